@@ -1,0 +1,3 @@
+//! One module per subcommand (alphabetical).
+
+pub mod info;

@@ -1,0 +1,230 @@
+//! The one place every subcommand gets its stdin/stdout/file handling, progress and
+//! report output from (the xsv `Config` idea), so all commands behave alike.
+
+use std::fs::File;
+use std::io::{self, BufRead, BufReader, IsTerminal, Read, Write};
+use std::path::{Path, PathBuf};
+
+use crate::error::CliError;
+
+/// Options shared by every subcommand.
+#[derive(Debug, Clone, Default)]
+pub struct Config {
+    /// `--quiet`: no progress bars, no stage lines.
+    pub quiet: bool,
+}
+
+/// Where an input comes from: a path or `-` for stdin.
+#[derive(Debug, Clone)]
+pub enum Input {
+    Stdin,
+    Path(PathBuf),
+}
+
+impl Input {
+    pub fn from_arg(arg: &str) -> Input {
+        if arg == "-" {
+            Input::Stdin
+        } else {
+            Input::Path(PathBuf::from(arg))
+        }
+    }
+
+    /// The name used in error messages (`<stdin>` or the path as given).
+    pub fn display_name(&self) -> String {
+        match self {
+            Input::Stdin => "<stdin>".to_string(),
+            Input::Path(p) => p.display().to_string(),
+        }
+    }
+
+    /// The file path, if the input is a file (needed by libraries that open paths themselves, e.g. GDAL).
+    pub fn path(&self) -> Option<&Path> {
+        match self {
+            Input::Stdin => None,
+            Input::Path(p) => Some(p),
+        }
+    }
+
+    /// Opens the input for buffered streaming reads.
+    pub fn open(&self) -> Result<Box<dyn BufRead>, CliError> {
+        match self {
+            Input::Stdin => Ok(Box::new(BufReader::with_capacity(1 << 16, io::stdin()))),
+            Input::Path(p) => {
+                let f = File::open(p).map_err(|e| CliError::unreadable(format!("{}: {e}", p.display())))?;
+                Ok(Box::new(BufReader::with_capacity(1 << 16, f)))
+            }
+        }
+    }
+
+    /// Reads the whole input into memory.
+    pub fn read_all(&self) -> Result<Vec<u8>, CliError> {
+        let mut buf = Vec::new();
+        self.open()?
+            .read_to_end(&mut buf)
+            .map_err(|e| CliError::unreadable(format!("{}: {e}", self.display_name())))?;
+        Ok(buf)
+    }
+}
+
+/// Where an output goes: stdout (`-` or no `-o`) or a file written atomically.
+#[derive(Debug, Clone)]
+pub enum Output {
+    Stdout,
+    Path(PathBuf),
+}
+
+impl Output {
+    pub fn from_arg(arg: Option<&str>) -> Output {
+        match arg {
+            None | Some("-") => Output::Stdout,
+            Some(p) => Output::Path(PathBuf::from(p)),
+        }
+    }
+
+    pub fn path(&self) -> Option<&Path> {
+        match self {
+            Output::Stdout => None,
+            Output::Path(p) => Some(p),
+        }
+    }
+
+    /// The lower-case file extension, used to pick a format (`out.glb` → `glb`).
+    pub fn extension(&self) -> Option<String> {
+        self.path()
+            .and_then(|p| p.extension())
+            .map(|e| e.to_string_lossy().to_ascii_lowercase())
+    }
+
+    /// Writes through `f`; for a file, into a temporary file beside the target that is renamed
+    /// over it only when `f` succeeded, so a failure never leaves a half-written output.
+    pub fn write_with<F>(&self, f: F) -> Result<(), CliError>
+    where
+        F: FnOnce(&mut dyn Write) -> Result<(), CliError>,
+    {
+        match self {
+            Output::Stdout => {
+                let stdout = io::stdout();
+                let mut lock = io::BufWriter::with_capacity(1 << 16, stdout.lock());
+                f(&mut lock)?;
+                lock.flush().map_err(CliError::io_out)
+            }
+            Output::Path(p) => write_atomic(p, f),
+        }
+    }
+
+    /// Writes a byte buffer (see [`Output::write_with`]).
+    pub fn write_bytes(&self, bytes: &[u8]) -> Result<(), CliError> {
+        self.write_with(|w| w.write_all(bytes).map_err(CliError::io_out))
+    }
+}
+
+/// Writes `path` atomically: temp file in the same directory, fsync, rename.
+pub fn write_atomic<F>(path: &Path, f: F) -> Result<(), CliError>
+where
+    F: FnOnce(&mut dyn Write) -> Result<(), CliError>,
+{
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let tmp = tempfile::Builder::new()
+        .prefix(".geofit-")
+        .suffix(".tmp")
+        .tempfile_in(&dir)
+        .map_err(|e| CliError::output(format!("cannot create a temporary file in {}: {e}", dir.display())))?;
+    {
+        let mut w = io::BufWriter::with_capacity(1 << 16, tmp.as_file());
+        f(&mut w)?;
+        w.flush().map_err(CliError::io_out)?;
+    }
+    tmp.as_file().sync_all().map_err(CliError::io_out)?;
+    tmp.persist(path)
+        .map_err(|e| CliError::output(format!("cannot write {}: {}", path.display(), e.error)))?;
+    Ok(())
+}
+
+/// Progress on stderr: an indicatif bar when stderr is a terminal, otherwise one plain line per
+/// stage; nothing with `--quiet`. Library crates report through [`ProgressSink`]-style callbacks
+/// and the CLI forwards them here.
+pub struct Progress {
+    mode: ProgressMode,
+}
+
+enum ProgressMode {
+    Silent,
+    Lines,
+    Bar(indicatif::ProgressBar),
+}
+
+impl Config {
+    /// A progress reporter for one stage of work with `total` steps (0 if unknown).
+    pub fn progress(&self, stage: &str, total: u64) -> Progress {
+        let mode = if self.quiet {
+            ProgressMode::Silent
+        } else if io::stderr().is_terminal() {
+            let bar = if total > 0 {
+                indicatif::ProgressBar::new(total)
+            } else {
+                indicatif::ProgressBar::new_spinner()
+            };
+            bar.set_style(
+                indicatif::ProgressStyle::with_template("{prefix:>12} [{bar:30}] {pos}/{len} {msg}")
+                    .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+                    .progress_chars("=> "),
+            );
+            bar.set_prefix(stage.to_string());
+            ProgressMode::Bar(bar)
+        } else {
+            eprintln!("geofit: {stage}");
+            ProgressMode::Lines
+        };
+        Progress { mode }
+    }
+
+    /// A one-line notice on stderr (suppressed by `--quiet`).
+    pub fn notice(&self, msg: &str) {
+        if !self.quiet {
+            eprintln!("geofit: {msg}");
+        }
+    }
+}
+
+impl Progress {
+    /// Advances to `pos`; in line mode prints `msg` when it is non-empty (one line per iteration).
+    pub fn set(&self, pos: u64, msg: &str) {
+        match &self.mode {
+            ProgressMode::Silent => {}
+            ProgressMode::Lines => {
+                if !msg.is_empty() {
+                    eprintln!("geofit:   {msg}");
+                }
+            }
+            ProgressMode::Bar(b) => {
+                b.set_position(pos);
+                b.set_message(msg.to_string());
+            }
+        }
+    }
+
+    pub fn finish(self, msg: &str) {
+        match self.mode {
+            ProgressMode::Silent => {}
+            ProgressMode::Lines => {
+                if !msg.is_empty() {
+                    eprintln!("geofit:   {msg}");
+                }
+            }
+            ProgressMode::Bar(b) => b.finish_with_message(msg.to_string()),
+        }
+    }
+}
+
+/// Writes a JSON report to `path` atomically (`--report PATH`), or to stdout for `-`.
+pub fn write_json_report<T: serde::Serialize>(path: &str, report: &T) -> Result<(), CliError> {
+    let out = Output::from_arg(Some(path));
+    out.write_with(|w| {
+        serde_json::to_writer_pretty(&mut *w, report).map_err(|e| CliError::internal(e.to_string()))?;
+        w.write_all(b"\n").map_err(CliError::io_out)
+    })
+}

@@ -1,0 +1,59 @@
+//! `geofit`: composable Unix-style subcommands for GIS and CAD data conversion.
+//!
+//! One file per subcommand under `cmd/`, each with its usage text, an `Args` struct and a `run`.
+//! The algorithms live in the library crates; this crate parses arguments, opens inputs,
+//! writes outputs atomically and maps errors to exit codes (see `error::Exit`).
+
+mod cmd;
+mod config;
+mod error;
+
+use clap::{Parser, Subcommand};
+use std::process::ExitCode;
+
+use config::Config;
+use error::Exit;
+
+#[derive(Parser)]
+#[command(
+    name = "geofit",
+    version,
+    about = "Composable subcommands for CityGML buildings, T-spline terrain and implicit surfaces",
+    long_about = "geofit: composable subcommands for CityGML buildings (popa3d adjustment), \
+T-spline terrain reduction and implicit surfaces.\n\nEvery command reads a path or `-` (stdin) and \
+writes to `-o PATH` (stdout when `-o` is missing or `-`).\n\nExit codes: 0 success, 1 findings in the \
+input (listed), 2 usage error, 3 unreadable input, 4 internal failure."
+)]
+struct Cli {
+    /// No progress bars or stage lines on stderr.
+    #[arg(long, short, global = true)]
+    quiet: bool,
+
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    // One line per subcommand; keep alphabetical. Each `cmd::<name>` module has `Args` and `run`.
+    Info(cmd::info::Args),
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let config = Config { quiet: cli.quiet };
+    let result = match cli.command {
+        Command::Info(a) => cmd::info::run(a, &config),
+    };
+    match result {
+        Ok(exit) => exit.into(),
+        Err(e) => {
+            // A closed stdout (e.g. `geofit ... | head`) is not an error worth a message.
+            if e.message.contains("Broken pipe") {
+                return Exit::Ok.into();
+            }
+            eprintln!("geofit: error: {}", e.message);
+            e.exit.into()
+        }
+    }
+}

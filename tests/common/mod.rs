@@ -1,0 +1,106 @@
+//! Helpers shared by the end-to-end tests: the real `geofit` binary, the shared fixtures, and
+//! temporary directories. Each test file does `mod common;` and uses what it needs.
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::io::Write;
+
+/// The `geofit` binary cargo built for this test run.
+pub fn geofit() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_geofit"))
+}
+
+/// Repository root (the workspace).
+pub fn repo_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..").canonicalize().expect("repo root")
+}
+
+/// `../shared` beside the checkout, or `$GEOFIT_SHARED`.
+pub fn shared_dir() -> PathBuf {
+    match std::env::var_os("GEOFIT_SHARED") {
+        Some(p) => PathBuf::from(p),
+        None => repo_root().join("../shared"),
+    }
+}
+
+/// True when running in CI (`CI=true`): a missing fixture is then a failure, not a skip.
+pub fn in_ci() -> bool {
+    std::env::var("CI").map(|v| v == "true" || v == "1").unwrap_or(false)
+}
+
+/// A file under `../shared/fixtures/`. Missing: panics in CI, otherwise prints a clear skip and
+/// returns `None` (callers `let Some(p) = fixture(..) else { return };`).
+pub fn fixture(rel: &str) -> Option<PathBuf> {
+    let p = shared_dir().join("fixtures").join(rel);
+    if p.exists() {
+        return Some(p);
+    }
+    if in_ci() {
+        panic!("fixture missing in CI: {}", p.display());
+    }
+    eprintln!("SKIP: fixture {} not found (set GEOFIT_SHARED or put ../shared beside the checkout)", p.display());
+    None
+}
+
+/// The directory `../shared/xsd` (CityGML/GML schemas), same missing-rule as [`fixture`].
+pub fn shared_xsd() -> Option<PathBuf> {
+    let p = shared_dir().join("xsd");
+    if p.exists() {
+        return Some(p);
+    }
+    if in_ci() {
+        panic!("schemas missing in CI: {}", p.display());
+    }
+    eprintln!("SKIP: {} not found", p.display());
+    None
+}
+
+/// Is an external tool on PATH? In CI a missing tool is a failure (make setup installs it).
+pub fn tool(name: &str) -> bool {
+    let found = Command::new("sh")
+        .arg("-c")
+        .arg(format!("command -v {name}"))
+        .stdout(Stdio::null())
+        .status()
+        .map(|s| s.success())
+        .unwrap_or(false);
+    if !found {
+        if in_ci() {
+            panic!("external tool `{name}` missing in CI (make setup installs it)");
+        }
+        eprintln!("SKIP: external tool `{name}` not found; run `make setup`");
+    }
+    found
+}
+
+/// Runs geofit with `args`, feeding `stdin` when given; returns the output.
+pub fn run(args: &[&str], stdin: Option<&[u8]>) -> Output {
+    let mut cmd = geofit();
+    cmd.args(args).stdout(Stdio::piped()).stderr(Stdio::piped());
+    cmd.stdin(if stdin.is_some() { Stdio::piped() } else { Stdio::null() });
+    let mut child = cmd.spawn().expect("spawn geofit");
+    if let Some(data) = stdin {
+        let mut si = child.stdin.take().unwrap();
+        let data = data.to_vec();
+        std::thread::spawn(move || {
+            let _ = si.write_all(&data);
+        });
+    }
+    child.wait_with_output().expect("wait geofit")
+}
+
+/// Exit code of an output (panics on signal, which is itself a test failure: e.g. a crash).
+pub fn code(o: &Output) -> i32 {
+    o.status.code().unwrap_or_else(|| panic!("geofit killed by a signal; stderr: {}", String::from_utf8_lossy(&o.stderr)))
+}
+
+/// A fresh temporary directory for one test.
+pub fn tempdir() -> tempfile::TempDir {
+    tempfile::tempdir().expect("tempdir")
+}
+
+/// Python 3 interpreter used by the independent-truth check scripts in `tests/scripts/`.
+pub fn python() -> Command {
+    Command::new("python3")
+}
