@@ -1,0 +1,35 @@
+//! Typed errors of raster-io. Each message names the file and, for text input, the line.
+
+use std::path::PathBuf;
+
+#[derive(Debug, thiserror::Error)]
+pub enum RasterError {
+    /// GDAL could not open or read the file (corrupt, unsupported, missing).
+    #[error("{path}: {message}")]
+    Open { path: PathBuf, message: String },
+    /// A file GDAL opened but that holds nothing usable (no raster band, bad geotransform...).
+    #[error("{path}: {message}")]
+    Content { path: PathBuf, message: String },
+    /// Writing failed.
+    #[error("{path}: cannot write: {message}")]
+    Write { path: PathBuf, message: String },
+    /// An in-memory raster that breaks the `Raster` invariants.
+    #[error("invalid raster: {0}")]
+    Invalid(String),
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum PointsError {
+    /// A line of an XYZ/CSV file that is not three finite numbers.
+    #[error("{name}:{line}: {message}")]
+    Line { name: String, line: usize, message: String },
+    /// An I/O failure while reading.
+    #[error("{name}: {message}")]
+    Io { name: String, message: String },
+    /// LAS/LAZ header or point decoding failure.
+    #[error("{name}: {message}")]
+    Las { name: String, message: String },
+    /// The file held no usable point.
+    #[error("{name}: {message}")]
+    Empty { name: String, message: String },
+}

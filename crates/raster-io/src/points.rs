@@ -1,0 +1,288 @@
+//! Scattered points (soundings, lidar returns) from XYZ/CSV text and LAS/LAZ.
+//!
+//! XYZ/CSV rules (one point per line):
+//! - fields separated by whitespace, commas or semicolons (mixed is fine);
+//! - blank lines and lines starting with `#`, `%` or `>` (GMT segment headers) are skipped;
+//! - the FIRST content line may be a header: when it is not numeric it names the columns, and
+//!   the columns called x/y/z (or lon/lat, easting/northing, elevation/depth/value…) are used;
+//!   without a header the first three fields are x, y, z and extra fields are ignored;
+//! - any later line that does not give three finite numbers is an error naming the line
+//!   (NaN and ±inf included: a sounding without a depth is a data error, not a hole).
+
+use std::io::BufRead;
+use std::path::Path;
+
+use crate::error::PointsError;
+
+/// Scattered 3D points with an optional CRS.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct PointCloud {
+    /// (x, y, z) per point, in file order.
+    pub points: Vec<[f64; 3]>,
+    /// CRS as WKT when the file declares one (LAS WKT VLR).
+    pub crs: Option<String>,
+}
+
+impl PointCloud {
+    /// Bounding box (min x, min y, max x, max y); `None` for an empty cloud.
+    pub fn bounds_xy(&self) -> Option<(f64, f64, f64, f64)> {
+        let first = self.points.first()?;
+        let mut b = (first[0], first[1], first[0], first[1]);
+        for p in &self.points {
+            b.0 = b.0.min(p[0]);
+            b.1 = b.1.min(p[1]);
+            b.2 = b.2.max(p[0]);
+            b.3 = b.3.max(p[1]);
+        }
+        Some(b)
+    }
+}
+
+/// Point file formats.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PointFormat {
+    Xyz,
+    Las,
+}
+
+impl PointFormat {
+    /// `.las`/`.laz` → LAS, everything else → XYZ text.
+    pub fn from_path(path: &Path) -> PointFormat {
+        match path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase()).as_deref() {
+            Some("las") | Some("laz") => PointFormat::Las,
+            _ => PointFormat::Xyz,
+        }
+    }
+}
+
+fn split_fields(line: &str) -> impl Iterator<Item = &str> {
+    line.split(|c: char| c.is_whitespace() || c == ',' || c == ';').filter(|s| !s.is_empty())
+}
+
+/// Column names recognised in a header for x, y and z.
+fn column_role(name: &str) -> Option<usize> {
+    let n = name.trim().trim_matches('"').to_ascii_lowercase();
+    match n.as_str() {
+        "x" | "lon" | "long" | "longitude" | "easting" | "east" | "e" => Some(0),
+        "y" | "lat" | "latitude" | "northing" | "north" | "n" => Some(1),
+        "z" | "depth" | "elevation" | "elev" | "height" | "h" | "value" | "val" | "alt" | "altitude" => Some(2),
+        _ => None,
+    }
+}
+
+/// Reads XYZ/CSV text (see the module docs). `name` is used in error messages.
+pub fn read_xyz<R: BufRead>(mut reader: R, name: &str) -> Result<PointCloud, PointsError> {
+    let mut points = Vec::new();
+    let mut columns: [usize; 3] = [0, 1, 2];
+    let mut seen_content = false;
+    let mut line_no = 0usize;
+    let mut buf = String::new();
+    loop {
+        buf.clear();
+        let n = reader.read_line(&mut buf).map_err(|e| {
+            if e.kind() == std::io::ErrorKind::InvalidData {
+                PointsError::Line { name: name.into(), line: line_no + 1, message: "not UTF-8 text (binary file?)".into() }
+            } else {
+                PointsError::Io { name: name.into(), message: e.to_string() }
+            }
+        })?;
+        if n == 0 {
+            break;
+        }
+        line_no += 1;
+        let line = buf.trim_start_matches('\u{feff}').trim();
+        if line.is_empty() || line.starts_with('#') || line.starts_with('%') || line.starts_with('>') {
+            continue;
+        }
+        let fields: Vec<&str> = split_fields(line).collect();
+        let first_content = !seen_content;
+        seen_content = true;
+        if first_content && fields.iter().any(|f| f.parse::<f64>().is_err() && !f.is_empty()) {
+            // A header: map named columns; the CSV index column ("" or "id") is just skipped.
+            let raw: Vec<&str> = line.split(|c: char| c == ',' || c == ';' || (c.is_whitespace() && !line.contains(','))).collect();
+            let mut found = [None, None, None];
+            for (i, f) in raw.iter().enumerate() {
+                if let Some(role) = column_role(f) {
+                    if found[role].is_none() {
+                        found[role] = Some(i);
+                    }
+                }
+            }
+            if let [Some(x), Some(y), Some(z)] = found {
+                columns = [x, y, z];
+                // Header columns count empty CSV fields; data lines must then be split the same way.
+                return read_xyz_columns(reader, name, line_no, columns, line.contains(','), points);
+            }
+            if raw.iter().all(|f| f.trim().parse::<f64>().is_err()) {
+                continue; // a header without recognisable names: first three columns
+            }
+            return Err(PointsError::Line {
+                name: name.into(),
+                line: line_no,
+                message: format!("expected three numbers x y z, found {line:?}"),
+            });
+        }
+        points.push(parse_xyz_fields(&fields, columns, name, line_no)?);
+    }
+    finish(points, name)
+}
+
+/// Continues reading after a header that named the x/y/z columns.
+fn read_xyz_columns<R: BufRead>(
+    mut reader: R,
+    name: &str,
+    mut line_no: usize,
+    columns: [usize; 3],
+    csv: bool,
+    mut points: Vec<[f64; 3]>,
+) -> Result<PointCloud, PointsError> {
+    let mut buf = String::new();
+    loop {
+        buf.clear();
+        let n = reader.read_line(&mut buf).map_err(|e| PointsError::Io { name: name.into(), message: e.to_string() })?;
+        if n == 0 {
+            break;
+        }
+        line_no += 1;
+        let line = buf.trim();
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        let fields: Vec<&str> = if csv {
+            line.split([',', ';']).map(str::trim).collect()
+        } else {
+            split_fields(line).collect()
+        };
+        points.push(parse_xyz_fields(&fields, columns, name, line_no)?);
+    }
+    finish(points, name)
+}
+
+fn parse_xyz_fields(fields: &[&str], columns: [usize; 3], name: &str, line: usize) -> Result<[f64; 3], PointsError> {
+    let mut p = [0.0; 3];
+    for (k, &c) in columns.iter().enumerate() {
+        let axis = ["x", "y", "z"][k];
+        let f = fields.get(c).copied().filter(|s| !s.is_empty()).ok_or_else(|| PointsError::Line {
+            name: name.into(),
+            line,
+            message: format!("missing {axis} (column {}): a point needs x, y and z", c + 1),
+        })?;
+        let v: f64 = f.parse().map_err(|_| PointsError::Line {
+            name: name.into(),
+            line,
+            message: format!("{axis} = {f:?} is not a number"),
+        })?;
+        if !v.is_finite() {
+            return Err(PointsError::Line { name: name.into(), line, message: format!("{axis} = {f} is not a finite number") });
+        }
+        p[k] = v;
+    }
+    Ok(p)
+}
+
+fn finish(points: Vec<[f64; 3]>, name: &str) -> Result<PointCloud, PointsError> {
+    if points.is_empty() {
+        return Err(PointsError::Empty { name: name.into(), message: "no points (empty file or only comments)".into() });
+    }
+    Ok(PointCloud { points, crs: None })
+}
+
+/// Reads a LAS/LAZ file; `class = Some(c)` keeps only points of ASPRS class `c`
+/// (2 = ground). Coordinates are the scaled/offset real-world values.
+pub fn read_las(path: &Path, class: Option<u8>) -> Result<PointCloud, PointsError> {
+    let name = path.display().to_string();
+    let las_err = |e: las::Error| PointsError::Las { name: name.clone(), message: e.to_string() };
+    let mut reader = las::Reader::from_path(path).map_err(las_err)?;
+    let crs = reader
+        .header()
+        .get_wkt_crs_bytes()
+        .map(|b| String::from_utf8_lossy(b).trim_end_matches('\0').trim().to_string())
+        .filter(|s| !s.is_empty());
+    let total = reader.header().number_of_points();
+    let mut points = Vec::new();
+    let mut read = 0u64;
+    let mut classes_seen = [0u64; 256];
+    while read < total {
+        let batch = reader.read_points(1 << 16).map_err(las_err)?;
+        if batch.is_empty() {
+            break;
+        }
+        read += batch.len() as u64;
+        for (i, ((x, y), (z, c))) in batch.x().zip(batch.y()).zip(batch.z().zip(batch.classification())).enumerate() {
+            classes_seen[c as usize] += 1;
+            if class.is_some_and(|k| k != c) {
+                continue;
+            }
+            if !(x.is_finite() && y.is_finite() && z.is_finite()) {
+                return Err(PointsError::Las {
+                    name: name.clone(),
+                    message: format!("point {} has a non-finite coordinate", read as usize - batch.len() + i),
+                });
+            }
+            points.push([x, y, z]);
+        }
+    }
+    if read < total {
+        return Err(PointsError::Las { name, message: format!("header announces {total} points but the file holds {read}") });
+    }
+    if points.is_empty() {
+        let present: Vec<String> =
+            classes_seen.iter().enumerate().filter(|(_, n)| **n > 0).map(|(c, n)| format!("{c} ({n})")).collect();
+        let message = match class {
+            Some(c) => format!("no point of class {c}; classes present: {}", present.join(", ")),
+            None => "no points".into(),
+        };
+        return Err(PointsError::Empty { name, message });
+    }
+    Ok(PointCloud { points, crs })
+}
+
+/// Reads a point file by extension: LAS/LAZ (with the class filter) or XYZ text.
+/// `class` on an XYZ file is an error (text points carry no class).
+pub fn read_points(path: &Path, class: Option<u8>) -> Result<PointCloud, PointsError> {
+    match PointFormat::from_path(path) {
+        PointFormat::Las => read_las(path, class),
+        PointFormat::Xyz => {
+            let name = path.display().to_string();
+            if class.is_some() {
+                return Err(PointsError::Io { name, message: "a class filter needs a LAS/LAZ file; XYZ text has no classes".into() });
+            }
+            let f = std::fs::File::open(path).map_err(|e| PointsError::Io { name: name.clone(), message: e.to_string() })?;
+            read_xyz(std::io::BufReader::new(f), &name)
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(s: &str) -> Result<PointCloud, PointsError> {
+        read_xyz(s.as_bytes(), "t.xyz")
+    }
+
+    #[test]
+    fn whitespace_comma_and_header() {
+        assert_eq!(parse("1 2 3\n4\t5  6\n").unwrap().points, vec![[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]]);
+        assert_eq!(parse("x,y,z\n1,2,3\n").unwrap().points, vec![[1.0, 2.0, 3.0]]);
+        assert_eq!(parse("# c\n\n1, 2, 3, 99\n").unwrap().points, vec![[1.0, 2.0, 3.0]]);
+        // named columns in another order, with an index column
+        let pc = parse(",Z,X,Y,extra\n0,30,10,20,a\n1,31,11,21,b\n").unwrap();
+        assert_eq!(pc.points, vec![[10.0, 20.0, 30.0], [11.0, 21.0, 31.0]]);
+    }
+
+    #[test]
+    fn bad_lines_name_their_number() {
+        let e = parse("1 2 3\n4 5 nan\n").unwrap_err().to_string();
+        assert_eq!(e, "t.xyz:2: z = nan is not a finite number");
+        let e = parse("1 2 3\n4 5 inf\n").unwrap_err().to_string();
+        assert!(e.starts_with("t.xyz:2:"), "{e}");
+        let e = parse("1 2 3\n\n4 five 6\n").unwrap_err().to_string();
+        assert_eq!(e, "t.xyz:3: y = \"five\" is not a number");
+        let e = parse("1 2\n").unwrap_err().to_string();
+        assert!(e.starts_with("t.xyz:1: missing z"), "{e}");
+        let e = parse("1 2 3\nx y z\n").unwrap_err().to_string();
+        assert!(e.starts_with("t.xyz:2:"), "{e}");
+        assert!(parse("# nothing\n").is_err());
+    }
+}
