@@ -120,8 +120,9 @@ impl SurfaceType {
             "InteriorWallSurface" => SurfaceType::InteriorWall,
             "OuterFloorSurface" => SurfaceType::OuterFloor,
             "OuterCeilingSurface" => SurfaceType::OuterCeiling,
-            "Window" => SurfaceType::Window,
-            "Door" => SurfaceType::Door,
+            // CityGML 3.0 spells the openings `con:WindowSurface` / `con:DoorSurface`.
+            "Window" | "WindowSurface" => SurfaceType::Window,
+            "Door" | "DoorSurface" => SurfaceType::Door,
             _ => return None,
         })
     }
@@ -159,6 +160,15 @@ pub struct Polygon {
     pub reversed: bool,
     /// Span of the `gml:Polygon` element (where it is defined, not where it is referenced).
     pub span: SourceSpan,
+    /// Span of the property element directly enclosing the `gml:Polygon` where it is defined
+    /// (`gml:surfaceMember`, `gml:baseSurface`, `gml:exterior` of a Solid, a `lodN…` property,
+    /// ...), so a writer can remove or replace the polygon together with its wrapper.
+    pub member_span: Option<SourceSpan>,
+    /// `Some(span of the referencing element)` when this polygon was reached through an
+    /// `xlink:href` (e.g. an NRW Solid face that points into a WallSurface): it is a copy of the
+    /// polygon defined at `span`, with that definition's semantics. `None` where it is defined.
+    /// [`CityObject::all_polygons`] skips copies, so each polygon is counted once.
+    pub via_xlink: Option<SourceSpan>,
 }
 
 /// A shell: the polygons bounding one solid (exterior or one cavity).
@@ -241,7 +251,11 @@ impl CityObject {
 
     /// Every polygon of this object and its children (each listed once, where it is defined).
     pub fn all_polygons(&self) -> Vec<&Polygon> {
-        self.walk().into_iter().flat_map(|o| o.geometries.iter().flat_map(|g| g.polygons())).collect()
+        self.walk()
+            .into_iter()
+            .flat_map(|o| o.geometries.iter().flat_map(|g| g.polygons()))
+            .filter(|p| p.via_xlink.is_none())
+            .collect()
     }
 }
 
@@ -257,4 +271,26 @@ pub struct CityModel {
     pub envelope: Envelope,
     /// Top-level city objects (cityObjectMember / featureMember contents).
     pub objects: Vec<CityObject>,
+    /// `xlink:href`s on geometry properties whose target is not in the document (left out of
+    /// the geometry they belong to; reported, not fatal).
+    pub unresolved_xlinks: Vec<XLinkRef>,
+}
+
+/// An `xlink:href` as written in the document and where.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct XLinkRef {
+    pub href: String,
+    pub span: SourceSpan,
+}
+
+impl CityModel {
+    /// Every city object, nested ones included, depth first.
+    pub fn all_objects(&self) -> Vec<&CityObject> {
+        self.objects.iter().flat_map(|o| o.walk()).collect()
+    }
+
+    /// Every polygon of the document, each once, where it is defined (XLink copies skipped).
+    pub fn all_polygons(&self) -> Vec<&Polygon> {
+        self.objects.iter().flat_map(|o| o.all_polygons()).collect()
+    }
 }

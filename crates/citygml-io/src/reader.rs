@@ -1,0 +1,1346 @@
+//! The CityGML event parser: one pass of quick-xml's slice reader over the bytes, recursive
+//! descent per city object, geometry decoded where it stands.
+//!
+//! Namespaces are resolved here (not by quick-xml's `NsReader`) so that any element can be
+//! re-parsed later from its own byte span with the document's root bindings: that is how
+//! XLinks are resolved without keeping the whole document model in memory.
+
+use std::borrow::Cow;
+use std::collections::HashMap;
+use std::ops::Range;
+use std::sync::Arc;
+
+use quick_xml::events::attributes::Attribute;
+use quick_xml::events::{BytesStart, Event};
+use quick_xml::name::PrefixDeclaration;
+use quick_xml::Reader;
+
+use crate::error::ReadError;
+use crate::lines::LineIndex;
+use crate::model::*;
+
+/// What namespace an element is in, as far as the reader cares.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Ns {
+    Gml,
+    /// A CityGML namespace: version and module short name (`core`, `bldg`, `con`, ...).
+    CityGml(CityGmlVersion, &'static str),
+    Xal,
+    Other,
+}
+
+pub(crate) fn classify_ns(uri: &[u8]) -> Ns {
+    match uri {
+        b"http://www.opengis.net/gml" | b"http://www.opengis.net/gml/3.2" => return Ns::Gml,
+        b"urn:oasis:names:tc:ciq:xsdschema:xAL:2.0" => return Ns::Xal,
+        _ => {}
+    }
+    let Some(rest) = uri.strip_prefix(b"http://www.opengis.net/citygml/") else {
+        return Ns::Other;
+    };
+    let (module, ver) = match memchr::memrchr(b'/', rest) {
+        Some(i) => (&rest[..i], &rest[i + 1..]),
+        None => (&b""[..], rest),
+    };
+    let version = match ver {
+        b"1.0" => CityGmlVersion::V1_0,
+        b"2.0" => CityGmlVersion::V2_0,
+        b"3.0" => CityGmlVersion::V3_0,
+        _ => return Ns::Other,
+    };
+    let m = match module {
+        b"" => "core",
+        b"building" => "bldg",
+        b"relief" => "dem",
+        b"generics" => "gen",
+        b"cityobjectgroup" => "grp",
+        b"landuse" => "luse",
+        b"transportation" => "tran",
+        b"vegetation" => "veg",
+        b"waterbody" => "wtr",
+        b"cityfurniture" => "frn",
+        b"bridge" => "brid",
+        b"tunnel" => "tun",
+        b"appearance" => "app",
+        b"texturedsurface" => "tex",
+        b"construction" => "con",
+        b"versioning" => "vers",
+        b"dynamizer" => "dyn",
+        b"pointcloud" => "pcl",
+        _ => "other",
+    };
+    Ns::CityGml(version, m)
+}
+
+/// A namespace prefix binding in scope (`depth` = element depth that declared it).
+#[derive(Debug, Clone)]
+pub(crate) struct Binding {
+    prefix: Vec<u8>,
+    uri: Vec<u8>,
+    ns: Ns,
+    depth: usize,
+}
+
+/// A start tag with its resolved namespace and byte offset of its `<`.
+pub(crate) struct Tag<'a> {
+    pub raw: BytesStart<'a>,
+    pub start: usize,
+    pub ns: Ns,
+}
+
+impl Tag<'_> {
+    pub fn local(&self) -> &[u8] {
+        self.raw.local_name().into_inner()
+    }
+    pub fn local_str(&self) -> String {
+        String::from_utf8_lossy(self.local()).into_owned()
+    }
+    pub fn attr(&self, local: &[u8]) -> Option<Cow<'_, [u8]>> {
+        attr_raw(&self.raw, local)
+    }
+    pub fn attr_string(&self, local: &[u8]) -> Option<String> {
+        self.attr(local).map(|v| String::from_utf8_lossy(&v).into_owned())
+    }
+    fn is_gml(&self, local: &[u8]) -> bool {
+        self.ns == Ns::Gml && self.local() == local
+    }
+}
+
+fn attr_raw<'t>(e: &'t BytesStart<'_>, local: &[u8]) -> Option<Cow<'t, [u8]>> {
+    for a in e.attributes().with_checks(false).flatten() {
+        let a: Attribute<'t> = a;
+        if a.key.local_name().as_ref() == local {
+            return Some(a.value);
+        }
+    }
+    None
+}
+
+pub(crate) enum Ev<'a> {
+    Start(Tag<'a>),
+    Empty(Tag<'a>),
+    End { end: usize },
+    Text { nonblank: bool, at: usize },
+    Eof,
+}
+
+/// Where an id'd surface element is defined, with the semantics of the thematic surface that
+/// owns it (so a polygon reached by XLink gets the type of its owner, not of the referrer).
+#[derive(Debug, Clone)]
+pub(crate) struct IdEntry {
+    pub bytes: Range<usize>,
+    pub semantic: Option<(SurfaceType, Option<String>)>,
+}
+
+/// Element names that open a (surface or solid) geometry.
+fn is_geometry(local: &[u8]) -> bool {
+    matches!(
+        local,
+        b"Polygon"
+            | b"MultiSurface"
+            | b"CompositeSurface"
+            | b"OrientableSurface"
+            | b"Surface"
+            | b"TriangulatedSurface"
+            | b"Tin"
+            | b"Shell"
+            | b"Solid"
+            | b"CompositeSolid"
+            | b"MultiSolid"
+            | b"MultiGeometry"
+            | b"GeometricComplex"
+    )
+}
+
+fn is_polygon_like(local: &[u8]) -> bool {
+    matches!(local, b"Polygon" | b"PolygonPatch" | b"Triangle" | b"Rectangle")
+}
+
+fn is_surface_like(local: &[u8]) -> bool {
+    is_polygon_like(local)
+        || matches!(
+            local,
+            b"MultiSurface"
+                | b"CompositeSurface"
+                | b"OrientableSurface"
+                | b"Surface"
+                | b"TriangulatedSurface"
+                | b"Tin"
+                | b"Shell"
+                | b"Solid"
+                | b"CompositeSolid"
+                | b"MultiSolid"
+                | b"MultiGeometry"
+                | b"GeometricComplex"
+        )
+}
+
+/// City objects that nest inside other city objects (parts, rooms, installations, boundary
+/// surfaces, openings, relief components, ...). Any other CityGML element inside an object is
+/// looked through for geometry (properties, ADE wrappers).
+fn is_nested_object(local: &[u8]) -> bool {
+    if let Ok(s) = std::str::from_utf8(local) {
+        if SurfaceType::from_local_name(s).is_some() {
+            return true;
+        }
+    }
+    matches!(
+        local,
+        b"Building"
+            | b"BuildingPart"
+            | b"Room"
+            | b"BuildingRoom"
+            | b"BuildingInstallation"
+            | b"IntBuildingInstallation"
+            | b"BuildingFurniture"
+            | b"BuildingConstructiveElement"
+            | b"BuildingUnit"
+            | b"Storey"
+            | b"BridgePart"
+            | b"BridgeRoom"
+            | b"BridgeInstallation"
+            | b"IntBridgeInstallation"
+            | b"BridgeConstructionElement"
+            | b"BridgeConstructiveElement"
+            | b"BridgeFurniture"
+            | b"TunnelPart"
+            | b"HollowSpace"
+            | b"TunnelInstallation"
+            | b"IntTunnelInstallation"
+            | b"TunnelConstructiveElement"
+            | b"TunnelFurniture"
+            | b"TINRelief"
+            | b"MassPointRelief"
+            | b"BreaklineRelief"
+            | b"RasterRelief"
+            | b"TrafficArea"
+            | b"AuxiliaryTrafficArea"
+            | b"TrafficSpace"
+            | b"AuxiliaryTrafficSpace"
+            | b"Section"
+            | b"Intersection"
+            | b"Marking"
+            | b"HoleSurface"
+            | b"WaterSurface"
+            | b"WaterGroundSurface"
+            | b"WaterClosureSurface"
+    )
+}
+
+/// CityGML elements whose content is never the object's own geometry.
+fn is_skipped(local: &[u8]) -> bool {
+    matches!(
+        local,
+        b"Address" | b"ImplicitGeometry" | b"ExternalReference" | b"address" | b"externalReference"
+    )
+}
+
+/// `lod2Solid` → 2.
+fn lod_of(local: &[u8]) -> Option<u8> {
+    if local.len() > 3 && local.starts_with(b"lod") && local[3].is_ascii_digit() {
+        Some(local[3] - b'0')
+    } else {
+        None
+    }
+}
+
+/// Local name of the element whose `<` is at `start`.
+fn name_at(src: &[u8], start: usize) -> &[u8] {
+    let s = &src[start + 1..];
+    let end = s.iter().position(|b| b.is_ascii_whitespace() || *b == b'>' || *b == b'/').unwrap_or(s.len());
+    let q = &s[..end];
+    match memchr::memchr(b':', q) {
+        Some(i) => &q[i + 1..],
+        None => q,
+    }
+}
+
+/// The parser: a quick-xml slice reader over `src[range]` plus our own namespace scope.
+pub(crate) struct Parser<'a> {
+    r: Reader<&'a [u8]>,
+    pub src: &'a [u8],
+    base: usize,
+    pub lines: Arc<LineIndex>,
+    bindings: Vec<Binding>,
+    depth: usize,
+    /// The thematic surface (type, gml:id) the parser is inside, given to its polygons.
+    cur_sem: Option<(SurfaceType, Option<String>)>,
+    /// srsDimension declared on the enclosing geometry element, if any.
+    dim_hint: Option<u8>,
+    /// First srsName seen (the document CRS when the root has no boundedBy).
+    pub first_srs: Option<String>,
+    /// Id'd aggregate surfaces (CompositeSurface, OrientableSurface, ...) of the current object.
+    pub local_ids: HashMap<String, IdEntry>,
+    /// Number of XLink placeholders created in the current object.
+    pub placeholders: usize,
+}
+
+impl<'a> Parser<'a> {
+    pub fn new(src: &'a [u8], lines: Arc<LineIndex>, range: Range<usize>, bindings: Vec<Binding>) -> Parser<'a> {
+        let mut r = Reader::from_reader(&src[range.clone()]);
+        let c = r.config_mut();
+        c.trim_text(false);
+        c.check_end_names = true;
+        c.expand_empty_elements = false;
+        c.check_comments = false;
+        Parser {
+            r,
+            src,
+            base: range.start,
+            lines,
+            bindings,
+            depth: 0,
+            cur_sem: None,
+            dim_hint: None,
+            first_srs: None,
+            local_ids: HashMap::new(),
+            placeholders: 0,
+        }
+    }
+
+    /// The bindings in scope, as the outermost scope of a parser over a sub-range.
+    pub fn bindings(&self) -> Vec<Binding> {
+        self.bindings.iter().map(|b| Binding { depth: 0, ..b.clone() }).collect()
+    }
+
+    pub fn pos(&self) -> usize {
+        self.base + self.r.buffer_position() as usize
+    }
+
+    pub fn err(&self, at: usize, message: impl Into<String>) -> ReadError {
+        let (line, column) = self.lines.line_col(at);
+        ReadError { line, column, byte: at, message: message.into() }
+    }
+
+    fn span(&self, start: usize, end: usize) -> SourceSpan {
+        self.lines.span(start, end)
+    }
+
+    fn xml_err(&self, e: quick_xml::Error) -> ReadError {
+        use quick_xml::errors::{IllFormedError, SyntaxError};
+        let at = self.base + self.r.error_position() as usize;
+        let msg = match &e {
+            quick_xml::Error::IllFormed(IllFormedError::MissingEndTag(n)) => {
+                format!("unexpected end of file: <{n}> is not closed (truncated document?)")
+            }
+            quick_xml::Error::IllFormed(IllFormedError::MismatchedEndTag { expected, found }) => {
+                format!("malformed XML: end tag </{found}> does not match the open <{expected}>")
+            }
+            quick_xml::Error::Syntax(
+                SyntaxError::UnclosedTag
+                | SyntaxError::UnclosedComment
+                | SyntaxError::UnclosedCData
+                | SyntaxError::UnclosedDoctype
+                | SyntaxError::UnclosedPIOrXmlDecl,
+            ) => format!("unexpected end of file: {e} (truncated document?)"),
+            _ => format!("malformed XML: {e}"),
+        };
+        self.err(at, msg)
+    }
+
+    fn unclosed(&self, what: &[u8], start: usize) -> ReadError {
+        let (l, c) = self.lines.line_col(start);
+        self.err(
+            self.pos(),
+            format!(
+                "unexpected end of file: <{}> opened at {l}:{c} is not closed (truncated document?)",
+                String::from_utf8_lossy(what)
+            ),
+        )
+    }
+
+    fn declare(&mut self, e: &BytesStart<'_>, depth: usize) {
+        if memchr::memmem::find(e.attributes_raw(), b"xmlns").is_none() {
+            return;
+        }
+        for a in e.attributes().with_checks(false).flatten() {
+            if let Some(decl) = a.key.as_namespace_binding() {
+                let prefix = match decl {
+                    PrefixDeclaration::Default => Vec::new(),
+                    PrefixDeclaration::Named(p) => p.to_vec(),
+                };
+                self.bindings.push(Binding { prefix, ns: classify_ns(&a.value), uri: a.value.to_vec(), depth });
+            }
+        }
+    }
+
+    fn binding_of(&self, qname: &[u8]) -> Option<&Binding> {
+        let prefix = match memchr::memchr(b':', qname) {
+            Some(i) => &qname[..i],
+            None => &b""[..],
+        };
+        self.bindings.iter().rev().find(|b| b.prefix == prefix)
+    }
+
+    /// Namespace URI of a tag (for messages).
+    pub fn uri_of(&self, t: &Tag<'_>) -> String {
+        self.binding_of(t.raw.name().as_ref())
+            .map(|b| String::from_utf8_lossy(&b.uri).into_owned())
+            .unwrap_or_default()
+    }
+
+    fn resolve(&self, qname: &[u8]) -> Ns {
+        self.binding_of(qname).map(|b| b.ns).unwrap_or(Ns::Other)
+    }
+
+    fn pop_bindings(&mut self) {
+        while self.bindings.last().is_some_and(|b| b.depth > self.depth) {
+            self.bindings.pop();
+        }
+    }
+
+    pub fn next(&mut self) -> Result<Ev<'a>, ReadError> {
+        loop {
+            let start = self.pos();
+            let ev = self.r.read_event().map_err(|e| self.xml_err(e))?;
+            match ev {
+                Event::Start(e) => {
+                    self.depth += 1;
+                    self.declare(&e, self.depth);
+                    let ns = self.resolve(e.name().as_ref());
+                    return Ok(Ev::Start(Tag { raw: e, start, ns }));
+                }
+                Event::Empty(e) => {
+                    self.declare(&e, self.depth + 1);
+                    let ns = self.resolve(e.name().as_ref());
+                    self.pop_bindings();
+                    return Ok(Ev::Empty(Tag { raw: e, start, ns }));
+                }
+                Event::End(_) => {
+                    self.depth = self.depth.saturating_sub(1);
+                    self.pop_bindings();
+                    return Ok(Ev::End { end: self.pos() });
+                }
+                Event::Text(t) => {
+                    let nonblank = t.iter().any(|b| !b.is_ascii_whitespace());
+                    return Ok(Ev::Text { nonblank, at: start });
+                }
+                Event::CData(_) | Event::GeneralRef(_) => return Ok(Ev::Text { nonblank: true, at: start }),
+                Event::Eof => return Ok(Ev::Eof),
+                Event::Decl(_) | Event::PI(_) | Event::Comment(_) | Event::DocType(_) => continue,
+            }
+        }
+    }
+
+    /// Skips the content of a started element; returns the offset after its end tag.
+    pub fn skip(&mut self, t: &Tag<'_>) -> Result<usize, ReadError> {
+        self.content(t).map(|_| self.pos())
+    }
+
+    /// The content range without leading/trailing whitespace (coordinate texts: an edit then
+    /// keeps the document's indentation).
+    fn trimmed(&self, r: Range<usize>) -> Range<usize> {
+        let s = &self.src[r.clone()];
+        let a = s.iter().position(|b| !b.is_ascii_whitespace()).unwrap_or(s.len());
+        let b = s.iter().rposition(|b| !b.is_ascii_whitespace()).map(|i| i + 1).unwrap_or(a);
+        r.start + a..r.start + b.max(a)
+    }
+
+    /// Reads to the end of a started element; returns the byte range of its content.
+    fn content(&mut self, t: &Tag<'_>) -> Result<Range<usize>, ReadError> {
+        let span = self.r.read_to_end(t.raw.name()).map_err(|e| match e {
+            quick_xml::Error::IllFormed(quick_xml::errors::IllFormedError::MissingEndTag(_)) => {
+                self.unclosed(t.raw.name().as_ref(), t.start)
+            }
+            e => self.xml_err(e),
+        })?;
+        self.depth = self.depth.saturating_sub(1);
+        self.pop_bindings();
+        Ok(self.base + span.start as usize..self.base + span.end as usize)
+    }
+
+    // ---------------------------------------------------------------------------------------
+    // City objects
+
+    /// Parses a city object whose start tag was just read, up to its end tag. XLinks are left
+    /// as placeholders; [`resolve_object`] replaces them.
+    pub fn parse_object(&mut self, tag: Tag<'a>) -> Result<CityObject, ReadError> {
+        let kind = tag.local_str();
+        let module = match tag.ns {
+            Ns::CityGml(_, m) => Some(m.to_string()),
+            _ => None,
+        };
+        let id = tag.attr_string(b"id");
+        let saved_sem = self.cur_sem.take();
+        if let Some(t) = SurfaceType::from_local_name(&kind) {
+            self.cur_sem = Some((t, id.clone()));
+        }
+        let mut obj = CityObject {
+            id,
+            kind,
+            module,
+            geometries: Vec::new(),
+            children: Vec::new(),
+            envelope: Envelope::empty(),
+            span: SourceSpan::default(),
+        };
+        // Elements open inside the object (properties, wrappers): start offset and LoD of name.
+        let mut stack: Vec<(usize, Option<u8>)> = Vec::new();
+        loop {
+            match self.next()? {
+                Ev::Start(t) => {
+                    let l = t.local();
+                    match t.ns {
+                        Ns::Gml => {
+                            if stack.is_empty() && l == b"boundedBy" {
+                                if let Some(env) = self.parse_bounded_by(&t)? {
+                                    obj.envelope = env;
+                                }
+                            } else if is_geometry(l) && !stack.is_empty() {
+                                let (prop, _) = *stack.last().unwrap();
+                                let lod = stack.iter().rev().find_map(|s| s.1);
+                                let g = self.parse_geometry(t, prop, lod)?;
+                                obj.geometries.push(g);
+                            } else {
+                                self.skip(&t)?;
+                            }
+                        }
+                        Ns::CityGml(_, m) => {
+                            if m == "app" || is_skipped(l) {
+                                self.skip(&t)?;
+                            } else if !stack.is_empty() && is_nested_object(l) {
+                                let child = self.parse_object(t)?;
+                                obj.children.push(child);
+                            } else {
+                                stack.push((t.start, lod_of(l)));
+                            }
+                        }
+                        Ns::Xal => {
+                            self.skip(&t)?;
+                        }
+                        Ns::Other => {
+                            // ADE wrappers and properties: look through them for geometry.
+                            stack.push((t.start, lod_of(l)));
+                        }
+                    }
+                }
+                Ev::Empty(t) => {
+                    // `<bldg:lod2Solid xlink:href="#solid"/>`: a whole geometry by reference.
+                    if let (Some(lod), Some(href)) = (lod_of(t.local()), t.attr_string(b"href")) {
+                        let end = self.pos();
+                        let ph = self.placeholder(&href, t.start, end, false);
+                        obj.geometries.push(Geometry {
+                            id: None,
+                            lod: Some(lod),
+                            property: t.local_str(),
+                            gml_type: "xlink".to_string(),
+                            srs_name: None,
+                            kind: GeometryKind::Surfaces(vec![ph]),
+                            span: self.span(t.start, end),
+                        });
+                    }
+                }
+                Ev::End { end } => {
+                    if stack.pop().is_none() {
+                        obj.span = self.span(tag.start, end);
+                        break;
+                    }
+                }
+                Ev::Text { .. } => {}
+                Ev::Eof => return Err(self.unclosed(tag.raw.name().as_ref(), tag.start)),
+            }
+        }
+        self.cur_sem = saved_sem;
+        Ok(obj)
+    }
+
+    /// `gml:boundedBy/gml:Envelope` → envelope (None when absent or not finite, e.g. the NaN
+    /// heights of empty NRW tiles).
+    pub fn parse_bounded_by(&mut self, t: &Tag<'_>) -> Result<Option<Envelope>, ReadError> {
+        let mut corners: Vec<Vec<f64>> = Vec::new();
+        let mut ok = true;
+        let mut depth = 0usize;
+        loop {
+            match self.next()? {
+                Ev::Start(c) => {
+                    let l = c.local();
+                    if c.ns == Ns::Gml && l == b"Envelope" {
+                        depth += 1;
+                        if let Some(s) = c.attr_string(b"srsName") {
+                            if self.first_srs.is_none() {
+                                self.first_srs = Some(s);
+                            }
+                        }
+                    } else if c.ns == Ns::Gml && matches!(l, b"lowerCorner" | b"upperCorner" | b"pos") {
+                        let r = self.content(&c)?;
+                        let mut v = Vec::new();
+                        for (at, tok) in tokens(&self.src[r.clone()], r.start) {
+                            match parse_f64(tok) {
+                                Some(x) if x.is_finite() => v.push(x),
+                                Some(_) => ok = false,
+                                None => {
+                                    return Err(self.err(
+                                        at,
+                                        format!("gml:{}: '{}' is not a number", String::from_utf8_lossy(l), lossy(tok)),
+                                    ))
+                                }
+                            }
+                        }
+                        corners.push(v);
+                    } else {
+                        self.skip(&c)?;
+                    }
+                }
+                Ev::End { .. } => {
+                    if depth == 0 {
+                        break;
+                    }
+                    depth -= 1;
+                }
+                Ev::Eof => return Err(self.unclosed(t.raw.name().as_ref(), t.start)),
+                _ => {}
+            }
+        }
+        if !ok || corners.len() != 2 || corners.iter().any(|c| c.len() < 2 || c.len() > 3) {
+            return Ok(None);
+        }
+        let p = |c: &Vec<f64>| [c[0], c[1], if c.len() == 3 { c[2] } else { 0.0 }];
+        let mut env = Envelope::empty();
+        env.add_point(&p(&corners[0]));
+        env.add_point(&p(&corners[1]));
+        Ok(Some(env))
+    }
+
+    // ---------------------------------------------------------------------------------------
+    // Geometry
+
+    fn parse_geometry(&mut self, t: Tag<'a>, prop_start: usize, lod: Option<u8>) -> Result<Geometry, ReadError> {
+        let id = t.attr_string(b"id");
+        let srs_name = t.attr_string(b"srsName");
+        if self.first_srs.is_none() {
+            self.first_srs = srs_name.clone();
+        }
+        let saved_dim = self.dim_hint;
+        if let Some(d) = t.attr(b"srsDimension").and_then(|v| parse_dim(&v)) {
+            self.dim_hint = Some(d);
+        }
+        let gml_type = t.local_str();
+        let property = String::from_utf8_lossy(name_at(self.src, prop_start)).into_owned();
+        let start = t.start;
+        let kind = match t.local() {
+            b"Solid" => {
+                let (e, i) = self.parse_solid(&t)?;
+                GeometryKind::Solid { exterior: e, interior: i }
+            }
+            b"CompositeSolid" | b"MultiSolid" => {
+                let mut solids = Vec::new();
+                loop {
+                    match self.next()? {
+                        Ev::Start(c) => {
+                            if c.ns == Ns::Gml && matches!(c.local(), b"solidMember" | b"solidMembers") {
+                                loop {
+                                    match self.next()? {
+                                        Ev::Start(s) if s.is_gml(b"Solid") => solids.push(self.parse_solid(&s)?),
+                                        Ev::Start(s) => {
+                                            self.skip(&s)?;
+                                        }
+                                        Ev::End { .. } => break,
+                                        Ev::Eof => return Err(self.unclosed(c.raw.name().as_ref(), c.start)),
+                                        _ => {}
+                                    }
+                                }
+                            } else {
+                                self.skip(&c)?;
+                            }
+                        }
+                        Ev::End { .. } => break,
+                        Ev::Eof => return Err(self.unclosed(t.raw.name().as_ref(), t.start)),
+                        _ => {}
+                    }
+                }
+                GeometryKind::Solids(solids)
+            }
+            _ => {
+                let mut v = Vec::new();
+                self.collect_element(t, false, Some(prop_start), &mut v)?;
+                GeometryKind::Surfaces(v)
+            }
+        };
+        self.dim_hint = saved_dim;
+        let end = self.pos();
+        Ok(Geometry { id, lod, property, gml_type, srs_name, kind, span: self.span(start, end) })
+    }
+
+    /// A `gml:Solid` whose start tag was just read → (exterior shell, interior shells).
+    fn parse_solid(&mut self, t: &Tag<'a>) -> Result<(Shell, Vec<Shell>), ReadError> {
+        let mut exterior = Shell { id: None, polygons: Vec::new() };
+        let mut interior = Vec::new();
+        loop {
+            match self.next()? {
+                Ev::Start(c) => {
+                    let is_ext = c.is_gml(b"exterior");
+                    if is_ext || c.is_gml(b"interior") {
+                        let mut polys = Vec::new();
+                        let id = self.collect_prop(c, false, &mut polys)?;
+                        let shell = Shell { id, polygons: polys };
+                        if is_ext {
+                            exterior = shell;
+                        } else {
+                            interior.push(shell);
+                        }
+                    } else {
+                        self.skip(&c)?;
+                    }
+                }
+                Ev::Empty(c) => {
+                    if let Some(href) = c.attr_string(b"href") {
+                        let ph = self.placeholder(&href, c.start, self.pos(), false);
+                        let shell = Shell { id: None, polygons: vec![ph] };
+                        if c.is_gml(b"exterior") {
+                            exterior = shell;
+                        } else {
+                            interior.push(shell);
+                        }
+                    }
+                }
+                Ev::End { .. } => break,
+                Ev::Text { .. } => {}
+                Ev::Eof => return Err(self.unclosed(t.raw.name().as_ref(), t.start)),
+            }
+        }
+        Ok((exterior, interior))
+    }
+
+    /// Reads a geometry property element (`surfaceMember`, `baseSurface`, `exterior`, ...)
+    /// whose start tag was just read; its surfaces go to `out`. Returns the gml:id of the
+    /// first geometry inside (a Shell's id).
+    fn collect_prop(&mut self, p: Tag<'a>, reversed: bool, out: &mut Vec<Polygon>) -> Result<Option<String>, ReadError> {
+        if let Some(href) = p.attr_string(b"href") {
+            self.skip(&p)?;
+            let ph = self.placeholder(&href, p.start, self.pos(), reversed);
+            out.push(ph);
+            return Ok(None);
+        }
+        let mut first_id = None;
+        loop {
+            match self.next()? {
+                Ev::Start(c) => {
+                    if c.ns == Ns::Gml && is_surface_like(c.local()) {
+                        if first_id.is_none() {
+                            first_id = c.attr_string(b"id");
+                        }
+                        self.collect_element(c, reversed, Some(p.start), out)?;
+                    } else {
+                        self.skip(&c)?;
+                    }
+                }
+                Ev::End { .. } => return Ok(first_id),
+                Ev::Eof => return Err(self.unclosed(p.raw.name().as_ref(), p.start)),
+                _ => {}
+            }
+        }
+    }
+
+    /// A surface element whose start tag was just read: a polygon, or an aggregate whose
+    /// members are collected (an `OrientableSurface` with `orientation="-"` flips them).
+    fn collect_element(
+        &mut self,
+        t: Tag<'a>,
+        reversed: bool,
+        member_start: Option<usize>,
+        out: &mut Vec<Polygon>,
+    ) -> Result<(), ReadError> {
+        if is_polygon_like(t.local()) {
+            let p = self.parse_polygon(t, reversed, member_start)?;
+            out.push(p);
+            return Ok(());
+        }
+        let rev = if t.local() == b"OrientableSurface" && t.attr(b"orientation").as_deref() == Some(b"-") {
+            !reversed
+        } else {
+            reversed
+        };
+        let id = t.attr_string(b"id");
+        loop {
+            match self.next()? {
+                Ev::Start(c) => {
+                    if c.ns == Ns::Gml {
+                        self.collect_prop(c, rev, out)?;
+                    } else {
+                        self.skip(&c)?;
+                    }
+                }
+                Ev::Empty(c) => {
+                    if let Some(href) = c.attr_string(b"href") {
+                        let ph = self.placeholder(&href, c.start, self.pos(), rev);
+                        out.push(ph);
+                    }
+                }
+                Ev::End { end } => {
+                    if let Some(id) = id {
+                        self.local_ids.insert(id, IdEntry { bytes: t.start..end, semantic: self.cur_sem.clone() });
+                    }
+                    return Ok(());
+                }
+                Ev::Text { .. } => {}
+                Ev::Eof => return Err(self.unclosed(t.raw.name().as_ref(), t.start)),
+            }
+        }
+    }
+
+    fn placeholder(&mut self, href: &str, start: usize, end: usize, reversed: bool) -> Polygon {
+        self.placeholders += 1;
+        Polygon {
+            id: Some(href.to_string()),
+            exterior: empty_ring(),
+            interiors: Vec::new(),
+            semantic: None,
+            semantic_owner: None,
+            reversed,
+            span: SourceSpan::default(),
+            member_span: None,
+            via_xlink: Some(self.span(start, end)),
+        }
+    }
+
+    /// Span of the property element that encloses a polygon: from the property's start tag
+    /// to the end tag that directly follows the polygon (None when something else follows).
+    fn member_span(&self, member_start: usize, poly_end: usize) -> Option<SourceSpan> {
+        let mut i = poly_end;
+        while i < self.src.len() && self.src[i].is_ascii_whitespace() {
+            i += 1;
+        }
+        if self.src.get(i..i + 2) != Some(b"</") {
+            return None;
+        }
+        let close = memchr::memchr(b'>', &self.src[i..])?;
+        Some(self.span(member_start, i + close + 1))
+    }
+
+    fn parse_polygon(&mut self, t: Tag<'a>, reversed: bool, member_start: Option<usize>) -> Result<Polygon, ReadError> {
+        let id = t.attr_string(b"id");
+        let mut exterior = None;
+        let mut interiors = Vec::new();
+        let end;
+        loop {
+            match self.next()? {
+                Ev::Start(c) => {
+                    let l = c.local();
+                    if c.ns == Ns::Gml && matches!(l, b"exterior" | b"outerBoundaryIs") {
+                        exterior = self.parse_ring_prop(c)?;
+                    } else if c.ns == Ns::Gml && matches!(l, b"interior" | b"innerBoundaryIs") {
+                        if let Some(r) = self.parse_ring_prop(c)? {
+                            interiors.push(r);
+                        }
+                    } else {
+                        self.skip(&c)?;
+                    }
+                }
+                Ev::End { end: e } => {
+                    end = e;
+                    break;
+                }
+                Ev::Eof => return Err(self.unclosed(t.raw.name().as_ref(), t.start)),
+                _ => {}
+            }
+        }
+        let Some(exterior) = exterior else {
+            return Err(self.err(
+                t.start,
+                format!(
+                    "gml:{} {}has no exterior gml:LinearRing (missing coordinates)",
+                    t.local_str(),
+                    id.as_ref().map(|i| format!("'{i}' ")).unwrap_or_default()
+                ),
+            ));
+        };
+        let (semantic, semantic_owner) = match &self.cur_sem {
+            Some((s, o)) => (Some(*s), o.clone()),
+            None => (None, None),
+        };
+        Ok(Polygon {
+            id,
+            exterior,
+            interiors,
+            semantic,
+            semantic_owner,
+            reversed,
+            span: self.span(t.start, end),
+            member_span: member_start.and_then(|m| self.member_span(m, end)),
+            via_xlink: None,
+        })
+    }
+
+    /// `gml:exterior`/`gml:interior` of a polygon → its LinearRing.
+    fn parse_ring_prop(&mut self, p: Tag<'a>) -> Result<Option<Ring>, ReadError> {
+        let mut ring = None;
+        loop {
+            match self.next()? {
+                Ev::Start(c) => {
+                    if c.is_gml(b"LinearRing") {
+                        ring = Some(self.parse_linear_ring(c)?);
+                    } else {
+                        self.skip(&c)?;
+                    }
+                }
+                Ev::End { .. } => return Ok(ring),
+                Ev::Eof => return Err(self.unclosed(p.raw.name().as_ref(), p.start)),
+                _ => {}
+            }
+        }
+    }
+
+    fn parse_linear_ring(&mut self, t: Tag<'a>) -> Result<Ring, ReadError> {
+        let id = t.attr_string(b"id");
+        let mut points: Vec<Point3> = Vec::new();
+        let mut encoding: Option<CoordEncoding> = None;
+        let mut dim: u8 = 3;
+        let mut text_span = SourceSpan::default();
+        let mut pos_spans = Vec::new();
+        let end;
+        loop {
+            match self.next()? {
+                Ev::Start(c) => {
+                    let l = c.local();
+                    if c.ns != Ns::Gml {
+                        self.skip(&c)?;
+                        continue;
+                    }
+                    match l {
+                        b"posList" => {
+                            if encoding.is_some() {
+                                return Err(self.err(c.start, "gml:LinearRing mixes coordinate encodings"));
+                            }
+                            let d = c.attr(b"srsDimension").and_then(|v| parse_dim(&v)).or(self.dim_hint).unwrap_or(3);
+                            let r = self.content(&c)?;
+                            let vals = self.numbers(r.clone(), "gml:posList")?;
+                            if vals.is_empty() {
+                                return Err(self.err(c.start, "empty gml:posList (missing coordinates)"));
+                            }
+                            if vals.len() % d as usize != 0 {
+                                return Err(self.err(
+                                    c.start,
+                                    format!(
+                                        "gml:posList has {} values, not a multiple of srsDimension {d}",
+                                        vals.len()
+                                    ),
+                                ));
+                            }
+                            points = vals.chunks_exact(d as usize).map(|v| to_point(v)).collect();
+                            dim = d;
+                            let tr = self.trimmed(r);
+                            text_span = self.span(tr.start, tr.end);
+                            encoding = Some(CoordEncoding::PosList);
+                        }
+                        b"pos" => {
+                            if encoding.is_some_and(|e| e != CoordEncoding::Pos) {
+                                return Err(self.err(c.start, "gml:LinearRing mixes coordinate encodings"));
+                            }
+                            let d_attr = c.attr(b"srsDimension").and_then(|v| parse_dim(&v));
+                            let r = self.content(&c)?;
+                            let vals = self.numbers(r.clone(), "gml:pos")?;
+                            let d = d_attr.unwrap_or(vals.len() as u8);
+                            if !(vals.len() == 2 || vals.len() == 3) || vals.len() != d as usize {
+                                return Err(self.err(
+                                    c.start,
+                                    format!("gml:pos has {} values, expected 2 or 3 (one position)", vals.len()),
+                                ));
+                            }
+                            let tr = self.trimmed(r);
+                            if encoding.is_none() {
+                                dim = d;
+                                text_span = self.span(tr.start, tr.end);
+                            } else if d != dim {
+                                return Err(self.err(c.start, format!("gml:pos has {d} values, the ring's first has {dim}")));
+                            }
+                            text_span.bytes.end = tr.end;
+                            points.push(to_point(&vals));
+                            pos_spans.push(self.span(tr.start, tr.end));
+                            encoding = Some(CoordEncoding::Pos);
+                        }
+                        b"coordinates" => {
+                            if encoding.is_some() {
+                                return Err(self.err(c.start, "gml:LinearRing mixes coordinate encodings"));
+                            }
+                            let cs = c.attr(b"cs").map(|v| v.into_owned()).unwrap_or_else(|| b",".to_vec());
+                            let dec = c.attr(b"decimal").map(|v| v.into_owned()).unwrap_or_else(|| b".".to_vec());
+                            let r = self.content(&c)?;
+                            let (pts, d) = self.coordinates(r.clone(), &cs, &dec)?;
+                            if pts.is_empty() {
+                                return Err(self.err(c.start, "empty gml:coordinates (missing coordinates)"));
+                            }
+                            points = pts;
+                            dim = d;
+                            let tr = self.trimmed(r);
+                            text_span = self.span(tr.start, tr.end);
+                            encoding = Some(CoordEncoding::Coordinates);
+                        }
+                        _ => {
+                            self.skip(&c)?;
+                        }
+                    }
+                }
+                Ev::Empty(c) => {
+                    if c.ns == Ns::Gml && matches!(c.local(), b"posList" | b"pos" | b"coordinates") {
+                        return Err(self.err(
+                            c.start,
+                            format!("empty gml:{} (missing coordinates)", c.local_str()),
+                        ));
+                    }
+                }
+                Ev::End { end: e } => {
+                    end = e;
+                    break;
+                }
+                Ev::Eof => return Err(self.unclosed(t.raw.name().as_ref(), t.start)),
+                Ev::Text { .. } => {}
+            }
+        }
+        let Some(encoding) = encoding else {
+            return Err(self.err(
+                t.start,
+                "gml:LinearRing has no coordinates (no gml:posList, gml:pos or gml:coordinates)",
+            ));
+        };
+        Ok(Ring { id, points, srs_dimension: dim, encoding, text_span, pos_spans, span: self.span(t.start, end) })
+    }
+
+    /// Whitespace-separated numbers of `src[r]`; a bad token is an error at its own position.
+    fn numbers(&self, r: Range<usize>, what: &str) -> Result<Vec<f64>, ReadError> {
+        let mut v = Vec::with_capacity((r.end - r.start) / 8);
+        for (at, tok) in tokens(&self.src[r.clone()], r.start) {
+            match parse_f64(tok) {
+                Some(x) if x.is_finite() => v.push(x),
+                Some(_) => return Err(self.err(at, format!("{what}: non-finite coordinate '{}'", lossy(tok)))),
+                None => {
+                    if tok.contains(&b'<') {
+                        return Err(self.err(at, format!("{what}: unexpected markup inside the coordinate text")));
+                    }
+                    return Err(self.err(at, format!("{what}: '{}' is not a number", lossy(tok))));
+                }
+            }
+        }
+        Ok(v)
+    }
+
+    /// `gml:coordinates`: tuples separated by whitespace, values by `cs`.
+    fn coordinates(&self, r: Range<usize>, cs: &[u8], dec: &[u8]) -> Result<(Vec<Point3>, u8), ReadError> {
+        let mut pts = Vec::new();
+        let mut dim = 0u8;
+        for (at, tuple) in tokens(&self.src[r.clone()], r.start) {
+            let mut vals = Vec::with_capacity(3);
+            let sep = cs.first().copied().unwrap_or(b',');
+            for part in tuple.split(|b| *b == sep) {
+                let owned;
+                let part = if dec != b"." && dec.len() == 1 {
+                    owned = part.iter().map(|b| if *b == dec[0] { b'.' } else { *b }).collect::<Vec<u8>>();
+                    &owned[..]
+                } else {
+                    part
+                };
+                match parse_f64(part) {
+                    Some(x) if x.is_finite() => vals.push(x),
+                    _ => {
+                        return Err(self.err(at, format!("gml:coordinates: '{}' is not a coordinate tuple", lossy(tuple))))
+                    }
+                }
+            }
+            if !(vals.len() == 2 || vals.len() == 3) {
+                return Err(self.err(at, format!("gml:coordinates: tuple '{}' has {} values", lossy(tuple), vals.len())));
+            }
+            if dim == 0 {
+                dim = vals.len() as u8;
+            } else if dim as usize != vals.len() {
+                return Err(self.err(at, "gml:coordinates: tuples of different dimension"));
+            }
+            pts.push(to_point(&vals));
+        }
+        Ok((pts, dim))
+    }
+}
+
+fn empty_ring() -> Ring {
+    Ring {
+        id: None,
+        points: Vec::new(),
+        srs_dimension: 3,
+        encoding: CoordEncoding::PosList,
+        text_span: SourceSpan::default(),
+        pos_spans: Vec::new(),
+        span: SourceSpan::default(),
+    }
+}
+
+fn to_point(v: &[f64]) -> Point3 {
+    [v[0], v[1], if v.len() > 2 { v[2] } else { 0.0 }]
+}
+
+fn parse_dim(v: &[u8]) -> Option<u8> {
+    match v {
+        b"2" => Some(2),
+        b"3" => Some(3),
+        _ => None,
+    }
+}
+
+fn lossy(b: &[u8]) -> String {
+    let s = String::from_utf8_lossy(b);
+    if s.chars().count() > 40 {
+        format!("{}…", s.chars().take(40).collect::<String>())
+    } else {
+        s.into_owned()
+    }
+}
+
+fn parse_f64(tok: &[u8]) -> Option<f64> {
+    std::str::from_utf8(tok).ok()?.parse::<f64>().ok()
+}
+
+/// Whitespace-separated tokens with their absolute byte offsets.
+fn tokens(s: &[u8], base: usize) -> impl Iterator<Item = (usize, &[u8])> {
+    let mut i = 0;
+    std::iter::from_fn(move || {
+        while i < s.len() && s[i].is_ascii_whitespace() {
+            i += 1;
+        }
+        if i >= s.len() {
+            return None;
+        }
+        let st = i;
+        while i < s.len() && !s[i].is_ascii_whitespace() {
+            i += 1;
+        }
+        Some((base + st, &s[st..i]))
+    })
+}
+
+/// Placeholders are polygons reached by `xlink:href` that are not yet filled in.
+fn is_placeholder(p: &Polygon) -> bool {
+    p.via_xlink.is_some() && p.span.bytes.end == 0
+}
+
+fn href_id(href: &str) -> Option<&str> {
+    match href.strip_prefix('#') {
+        Some(id) => Some(id),
+        None if !href.contains('#') && !href.contains('/') => Some(href),
+        None => None,
+    }
+}
+
+fn visit_polys<'o>(obj: &'o CityObject, f: &mut dyn FnMut(&'o Polygon)) {
+    for g in &obj.geometries {
+        for p in g.polygons() {
+            f(p);
+        }
+    }
+    for c in &obj.children {
+        visit_polys(c, f);
+    }
+}
+
+fn visit_vecs_mut(obj: &mut CityObject, f: &mut dyn FnMut(&mut Vec<Polygon>)) {
+    for g in &mut obj.geometries {
+        match &mut g.kind {
+            GeometryKind::Surfaces(v) => f(v),
+            GeometryKind::Solid { exterior, interior } => {
+                f(&mut exterior.polygons);
+                for s in interior {
+                    f(&mut s.polygons);
+                }
+            }
+            GeometryKind::Solids(v) => {
+                for (e, i) in v {
+                    f(&mut e.polygons);
+                    for s in i {
+                        f(&mut s.polygons);
+                    }
+                }
+            }
+        }
+    }
+    for c in &mut obj.children {
+        visit_vecs_mut(c, f);
+    }
+}
+
+/// Where XLink targets outside the current object are looked up (the stream's lazy index).
+pub(crate) trait GlobalIds {
+    fn lookup(&mut self, id: &str) -> Result<Option<IdEntry>, ReadError>;
+}
+
+/// Context to re-parse an id'd element from its own bytes.
+pub(crate) struct Reparse<'s, 'a> {
+    pub src: &'a [u8],
+    pub lines: &'s Arc<LineIndex>,
+    pub bindings: &'s [Binding],
+}
+
+impl Reparse<'_, '_> {
+    fn surfaces(&self, e: &IdEntry) -> Result<Vec<Polygon>, ReadError> {
+        let mut p = Parser::new(self.src, self.lines.clone(), e.bytes.clone(), self.bindings.to_vec());
+        p.cur_sem = e.semantic.clone();
+        let mut out = Vec::new();
+        loop {
+            match p.next()? {
+                Ev::Start(t) => {
+                    if t.ns == Ns::Gml && is_surface_like(t.local()) {
+                        p.collect_element(t, false, None, &mut out)?;
+                    } else {
+                        p.skip(&t)?;
+                    }
+                    break;
+                }
+                Ev::Eof => break,
+                _ => {}
+            }
+        }
+        Ok(out)
+    }
+}
+
+/// Replaces the XLink placeholders of one top-level object by copies of their targets:
+/// polygons defined in the object itself, id'd aggregates of the object (re-parsed from their
+/// bytes), then anything else in the document through `global`. Unresolvable ones are removed
+/// and returned.
+pub(crate) fn resolve_object(
+    obj: &mut CityObject,
+    local_ids: &HashMap<String, IdEntry>,
+    reparse: &Reparse<'_, '_>,
+    global: &mut dyn GlobalIds,
+) -> Result<Vec<XLinkRef>, ReadError> {
+    let mut unresolved = Vec::new();
+    // Phase 1 (shared borrow): what each placeholder becomes, in visiting order.
+    let mut replacements: Vec<Option<Vec<Polygon>>> = Vec::new();
+    {
+        let mut by_id: HashMap<&str, &Polygon> = HashMap::new();
+        let mut phs: Vec<&Polygon> = Vec::new();
+        visit_polys(obj, &mut |p| {
+            if is_placeholder(p) {
+                phs.push(p);
+            } else if let Some(id) = &p.id {
+                by_id.insert(id.as_str(), p);
+            }
+        });
+        for ph in phs {
+            let r = resolve_one(ph, &by_id, local_ids, reparse, global, 0)?;
+            if r.is_none() {
+                unresolved.push(XLinkRef {
+                    href: ph.id.clone().unwrap_or_default(),
+                    span: ph.via_xlink.clone().unwrap_or_default(),
+                });
+            }
+            replacements.push(r);
+        }
+    }
+    // Phase 2: splice them in, same order.
+    let mut it = replacements.into_iter();
+    visit_vecs_mut(obj, &mut |v| {
+        if !v.iter().any(is_placeholder) {
+            return;
+        }
+        let old = std::mem::take(v);
+        for p in old {
+            if is_placeholder(&p) {
+                if let Some(Some(r)) = it.next() {
+                    v.extend(r);
+                }
+            } else {
+                v.push(p);
+            }
+        }
+    });
+    Ok(unresolved)
+}
+
+fn resolve_one(
+    ph: &Polygon,
+    by_id: &HashMap<&str, &Polygon>,
+    local_ids: &HashMap<String, IdEntry>,
+    reparse: &Reparse<'_, '_>,
+    global: &mut dyn GlobalIds,
+    depth: usize,
+) -> Result<Option<Vec<Polygon>>, ReadError> {
+    let href = ph.id.as_deref().unwrap_or("");
+    let Some(id) = href_id(href) else { return Ok(None) };
+    let via = ph.via_xlink.clone();
+    let copy = |p: &Polygon| {
+        let mut c = p.clone();
+        c.reversed ^= ph.reversed;
+        c.via_xlink = via.clone();
+        c
+    };
+    if let Some(p) = by_id.get(id) {
+        return Ok(Some(vec![copy(p)]));
+    }
+    if depth > 8 {
+        return Ok(None); // reference cycle
+    }
+    let entry = match local_ids.get(id) {
+        Some(e) => Some(e.clone()),
+        None => global.lookup(id)?,
+    };
+    let Some(entry) = entry else { return Ok(None) };
+    let mut out = Vec::new();
+    for p in reparse.surfaces(&entry)? {
+        if is_placeholder(&p) {
+            if let Some(r) = resolve_one(&p, by_id, local_ids, reparse, global, depth + 1)? {
+                out.extend(r.iter().map(&copy));
+            }
+        } else {
+            out.push(copy(&p));
+        }
+    }
+    Ok(Some(out))
+}
+
+/// Computes envelopes from coordinates (children included); keeps the declared one where an
+/// object has no geometry of its own.
+pub(crate) fn finish_envelopes(obj: &mut CityObject) {
+    let mut env = Envelope::empty();
+    for c in &mut obj.children {
+        finish_envelopes(c);
+        env.merge(&c.envelope);
+    }
+    for g in &obj.geometries {
+        for p in g.polygons() {
+            for r in std::iter::once(&p.exterior).chain(p.interiors.iter()) {
+                for q in &r.points {
+                    env.add_point(q);
+                }
+            }
+        }
+    }
+    if !env.is_empty() {
+        obj.envelope = env;
+    }
+}
+
+/// A first pass over the whole document: every id'd surface element with its span and owner
+/// semantics. Built only when an XLink points outside its own top-level object.
+pub(crate) fn build_index(
+    src: &[u8],
+    lines: &Arc<LineIndex>,
+    range: Range<usize>,
+) -> Result<HashMap<String, IdEntry>, ReadError> {
+    let mut p = Parser::new(src, lines.clone(), range, Vec::new());
+    let mut map = HashMap::new();
+    // (start, id if surface element, thematic semantic if thematic surface)
+    let mut stack: Vec<(usize, Option<String>, Option<(SurfaceType, Option<String>)>)> = Vec::new();
+    loop {
+        match p.next()? {
+            Ev::Start(t) => {
+                let l = t.local();
+                let id = if t.ns == Ns::Gml && is_surface_like(l) { t.attr_string(b"id") } else { None };
+                let sem = match t.ns {
+                    Ns::CityGml(..) => std::str::from_utf8(l)
+                        .ok()
+                        .and_then(SurfaceType::from_local_name)
+                        .map(|s| (s, t.attr_string(b"id"))),
+                    _ => None,
+                };
+                stack.push((t.start, id, sem));
+            }
+            Ev::End { end } => {
+                if let Some((start, id, _)) = stack.pop() {
+                    if let Some(id) = id {
+                        let semantic = stack.iter().rev().find_map(|s| s.2.clone());
+                        map.insert(id, IdEntry { bytes: start..end, semantic });
+                    }
+                }
+            }
+            Ev::Eof => break,
+            _ => {}
+        }
+    }
+    Ok(map)
+}

@@ -1,0 +1,109 @@
+//! Lossless writing: the output is the source bytes with [`Edit`]s spliced in. Without edits the
+//! output IS the input (byte-identical, hence canonically equal); with coordinate edits only the
+//! touched coordinate texts change. Nothing is ever re-serialised.
+
+use std::io::Write;
+use std::ops::Range;
+
+use crate::error::WriteError;
+use crate::model::{CoordEncoding, Point3, Ring};
+
+/// Replace `bytes` of the source by `replacement` (an empty range inserts, an empty
+/// replacement deletes, e.g. a `Polygon::member_span` to drop a polygon with its wrapper).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Edit {
+    pub bytes: Range<usize>,
+    pub replacement: Vec<u8>,
+}
+
+/// Writes `src` with `edits` applied. Edits may come in any order; they must not overlap
+/// (two insertions at the same offset are applied in the order given).
+pub fn write_with_edits(src: &[u8], edits: &[Edit], out: &mut dyn Write) -> Result<(), WriteError> {
+    let mut order: Vec<&Edit> = edits.iter().collect();
+    order.sort_by_key(|e| (e.bytes.start, e.bytes.end));
+    for e in &order {
+        if e.bytes.start > e.bytes.end || e.bytes.end > src.len() {
+            return Err(WriteError::OutOfBounds { start: e.bytes.start, end: e.bytes.end, len: src.len() });
+        }
+    }
+    for w in order.windows(2) {
+        let (a, b) = (&w[0].bytes, &w[1].bytes);
+        if a.end > b.start {
+            return Err(WriteError::Overlap { a_start: a.start, a_end: a.end, b_start: b.start, b_end: b.end });
+        }
+    }
+    let mut at = 0;
+    for e in order {
+        out.write_all(&src[at..e.bytes.start])?;
+        out.write_all(&e.replacement)?;
+        at = e.bytes.end;
+    }
+    out.write_all(&src[at..])?;
+    Ok(())
+}
+
+/// One position as text: values separated by `sep`, in the ring's dimension, shortest
+/// round-trip formatting (Rust `{}` of f64: `3.5`, `1`, `0.1`, `385421.123`).
+fn push_point(s: &mut String, p: &Point3, dim: u8, sep: char) {
+    use std::fmt::Write as _;
+    for (i, v) in p.iter().take(dim as usize).enumerate() {
+        if i > 0 {
+            s.push(sep);
+        }
+        // `+ 0.0` turns -0 into 0, so a coordinate never reads "-0".
+        let _ = write!(s, "{}", v + 0.0);
+    }
+}
+
+/// The coordinate text for `points` in `ring`'s own encoding and dimension: `gml:posList` →
+/// `x y z x y z ...`; `gml:coordinates` → `x,y,z x,y,z ...`; `gml:pos` → the same text as a
+/// posList (a `gml:pos` ring has one text per position: use [`ring_edits`] to edit it).
+pub fn format_coordinates(ring: &Ring, points: &[Point3]) -> String {
+    let mut s = String::with_capacity(points.len() * 3 * 12);
+    let (tuple_sep, value_sep) = match ring.encoding {
+        CoordEncoding::Coordinates => (' ', ','),
+        CoordEncoding::PosList | CoordEncoding::Pos => (' ', ' '),
+    };
+    for (i, p) in points.iter().enumerate() {
+        if i > 0 {
+            s.push(tuple_sep);
+        }
+        push_point(&mut s, p, ring.srs_dimension, value_sep);
+    }
+    s
+}
+
+/// The edits that replace `ring`'s coordinates by `points`, keeping its encoding, dimension
+/// and the whitespace around the texts. A `gml:pos` ring gets one edit per position and must
+/// keep its number of positions; a posList/coordinates ring may change it (a `count`
+/// attribute on the posList, rare in CityGML, is not updated).
+pub fn ring_edits(ring: &Ring, points: &[Point3]) -> Result<Vec<Edit>, WriteError> {
+    if points.iter().flatten().any(|v| !v.is_finite()) {
+        return Err(WriteError::Coordinates("a new coordinate is not finite".into()));
+    }
+    match ring.encoding {
+        CoordEncoding::Pos => {
+            if points.len() != ring.pos_spans.len() {
+                return Err(WriteError::Coordinates(format!(
+                    "a gml:pos ring has {} positions, {} given",
+                    ring.pos_spans.len(),
+                    points.len()
+                )));
+            }
+            Ok(ring
+                .pos_spans
+                .iter()
+                .zip(points)
+                .map(|(sp, p)| {
+                    let mut s = String::new();
+                    push_point(&mut s, p, ring.srs_dimension, ' ');
+                    Edit { bytes: sp.bytes.clone(), replacement: s.into_bytes() }
+                })
+                .collect())
+        }
+        _ => Ok(vec![Edit {
+            bytes: ring.text_span.bytes.clone(),
+            replacement: format_coordinates(ring, points).into_bytes(),
+        }]),
+    }
+}
