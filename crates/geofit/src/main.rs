@@ -37,6 +37,7 @@ struct Cli {
 enum Command {
     // One line per subcommand; keep alphabetical. Each `cmd::<name>` module has `Args` and `run`.
     Info(cmd::info::Args),
+    Validate(cmd::validate::Args),
 }
 
 fn main() -> ExitCode {
@@ -44,6 +45,7 @@ fn main() -> ExitCode {
     let config = Config { quiet: cli.quiet };
     let result = match cli.command {
         Command::Info(a) => cmd::info::run(a, &config),
+        Command::Validate(a) => cmd::validate::run(a, &config),
     };
     match result {
         Ok(exit) => exit.into(),

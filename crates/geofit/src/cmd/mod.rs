@@ -1,3 +1,4 @@
 //! One module per subcommand (alphabetical).
 
 pub mod info;
+pub mod validate;

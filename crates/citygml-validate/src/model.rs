@@ -1,0 +1,144 @@
+//! Runs the geometric checks over a whole [`CityModel`] and locates each issue in the document
+//! (feature gml:id, primitive gml:id, line:column).
+
+use crate::polygon::PolygonInput;
+use crate::{check_solid, check_surfaces, Issue, Options};
+use citygml_io::{CityModel, CityObject, Geometry, GeometryKind, Polygon, Shell};
+use rayon::prelude::*;
+use serde::Serialize;
+
+/// One geometric finding, ready for a report.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Finding {
+    /// gml:id of the city object that holds the geometry.
+    pub feature: Option<String>,
+    /// Its element name (`Building`, `WallSurface`, ...).
+    pub feature_type: String,
+    /// Geometry property (`lod2Solid`, `lod2MultiSurface`, ...).
+    pub geometry: String,
+    /// gml:id of the failing primitive (ring, polygon, or the solid), when it has one.
+    pub primitive: Option<String>,
+    pub code: u16,
+    pub name: &'static str,
+    pub detail: String,
+    pub line: usize,
+    pub column: usize,
+}
+
+fn to_inputs<'a>(polys: &[&'a Polygon]) -> Vec<PolygonInput<'a>> {
+    polys
+        .iter()
+        .map(|p| PolygonInput {
+            exterior: &p.exterior.points,
+            interiors: p.interiors.iter().map(|r| r.points.as_slice()).collect(),
+            reversed: p.reversed,
+        })
+        .collect()
+}
+
+fn locate(obj: &CityObject, geom: &Geometry, shells: &[Vec<&Polygon>], issue: Issue) -> Finding {
+    let shell = issue.shell.unwrap_or(0);
+    let poly = issue.polygon.and_then(|i| shells.get(shell).and_then(|s| s.get(i)).copied());
+    let (primitive, span) = match (poly, issue.ring) {
+        (Some(p), Some(r)) => {
+            let ring = if r == 0 { Some(&p.exterior) } else { p.interiors.get(r - 1) };
+            match ring {
+                Some(ring) => (ring.id.clone().or_else(|| p.id.clone()), if ring.span.line > 0 { &ring.span } else { &p.span }),
+                None => (p.id.clone(), &p.span),
+            }
+        }
+        (Some(p), None) => (p.id.clone(), &p.span),
+        _ => (geom.id.clone(), &geom.span),
+    };
+    let mut detail = issue.detail;
+    if let Some(i) = issue.polygon {
+        if poly.map_or(true, |p| p.id.is_none()) {
+            detail = format!("polygon #{}: {}", i + 1, detail);
+        }
+    }
+    if shells.len() > 1 {
+        if let Some(s) = issue.shell {
+            detail = format!("shell {}: {}", s + 1, detail);
+        }
+    }
+    Finding {
+        feature: obj.id.clone(),
+        feature_type: obj.kind.clone(),
+        geometry: geom.property.clone(),
+        primitive,
+        code: issue.code.code(),
+        name: issue.code.name(),
+        detail,
+        line: span.line,
+        column: span.column,
+    }
+}
+
+fn shell_polys(s: &Shell) -> Vec<&Polygon> {
+    s.polygons.iter().collect()
+}
+
+fn check_geometry(obj: &CityObject, geom: &Geometry, opts: &Options) -> Vec<Finding> {
+    let mut out = Vec::new();
+    match &geom.kind {
+        GeometryKind::Surfaces(ps) => {
+            let polys: Vec<&Polygon> = ps.iter().collect();
+            let shells = vec![polys];
+            for is in check_surfaces(&to_inputs(&shells[0]), opts) {
+                out.push(locate(obj, geom, &shells, is));
+            }
+        }
+        GeometryKind::Solid { exterior, interior } => {
+            let shells: Vec<Vec<&Polygon>> = std::iter::once(exterior).chain(interior.iter()).map(shell_polys).collect();
+            let inp: Vec<Vec<PolygonInput>> = shells.iter().map(|s| to_inputs(s)).collect();
+            for is in check_solid(&inp, opts) {
+                out.push(locate(obj, geom, &shells, is));
+            }
+        }
+        GeometryKind::Solids(solids) => {
+            for (k, (ext, ints)) in solids.iter().enumerate() {
+                let shells: Vec<Vec<&Polygon>> = std::iter::once(ext).chain(ints.iter()).map(shell_polys).collect();
+                let inp: Vec<Vec<PolygonInput>> = shells.iter().map(|s| to_inputs(s)).collect();
+                for is in check_solid(&inp, opts) {
+                    let mut f = locate(obj, geom, &shells, is);
+                    if solids.len() > 1 {
+                        f.detail = format!("solid {}: {}", k + 1, f.detail);
+                    }
+                    out.push(f);
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Validates every geometry of one top-level city object and everything nested in it.
+pub fn validate_object(top: &CityObject, opts: &Options) -> Vec<Finding> {
+    let mut v = Vec::new();
+    for obj in top.walk() {
+        for g in &obj.geometries {
+            v.extend(check_geometry(obj, g, opts));
+        }
+    }
+    v
+}
+
+/// Validates top-level objects in parallel; findings come back sorted by position in the
+/// document (see [`sort_findings`]).
+pub fn validate_objects(objects: &[CityObject], opts: &Options) -> Vec<Finding> {
+    let mut all: Vec<Finding> = objects.par_iter().flat_map_iter(|top| validate_object(top, opts)).collect();
+    sort_findings(&mut all);
+    all
+}
+
+/// Sorts findings by position in the document and drops repeats: a polygon reached twice
+/// (defined in a boundary surface and referenced by a solid through an XLink) is reported once.
+pub fn sort_findings(all: &mut Vec<Finding>) {
+    all.sort_by(|a, b| (a.line, a.column, a.code, &a.detail, &a.feature).cmp(&(b.line, b.column, b.code, &b.detail, &b.feature)));
+    all.dedup_by(|a, b| a.line == b.line && a.column == b.column && a.code == b.code && a.detail == b.detail);
+}
+
+/// Validates a whole model (see [`validate_objects`]).
+pub fn validate_model(model: &CityModel, opts: &Options) -> Vec<Finding> {
+    validate_objects(&model.objects, opts)
+}

@@ -1,0 +1,542 @@
+//! Ring level (101–104) and polygon level (201–208) checks, in the polygon's own plane.
+//!
+//! Order follows val3dity: per ring 103, 101, 102; per polygon 104 for a collapsed triangle, 203
+//! against the least-squares plane, then the rings projected to that plane: 104 (simple ring),
+//! 208 (inner rings opposite to the outer), then the GEOS-style topology checks 202, 201, 206, 207,
+//! 205; finally 204 on the polygon's triangulation. A polygon stops at its first error.
+
+use crate::codes::ErrorCode;
+use crate::geom::{angle_deg, fit_plane, newell_normal, signed_area, Plane, Snapper, V2, V3};
+use crate::{Issue, Options};
+use geo::line_intersection::{line_intersection, LineIntersection};
+use geo::coordinate_position::CoordPos;
+use geo::{coord, CoordinatePosition, Line, LineString};
+use spade::{ConstrainedDelaunayTriangulation, Point2, Triangulation};
+
+/// One polygon as plain coordinates: rings as written in the file (closing point included).
+#[derive(Debug, Clone)]
+pub struct PolygonInput<'a> {
+    pub exterior: &'a [[f64; 3]],
+    pub interiors: Vec<&'a [[f64; 3]]>,
+    /// `gml:OrientableSurface orientation="-"`: the polygon's sense is reversed.
+    pub reversed: bool,
+}
+
+/// A polygon that passed the ring and polygon checks, ready for shell checks.
+#[derive(Debug, Clone)]
+pub struct PreparedPolygon {
+    /// Vertex ids (into the snapper) of each ring, closing point removed; ring 0 is the exterior.
+    pub rings: Vec<Vec<u32>>,
+    /// Unit normal following the polygon's orientation (exterior counter-clockwise around it,
+    /// `reversed` applied).
+    pub normal: V3,
+    /// Triangles of the polygon, counter-clockwise around `normal`.
+    pub triangles: Vec<[u32; 3]>,
+}
+
+fn issue(code: ErrorCode, polygon: usize, ring: Option<usize>, detail: String) -> Issue {
+    Issue { code, polygon: Some(polygon), ring, shell: None, detail }
+}
+
+fn fmt_pt(p: &V3, origin: &V3) -> String {
+    let q = p + origin;
+    format!("({}, {}, {})", round6(q.x), round6(q.y), round6(q.z))
+}
+
+fn round6(x: f64) -> f64 {
+    (x * 1e6).round() / 1e6
+}
+
+/// Snaps all points of `polys` (in order, like val3dity's parser) and checks every polygon.
+/// Returns the issues and, per polygon, its prepared form when it is valid.
+pub fn check_polygons(
+    polys: &[PolygonInput],
+    snap: &mut Snapper,
+    opts: &Options,
+) -> (Vec<Issue>, Vec<Option<PreparedPolygon>>) {
+    let ids: Vec<Vec<Vec<u32>>> = polys
+        .iter()
+        .map(|p| {
+            std::iter::once(p.exterior)
+                .chain(p.interiors.iter().copied())
+                .map(|r| r.iter().map(|pt| snap.add(pt)).collect())
+                .collect()
+        })
+        .collect();
+    let mut issues = Vec::new();
+    let mut out = Vec::with_capacity(polys.len());
+    for (i, (poly, rings)) in polys.iter().zip(ids).enumerate() {
+        match check_polygon(i, poly, rings, snap, opts) {
+            Ok(p) => out.push(Some(p)),
+            Err(is) => {
+                issues.push(is);
+                out.push(None);
+            }
+        }
+    }
+    (issues, out)
+}
+
+/// Ring-level checks on snapped ids: 103, 101, 102. Returns the ring without its closing point.
+fn check_ring(pi: usize, ri: usize, mut ids: Vec<u32>, snap: &Snapper) -> Result<Vec<u32>, Issue> {
+    if ids.len() >= 2 && ids[0] != ids[ids.len() - 1] {
+        let a = snap.points[ids[0] as usize];
+        let b = snap.points[ids[ids.len() - 1] as usize];
+        return Err(issue(
+            ErrorCode::RingNotClosed,
+            pi,
+            Some(ri),
+            format!("first and last points are {:.6} m apart", (a - b).norm()),
+        ));
+    }
+    ids.pop();
+    if ids.len() < 3 {
+        return Err(issue(ErrorCode::TooFewPoints, pi, Some(ri), format!("{} distinct points, at least 3 needed", ids.len())));
+    }
+    let n = ids.len();
+    for k in 0..n {
+        if ids[k] == ids[(k + 1) % n] {
+            let o = snap.origin();
+            return Err(issue(
+                ErrorCode::ConsecutivePointsSame,
+                pi,
+                Some(ri),
+                format!("points {} and {} coincide at {}", k + 1, (k + 1) % n + 1, fmt_pt(&snap.points[ids[k] as usize], &o)),
+            ));
+        }
+    }
+    Ok(ids)
+}
+
+fn check_polygon(
+    pi: usize,
+    poly: &PolygonInput,
+    rings: Vec<Vec<u32>>,
+    snap: &Snapper,
+    opts: &Options,
+) -> Result<PreparedPolygon, Issue> {
+    let mut rs = Vec::with_capacity(rings.len());
+    for (ri, r) in rings.into_iter().enumerate() {
+        rs.push(check_ring(pi, ri, r, snap)?);
+    }
+    let pts = |r: &Vec<u32>| -> Vec<V3> { r.iter().map(|&i| snap.points[i as usize]).collect() };
+    let ext3 = pts(&rs[0]);
+    let all3: Vec<V3> = rs.iter().flat_map(|r| pts(r)).collect();
+    let newell = newell_normal(&ext3);
+    let extent = {
+        let mut e: f64 = 0.0;
+        for p in &all3 {
+            e = e.max((p - all3[0]).norm());
+        }
+        e
+    };
+    if !(newell.norm() > 1e-12 * extent * extent) {
+        return Err(issue(ErrorCode::RingSelfIntersection, pi, Some(0), "outer ring is collapsed to a line or a point".into()));
+    }
+    let plane = if rs.len() == 1 && rs[0].len() == 3 {
+        Plane { point: ext3[0], normal: newell.normalize() }
+    } else {
+        let Some(mut pl) = fit_plane(&all3) else {
+            return Err(issue(ErrorCode::RingSelfIntersection, pi, Some(0), "polygon is collapsed to a line".into()));
+        };
+        // spec: val3dity checks every point against the least-squares plane (203).
+        let (mut dmax, mut at) = (0.0f64, 0usize);
+        for (k, p) in all3.iter().enumerate() {
+            let d = pl.distance(p).abs();
+            if d > dmax {
+                dmax = d;
+                at = k;
+            }
+        }
+        if dmax > opts.planarity_tol {
+            return Err(issue(
+                ErrorCode::NonPlanarPolygonDistancePlane,
+                pi,
+                None,
+                format!(
+                    "distance to fitted plane {:.6} m at {} (tolerance {} m)",
+                    dmax,
+                    fmt_pt(&all3[at], &snap.origin()),
+                    opts.planarity_tol
+                ),
+            ));
+        }
+        if pl.normal.dot(&newell) < 0.0 {
+            pl.normal = -pl.normal;
+        }
+        pl
+    };
+    let (u, v) = plane.basis();
+    let proj = |r: &Vec<u32>| -> Vec<V2> {
+        r.iter()
+            .map(|&i| {
+                let d = snap.points[i as usize] - plane.point;
+                V2::new(d.dot(&u), d.dot(&v))
+            })
+            .collect()
+    };
+    let rings2: Vec<Vec<V2>> = rs.iter().map(proj).collect();
+    for (ri, (r2, ids)) in rings2.iter().zip(&rs).enumerate() {
+        if let Some(why) = ring_not_simple(r2, ids) {
+            return Err(issue(ErrorCode::RingSelfIntersection, pi, Some(ri), why));
+        }
+    }
+    // The exterior runs counter-clockwise around the oriented normal; inner rings must not.
+    for ri in 1..rings2.len() {
+        if signed_area(&rings2[ri]) > 0.0 {
+            return Err(issue(
+                ErrorCode::OrientationRingsSame,
+                pi,
+                Some(ri),
+                "inner ring has the same orientation as the outer ring".into(),
+            ));
+        }
+    }
+    let splits = check_ring_topology(pi, &rings2, &rs, extent)?;
+    let mut rings_split = rs.clone();
+    let mut splits = splits;
+    // later segments first, and within a segment the farthest split first, so indices stay valid
+    splits.sort_by(|a, b| a.0.cmp(&b.0).then(b.1.cmp(&a.1)).then(b.3.total_cmp(&a.3)));
+    for (ri, seg, vid, _t) in splits {
+        insert_split(&mut rings_split[ri], seg, vid);
+    }
+    let triangles = triangulate(&rings_split, snap, &plane, u, v).ok_or_else(|| {
+        issue(ErrorCode::RingSelfIntersection, pi, None, "polygon cannot be triangulated in its plane (rings touch or cross)".into())
+    })?;
+    // 204: the normals of the triangles must not deviate from each other by more than the tolerance.
+    let normals: Vec<(f64, V3)> = triangles
+        .iter()
+        .filter_map(|t| {
+            let a = snap.points[t[0] as usize];
+            let n = (snap.points[t[1] as usize] - a).cross(&(snap.points[t[2] as usize] - a));
+            let area = n.norm();
+            (area > 1e-12 * extent * extent).then(|| (area, n / area))
+        })
+        .collect();
+    if normals.len() > 1 {
+        let mut worst = 0.0f64;
+        if normals.len() <= 256 {
+            for i in 0..normals.len() {
+                for j in i + 1..normals.len() {
+                    worst = worst.max(angle_deg(&normals[i].1, &normals[j].1));
+                }
+            }
+        } else {
+            let r = normals.iter().max_by(|a, b| a.0.total_cmp(&b.0)).unwrap().1;
+            for n in &normals {
+                worst = worst.max(angle_deg(&r, &n.1));
+            }
+        }
+        if worst > opts.normals_tol_deg {
+            return Err(issue(
+                ErrorCode::NonPlanarPolygonNormalsDeviation,
+                pi,
+                None,
+                format!("normals of its triangles deviate by {:.4}° (tolerance {}°)", worst, opts.normals_tol_deg),
+            ));
+        }
+    }
+    let (normal, triangles) = if poly.reversed {
+        (-plane.normal, triangles.into_iter().map(|t| [t[0], t[2], t[1]]).collect())
+    } else {
+        (plane.normal, triangles)
+    };
+    Ok(PreparedPolygon { rings: rs, normal, triangles })
+}
+
+fn gline(a: &V2, b: &V2) -> Line<f64> {
+    Line::new(coord! {x: a.x, y: a.y}, coord! {x: b.x, y: b.y})
+}
+
+fn seg_bbox_overlap(a: &V2, b: &V2, c: &V2, d: &V2) -> bool {
+    a.x.min(b.x) <= c.x.max(d.x) && c.x.min(d.x) <= a.x.max(b.x) && a.y.min(b.y) <= c.y.max(d.y) && c.y.min(d.y) <= a.y.max(b.y)
+}
+
+/// Why a projected ring is not simple (crossing, touching itself, spike, zero area), if it is not.
+fn ring_not_simple(r: &[V2], ids: &[u32]) -> Option<String> {
+    let n = r.len();
+    let area = signed_area(r).abs();
+    let per: f64 = (0..n).map(|i| (r[(i + 1) % n] - r[i]).norm()).sum();
+    if !(area > 1e-12 * per * per) {
+        return Some("ring is collapsed to a line".into());
+    }
+    let mut seen = std::collections::HashMap::new();
+    for (k, id) in ids.iter().enumerate() {
+        if let Some(j) = seen.insert(*id, k) {
+            return Some(format!("ring passes twice through the same point (points {} and {})", j + 1, k + 1));
+        }
+    }
+    for i in 0..n {
+        let (a, b) = (r[i], r[(i + 1) % n]);
+        for j in i + 1..n {
+            let (c, d) = (r[j], r[(j + 1) % n]);
+            if !seg_bbox_overlap(&a, &b, &c, &d) {
+                continue;
+            }
+            let adjacent = j == i + 1 || (i == 0 && j == n - 1);
+            match line_intersection(gline(&a, &b), gline(&c, &d)) {
+                None => {}
+                Some(LineIntersection::SinglePoint { .. }) if adjacent => {}
+                Some(LineIntersection::Collinear { intersection }) if adjacent && intersection.start == intersection.end => {}
+                Some(_) => {
+                    return Some(format!("segments {} and {} of the ring intersect", i + 1, j + 1));
+                }
+            }
+        }
+    }
+    None
+}
+
+/// Topology between the rings of one polygon (after each ring is simple): 202, 201, 206, 207, 205.
+/// Returns the points where a vertex of one ring touches the inside of a segment of another
+/// (ring, segment, vertex id, parameter), so the triangulation can split that segment.
+fn check_ring_topology(
+    pi: usize,
+    rings: &[Vec<V2>],
+    ids: &[Vec<u32>],
+    extent: f64,
+) -> Result<Vec<(usize, usize, u32, f64)>, Issue> {
+    let nr = rings.len();
+    if nr == 1 {
+        return Ok(Vec::new());
+    }
+    for a in 0..nr {
+        for b in a + 1..nr {
+            let mut sa = ids[a].clone();
+            let mut sb = ids[b].clone();
+            sa.sort_unstable();
+            sb.sort_unstable();
+            if sa == sb {
+                return Err(issue(ErrorCode::DuplicatedRings, pi, Some(b), format!("rings {} and {} are identical", a + 1, b + 1)));
+            }
+        }
+    }
+    let eps = 1e-9 * extent.max(1e-9);
+    let mut splits = Vec::new();
+    // touch points per ring pair
+    let mut touches: Vec<((usize, usize), Vec<V2>)> = Vec::new();
+    for a in 0..nr {
+        for b in a + 1..nr {
+            let (ra, rb) = (&rings[a], &rings[b]);
+            let mut pts: Vec<V2> = Vec::new();
+            for i in 0..ra.len() {
+                let (p, q) = (ra[i], ra[(i + 1) % ra.len()]);
+                for j in 0..rb.len() {
+                    let (s, t) = (rb[j], rb[(j + 1) % rb.len()]);
+                    if !seg_bbox_overlap(&p, &q, &s, &t) {
+                        continue;
+                    }
+                    match line_intersection(gline(&p, &q), gline(&s, &t)) {
+                        None => {}
+                        Some(LineIntersection::SinglePoint { is_proper: true, .. }) => {
+                            return Err(issue(
+                                ErrorCode::IntersectionRings,
+                                pi,
+                                Some(b),
+                                format!("ring {} crosses ring {}", b + 1, a + 1),
+                            ));
+                        }
+                        Some(LineIntersection::Collinear { intersection }) => {
+                            let (x0, x1) = (intersection.start, intersection.end);
+                            if (x0.x - x1.x).hypot(x0.y - x1.y) > eps {
+                                return Err(issue(
+                                    ErrorCode::IntersectionRings,
+                                    pi,
+                                    Some(b),
+                                    format!("rings {} and {} share a segment", a + 1, b + 1),
+                                ));
+                            }
+                            pts.push(V2::new(x0.x, x0.y));
+                        }
+                        Some(LineIntersection::SinglePoint { intersection: x, .. }) => {
+                            let x = V2::new(x.x, x.y);
+                            pts.push(x);
+                            // A vertex of one ring inside a segment of the other: split that segment.
+                            let near = |u: &V2, w: &V2| (u - w).norm() <= eps;
+                            if !near(&x, &p) && !near(&x, &q) {
+                                if near(&x, &s) {
+                                    splits.push((a, i, ids[b][j], (x - p).norm() / (q - p).norm()));
+                                } else if near(&x, &t) {
+                                    splits.push((a, i, ids[b][(j + 1) % rb.len()], (x - p).norm() / (q - p).norm()));
+                                }
+                            } else if !near(&x, &s) && !near(&x, &t) {
+                                let vid = if near(&x, &p) { ids[a][i] } else { ids[a][(i + 1) % ra.len()] };
+                                splits.push((b, j, vid, (x - s).norm() / (t - s).norm()));
+                            }
+                        }
+                    }
+                }
+            }
+            // distinct touch points
+            let mut distinct: Vec<V2> = Vec::new();
+            for p in pts {
+                if !distinct.iter().any(|q| (q - p).norm() <= eps) {
+                    distinct.push(p);
+                }
+            }
+            if !distinct.is_empty() {
+                touches.push(((a, b), distinct));
+            }
+        }
+    }
+    // 206: every inner ring inside the outer ring; 207: no inner ring inside another.
+    let polys: Vec<geo::Polygon<f64>> = rings
+        .iter()
+        .map(|r| {
+            let mut cs: Vec<geo::Coord<f64>> = r.iter().map(|p| coord! {x: p.x, y: p.y}).collect();
+            cs.push(cs[0]);
+            geo::Polygon::new(LineString::new(cs), vec![])
+        })
+        .collect();
+    let position = |inner: usize, outer: usize| -> CoordPos {
+        // first vertex (or segment midpoint) of `inner` that is not on the boundary of `outer`
+        let r = &rings[inner];
+        let cands = r.iter().copied().chain((0..r.len()).map(|k| (r[k] + r[(k + 1) % r.len()]) * 0.5));
+        for c in cands {
+            let pos = polys[outer].coordinate_position(&coord! {x: c.x, y: c.y});
+            if pos != CoordPos::OnBoundary {
+                return pos;
+            }
+        }
+        CoordPos::OnBoundary
+    };
+    for b in 1..nr {
+        if position(b, 0) == CoordPos::Outside {
+            return Err(issue(ErrorCode::InnerRingOutside, pi, Some(b), format!("inner ring {} lies outside the outer ring", b + 1)));
+        }
+    }
+    for b in 1..nr {
+        for c in 1..nr {
+            if b != c && position(b, c) == CoordPos::Inside {
+                return Err(issue(
+                    ErrorCode::InnerRingsNested,
+                    pi,
+                    Some(b),
+                    format!("inner ring {} lies inside inner ring {}", b + 1, c + 1),
+                ));
+            }
+        }
+    }
+    // 205: two rings touching twice, or rings touching in a cycle, cut the interior apart.
+    let mut parent: Vec<usize> = (0..nr).collect();
+    fn find(p: &mut [usize], x: usize) -> usize {
+        let mut x = x;
+        while p[x] != x {
+            p[x] = p[p[x]];
+            x = p[x];
+        }
+        x
+    }
+    for ((a, b), pts) in &touches {
+        if pts.len() >= 2 {
+            return Err(issue(
+                ErrorCode::InteriorDisconnected,
+                pi,
+                Some(*b),
+                format!("rings {} and {} touch at {} points", a + 1, b + 1, pts.len()),
+            ));
+        }
+        let (ra, rb) = (find(&mut parent, *a), find(&mut parent, *b));
+        if ra == rb {
+            return Err(issue(
+                ErrorCode::InteriorDisconnected,
+                pi,
+                Some(*b),
+                "rings touch each other in a cycle, the interior is cut into pieces".into(),
+            ));
+        }
+        parent[ra] = rb;
+    }
+    Ok(splits)
+}
+
+/// Inserts vertex `vid` into segment `seg` of a ring (after the segment's start), keeping several
+/// splits of one segment ordered by their parameter.
+fn insert_split(ring: &mut Vec<u32>, seg: usize, vid: u32) {
+    if ring.contains(&vid) {
+        return;
+    }
+    let pos = (seg + 1).min(ring.len());
+    ring.insert(pos, vid);
+}
+
+/// Constrained Delaunay triangulation of the polygon in its plane; triangles inside the polygon
+/// (odd nesting level) are returned counter-clockwise in (u, v), i.e. around the plane normal.
+fn triangulate(rings: &[Vec<u32>], snap: &Snapper, plane: &Plane, u: V3, v: V3) -> Option<Vec<[u32; 3]>> {
+    let mut cdt: ConstrainedDelaunayTriangulation<Point2<f64>> = ConstrainedDelaunayTriangulation::new();
+    let mut id_of: Vec<u32> = Vec::new();
+    let mut handles: Vec<Vec<spade::handles::FixedVertexHandle>> = Vec::new();
+    for r in rings {
+        let mut hs = Vec::with_capacity(r.len());
+        for &id in r {
+            let d = snap.points[id as usize] - plane.point;
+            let h = cdt.insert(Point2::new(d.dot(&u), d.dot(&v))).ok()?;
+            if h.index() >= id_of.len() {
+                id_of.resize(h.index() + 1, u32::MAX);
+            }
+            if id_of[h.index()] == u32::MAX {
+                id_of[h.index()] = id;
+            }
+            hs.push(h);
+        }
+        handles.push(hs);
+    }
+    for hs in &handles {
+        for k in 0..hs.len() {
+            let (a, b) = (hs[k], hs[(k + 1) % hs.len()]);
+            if a != b {
+                if !cdt.can_add_constraint(a, b) {
+                    return None;
+                }
+                cdt.add_constraint(a, b);
+            }
+        }
+    }
+    // nesting level by flood fill from the outside; crossing a constraint edge changes the parity
+    let nf = cdt.num_all_faces();
+    let mut level = vec![-1i32; nf];
+    let mut fixed = vec![None; nf];
+    for f in cdt.inner_faces() {
+        fixed[f.fix().index()] = Some(f.fix());
+    }
+    let mut stack: Vec<(usize, i32)> = Vec::new();
+    for f in cdt.inner_faces() {
+        for e in f.adjacent_edges() {
+            if e.rev().face().is_outer() {
+                let l = if e.is_constraint_edge() { 1 } else { 0 };
+                stack.push((f.fix().index(), l));
+            }
+        }
+    }
+    while let Some((fi, l)) = stack.pop() {
+        if level[fi] >= 0 {
+            continue;
+        }
+        level[fi] = l;
+        let Some(fh) = fixed[fi] else { continue };
+        let f = cdt.face(fh);
+        for e in f.adjacent_edges() {
+            let nb = e.rev().face();
+            if let Some(inner) = nb.as_inner() {
+                let ni = inner.fix().index();
+                if level[ni] < 0 {
+                    stack.push((ni, l + if e.is_constraint_edge() { 1 } else { 0 }));
+                }
+            }
+        }
+    }
+    let mut tris = Vec::new();
+    for f in cdt.inner_faces() {
+        if level[f.fix().index()] % 2 == 1 {
+            let vs = f.vertices();
+            let t = [id_of[vs[0].fix().index()], id_of[vs[1].fix().index()], id_of[vs[2].fix().index()]];
+            if t[0] != t[1] && t[1] != t[2] && t[0] != t[2] {
+                tris.push(t);
+            }
+        }
+    }
+    if tris.is_empty() {
+        return None;
+    }
+    Some(tris)
+}

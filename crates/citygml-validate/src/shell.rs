@@ -1,0 +1,387 @@
+//! Shell level (301–307) on the triangulated shell, like val3dity: the polygons are checked first
+//! (ring and polygon levels), triangulated in their planes, and the triangles' edges on snapped
+//! vertices give the combinatorial checks; a triangle–triangle test gives the geometric one.
+//!
+//! Order: 301 too few polygons; 303 an edge shared by more than two faces; 307 two faces using an
+//! edge in the same direction; 303 a vertex whose faces form several fans (unless the faces
+//! actually cross there, which is 306); 305 several edge-connected components; 302 border edges
+//! (holes); 306 faces meeting anywhere other than along shared vertices and edges.
+
+use crate::codes::ErrorCode;
+use crate::geom::{point_segment_distance, Snapper, V3};
+use crate::polygon::{check_polygons, PolygonInput};
+use crate::tritri::contact;
+use crate::{Issue, Options};
+use rstar::{primitives::GeomWithData, primitives::Rectangle, RTree, AABB};
+use std::collections::{BTreeMap, HashMap, HashSet};
+
+/// A shell that passed all checks up to the shell level, as a triangle mesh.
+pub struct ShellMesh {
+    /// Vertices relative to `origin`.
+    pub points: Vec<V3>,
+    pub origin: V3,
+    pub triangles: Vec<[u32; 3]>,
+    /// Index of the polygon each triangle comes from.
+    pub triangle_polygon: Vec<usize>,
+}
+
+impl ShellMesh {
+    /// Signed volume (positive when the faces point outwards).
+    pub fn signed_volume(&self) -> f64 {
+        let c = self.points.first().copied().unwrap_or_else(V3::zeros);
+        self.triangles
+            .iter()
+            .map(|t| {
+                let (a, b, d) = (self.points[t[0] as usize] - c, self.points[t[1] as usize] - c, self.points[t[2] as usize] - c);
+                a.dot(&b.cross(&d)) / 6.0
+            })
+            .sum()
+    }
+    pub fn abs_point(&self, i: u32) -> V3 {
+        self.points[i as usize] + self.origin
+    }
+    fn extent(&self) -> f64 {
+        let c = self.points.first().copied().unwrap_or_else(V3::zeros);
+        self.points.iter().map(|p| (p - c).norm()).fold(0.0, f64::max)
+    }
+}
+
+fn shell_issue(code: ErrorCode, polygon: Option<usize>, detail: String) -> Issue {
+    Issue { code, polygon, ring: None, shell: None, detail }
+}
+
+fn fmt_abs(p: &V3) -> String {
+    let r = |x: f64| (x * 1e6).round() / 1e6;
+    format!("({}, {}, {})", r(p.x), r(p.y), r(p.z))
+}
+
+struct Dsu(Vec<usize>);
+impl Dsu {
+    fn new(n: usize) -> Self {
+        Dsu((0..n).collect())
+    }
+    fn find(&mut self, x: usize) -> usize {
+        let mut x = x;
+        while self.0[x] != x {
+            self.0[x] = self.0[self.0[x]];
+            x = self.0[x];
+        }
+        x
+    }
+    fn union(&mut self, a: usize, b: usize) -> bool {
+        let (ra, rb) = (self.find(a), self.find(b));
+        if ra == rb {
+            return false;
+        }
+        self.0[ra] = rb;
+        true
+    }
+}
+
+/// Tolerances derived from the options and the shell's size: `plane` for on-plane decisions in
+/// the triangle test, `touch` for how far a contact may reach beyond a shared vertex or edge.
+pub(crate) fn contact_eps(opts: &Options, extent: f64) -> (f64, f64) {
+    let plane = 1e-9 * extent.max(1.0);
+    let touch = (opts.snap_tol * 0.01).max(plane * 10.0);
+    (plane, touch)
+}
+
+/// Checks one shell. Returns its issues and, when it is valid, its triangle mesh.
+pub fn check_shell(polys: &[PolygonInput], opts: &Options) -> (Vec<Issue>, Option<ShellMesh>) {
+    if polys.is_empty() {
+        return (vec![shell_issue(ErrorCode::EmptyPrimitive, None, "shell has no polygons".into())], None);
+    }
+    let mut snap = Snapper::new(opts.snap_tol);
+    let (issues, prepared) = check_polygons(polys, &mut snap, opts);
+    if !issues.is_empty() {
+        return (issues, None);
+    }
+    if polys.len() < 4 {
+        return (
+            vec![shell_issue(ErrorCode::TooFewPolygons, None, format!("{} polygons, a shell needs at least 4", polys.len()))],
+            None,
+        );
+    }
+    let mut mesh = ShellMesh { points: snap.points.clone(), origin: snap.origin(), triangles: Vec::new(), triangle_polygon: Vec::new() };
+    for (pi, p) in prepared.iter().enumerate() {
+        let p = p.as_ref().expect("valid polygons are prepared");
+        for t in &p.triangles {
+            mesh.triangles.push(*t);
+            mesh.triangle_polygon.push(pi);
+        }
+    }
+    let issues = shell_topology_and_geometry(&mesh, opts);
+    if issues.is_empty() {
+        (issues, Some(mesh))
+    } else {
+        (issues, None)
+    }
+}
+
+fn shell_topology_and_geometry(mesh: &ShellMesh, opts: &Options) -> Vec<Issue> {
+    let tris = &mesh.triangles;
+    let tp = &mesh.triangle_polygon;
+    // edge uses: undirected key -> (triangle, runs from low to high id)
+    let mut edges: BTreeMap<(u32, u32), Vec<(usize, bool)>> = BTreeMap::new();
+    for (ti, t) in tris.iter().enumerate() {
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            edges.entry((a.min(b), a.max(b))).or_default().push((ti, a < b));
+        }
+    }
+    let edge_str = |e: &(u32, u32)| format!("{}–{}", fmt_abs(&mesh.abs_point(e.0)), fmt_abs(&mesh.abs_point(e.1)));
+    // A triangulation edge inside a polygon shows up twice for that polygon (once per side).
+    let boundary_polys = |uses: &[(usize, bool)]| -> (Vec<usize>, Vec<usize>) {
+        let mut count: BTreeMap<usize, usize> = BTreeMap::new();
+        for u in uses {
+            *count.entry(tp[u.0]).or_default() += 1;
+        }
+        let inner = count.iter().filter(|(_, &c)| c >= 2).map(|(&p, _)| p).collect();
+        let bound = count.iter().filter(|(_, &c)| c == 1).map(|(&p, _)| p).collect();
+        (bound, inner)
+    };
+    // 303: non-manifold edges (a polygon edge shared by more than two polygons)
+    let mut issues = Vec::new();
+    for (e, uses) in &edges {
+        if uses.len() > 2 {
+            let (bound, inner) = boundary_polys(uses);
+            if inner.is_empty() && bound.len() > 2 {
+                issues.push(shell_issue(
+                    ErrorCode::NonManifoldCase,
+                    Some(bound[0]),
+                    format!("edge {} is shared by {} polygons ({})", edge_str(e), bound.len(), list1(&bound)),
+                ));
+            }
+        }
+    }
+    if !issues.is_empty() {
+        return issues;
+    }
+    // 306: other polygons meet the inside of a polygon along one of its triangulation edges
+    for (e, uses) in &edges {
+        if uses.len() > 2 {
+            let (bound, inner) = boundary_polys(uses);
+            if let (Some(&a), Some(&b)) = (inner.first(), bound.first().or(inner.get(1))) {
+                issues.push(shell_issue(
+                    ErrorCode::ShellSelfIntersection,
+                    Some(a.min(b)),
+                    format!(
+                        "polygon #{} meets the inside of polygon #{} along {}",
+                        b + 1,
+                        a + 1,
+                        edge_str(e)
+                    ),
+                ));
+            }
+        }
+    }
+    if !issues.is_empty() {
+        return issues;
+    }
+    // 307: orientation, by propagating relative flips over shared edges
+    if edges.values().any(|u| u.len() == 2 && u[0].1 == u[1].1) {
+        let np = tp.iter().max().map_or(0, |m| m + 1);
+        let mut adj: Vec<Vec<(usize, bool)>> = vec![Vec::new(); np];
+        for u in edges.values() {
+            if u.len() == 2 {
+                let (pa, pb) = (tp[u[0].0], tp[u[1].0]);
+                if pa != pb {
+                    let flip = u[0].1 == u[1].1;
+                    adj[pa].push((pb, flip));
+                    adj[pb].push((pa, flip));
+                }
+            }
+        }
+        let mut label: Vec<Option<bool>> = vec![None; np];
+        for start in 0..np {
+            if label[start].is_some() {
+                continue;
+            }
+            let mut comp = vec![start];
+            label[start] = Some(false);
+            let mut stack = vec![start];
+            while let Some(p) = stack.pop() {
+                for &(q, flip) in &adj[p] {
+                    if label[q].is_none() {
+                        label[q] = Some(label[p].unwrap() ^ flip);
+                        comp.push(q);
+                        stack.push(q);
+                    }
+                }
+            }
+            let flipped: Vec<usize> = comp.iter().copied().filter(|&p| label[p] == Some(true)).collect();
+            let kept = comp.len() - flipped.len();
+            let wrong: Vec<usize> = if flipped.len() <= kept {
+                flipped
+            } else {
+                comp.iter().copied().filter(|&p| label[p] == Some(false)).collect()
+            };
+            for p in wrong {
+                issues.push(shell_issue(
+                    ErrorCode::PolygonWrongOrientation,
+                    Some(p),
+                    "polygon is oriented opposite to its neighbours".into(),
+                ));
+            }
+        }
+        if issues.is_empty() {
+            issues.push(shell_issue(ErrorCode::PolygonWrongOrientation, None, "faces use an edge in the same direction".into()));
+        }
+        return issues;
+    }
+    // vertex fans: faces around a vertex connected through the edges at that vertex
+    let mut corners: HashMap<u32, Vec<(u32, u32)>> = HashMap::new();
+    for t in tris {
+        for k in 0..3 {
+            corners.entry(t[k]).or_default().push((t[(k + 1) % 3], t[(k + 2) % 3]));
+        }
+    }
+    let mut nonmanifold_vertices: Vec<u32> = Vec::new();
+    for (v, cs) in &corners {
+        let mut d = Dsu::new(cs.len());
+        let mut by_nb: HashMap<u32, usize> = HashMap::new();
+        for (ci, (a, b)) in cs.iter().enumerate() {
+            for nb in [a, b] {
+                if let Some(&other) = by_nb.get(nb) {
+                    d.union(ci, other);
+                } else {
+                    by_nb.insert(*nb, ci);
+                }
+            }
+        }
+        let roots: HashSet<usize> = (0..cs.len()).map(|i| d.find(i)).collect();
+        if roots.len() > 1 {
+            nonmanifold_vertices.push(*v);
+        }
+    }
+    nonmanifold_vertices.sort_unstable();
+    if !nonmanifold_vertices.is_empty() {
+        let si = self_intersections(mesh, opts);
+        if !si.is_empty() {
+            return si;
+        }
+        return nonmanifold_vertices
+            .iter()
+            .map(|v| {
+                shell_issue(
+                    ErrorCode::NonManifoldCase,
+                    None,
+                    format!("non-manifold vertex at {}: its faces form more than one fan", fmt_abs(&mesh.abs_point(*v))),
+                )
+            })
+            .collect();
+    }
+    // 305: connected components through shared edges
+    let mut d = Dsu::new(tris.len());
+    for u in edges.values() {
+        if u.len() == 2 {
+            d.union(u[0].0, u[1].0);
+        }
+    }
+    let ncomp = (0..tris.len()).map(|i| d.find(i)).collect::<HashSet<_>>().len();
+    if ncomp > 1 {
+        return vec![shell_issue(
+            ErrorCode::MultipleConnectedComponents,
+            None,
+            format!("the faces form {ncomp} separate parts"),
+        )];
+    }
+    // 302: border edges, grouped into holes
+    let border: Vec<(&(u32, u32), usize)> = edges.iter().filter(|(_, u)| u.len() == 1).map(|(e, u)| (e, u[0].0)).collect();
+    if !border.is_empty() {
+        let nv = mesh.points.len();
+        let mut dv = Dsu::new(nv);
+        for (e, _) in &border {
+            dv.union(e.0 as usize, e.1 as usize);
+        }
+        let mut seen = HashSet::new();
+        for (e, ti) in &border {
+            if seen.insert(dv.find(e.0 as usize)) {
+                issues.push(shell_issue(
+                    ErrorCode::ShellNotClosed,
+                    Some(tp[*ti]),
+                    format!("hole in the shell at edge {}", edge_str(e)),
+                ));
+            }
+        }
+        return issues;
+    }
+    self_intersections(mesh, opts)
+}
+
+fn list1(ps: &[usize]) -> String {
+    ps.iter().map(|p| format!("#{}", p + 1)).collect::<Vec<_>>().join(", ")
+}
+
+type TriBox = GeomWithData<Rectangle<[f64; 3]>, usize>;
+
+fn tri_box(p: &[V3; 3], pad: f64, data: usize) -> TriBox {
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for q in p {
+        for k in 0..3 {
+            lo[k] = lo[k].min(q[k] - pad);
+            hi[k] = hi[k].max(q[k] + pad);
+        }
+    }
+    GeomWithData::new(Rectangle::from_corners(lo, hi), data)
+}
+
+/// 306: pairs of faces (from different polygons) that meet beyond the vertices they share.
+fn self_intersections(mesh: &ShellMesh, opts: &Options) -> Vec<Issue> {
+    let (eps, touch) = contact_eps(opts, mesh.extent());
+    let tri_pts = |t: &[u32; 3]| [mesh.points[t[0] as usize], mesh.points[t[1] as usize], mesh.points[t[2] as usize]];
+    let boxes: Vec<TriBox> = mesh.triangles.iter().enumerate().map(|(i, t)| tri_box(&tri_pts(t), touch, i)).collect();
+    let tree = RTree::bulk_load(boxes.clone());
+    let mut pairs: BTreeMap<(usize, usize), V3> = BTreeMap::new();
+    for bi in &boxes {
+        let i = bi.data;
+        let ti = mesh.triangles[i];
+        let env: AABB<[f64; 3]> = bi.geom().envelope_box();
+        for bj in tree.locate_in_envelope_intersecting(&env) {
+            let j = bj.data;
+            if j <= i || mesh.triangle_polygon[i] == mesh.triangle_polygon[j] {
+                continue;
+            }
+            let key = (mesh.triangle_polygon[i], mesh.triangle_polygon[j]);
+            let key = (key.0.min(key.1), key.0.max(key.1));
+            if pairs.contains_key(&key) {
+                continue;
+            }
+            let tj = mesh.triangles[j];
+            let shared: Vec<V3> = ti.iter().filter(|v| tj.contains(v)).map(|&v| mesh.points[v as usize]).collect();
+            if shared.len() == 3 {
+                pairs.insert(key, mesh.points[ti[0] as usize]);
+                continue;
+            }
+            let c = contact(&tri_pts(&ti), &tri_pts(&tj), eps);
+            let beyond = c.iter().find(|p| match shared.len() {
+                0 => true,
+                1 => (*p - shared[0]).norm() > touch,
+                _ => point_segment_distance(p, &shared[0], &shared[1]) > touch,
+            });
+            if let Some(p) = beyond {
+                pairs.insert(key, *p);
+            }
+        }
+    }
+    pairs
+        .into_iter()
+        .map(|((a, b), p)| {
+            shell_issue(
+                ErrorCode::ShellSelfIntersection,
+                Some(a),
+                format!("polygons #{} and #{} intersect near {}", a + 1, b + 1, fmt_abs(&(p + mesh.origin))),
+            )
+        })
+        .collect()
+}
+
+trait EnvelopeBox {
+    fn envelope_box(&self) -> AABB<[f64; 3]>;
+}
+impl EnvelopeBox for Rectangle<[f64; 3]> {
+    fn envelope_box(&self) -> AABB<[f64; 3]> {
+        AABB::from_corners(self.lower(), self.upper())
+    }
+}

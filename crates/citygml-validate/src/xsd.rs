@@ -1,0 +1,341 @@
+//! XSD validation with the system libxml2, linked in-process through a small hand-written FFI
+//! (the handful of calls `xmllint --schema` makes). Network access is off (`XML_PARSE_NONET` and
+//! libxml2's no-network entity loader), so the offline schema bundle must be complete.
+//!
+//! libxml2 reports the line of each validity error but not its column (its nodes carry no
+//! column), so the column is recovered from the source: the start tag of the reported element on
+//! that line.
+
+use std::ffi::{c_char, c_int, c_void, CStr, CString};
+use std::path::Path;
+use std::sync::Once;
+
+#[repr(C)]
+struct XmlError {
+    domain: c_int,
+    code: c_int,
+    message: *const c_char,
+    level: c_int,
+    file: *const c_char,
+    line: c_int,
+    str1: *const c_char,
+    str2: *const c_char,
+    str3: *const c_char,
+    int1: c_int,
+    int2: c_int,
+    ctxt: *mut c_void,
+    node: *mut c_void,
+}
+
+/// The first fields of libxml2's `xmlNode` (stable since 2.0).
+#[repr(C)]
+struct XmlNodeHead {
+    private: *mut c_void,
+    kind: c_int,
+    name: *const c_char,
+}
+
+type StructuredErrorFunc = unsafe extern "C" fn(*mut c_void, *const XmlError);
+type EntityLoader = unsafe extern "C" fn(*const c_char, *const c_char, *mut c_void) -> *mut c_void;
+
+#[link(name = "xml2")]
+extern "C" {
+    fn xmlInitParser();
+    fn xmlSetExternalEntityLoader(f: EntityLoader);
+    fn xmlNoNetExternalEntityLoader(url: *const c_char, id: *const c_char, ctxt: *mut c_void) -> *mut c_void;
+    fn xmlSetStructuredErrorFunc(ctx: *mut c_void, handler: Option<StructuredErrorFunc>);
+    fn xmlSchemaNewParserCtxt(url: *const c_char) -> *mut c_void;
+    fn xmlSchemaSetParserStructuredErrors(ctxt: *mut c_void, serror: Option<StructuredErrorFunc>, ctx: *mut c_void);
+    fn xmlSchemaParse(ctxt: *mut c_void) -> *mut c_void;
+    fn xmlSchemaFreeParserCtxt(ctxt: *mut c_void);
+    fn xmlSchemaFree(schema: *mut c_void);
+    fn xmlSchemaNewValidCtxt(schema: *mut c_void) -> *mut c_void;
+    fn xmlSchemaSetValidStructuredErrors(ctxt: *mut c_void, serror: Option<StructuredErrorFunc>, ctx: *mut c_void);
+    fn xmlSchemaValidateDoc(ctxt: *mut c_void, doc: *mut c_void) -> c_int;
+    fn xmlSchemaFreeValidCtxt(ctxt: *mut c_void);
+    fn xmlReadMemory(buffer: *const c_char, size: c_int, url: *const c_char, encoding: *const c_char, options: c_int) -> *mut c_void;
+    fn xmlFreeDoc(doc: *mut c_void);
+}
+
+const XML_PARSE_NONET: c_int = 1 << 11;
+const XML_PARSE_COMPACT: c_int = 1 << 16;
+const XML_PARSE_BIG_LINES: c_int = 1 << 22;
+
+static INIT: Once = Once::new();
+
+fn init() {
+    INIT.call_once(|| unsafe {
+        xmlInitParser();
+        xmlSetExternalEntityLoader(xmlNoNetExternalEntityLoader);
+    });
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum XsdError {
+    #[error("cannot load schema {path}: {message}")]
+    SchemaLoad { path: String, message: String },
+    #[error("document is too large for libxml2 ({0} bytes, limit 2 GiB)")]
+    TooLarge(usize),
+}
+
+/// What kind of problem libxml2 reported.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum XsdErrorKind {
+    /// The document is not well-formed XML (no schema check possible).
+    NotWellFormed,
+    /// The document breaks the schema.
+    Invalid,
+}
+
+/// One XSD finding.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct XsdFinding {
+    pub kind: XsdErrorKind,
+    pub line: usize,
+    /// 1-based column; for validity errors, the column of the element's start tag.
+    pub column: usize,
+    /// Local name of the element libxml2 blames, when it names one.
+    pub element: Option<String>,
+    pub message: String,
+}
+
+struct Collector {
+    findings: Vec<(XsdErrorKind, XmlErrorCopy)>,
+    kind: XsdErrorKind,
+}
+
+struct XmlErrorCopy {
+    line: usize,
+    column: usize,
+    element: Option<String>,
+    message: String,
+}
+
+unsafe extern "C" fn collect(ctx: *mut c_void, err: *const XmlError) {
+    if ctx.is_null() || err.is_null() {
+        return;
+    }
+    let c = &mut *(ctx as *mut Collector);
+    let e = &*err;
+    // warnings (level 1) are not errors
+    if e.level < 2 {
+        return;
+    }
+    let message = if e.message.is_null() {
+        String::from("unknown error")
+    } else {
+        CStr::from_ptr(e.message).to_string_lossy().trim_end().to_string()
+    };
+    let element = if !e.node.is_null() {
+        let n = &*(e.node as *const XmlNodeHead);
+        // XML_ELEMENT_NODE = 1
+        (n.kind == 1 && !n.name.is_null()).then(|| CStr::from_ptr(n.name).to_string_lossy().into_owned())
+    } else {
+        None
+    };
+    c.findings.push((
+        c.kind,
+        XmlErrorCopy { line: e.line.max(0) as usize, column: e.int2.max(0) as usize, element, message },
+    ));
+}
+
+/// A parsed XML schema; parse it once per run and validate any number of documents with it.
+pub struct Schema {
+    ptr: *mut c_void,
+}
+
+// The parsed schema is immutable after xmlSchemaParse; libxml2 allows sharing it between
+// validation contexts on different threads.
+unsafe impl Send for Schema {}
+unsafe impl Sync for Schema {}
+
+impl Drop for Schema {
+    fn drop(&mut self) {
+        unsafe { xmlSchemaFree(self.ptr) }
+    }
+}
+
+impl Schema {
+    /// Parses the schema at `path` (imports are resolved relative to it, never over the network).
+    pub fn load(path: &Path) -> Result<Schema, XsdError> {
+        init();
+        let shown = path.display().to_string();
+        let c = CString::new(path.to_string_lossy().as_bytes())
+            .map_err(|_| XsdError::SchemaLoad { path: shown.clone(), message: "path contains a NUL byte".into() })?;
+        let mut col = Collector { findings: Vec::new(), kind: XsdErrorKind::Invalid };
+        unsafe {
+            let pctxt = xmlSchemaNewParserCtxt(c.as_ptr());
+            if pctxt.is_null() {
+                return Err(XsdError::SchemaLoad { path: shown, message: "libxml2 could not create a schema parser".into() });
+            }
+            let colp = &mut col as *mut Collector as *mut c_void;
+            xmlSchemaSetParserStructuredErrors(pctxt, Some(collect), colp);
+            xmlSetStructuredErrorFunc(colp, Some(collect));
+            let schema = xmlSchemaParse(pctxt);
+            xmlSetStructuredErrorFunc(std::ptr::null_mut(), None);
+            xmlSchemaFreeParserCtxt(pctxt);
+            if schema.is_null() {
+                let msg = col
+                    .findings
+                    .first()
+                    .map(|(_, e)| format!("{} (line {})", e.message, e.line))
+                    .unwrap_or_else(|| "the schema could not be parsed".into());
+                return Err(XsdError::SchemaLoad { path: shown, message: msg });
+            }
+            Ok(Schema { ptr: schema })
+        }
+    }
+
+    /// Validates a document held in memory. `name` is used as the document URL in libxml2.
+    /// Returns the findings in document order (empty when the document is valid).
+    pub fn validate(&self, xml: &[u8], name: &str) -> Result<Vec<XsdFinding>, XsdError> {
+        init();
+        if xml.len() > i32::MAX as usize {
+            return Err(XsdError::TooLarge(xml.len()));
+        }
+        let url = CString::new(name.replace('\0', "")).unwrap_or_default();
+        let mut col = Collector { findings: Vec::new(), kind: XsdErrorKind::NotWellFormed };
+        unsafe {
+            let colp = &mut col as *mut Collector as *mut c_void;
+            xmlSetStructuredErrorFunc(colp, Some(collect));
+            let doc = xmlReadMemory(
+                xml.as_ptr() as *const c_char,
+                xml.len() as c_int,
+                url.as_ptr(),
+                std::ptr::null(),
+                XML_PARSE_NONET | XML_PARSE_COMPACT | XML_PARSE_BIG_LINES,
+            );
+            if doc.is_null() || !col.findings.is_empty() {
+                xmlSetStructuredErrorFunc(std::ptr::null_mut(), None);
+                if !doc.is_null() {
+                    xmlFreeDoc(doc);
+                }
+                if col.findings.is_empty() {
+                    col.findings.push((
+                        XsdErrorKind::NotWellFormed,
+                        XmlErrorCopy { line: 1, column: 1, element: None, message: "document could not be parsed".into() },
+                    ));
+                }
+                return Ok(finish(col, xml));
+            }
+            col.kind = XsdErrorKind::Invalid;
+            let vctxt = xmlSchemaNewValidCtxt(self.ptr);
+            if vctxt.is_null() {
+                xmlSetStructuredErrorFunc(std::ptr::null_mut(), None);
+                xmlFreeDoc(doc);
+                return Err(XsdError::SchemaLoad { path: name.into(), message: "cannot create a validation context".into() });
+            }
+            xmlSchemaSetValidStructuredErrors(vctxt, Some(collect), colp);
+            let rc = xmlSchemaValidateDoc(vctxt, doc);
+            xmlSchemaFreeValidCtxt(vctxt);
+            xmlSetStructuredErrorFunc(std::ptr::null_mut(), None);
+            xmlFreeDoc(doc);
+            if rc != 0 && col.findings.is_empty() {
+                col.findings.push((
+                    XsdErrorKind::Invalid,
+                    XmlErrorCopy { line: 0, column: 0, element: None, message: format!("validation failed (libxml2 code {rc})") },
+                ));
+            }
+        }
+        Ok(finish(col, xml))
+    }
+}
+
+fn finish(col: Collector, xml: &[u8]) -> Vec<XsdFinding> {
+    let starts = line_starts(xml);
+    col.findings
+        .into_iter()
+        .map(|(kind, e)| {
+            let column = if e.column > 0 {
+                e.column
+            } else {
+                e.element.as_deref().and_then(|n| element_column(xml, &starts, e.line, n)).unwrap_or(0)
+            };
+            XsdFinding { kind, line: e.line, column, element: e.element, message: e.message }
+        })
+        .collect()
+}
+
+fn line_starts(xml: &[u8]) -> Vec<usize> {
+    let mut v = vec![0];
+    v.extend(xml.iter().enumerate().filter(|(_, &b)| b == b'\n').map(|(i, _)| i + 1));
+    v
+}
+
+/// Column (1-based, in characters) of the start tag `<name` or `<prefix:name` on `line`.
+fn element_column(xml: &[u8], starts: &[usize], line: usize, local: &str) -> Option<usize> {
+    if line == 0 || line > starts.len() {
+        return None;
+    }
+    let s = starts[line - 1];
+    let e = starts.get(line).copied().unwrap_or(xml.len());
+    let text = String::from_utf8_lossy(&xml[s..e]);
+    let mut from = 0;
+    while let Some(k) = text[from..].find('<') {
+        let at = from + k;
+        let rest = &text[at + 1..];
+        let qname: String = rest.chars().take_while(|c| !c.is_whitespace() && *c != '>' && *c != '/').collect();
+        let ln = qname.rsplit(':').next().unwrap_or("");
+        if ln == local {
+            return Some(text[..at].chars().count() + 1);
+        }
+        from = at + 1;
+    }
+    None
+}
+
+/// The CityGML version of a document from the namespaces bound on its root element
+/// ("1.0", "2.0" or "3.0"), without a full parse. Used to pick the wrapper schema.
+pub fn sniff_version(xml: &[u8]) -> Option<&'static str> {
+    let mut i = 0;
+    let n = xml.len();
+    // skip BOM, declaration, comments, doctype, PIs
+    while i < n {
+        if xml[i] == b'<' {
+            let next = xml.get(i + 1).copied();
+            if next == Some(b'?') || next == Some(b'!') {
+                if xml[i..].starts_with(b"<!--") {
+                    i = find(xml, i, b"-->").map(|k| k + 3)?;
+                } else {
+                    i = find(xml, i, b">").map(|k| k + 1)?;
+                }
+                continue;
+            }
+            let end = find(xml, i, b">")?;
+            let tag = &xml[i..end];
+            for (ns, v) in [
+                (&b"http://www.opengis.net/citygml/3.0"[..], "3.0"),
+                (&b"http://www.opengis.net/citygml/2.0"[..], "2.0"),
+                (&b"http://www.opengis.net/citygml/1.0"[..], "1.0"),
+            ] {
+                if find(tag, 0, ns).is_some() {
+                    return Some(v);
+                }
+            }
+            // module namespaces (…/building/2.0) when the core namespace is not bound
+            for v in ["3.0", "2.0", "1.0"] {
+                let pat = format!("/{v}\"");
+                let s = String::from_utf8_lossy(tag);
+                if s.contains("opengis.net/citygml") && s.contains(&pat) {
+                    return Some(v);
+                }
+            }
+            return None;
+        }
+        i += 1;
+    }
+    None
+}
+
+fn find(hay: &[u8], from: usize, needle: &[u8]) -> Option<usize> {
+    if from >= hay.len() {
+        return None;
+    }
+    hay[from..].windows(needle.len()).position(|w| w == needle).map(|k| k + from)
+}
+
+/// File name of the project's wrapper schema for a CityGML version (see `../shared/xsd/README.md`).
+pub fn wrapper_for(version: &str) -> String {
+    format!("citygml-{version}.xsd")
+}

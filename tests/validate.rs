@@ -1,0 +1,2 @@
+//! End-to-end tests of `geofit validate` (filled in below).
+mod common;
