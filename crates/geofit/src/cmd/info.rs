@@ -83,10 +83,12 @@ pub fn run(args: Args, _config: &Config) -> CmdResult {
     let mut lods: BTreeMap<String, LodCounts> = BTreeMap::new();
     let mut envelope = Envelope::empty();
     let (mut top, mut solids, mut polygons, mut rings, mut interior_rings, mut points, mut xlinks) =
-        (0, 0, 0, 0, 0, 0, 0);
+        (0, 0, 0, 0, 0, 0, 0usize);
     let mut findings: Vec<String> = Vec::new();
     for obj in &mut stream {
         let obj: CityObject = obj.map_err(located)?;
+        // One href may stand for several polygons (a CompositeSurface): count hrefs, not copies.
+        let mut hrefs = std::collections::HashSet::new();
         top += 1;
         envelope.merge(&obj.envelope);
         for o in obj.walk() {
@@ -101,8 +103,8 @@ pub fn run(args: Args, _config: &Config) -> CmdResult {
                     citygml_io::GeometryKind::Surfaces(_) => 0,
                 };
                 for p in g.polygons() {
-                    if p.via_xlink.is_some() {
-                        xlinks += 1;
+                    if let Some(v) = &p.via_xlink {
+                        hrefs.insert(v.bytes.start);
                         continue;
                     }
                     lc.polygons += 1;
@@ -123,6 +125,7 @@ pub fn run(args: Args, _config: &Config) -> CmdResult {
                 }
             }
         }
+        xlinks += hrefs.len();
     }
     for u in stream.unresolved_xlinks() {
         findings.push(format!(

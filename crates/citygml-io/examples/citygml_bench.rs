@@ -1,0 +1,101 @@
+//! Parse throughput against the ceiling of a bare quick-xml tokenizer pass over the same bytes.
+//!
+//! `citygml_bench tokenize FILE...`  only quick-xml events (the ceiling, nothing decoded)
+//! `citygml_bench parse FILE...`     `citygml_io::parse` (whole model, XLinks resolved)
+//! `citygml_bench stream FILE...`    `ObjectStream`, one object at a time, dropped after counting
+//! `citygml_bench counts FILE...`    buildings / parts / solids / polygons / rings / points (debug)
+//!
+//! Each mode reads the files into memory first and times only the pass itself (best of
+//! `REPEAT`, default 5), printing `MODE MB/s bytes seconds`.
+
+use std::time::Instant;
+
+use citygml_io::{GeometryKind, ObjectStream};
+use quick_xml::events::Event;
+use quick_xml::Reader;
+
+fn tokenize(src: &[u8]) -> usize {
+    let mut r = Reader::from_reader(src);
+    r.config_mut().trim_text(false);
+    let mut n = 0usize;
+    loop {
+        match r.read_event() {
+            Ok(Event::Eof) => break,
+            Ok(_) => n += 1,
+            Err(e) => panic!("{e}"),
+        }
+    }
+    n
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let mode = args.get(1).map(String::as_str).unwrap_or("parse");
+    let repeat: usize = std::env::var("REPEAT").ok().and_then(|v| v.parse().ok()).unwrap_or(5);
+    let files: Vec<Vec<u8>> = args[2..].iter().map(|p| std::fs::read(p).expect("read")).collect();
+    let bytes: usize = files.iter().map(|f| f.len()).sum();
+    if mode == "counts" {
+        for (p, f) in args[2..].iter().zip(&files) {
+            match citygml_io::parse(f) {
+                Ok(m) => {
+                    let objs = m.all_objects();
+                    let b = objs.iter().filter(|o| o.kind == "Building").count();
+                    let bp = objs.iter().filter(|o| o.kind == "BuildingPart").count();
+                    let mut solids = 0;
+                    let mut polys = 0;
+                    let mut rings = 0;
+                    let mut pts = 0;
+                    for o in &objs {
+                        for g in &o.geometries {
+                            solids += match &g.kind {
+                                GeometryKind::Solid { .. } => 1,
+                                GeometryKind::Solids(v) => v.len(),
+                                _ => 0,
+                            };
+                            if g.gml_type == "TriangulatedSurface" || g.gml_type == "Tin" {
+                                continue;
+                            }
+                            for p in g.polygons() {
+                                if p.via_xlink.is_none() {
+                                    polys += 1;
+                                    rings += 1 + p.interiors.len();
+                                    pts += p.exterior.points.len() + p.interiors.iter().map(|r| r.points.len()).sum::<usize>();
+                                }
+                            }
+                        }
+                    }
+                    let xl: usize = m
+                        .all_objects()
+                        .iter()
+                        .flat_map(|o| o.geometries.iter())
+                        .flat_map(|g| g.polygons())
+                        .filter(|p| p.via_xlink.is_some())
+                        .count();
+                    println!(
+                        "{p} {} {b} {bp} {solids} {polys} {xl} {rings} {pts} unresolved={}",
+                        m.version.as_str(),
+                        m.unresolved_xlinks.len()
+                    );
+                }
+                Err(e) => println!("{p} ERROR {e}"),
+            }
+        }
+        return;
+    }
+    let mut best = f64::INFINITY;
+    for _ in 0..repeat {
+        let t = Instant::now();
+        let mut sink = 0usize;
+        for f in &files {
+            sink += match mode {
+                "tokenize" => tokenize(f),
+                "parse" => citygml_io::parse(f).expect("parse").objects.len(),
+                "stream" => ObjectStream::new(f).expect("parse").map(|o| o.expect("parse").children.len() + 1).sum(),
+                _ => panic!("unknown mode {mode}"),
+            };
+        }
+        std::hint::black_box(sink);
+        best = best.min(t.elapsed().as_secs_f64());
+    }
+    println!("{mode} {:.1} MB/s {bytes} bytes {:.4} s", bytes as f64 / best / 1e6, best);
+}
