@@ -1,0 +1,483 @@
+//! Discrete Smooth Interpolation on a tetrahedral mesh (seed appendix A) with the base + float
+//! split of the constraints (seed §3).
+//!
+//! Every constraint c is one linear row `A_cᵗ·φ ≃ b_c` over the mesh nodes, normalised and
+//! weighted as in seed eq. 9 (`A_c ← ϖ_c/‖A_c‖·A_c`, same for `b_c`), so ϖ_c² is its relative
+//! weight. Classes:
+//! - value ("boundary") constraints: φ(p) = v, with φ(p) the barycentric combination of the four
+//!   nodes of the tetrahedron holding p;
+//! - inequality constraints from normals, a small step δ along and against the normal:
+//!   φ(p + δn) ≥ v + δg and φ(p − δn) ≤ v − δg (g: expected gradient magnitude; without a value
+//!   at p, φ(p + δn) − φ(p − δn) ≥ 2δg), and from side points: s·φ(p) ≥ δg. They are soft and
+//!   one-sided: a row counts only while violated (an active-set loop re-solves until the set of
+//!   violated rows stops changing or the round cap is hit);
+//! - the roughness constraint on the gradient across the mesh graph: for each interior face the
+//!   jump of ∂φ/∂n between its two tetrahedra ≃ 0 (Frank, Tertois & Mallet 2007's "constant
+//!   gradient" criterion; its null space is the linear functions, so a planar field is not
+//!   penalised, and a face between tetrahedra on two sides of a fault is not in the graph).
+//!
+//! The minimiser of seed eq. 12 solves `A·φ = b` with `A = Σ A_c A_cᵗ = A_B + A_F` (seed eq. 1–3),
+//! solved by conjugate gradients with a Jacobi preconditioner (rayon-parallel products).
+
+use rayon::prelude::*;
+
+use crate::geom::{add, barycentric, cross, dot, hat_gradients, norm, scale, sub, V3};
+use crate::mesh::{Locator, TetMesh};
+use crate::Error;
+
+/// Relative weights ϖ of the three constraint classes (seed eq. 9).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Weights {
+    pub value: f64,
+    pub normal: f64,
+    pub rough: f64,
+}
+
+impl Default for Weights {
+    fn default() -> Self {
+        Weights { value: 1.0, normal: 1.0, rough: DEFAULT_ROUGHNESS }
+    }
+}
+
+/// Default ϖ_r: the minimum of the U-shaped error curve of the noisy sphere and plane sweeps
+/// (tests/implicit.rs `roughness_sweep_traces_u_shape`).
+pub const DEFAULT_ROUGHNESS: f64 = 0.3;
+
+/// Solver and constraint parameters stored with a model.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Params {
+    pub weights: Weights,
+    /// δ: step along and against each normal for the inequality constraints.
+    pub step: f64,
+    /// g: gradient magnitude the inequality constraints ask for (1 = φ is a distance).
+    pub grad: f64,
+    /// CG stops when ‖r‖ ≤ tol·‖b‖.
+    pub tol: f64,
+    /// CG iteration cap per solve.
+    pub max_iter: usize,
+    /// Cap on active-set rounds of the inequality constraints.
+    pub rounds: usize,
+}
+
+/// One input constraint (positions in the model's local frame).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Constraint {
+    pub pos: V3,
+    pub value: Option<f64>,
+    pub normal: Option<V3>,
+    /// +1 / −1 for a side point (φ > 0 / φ < 0), 0 otherwise.
+    pub side: f64,
+    /// Float constraint (seed §3): added or moved after the base model was solved.
+    pub float: bool,
+}
+
+/// Constraint rows in compressed form (already normalised and weighted, seed eq. 9).
+#[derive(Debug, Default, Clone)]
+pub struct Rows {
+    pub ptr: Vec<usize>,
+    pub idx: Vec<u32>,
+    pub val: Vec<f64>,
+    pub rhs: Vec<f64>,
+    /// One-sided (A·φ ≥ b) rather than A·φ ≃ b.
+    pub ineq: Vec<bool>,
+    pub float: Vec<bool>,
+    /// The constraint a row came from (u32::MAX: roughness).
+    pub owner: Vec<u32>,
+}
+
+impl Rows {
+    fn new() -> Rows {
+        Rows { ptr: vec![0], ..Default::default() }
+    }
+    fn push(&mut self, coefs: &[(u32, f64)], rhs: f64, weight: f64, ineq: bool, float: bool, owner: u32) {
+        // Merge duplicate columns (e.g. both offset points in the same tetrahedron).
+        let mut c: Vec<(u32, f64)> = Vec::with_capacity(coefs.len());
+        for &(i, v) in coefs {
+            if let Some(e) = c.iter_mut().find(|e| e.0 == i) {
+                e.1 += v;
+            } else {
+                c.push((i, v));
+            }
+        }
+        let n: f64 = c.iter().map(|e| e.1 * e.1).sum::<f64>().sqrt();
+        if !(n > 0.0) {
+            return;
+        }
+        let s = weight / n; // seed eq. 9
+        for (i, v) in c {
+            self.idx.push(i);
+            self.val.push(v * s);
+        }
+        self.ptr.push(self.idx.len());
+        self.rhs.push(rhs * s);
+        self.ineq.push(ineq);
+        self.float.push(float);
+        self.owner.push(owner);
+    }
+    pub fn len(&self) -> usize {
+        self.rhs.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.rhs.is_empty()
+    }
+    pub fn row(&self, r: usize) -> (&[u32], &[f64]) {
+        (&self.idx[self.ptr[r]..self.ptr[r + 1]], &self.val[self.ptr[r]..self.ptr[r + 1]])
+    }
+    pub fn dot(&self, r: usize, x: &[f64]) -> f64 {
+        let (i, v) = self.row(r);
+        i.iter().zip(v).map(|(&i, &v)| v * x[i as usize]).sum()
+    }
+}
+
+/// The barycentric row of φ at `p`.
+fn point_row(mesh: &TetMesh, loc: &Locator, p: V3) -> Option<[(u32, f64); 4]> {
+    let (t, l) = loc.locate(mesh, p)?;
+    let v = mesh.tets[t];
+    Some([(v[0], l[0]), (v[1], l[1]), (v[2], l[2]), (v[3], l[3])])
+}
+
+/// Evaluates a nodal field at `p` (None outside the mesh).
+pub fn eval(mesh: &TetMesh, loc: &Locator, field: &[f64], p: V3) -> Option<f64> {
+    point_row(mesh, loc, p).map(|r| r.iter().map(|&(i, w)| w * field[i as usize]).sum())
+}
+
+/// Builds the data rows of `constraints` (value, normal and side rows). Fails on a constraint
+/// outside the mesh, naming it.
+pub fn data_rows(mesh: &TetMesh, loc: &Locator, cs: &[Constraint], p: &Params) -> Result<Rows, Error> {
+    let mut rows = Rows::new();
+    let outside = |i: usize, q: V3| {
+        Error::BadInput(format!(
+            "constraint #{i} at ({:.3}, {:.3}, {:.3}) (model frame) lies outside the model's mesh",
+            q[0], q[1], q[2]
+        ))
+    };
+    let (d, g) = (p.step, p.grad);
+    for (i, c) in cs.iter().enumerate() {
+        let o = i as u32;
+        if let Some(v) = c.value {
+            let r = point_row(mesh, loc, c.pos).ok_or_else(|| outside(i, c.pos))?;
+            rows.push(&r, v, p.weights.value, false, c.float, o);
+        }
+        if let Some(n) = c.normal {
+            let pp = add(c.pos, scale(n, d));
+            let pm = sub(c.pos, scale(n, d));
+            let rp = point_row(mesh, loc, pp).ok_or_else(|| outside(i, pp))?;
+            let rm = point_row(mesh, loc, pm).ok_or_else(|| outside(i, pm))?;
+            match c.value {
+                Some(v) => {
+                    rows.push(&rp, v + d * g, p.weights.normal, true, c.float, o);
+                    let neg: Vec<(u32, f64)> = rm.iter().map(|&(j, w)| (j, -w)).collect();
+                    rows.push(&neg, -(v - d * g), p.weights.normal, true, c.float, o);
+                }
+                None => {
+                    let mut diff: Vec<(u32, f64)> = rp.to_vec();
+                    diff.extend(rm.iter().map(|&(j, w)| (j, -w)));
+                    rows.push(&diff, 2.0 * d * g, p.weights.normal, true, c.float, o);
+                }
+            }
+        }
+        if c.side != 0.0 {
+            let r = point_row(mesh, loc, c.pos).ok_or_else(|| outside(i, c.pos))?;
+            let sr: Vec<(u32, f64)> = r.iter().map(|&(j, w)| (j, c.side * w)).collect();
+            rows.push(&sr, d * g, p.weights.normal, true, c.float, o);
+        }
+    }
+    Ok(rows)
+}
+
+/// Roughness rows: the jump of the normal derivative across each interior face ≃ 0.
+pub fn roughness_rows(mesh: &TetMesh, weight: f64) -> Rows {
+    let faces = mesh.interior_faces();
+    let per: Vec<Option<Vec<(u32, f64)>>> = faces
+        .par_iter()
+        .map(|f| {
+            let c1 = mesh.corners(f.tets[0] as usize);
+            let c2 = mesh.corners(f.tets[1] as usize);
+            let g1 = hat_gradients(&c1)?;
+            let g2 = hat_gradients(&c2)?;
+            let [a, b, c] = f.verts.map(|v| mesh.verts[v as usize]);
+            let n = cross(sub(b, a), sub(c, a));
+            let nn = norm(n);
+            if nn == 0.0 {
+                return None;
+            }
+            let n = scale(n, 1.0 / nn);
+            let mut coefs: Vec<(u32, f64)> = Vec::with_capacity(8);
+            let v1 = mesh.tets[f.tets[0] as usize];
+            let v2 = mesh.tets[f.tets[1] as usize];
+            for k in 0..4 {
+                coefs.push((v1[k], dot(n, g1[k])));
+            }
+            for k in 0..4 {
+                coefs.push((v2[k], -dot(n, g2[k])));
+            }
+            Some(coefs)
+        })
+        .collect();
+    let mut rows = Rows::new();
+    for c in per.into_iter().flatten() {
+        rows.push(&c, 0.0, weight, false, false, u32::MAX);
+    }
+    rows
+}
+
+/// A symmetric sparse matrix in CSR form (full storage).
+#[derive(Debug, Clone, Default)]
+pub struct Csr {
+    pub n: usize,
+    pub ptr: Vec<usize>,
+    pub idx: Vec<u32>,
+    pub val: Vec<f64>,
+}
+
+impl Csr {
+    /// y = A·x (rayon over rows).
+    pub fn mul(&self, x: &[f64], y: &mut [f64]) {
+        y.par_iter_mut().enumerate().for_each(|(r, yr)| {
+            let (a, b) = (self.ptr[r], self.ptr[r + 1]);
+            let mut s = 0.0;
+            for k in a..b {
+                s += self.val[k] * x[self.idx[k] as usize];
+            }
+            *yr = s;
+        });
+    }
+    pub fn diag(&self) -> Vec<f64> {
+        (0..self.n)
+            .map(|r| {
+                (self.ptr[r]..self.ptr[r + 1]).find(|&k| self.idx[k] as usize == r).map(|k| self.val[k]).unwrap_or(0.0)
+            })
+            .collect()
+    }
+    pub fn nnz(&self) -> usize {
+        self.val.len()
+    }
+}
+
+/// `A = Σ A_c A_cᵗ` and `b = Σ b_c A_c` (seed eq. 11) over the rows that `select` keeps.
+pub fn normal_system(n: usize, rows: &[&Rows], select: &dyn Fn(usize, usize) -> bool) -> (Csr, Vec<f64>) {
+    let mut trip: Vec<(u64, f64)> = Vec::new();
+    let mut b = vec![0.0; n];
+    for (s, rs) in rows.iter().enumerate() {
+        for r in 0..rs.len() {
+            if !select(s, r) {
+                continue;
+            }
+            let (i, v) = rs.row(r);
+            for (a, &ia) in i.iter().enumerate() {
+                b[ia as usize] += rs.rhs[r] * v[a];
+                for (c, &ic) in i.iter().enumerate() {
+                    trip.push((((ia as u64) << 32) | ic as u64, v[a] * v[c]));
+                }
+            }
+        }
+    }
+    trip.par_sort_by_key(|t| t.0); // stable: identical sums for identical input
+    let mut m = Csr { n, ptr: vec![0; n + 1], idx: Vec::new(), val: Vec::new() };
+    let mut k = 0;
+    while k < trip.len() {
+        let key = trip[k].0;
+        let mut s = 0.0;
+        while k < trip.len() && trip[k].0 == key {
+            s += trip[k].1;
+            k += 1;
+        }
+        m.idx.push((key & 0xffff_ffff) as u32);
+        m.val.push(s);
+        m.ptr[(key >> 32) as usize + 1] += 1;
+    }
+    for r in 0..n {
+        m.ptr[r + 1] += m.ptr[r];
+    }
+    (m, b)
+}
+
+/// What one CG solve did.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct CgStats {
+    pub iterations: usize,
+    pub residual: f64,
+    pub converged: bool,
+}
+
+/// Preconditioned conjugate gradients on `Σ mats · x = b` from the start value in `x`
+/// (Hestenes & Stiefel 1952, seed ref. [HS52]); Jacobi preconditioner.
+pub fn pcg(mats: &[&Csr], shift: f64, b: &[f64], x: &mut [f64], tol: f64, max_iter: usize) -> CgStats {
+    let n = b.len();
+    let mut diag = vec![shift; n];
+    for m in mats {
+        for (d, v) in diag.iter_mut().zip(m.diag()) {
+            *d += v;
+        }
+    }
+    let inv: Vec<f64> = diag.iter().map(|&d| if d > 0.0 { 1.0 / d } else { 1.0 }).collect();
+    let apply = |p: &[f64], out: &mut [f64], tmp: &mut [f64]| {
+        mats[0].mul(p, out);
+        for m in &mats[1..] {
+            m.mul(p, tmp);
+            out.par_iter_mut().zip(tmp.par_iter()).for_each(|(o, t)| *o += t);
+        }
+        out.par_iter_mut().zip(p.par_iter()).for_each(|(o, q)| *o += shift * q);
+    };
+    let pdot = |a: &[f64], b: &[f64]| -> f64 { a.par_iter().zip(b.par_iter()).map(|(x, y)| x * y).sum() };
+    let bn = pdot(b, b).sqrt();
+    if bn == 0.0 {
+        x.iter_mut().for_each(|v| *v = 0.0);
+        return CgStats { iterations: 0, residual: 0.0, converged: true };
+    }
+    let mut r = vec![0.0; n];
+    let mut tmp = vec![0.0; n];
+    apply(x, &mut r, &mut tmp);
+    r.par_iter_mut().zip(b.par_iter()).for_each(|(r, b)| *r = b - *r);
+    let mut z: Vec<f64> = r.iter().zip(&inv).map(|(r, d)| r * d).collect();
+    let mut p = z.clone();
+    let mut rz = pdot(&r, &z);
+    let mut q = vec![0.0; n];
+    let mut res = pdot(&r, &r).sqrt() / bn;
+    let mut it = 0;
+    while res > tol && it < max_iter {
+        apply(&p, &mut q, &mut tmp);
+        let pq = pdot(&p, &q);
+        if !(pq > 0.0) {
+            break;
+        }
+        let alpha = rz / pq;
+        x.par_iter_mut().zip(p.par_iter()).for_each(|(x, p)| *x += alpha * p);
+        r.par_iter_mut().zip(q.par_iter()).for_each(|(r, q)| *r -= alpha * q);
+        z.par_iter_mut().zip(r.par_iter().zip(inv.par_iter())).for_each(|(z, (r, d))| *z = r * d);
+        let rz2 = pdot(&r, &z);
+        let beta = rz2 / rz;
+        rz = rz2;
+        p.par_iter_mut().zip(z.par_iter()).for_each(|(p, z)| *p = z + beta * *p);
+        res = pdot(&r, &r).sqrt() / bn;
+        it += 1;
+    }
+    CgStats { iterations: it, residual: res, converged: res <= tol }
+}
+
+/// Result of [`solve`].
+#[derive(Debug, Clone, Default)]
+pub struct Solution {
+    pub phi: Vec<f64>,
+    /// Active flags of the data rows (inequality rows active when violated; equality rows true).
+    pub active: Vec<bool>,
+    /// CG iterations per active-set round.
+    pub iterations: Vec<usize>,
+    pub residual: f64,
+    pub unknowns: usize,
+    pub rows: usize,
+}
+
+/// Solves the DSI system: base rows (`float == false`, plus roughness) form A_B, float rows A_F
+/// (seed §3 eq. 1–4). `start` warm-starts CG (e.g. the saved solution); `active` the saved
+/// active set of the data rows. `progress(round, iterations, residual)` is called per round.
+pub fn solve(
+    mesh: &TetMesh,
+    loc: &Locator,
+    cs: &[Constraint],
+    p: &Params,
+    start: Option<&[f64]>,
+    active: Option<&[bool]>,
+    progress: &mut dyn FnMut(usize, usize, f64),
+) -> Result<Solution, Error> {
+    let n = mesh.verts.len();
+    let data = data_rows(mesh, loc, cs, p)?;
+    let rough = roughness_rows(mesh, p.weights.rough);
+    let mut act: Vec<bool> = match active {
+        Some(a) if a.len() == data.len() => a.to_vec(),
+        _ => vec![true; data.len()],
+    };
+    let mut x = match start {
+        Some(s) if s.len() == n => s.to_vec(),
+        _ => vec![0.0; n],
+    };
+    // Roughness rows never change: assemble them once as part of the base matrix.
+    let (a_rough, _) = normal_system(n, &[&rough], &|_, _| true);
+    let scale_diag = a_rough.diag().iter().cloned().fold(0.0, f64::max).max(1e-300);
+    let shift = 1e-12 * scale_diag; // keeps A positive definite for nodes no data reaches
+    let mut iters = Vec::new();
+    let mut last_res = 0.0;
+    for round in 0..p.rounds.max(1) {
+        let (a_base, b_base) = normal_system(n, &[&data], &|_, r| act[r] && !data.float[r]);
+        let (a_float, b_float) = normal_system(n, &[&data], &|_, r| act[r] && data.float[r]);
+        let b: Vec<f64> = b_base.iter().zip(&b_float).map(|(a, b)| a + b).collect();
+        let mats: Vec<&Csr> = if a_float.nnz() > 0 { vec![&a_rough, &a_base, &a_float] } else { vec![&a_rough, &a_base] };
+        let st = pcg(&mats, shift, &b, &mut x, p.tol, p.max_iter);
+        iters.push(st.iterations);
+        last_res = st.residual;
+        progress(round, st.iterations, st.residual);
+        if !st.converged {
+            return Err(Error::NotConverged { iterations: st.iterations, residual: st.residual, tol: p.tol });
+        }
+        let new: Vec<bool> = (0..data.len()).map(|r| !data.ineq[r] || data.dot(r, &x) < data.rhs[r]).collect();
+        if new == act {
+            break;
+        }
+        if round + 1 < p.rounds.max(1) {
+            act = new;
+        }
+    }
+    if x.iter().any(|v| !v.is_finite()) {
+        return Err(Error::BadInput("the solution contains non-finite values (degenerate mesh or constraints)".into()));
+    }
+    Ok(Solution { phi: x, active: act, iterations: iters, residual: last_res, unknowns: n, rows: data.len() + rough.len() })
+}
+
+/// Expected gradient magnitude g: the slope of the least-squares linear fit of the values
+/// when they vary, otherwise 1 (φ is then a distance near the surface).
+pub fn gradient_scale(cs: &[Constraint]) -> f64 {
+    let vals: Vec<(V3, f64)> = cs.iter().filter_map(|c| c.value.map(|v| (c.pos, v))).collect();
+    if vals.len() < 4 {
+        return 1.0;
+    }
+    let (lo, hi) = vals.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), (_, v)| (a.min(*v), b.max(*v)));
+    if hi - lo <= 0.0 {
+        return 1.0;
+    }
+    // Normal equations of v ≈ c + a·x, 4×4, solved by Gaussian elimination with pivoting.
+    let mut m = [[0.0f64; 5]; 4];
+    for (p, v) in &vals {
+        let row = [1.0, p[0], p[1], p[2]];
+        for i in 0..4 {
+            for j in 0..4 {
+                m[i][j] += row[i] * row[j];
+            }
+            m[i][4] += row[i] * v;
+        }
+    }
+    for c in 0..4 {
+        let piv = (c..4).max_by(|&a, &b| m[a][c].abs().total_cmp(&m[b][c].abs())).unwrap_or(c);
+        m.swap(c, piv);
+        if m[c][c].abs() < 1e-300 {
+            return 1.0;
+        }
+        for r in 0..4 {
+            if r != c {
+                let f = m[r][c] / m[c][c];
+                for k in c..5 {
+                    m[r][k] -= f * m[c][k];
+                }
+            }
+        }
+    }
+    let a = [m[1][4] / m[1][1], m[2][4] / m[2][2], m[3][4] / m[3][3]];
+    let g = norm(a);
+    if g.is_finite() && g > 0.0 {
+        g
+    } else {
+        1.0
+    }
+}
+
+/// Misfit |φ(p) − v| at every value constraint (None where p is outside the mesh).
+pub fn value_misfits(mesh: &TetMesh, loc: &Locator, cs: &[Constraint], phi: &[f64]) -> Vec<f64> {
+    cs.iter()
+        .filter_map(|c| c.value.map(|v| (c.pos, v)))
+        .filter_map(|(p, v)| eval(mesh, loc, phi, p).map(|f| (f - v).abs()))
+        .collect()
+}
+
+/// Barycentric weights of `p` in the tetrahedron `t` of `mesh` (helper for tests and tools).
+pub fn bary(mesh: &TetMesh, t: usize, p: V3) -> Option<[f64; 4]> {
+    barycentric(&mesh.corners(t), p)
+}
