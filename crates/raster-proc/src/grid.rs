@@ -1,0 +1,116 @@
+//! Raster grids laid over scattered points.
+
+use raster_io::{GeoTransform, Raster};
+
+use crate::ProcError;
+
+/// The most cells a grid may have (2³¹): beyond that the cell size is surely a mistake.
+pub const MAX_CELLS: usize = 1 << 31;
+
+/// A north-up grid: size and GDAL geotransform (corner based, `gt[5] < 0`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GridSpec {
+    pub width: usize,
+    pub height: usize,
+    pub geotransform: GeoTransform,
+}
+
+impl GridSpec {
+    /// The grid whose cell EDGES lie on multiples of `cell` (GDAL's `-tap` convention) and
+    /// whose cells contain every point of the bounds: a point on the upper edge gets its own
+    /// row/column, so every input point falls inside a cell.
+    pub fn covering(bounds: (f64, f64, f64, f64), cell: f64) -> Result<GridSpec, ProcError> {
+        let (minx, miny, maxx, maxy) = bounds;
+        check_cell(cell)?;
+        if ![minx, miny, maxx, maxy].iter().all(|v| v.is_finite()) || minx > maxx || miny > maxy {
+            return Err(ProcError::Input(format!("bounds {bounds:?} are not a finite box")));
+        }
+        let x0 = (minx / cell).floor() * cell;
+        let y0 = (miny / cell).floor() * cell;
+        let width = ((maxx - x0) / cell).floor() as usize + 1;
+        let height = ((maxy - y0) / cell).floor() as usize + 1;
+        let top = y0 + height as f64 * cell;
+        Self::checked(width, height, [x0, cell, 0.0, top, 0.0, -cell])
+    }
+
+    /// The grid with exactly these outer EDGES (like `gdal_grid -txe xmin xmax -tye ymin ymax`);
+    /// the extent must be a whole number of cells (to 1e-9 relative).
+    pub fn from_edges(xmin: f64, ymin: f64, xmax: f64, ymax: f64, cell: f64) -> Result<GridSpec, ProcError> {
+        check_cell(cell)?;
+        if !(xmax > xmin && ymax > ymin) {
+            return Err(ProcError::Input(format!("bounds {xmin} {ymin} {xmax} {ymax}: need xmin < xmax and ymin < ymax")));
+        }
+        let w = (xmax - xmin) / cell;
+        let h = (ymax - ymin) / cell;
+        let (wr, hr) = (w.round(), h.round());
+        if (w - wr).abs() > 1e-9 * w.max(1.0) || (h - hr).abs() > 1e-9 * h.max(1.0) {
+            return Err(ProcError::Input(format!(
+                "bounds {xmin} {ymin} {xmax} {ymax} are not a whole number of {cell} cells ({w} × {h})"
+            )));
+        }
+        Self::checked(wr as usize, hr as usize, [xmin, cell, 0.0, ymax, 0.0, -cell])
+    }
+
+    fn checked(width: usize, height: usize, geotransform: GeoTransform) -> Result<GridSpec, ProcError> {
+        if width == 0 || height == 0 {
+            return Err(ProcError::Input("grid has no cells".into()));
+        }
+        if width.saturating_mul(height) > MAX_CELLS {
+            return Err(ProcError::Input(format!(
+                "grid of {width} × {height} cells is too large (limit {MAX_CELLS}); use a larger cell size"
+            )));
+        }
+        Ok(GridSpec { width, height, geotransform })
+    }
+
+    /// An empty raster on this grid.
+    pub fn empty_raster(&self, crs: Option<String>) -> Raster {
+        Raster::new_empty(self.width, self.height, self.geotransform, crs)
+    }
+
+    /// Centre-based pixel coordinates of a world point (see `raster_io::raster`).
+    #[inline]
+    pub fn world_to_pixel(&self, x: f64, y: f64) -> (f64, f64) {
+        let gt = &self.geotransform;
+        ((x - gt[0]) / gt[1] - 0.5, (y - gt[3]) / gt[5] - 0.5)
+    }
+
+    /// World position of the centre of cell (col, row).
+    #[inline]
+    pub fn cell_centre(&self, col: usize, row: usize) -> (f64, f64) {
+        let gt = &self.geotransform;
+        (gt[0] + (col as f64 + 0.5) * gt[1], gt[3] + (row as f64 + 0.5) * gt[5])
+    }
+}
+
+fn check_cell(cell: f64) -> Result<(), ProcError> {
+    if !(cell.is_finite() && cell > 0.0) {
+        return Err(ProcError::Input(format!("cell size {cell} must be a positive number")));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn covering_contains_every_point() {
+        let g = GridSpec::covering((0.3, 6.1, 6.3, 6.2), 0.5).unwrap();
+        assert_eq!(g.geotransform[0], 0.0);
+        assert_eq!(g.width, 13); // 0.0 .. 6.5
+        assert_eq!(g.height, 1); // 6.0 .. 6.5
+        let (px, py) = g.world_to_pixel(6.3, 6.1);
+        assert!(px.round() as usize == 12 && py.round() as usize == 0);
+        assert!(GridSpec::covering((0.0, 0.0, 1.0, 1.0), 0.0).is_err());
+        assert!(GridSpec::covering((0.0, 0.0, 1e9, 1e9), 1e-3).is_err());
+    }
+
+    #[test]
+    fn from_edges_needs_whole_cells() {
+        let g = GridSpec::from_edges(0.0, 0.0, 6.5, 6.5, 0.25).unwrap();
+        assert_eq!((g.width, g.height), (26, 26));
+        assert_eq!(g.cell_centre(0, 0), (0.125, 6.375));
+        assert!(GridSpec::from_edges(0.0, 0.0, 6.4, 6.5, 0.25).is_err());
+    }
+}

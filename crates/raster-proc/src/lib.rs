@@ -1,0 +1,33 @@
+//! raster-proc: raster processing beside `raster-io` (which only reads and writes).
+//!
+//! - [`grid`]: raster grids that cover a point set at a given cell size.
+//! - [`splat`]: Gauss splatting of scattered values into a grid (spec §2.3.4, A5).
+//! - [`tin`]: TIN-linear rasterization (spade Delaunay, barycentric).
+//! - [`dilate`]: dilation fill of unknown cells (spec §2.3.5, Alg. 2, A6).
+//! - [`pca`]: principal-axis rotation (spec §2.3.1, A3).
+//! - [`warp`]: landmark warp field, forward/inverse mapping, raster warping (spec §2.3.2–2.3.3, A4).
+//! - [`diff`]: raster-vs-raster error statistics, histograms and error-class maps (spec §4.2, A17).
+
+pub mod diff;
+pub mod dilate;
+pub mod grid;
+pub mod pca;
+pub mod splat;
+pub mod tin;
+pub mod warp;
+
+/// Errors of the processing steps.
+#[derive(Debug, thiserror::Error)]
+pub enum ProcError {
+    /// Inputs that cannot produce a result (no points, all-nodata raster, degenerate grid).
+    #[error("{0}")]
+    Input(String),
+    /// The warp field folds over (crossing displacement vectors).
+    #[error("warp field folds over: {0}")]
+    FoldOver(String),
+    /// A stored warp field that cannot be decoded.
+    #[error("warp field: {0}")]
+    Field(String),
+    #[error(transparent)]
+    Raster(#[from] raster_io::RasterError),
+}
