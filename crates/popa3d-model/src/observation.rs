@@ -120,7 +120,9 @@ pub enum ObsKind {
     ConstraintFaceEdge { a: FaceId, b: EdgeId, l: Measured },
     /// Cosine between two edge directions: 0 orthogonal, ±1 parallel.
     ConstraintEdgeEdge { a: EdgeId, b: EdgeId, l: Measured },
-    /// Sketch prior Δd = d_upper − d_lower of two planes on one normal (spec §4.6).
+    /// Sketch prior Δd = d'_upper − d'_lower of two planes on one normal object (spec §4.6), where
+    /// d' = sign·d is a plane's offset along the normal object's own direction (so planes stored with
+    /// opposite signs compare correctly); the sort order makes the value ≥ 0.
     RelativeDistancePlanePlane { lower: PlaneId, upper: PlaneId, l: Measured },
     /// Sketch prior ⟨n_a, n_b⟩ of two normals (spec §4.6).
     RelativeAngleNormalNormal { a: NormalId, b: NormalId, l: Measured },

@@ -1,0 +1,424 @@
+//! Conditions generated from geometry and semantics (spec §8.2 step 5), sketch priors (spec §4.6)
+//! and observation-induced angle constraints (spec §4.5).
+//!
+//! Decisions for the spec's [gap]s (§8.2, §10.2 items 10, 13):
+//! * Parallelism / orthogonality are generated once per pair of *distinct* normal objects (between
+//!   their largest faces), not per face pair: faces on one normal are parallel by construction, and a
+//!   per-face-pair list would be quadratic with no extra information.
+//! * Coplanarity: planes on parallel normals (same normal object, or normals the parallelism
+//!   conditions make parallel) whose faces have the same non-opening semantic type and whose d differ
+//!   by less than ε get a face–face distance 0 — between consecutive planes in d order (a chain, not
+//!   all pairs).
+//! * Wall–window: each opening face gets a face–face distance to the parallel face of its parent
+//!   wall surface (or, without a parent, the nearest parallel wall face) with the source offset as
+//!   value, even below ε, so openings keep their place.
+//! * Soft datum: an identity observation for every plane d and normal parameter.
+//! * Unit norm: one `NormNV` per normal, skipped for a normal whose parameters are a signed
+//!   permutation of an earlier one's (the same norm, spec §3.3).
+
+use popa3d_model::*;
+use serde::Serialize;
+use std::collections::HashMap;
+
+/// Tolerances and weights of the generated conditions. Defaults: decided here (the thesis gives no
+/// numbers, spec §8.2 / §10.2 item 10).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct ConditionOptions {
+    /// Normals within this angle (degrees) of parallel get a parallelism condition. Default 2°.
+    pub parallel_deg: f64,
+    /// Normals within this angle (degrees) of orthogonal get an orthogonality condition. Default 2°.
+    pub orthogonal_deg: f64,
+    /// ε: parallel planes of the same semantic type closer than this (m) get a coplanarity
+    /// condition. Default 0.2 m (above the storey offsets LoD2/3 data sets carry, below wall thickness).
+    pub epsilon: f64,
+    /// σ of angle conditions, in cosine units. Default 1e-4 (strong, Pasewaldt: constraints strong).
+    pub sigma_angle: f64,
+    /// σ of coplanarity and wall–window distances (m). Default 1 mm.
+    pub sigma_distance: f64,
+    /// σ of identity observations of plane distances (m). Default 0.1 m (weak: the geometry yields).
+    pub sigma_identity_d: f64,
+    /// σ of identity observations of normal parameters. Default 0.05.
+    pub sigma_identity_param: f64,
+    /// σ of the unit-norm pseudo-observations; `None` = restrictions. Default `None`.
+    pub sigma_norm: Option<f64>,
+}
+
+impl Default for ConditionOptions {
+    fn default() -> Self {
+        ConditionOptions {
+            parallel_deg: 2.0,
+            orthogonal_deg: 2.0,
+            epsilon: 0.2,
+            sigma_angle: 1e-4,
+            sigma_distance: 0.001,
+            sigma_identity_d: 0.1,
+            sigma_identity_param: 0.05,
+            sigma_norm: None,
+        }
+    }
+}
+
+/// How many conditions of each kind were generated (the shape of the spec's Fig. 7.16 table).
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize)]
+pub struct ConditionCounts {
+    pub parallelism: usize,
+    pub coplanarity: usize,
+    pub orthogonality: usize,
+    pub wall_window: usize,
+    pub identity: usize,
+    pub norm: usize,
+}
+
+/// Element ranges of one normalized object inside a model.
+#[derive(Debug, Clone, Default)]
+pub struct Ranges {
+    pub faces: std::ops::Range<usize>,
+    pub planes: std::ops::Range<usize>,
+    pub normals: std::ops::Range<usize>,
+    pub parameters: std::ops::Range<usize>,
+}
+
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+fn unit(a: [f64; 3]) -> [f64; 3] {
+    let n = dot(a, a).sqrt();
+    if n > 0.0 {
+        [a[0] / n, a[1] / n, a[2] / n]
+    } else {
+        a
+    }
+}
+
+/// Face areas (from the model's own geometry).
+fn face_areas(m: &Popa3d, inc: &Incidence, pos: &[[f64; 3]], faces: &std::ops::Range<usize>) -> HashMap<usize, f64> {
+    let mut out = HashMap::new();
+    for f in faces.clone() {
+        let fid = FaceId::from(f);
+        let mut a = 0.0;
+        if let Some(loops) = m.face_loops(inc, fid, pos) {
+            let n = unit(m.face_plane_value(fid).n);
+            for (i, l) in loops.iter().enumerate() {
+                let p: Vec<[f64; 3]> = l.iter().map(|x| pos[x.idx()]).collect();
+                let v = dot(popa3d_model::topology::newell(&p), n).abs() / 2.0;
+                a += if i == 0 { v } else { -v };
+            }
+        }
+        out.insert(f, a);
+    }
+    out
+}
+
+/// The unit-norm and soft-datum conditions shared by both use cases.
+fn norms_and_identities(m: &Popa3d, r: &Ranges, o: &ConditionOptions, out: &mut Vec<Observation>, c: &mut ConditionCounts, identities: bool) {
+    let mut seen: Vec<Vec<ParamId>> = Vec::new();
+    for nv in r.normals.clone() {
+        let mut key: Vec<ParamId> = m.normals[nv].comps.iter().map(|x| x.0).collect();
+        key.sort();
+        if seen.contains(&key) {
+            continue;
+        }
+        seen.push(key);
+        out.push(Observation::new(ObsKind::NormNV { normal: NormalId::from(nv), sigma: o.sigma_norm }, ObsOrigin::Consistency));
+        c.norm += 1;
+    }
+    if identities {
+        for p in r.planes.clone() {
+            let l = Measured::new(m.planes[p].d, o.sigma_identity_d);
+            out.push(Observation::new(ObsKind::ParameterObs { unknown: Unknown::PlaneD(PlaneId::from(p)), l }, ObsOrigin::Datum));
+            c.identity += 1;
+        }
+        for p in r.parameters.clone() {
+            let l = Measured::new(m.parameters[p].value, o.sigma_identity_param);
+            out.push(Observation::new(ObsKind::ParameterObs { unknown: Unknown::Param(ParamId::from(p)), l }, ObsOrigin::Datum));
+            c.identity += 1;
+        }
+    }
+}
+
+fn is_opening(s: Option<&str>) -> bool {
+    matches!(s, Some("Window") | Some("Door"))
+}
+
+/// Generates the conditions of the CityGML use case (spec §8.2) for one object and appends them to
+/// the model. Node positions must be computable (normalization guarantees it).
+pub fn semantic(m: &mut Popa3d, r: &Ranges, o: &ConditionOptions) -> ConditionCounts {
+    let inc = Incidence::new(m);
+    let pos = match m.node_positions(&inc) {
+        Ok(p) => p,
+        Err(_) => return ConditionCounts::default(),
+    };
+    let area = face_areas(m, &inc, &pos, &r.faces);
+    let mut c = ConditionCounts::default();
+    let mut out: Vec<Observation> = Vec::new();
+    // Largest face per normal, per plane.
+    let mut normal_face: HashMap<usize, usize> = HashMap::new();
+    let mut plane_faces: HashMap<usize, Vec<usize>> = HashMap::new();
+    for f in r.faces.clone() {
+        let pl = m.faces[f].plane.idx();
+        plane_faces.entry(pl).or_default().push(f);
+        let nv = m.planes[pl].normal.idx();
+        let best = normal_face.entry(nv).or_insert(f);
+        if area[&f] > area[best] {
+            *best = f;
+        }
+    }
+    let cos_par = o.parallel_deg.to_radians().cos();
+    let sin_ort = o.orthogonal_deg.to_radians().sin();
+    // Parallel groups of normals (union-find over parallel pairs), and the pair conditions.
+    let normals: Vec<usize> = r.normals.clone().filter(|n| normal_face.contains_key(n)).collect();
+    let mut group: HashMap<usize, usize> = normals.iter().map(|&n| (n, n)).collect();
+    fn find(g: &mut HashMap<usize, usize>, x: usize) -> usize {
+        let p = g[&x];
+        if p == x {
+            x
+        } else {
+            let r = find(g, p);
+            g.insert(x, r);
+            r
+        }
+    }
+    let pset = |n: usize| {
+        let mut k: Vec<ParamId> = m.normals[n].comps.iter().map(|x| x.0).collect();
+        k.sort();
+        k
+    };
+    for (i, &a) in normals.iter().enumerate() {
+        for &b in &normals[i + 1..] {
+            if pset(a) == pset(b) {
+                continue; // a swap pair: orthogonal by construction (spec §3.2 step 4)
+            }
+            let (fa, fb) = (normal_face[&a], normal_face[&b]);
+            let cs = dot(unit(m.face_plane_value(FaceId::from(fa)).n), unit(m.face_plane_value(FaceId::from(fb)).n));
+            let kind = if cs.abs() >= cos_par {
+                c.parallelism += 1;
+                let (ra, rb) = (find(&mut group, a), find(&mut group, b));
+                group.insert(ra.max(rb), ra.min(rb));
+                Some(cs.signum())
+            } else if cs.abs() <= sin_ort {
+                c.orthogonality += 1;
+                Some(0.0)
+            } else {
+                None
+            };
+            if let Some(v) = kind {
+                let ob = Observation::new(
+                    ObsKind::ConstraintFaceFace { a: FaceId::from(fa), b: FaceId::from(fb), l: Measured::new(v, o.sigma_angle) },
+                    ObsOrigin::Semantic,
+                );
+                out.push(ob.with_label(if v == 0.0 { "orthogonal" } else { "parallel" }));
+            }
+        }
+    }
+    // Coplanarity and wall–window distances within each parallel group.
+    let mut groups: HashMap<usize, Vec<usize>> = HashMap::new();
+    for &n in &normals {
+        let g = find(&mut group, n);
+        groups.entry(g).or_default().push(n);
+    }
+    let mut gkeys: Vec<usize> = groups.keys().cloned().collect();
+    gkeys.sort();
+    for g in gkeys {
+        let ns = &groups[&g];
+        let refn = unit(m.face_plane_value(FaceId::from(normal_face[&g])).n);
+        // (signed offset along refn, face) for each face of the group: offset of the face's plane.
+        let mut faces: Vec<(f64, usize)> = Vec::new();
+        for f in r.faces.clone() {
+            let pl = m.faces[f].plane.idx();
+            if !ns.contains(&m.planes[pl].normal.idx()) {
+                continue;
+            }
+            // A point of the face: its first node.
+            let h = inc.face_half_edges[f][0];
+            let p = pos[m.half_edge_start(h).idx()];
+            faces.push((dot(refn, p), f));
+        }
+        let sem = |f: usize| m.faces[f].source.as_ref().and_then(|s| s.semantic.clone());
+        // Coplanarity: per semantic type, planes sorted by offset, consecutive pairs within ε.
+        let mut by_sem: HashMap<Option<String>, Vec<(f64, usize)>> = HashMap::new();
+        for &(t, f) in &faces {
+            if !is_opening(sem(f).as_deref()) {
+                by_sem.entry(sem(f)).or_default().push((t, f));
+            }
+        }
+        let mut sems: Vec<Option<String>> = by_sem.keys().cloned().collect();
+        sems.sort();
+        for s in sems {
+            let mut v = by_sem[&s].clone();
+            // One representative (largest face) per plane.
+            let mut per_plane: HashMap<usize, (f64, usize)> = HashMap::new();
+            for (t, f) in v.drain(..) {
+                let pl = m.faces[f].plane.idx();
+                let e = per_plane.entry(pl).or_insert((t, f));
+                if area[&f] > area[&e.1] {
+                    *e = (t, f);
+                }
+            }
+            let mut v: Vec<(f64, usize)> = per_plane.into_values().collect();
+            v.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+            for w in v.windows(2) {
+                let dd = w[1].0 - w[0].0;
+                if dd.abs() < o.epsilon {
+                    let ob = Observation::new(
+                        ObsKind::DistanceFaceFace { a: FaceId::from(w[0].1), b: FaceId::from(w[1].1), l: Measured::new(0.0, o.sigma_distance) },
+                        ObsOrigin::Semantic,
+                    );
+                    out.push(ob.with_label(format!("coplanar {} (source offset {dd:.4} m)", s.clone().unwrap_or_default())));
+                    c.coplanarity += 1;
+                }
+            }
+        }
+        // Wall–window: each opening face to the nearest parallel face of its parent (or any wall).
+        for &(t, f) in &faces {
+            let src = match &m.faces[f].source {
+                Some(s) if is_opening(s.semantic.as_deref()) => s.clone(),
+                _ => continue,
+            };
+            let mut best: Option<(f64, usize)> = None;
+            for &(t2, f2) in &faces {
+                if f2 == f || m.faces[f2].plane == m.faces[f].plane {
+                    continue;
+                }
+                let s2 = match &m.faces[f2].source {
+                    Some(s) => s,
+                    None => continue,
+                };
+                if s2.semantic.as_deref() != Some("WallSurface") {
+                    continue;
+                }
+                let dd = (t2 - t).abs();
+                if best.map_or(true, |(b, _)| dd < b) {
+                    best = Some((dd, f2));
+                }
+            }
+            if let Some((dd, f2)) = best {
+                let ob = Observation::new(
+                    ObsKind::DistanceFaceFace { a: FaceId::from(f2), b: FaceId::from(f), l: Measured::new(dd, o.sigma_distance) },
+                    ObsOrigin::Semantic,
+                );
+                out.push(ob.with_label(format!("wall-window {}", src.owner.clone().unwrap_or(src.polygon.clone()))));
+                c.wall_window += 1;
+            }
+        }
+    }
+    norms_and_identities(m, r, o, &mut out, &mut c, true);
+    for ob in out {
+        m.add_observation(ob);
+    }
+    c
+}
+
+/// σ of the sketch priors (spec Table 7.2: plane differences ±10 cm, relative angles ±0.001,
+/// normal norm ±0.001).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct SketchOptions {
+    pub sigma_plane_difference: f64,
+    pub sigma_relative_angle: f64,
+    pub sigma_norm: f64,
+}
+
+impl Default for SketchOptions {
+    fn default() -> Self {
+        SketchOptions { sigma_plane_difference: 0.1, sigma_relative_angle: 0.001, sigma_norm: 0.001 }
+    }
+}
+
+/// Sketch priors of the first use case (spec §4.6, P10): per normal, planes sorted by their d in
+/// the canonical direction (T 2.5), consecutive differences; all pairwise normal dot products; unit
+/// norms as pseudo-observations. Returns (plane differences, relative angles, norms).
+pub fn sketch_priors(m: &mut Popa3d, r: &Ranges, o: &SketchOptions) -> (usize, usize, usize) {
+    let mut out = Vec::new();
+    let mut nd = 0;
+    for nv in r.normals.clone() {
+        // d' = sign·d: the plane's offset along its normal object's direction (normal objects are
+        // already in the canonical direction of T 2.5, spec §4.6 step 1).
+        let mut ps: Vec<(f64, usize)> = r
+            .planes
+            .clone()
+            .filter(|&p| m.planes[p].normal.idx() == nv)
+            .map(|p| (m.planes[p].sign.f64() * m.planes[p].d, p))
+            .collect();
+        ps.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        for w in ps.windows(2) {
+            out.push(Observation::new(
+                ObsKind::RelativeDistancePlanePlane {
+                    lower: PlaneId::from(w[0].1),
+                    upper: PlaneId::from(w[1].1),
+                    l: Measured::new(w[1].0 - w[0].0, o.sigma_plane_difference),
+                },
+                ObsOrigin::Sketch,
+            ));
+            nd += 1;
+        }
+    }
+    let mut na = 0;
+    let nvs: Vec<usize> = r.normals.clone().collect();
+    for (i, &a) in nvs.iter().enumerate() {
+        for &b in &nvs[i + 1..] {
+            let v = dot(m.normal_value(NormalId::from(a)), m.normal_value(NormalId::from(b)));
+            out.push(Observation::new(
+                ObsKind::RelativeAngleNormalNormal { a: NormalId::from(a), b: NormalId::from(b), l: Measured::new(v, o.sigma_relative_angle) },
+                ObsOrigin::Sketch,
+            ));
+            na += 1;
+        }
+    }
+    let mut c = ConditionCounts::default();
+    let co = ConditionOptions { sigma_norm: Some(o.sigma_norm), ..Default::default() };
+    norms_and_identities(m, r, &co, &mut out, &mut c, false);
+    for ob in out {
+        m.add_observation(ob);
+    }
+    (nd, na, c.norm)
+}
+
+/// Adds a measured distance and, for face–face, face–edge and edge–edge distances, the induced
+/// "parallel" angle constraint (spec §4.5, P9) — unless parallelism already holds by construction
+/// (the same normal object), which would duplicate a condition and cause a rank defect (spec §10.2
+/// item 13). Returns the ids added. `sigma_induced` is the σ of induced constraints (cosine units).
+pub fn add_distance(m: &mut Popa3d, obs: Observation, sigma_induced: f64) -> Vec<ObsId> {
+    let inc = Incidence::new(m);
+    let face_normal = |f: FaceId| m.planes[m.faces[f.idx()].plane.idx()].normal;
+    let edge_normals = |e: EdgeId| -> Vec<NormalId> {
+        let mut v: Vec<NormalId> = inc.edge_planes(m, e).iter().map(|p| m.planes[p.idx()].normal).collect();
+        v.sort();
+        v.dedup();
+        v
+    };
+    let induced: Option<ObsKind> = match obs.kind {
+        ObsKind::DistanceFaceFace { a, b, .. } => {
+            if face_normal(a) == face_normal(b) {
+                None
+            } else {
+                let cs = dot(unit(m.face_plane_value(a).n), unit(m.face_plane_value(b).n));
+                Some(ObsKind::ConstraintFaceFace { a, b, l: Measured::new(if cs < 0.0 { -1.0 } else { 1.0 }, sigma_induced) })
+            }
+        }
+        ObsKind::DistanceFaceEdge { a, b, .. } => {
+            if edge_normals(b).contains(&face_normal(a)) {
+                None
+            } else {
+                Some(ObsKind::ConstraintFaceEdge { a, b, l: Measured::new(0.0, sigma_induced) })
+            }
+        }
+        ObsKind::DistanceEdgeEdge { a, b, .. } => {
+            if edge_normals(a) == edge_normals(b) {
+                None
+            } else {
+                let da = m.edge_line(&inc, a).map(|x| unit(x.1)).unwrap_or([0.0; 3]);
+                let db = m.edge_line(&inc, b).map(|x| unit(x.1)).unwrap_or([0.0; 3]);
+                let cs = dot(da, db);
+                Some(ObsKind::ConstraintEdgeEdge { a, b, l: Measured::new(if cs < 0.0 { -1.0 } else { 1.0 }, sigma_induced) })
+            }
+        }
+        _ => None,
+    };
+    let id = m.add_observation(obs);
+    let mut ids = vec![id];
+    if let Some(k) = induced {
+        let mut o = Observation::new(k, ObsOrigin::Induced);
+        o.induced_by = Some(id);
+        ids.push(m.add_observation(o));
+    }
+    ids
+}

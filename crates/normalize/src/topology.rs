@@ -1,0 +1,375 @@
+//! Topological normalization (spec §3.1): polygon soup → nodes, directed edges, half-edges, faces
+//! referencing solids. Snap tolerance: [`crate::Tolerances::snap`] (spec [gap], decided there).
+
+use crate::soup::Soup;
+use crate::{Notice, Rejection, Tolerances};
+use popa3d_model::VertexSource;
+use std::collections::HashMap;
+
+/// A face after topological normalization: rings of node indices oriented so that the right-hand
+/// normal points out of `back` (into `front`, `None` = the exterior space).
+#[derive(Debug, Clone)]
+pub struct TopoFace {
+    pub rings: Vec<Vec<usize>>,
+    /// Index of the source polygon in the soup.
+    pub polygon: usize,
+    pub back: usize,
+    pub front: Option<usize>,
+}
+
+/// The point-parameterised topological model of one soup.
+#[derive(Debug, Clone, Default)]
+pub struct Topo {
+    /// Node coordinates (source CRS; the first point snapped to a node is its representative).
+    pub points: Vec<[f64; 3]>,
+    pub node_sources: Vec<Vec<VertexSource>>,
+    pub faces: Vec<TopoFace>,
+    /// Directed edges (start, end).
+    pub edges: Vec<(usize, usize)>,
+    /// (edge, +1/−1, face).
+    pub half_edges: Vec<(usize, i8, usize)>,
+    /// Counts before normalization: distinct nodes, distinct edges, input polygons.
+    pub soup_nodes: usize,
+    pub soup_edges: usize,
+    pub soup_faces: usize,
+    pub soup_points: usize,
+}
+
+/// Grid hash for snapping points within `tol`.
+struct Snapper {
+    tol: f64,
+    cells: HashMap<[i64; 3], Vec<usize>>,
+}
+
+impl Snapper {
+    fn key(&self, p: &[f64; 3]) -> [i64; 3] {
+        [(p[0] / self.tol).floor() as i64, (p[1] / self.tol).floor() as i64, (p[2] / self.tol).floor() as i64]
+    }
+    fn find_or_insert(&mut self, p: [f64; 3], points: &mut Vec<[f64; 3]>) -> usize {
+        let k = self.key(&p);
+        let mut best: Option<(usize, f64)> = None;
+        for dx in -1..=1 {
+            for dy in -1..=1 {
+                for dz in -1..=1 {
+                    if let Some(v) = self.cells.get(&[k[0] + dx, k[1] + dy, k[2] + dz]) {
+                        for &i in v {
+                            let d = dist(&points[i], &p);
+                            if d <= self.tol && best.map_or(true, |(_, b)| d < b) {
+                                best = Some((i, d));
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        if let Some((i, _)) = best {
+            return i;
+        }
+        points.push(p);
+        let i = points.len() - 1;
+        self.cells.entry(k).or_default().push(i);
+        i
+    }
+}
+
+fn dist(a: &[f64; 3], b: &[f64; 3]) -> f64 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+}
+
+fn sub(a: &[f64; 3], b: &[f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+fn dot(a: &[f64; 3], b: &[f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+fn cross(a: &[f64; 3], b: &[f64; 3]) -> [f64; 3] {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
+
+/// Builds the topology of one soup. Rejects (naming the source polygon) rings with fewer than three
+/// distinct points (TA05), open shells (TA03) and shells that cannot be oriented consistently.
+/// Duplicate faces of one solid are removed with a notice (spec §3.1: duplicates are redundancy).
+pub fn build(soup: &Soup, tol: &Tolerances, notices: &mut Vec<Notice>) -> Result<Topo, Rejection> {
+    if soup.polygons.is_empty() {
+        return Err(Rejection::new("NO-GEOMETRY", &soup.name, "no polygons to convert"));
+    }
+    let mut t = Topo { soup_faces: soup.polygons.len(), ..Default::default() };
+    // Reduce to a local frame before hashing so snapping works at the same resolution everywhere.
+    let mut snap = Snapper { tol: tol.snap.max(1e-9), cells: HashMap::new() };
+    let mut rings_nodes: Vec<Vec<Vec<usize>>> = Vec::with_capacity(soup.polygons.len());
+    for poly in &soup.polygons {
+        let mut rings = Vec::new();
+        for (ri, ring) in poly.rings.iter().enumerate() {
+            t.soup_points += ring.len();
+            let mut ids: Vec<usize> = Vec::with_capacity(ring.len());
+            for (vi, p) in ring.iter().enumerate() {
+                if !p.iter().all(|x| x.is_finite()) {
+                    return Err(Rejection::new("TA05", &poly.locator, format!("ring {ri} point {vi} is not a finite coordinate")));
+                }
+                let n = snap.find_or_insert(*p, &mut t.points);
+                if t.node_sources.len() < t.points.len() {
+                    t.node_sources.push(Vec::new());
+                }
+                if let Some(s) = poly.vertex_sources.get(ri).and_then(|r| r.get(vi)) {
+                    t.node_sources[n].push(s.clone());
+                }
+                if ids.last() != Some(&n) {
+                    ids.push(n);
+                }
+            }
+            while ids.len() > 1 && ids.first() == ids.last() {
+                ids.pop();
+            }
+            let mut distinct = ids.clone();
+            distinct.sort();
+            distinct.dedup();
+            if distinct.len() < 3 {
+                return Err(Rejection::new(
+                    "TA05",
+                    &poly.locator,
+                    format!(
+                        "{} ring {ri} has {} distinct point(s) within the snap tolerance {} m; a face needs at least 3",
+                        if ri == 0 { "exterior" } else { "interior" },
+                        distinct.len(),
+                        tol.snap
+                    ),
+                ));
+            }
+            rings.push(ids);
+        }
+        rings_nodes.push(rings);
+    }
+    t.soup_nodes = t.points.len();
+    {
+        let mut es = std::collections::HashSet::new();
+        for rings in &rings_nodes {
+            for r in rings {
+                for i in 0..r.len() {
+                    let (a, b) = (r[i], r[(i + 1) % r.len()]);
+                    es.insert((a.min(b), a.max(b)));
+                }
+            }
+        }
+        t.soup_edges = es.len();
+    }
+
+    // T-junctions: a node lying on another face's edge is inserted into that edge, so both faces
+    // share the same edges (common in LoD2 data where a wall meets two roof polygons).
+    for rings in rings_nodes.iter_mut() {
+        for r in rings.iter_mut() {
+            let mut out = Vec::with_capacity(r.len());
+            for i in 0..r.len() {
+                let (a, b) = (r[i], r[(i + 1) % r.len()]);
+                out.push(a);
+                let pa = t.points[a];
+                let ab = sub(&t.points[b], &pa);
+                let len2 = dot(&ab, &ab);
+                if len2 <= 0.0 {
+                    continue;
+                }
+                let mut on: Vec<(f64, usize)> = Vec::new();
+                for (n, p) in t.points.iter().enumerate() {
+                    if n == a || n == b {
+                        continue;
+                    }
+                    let ap = sub(p, &pa);
+                    let s = dot(&ap, &ab) / len2;
+                    if s <= 0.0 || s >= 1.0 {
+                        continue;
+                    }
+                    let c = cross(&ap, &ab);
+                    if dot(&c, &c) / len2 <= tol.snap * tol.snap {
+                        on.push((s, n));
+                    }
+                }
+                on.sort_by(|x, y| x.0.total_cmp(&y.0));
+                out.extend(on.into_iter().map(|x| x.1));
+            }
+            *r = out;
+        }
+    }
+
+    // Duplicate faces: the same cycle in either direction. In the same solid: removed with a notice;
+    // in two different solids: one face shared by both (it separates them, spec §3.1 item 5).
+    let mut seen: HashMap<Vec<usize>, usize> = HashMap::new();
+    for (pi, rings) in rings_nodes.iter().enumerate() {
+        let key = cycle_key(&rings[0]);
+        let solid = soup.polygons[pi].solid;
+        if let Some(&fi) = seen.get(&key) {
+            let f: &mut TopoFace = &mut t.faces[fi];
+            if f.back == solid || f.front == Some(solid) {
+                notices.push(Notice {
+                    rule: "DUPLICATE".into(),
+                    element: soup.polygons[pi].locator.clone(),
+                    message: format!("duplicate of polygon {} (same boundary); removed", soup.polygons[f.polygon].locator),
+                });
+            } else if f.front.is_none() {
+                f.front = Some(solid);
+            } else {
+                notices.push(Notice {
+                    rule: "DUPLICATE".into(),
+                    element: soup.polygons[pi].locator.clone(),
+                    message: "a third solid uses this face; removed".into(),
+                });
+            }
+            continue;
+        }
+        seen.insert(key, t.faces.len());
+        t.faces.push(TopoFace { rings: rings.clone(), polygon: pi, back: solid, front: None });
+    }
+
+    // Orientation per solid: breadth-first over faces sharing edges, then the sign of the volume.
+    let nsol = soup.solids.len();
+    // flip[f] for the face as seen from its back solid.
+    let mut flip = vec![false; t.faces.len()];
+    for s in 0..nsol {
+        let faces: Vec<usize> = (0..t.faces.len()).filter(|&f| t.faces[f].back == s || t.faces[f].front == Some(s)).collect();
+        if faces.is_empty() {
+            continue;
+        }
+        // (face, stored direction a→b) per undirected edge.
+        let mut uses: HashMap<(usize, usize), Vec<(usize, bool)>> = HashMap::new();
+        for &f in &faces {
+            for r in &t.faces[f].rings {
+                for i in 0..r.len() {
+                    let (a, b) = (r[i], r[(i + 1) % r.len()]);
+                    uses.entry((a.min(b), a.max(b))).or_default().push((f, a < b));
+                }
+            }
+        }
+        // Closedness: every edge used an even number of times by the solid's faces (2-manifold: 2).
+        let mut open: Vec<(&(usize, usize), &Vec<(usize, bool)>)> = uses.iter().filter(|(_, v)| v.len() % 2 == 1).collect();
+        if !open.is_empty() {
+            open.sort_by_key(|(k, _)| **k);
+            let (k, v) = open[0];
+            let p = &soup.polygons[t.faces[v[0].0].polygon];
+            let (a, b) = (t.points[k.0], t.points[k.1]);
+            return Err(Rejection::new(
+                "TA03",
+                &p.locator,
+                format!(
+                    "open shell: the edge ({:.3} {:.3} {:.3})–({:.3} {:.3} {:.3}) of this polygon is used by no other face of the solid ({} such edge(s) in all); a closed solid needs every edge in two faces",
+                    a[0], a[1], a[2], b[0], b[1], b[2], open.len()
+                ),
+            ));
+        }
+        // Orientation as seen from s: o[f] = the face's stored direction is outward for s.
+        let mut o: HashMap<usize, bool> = HashMap::new();
+        let mut edges_of: HashMap<usize, Vec<(usize, usize)>> = HashMap::new();
+        for (k, v) in &uses {
+            for (f, _) in v {
+                edges_of.entry(*f).or_default().push(*k);
+            }
+        }
+        let mut comps: Vec<Vec<usize>> = Vec::new();
+        for &f0 in &faces {
+            if o.contains_key(&f0) {
+                continue;
+            }
+            o.insert(f0, true);
+            let mut comp = vec![f0];
+            let mut queue = std::collections::VecDeque::from([f0]);
+            while let Some(f) = queue.pop_front() {
+                let mut ks = edges_of.get(&f).cloned().unwrap_or_default();
+                ks.sort();
+                ks.dedup();
+                for k in ks {
+                    let v = &uses[&k];
+                    if v.len() != 2 {
+                        continue; // non-manifold edge: leave to the neighbours through other edges
+                    }
+                    let (g, gdir) = if v[0].0 == f { v[1] } else { v[0] };
+                    let fdir = if v[0].0 == f { v[0].1 } else { v[1].1 };
+                    if g == f {
+                        continue;
+                    }
+                    // Consistent: the two faces run the edge in opposite directions.
+                    let want = if fdir == gdir { !o[&f] } else { o[&f] };
+                    match o.get(&g) {
+                        Some(&x) if x != want => {
+                            return Err(Rejection::new(
+                                "ORIENT",
+                                &soup.polygons[t.faces[g].polygon].locator,
+                                "the shell cannot be oriented consistently (non-orientable or self-overlapping faces)",
+                            ))
+                        }
+                        Some(_) => {}
+                        None => {
+                            o.insert(g, want);
+                            comp.push(g);
+                            queue.push_back(g);
+                        }
+                    }
+                }
+            }
+            comps.push(comp);
+        }
+        for comp in comps {
+            // Signed volume with the chosen orientation; negative → flip the whole component.
+            let c = t.points[t.faces[comp[0]].rings[0][0]];
+            let mut vol = 0.0;
+            for &f in &comp {
+                let sgn = if o[&f] { 1.0 } else { -1.0 };
+                for r in &t.faces[f].rings {
+                    let p0 = sub(&t.points[r[0]], &c);
+                    for i in 1..r.len() - 1 {
+                        let p1 = sub(&t.points[r[i]], &c);
+                        let p2 = sub(&t.points[r[i + 1]], &c);
+                        vol += sgn * dot(&p0, &cross(&p1, &p2)) / 6.0;
+                    }
+                }
+            }
+            let outward = vol >= 0.0;
+            for &f in &comp {
+                let out_for_s = o[&f] == outward;
+                // Decide the stored orientation from the face's back solid only.
+                if t.faces[f].back == s {
+                    flip[f] = !out_for_s;
+                } else if t.faces[f].front == Some(s) && !faces_has_back_decided(&t.faces[f], s) {
+                    // A shared face first met from its front solid: seen from the back it is reversed.
+                    flip[f] = out_for_s;
+                }
+            }
+        }
+    }
+    for (f, fl) in flip.iter().enumerate() {
+        if *fl {
+            for r in t.faces[f].rings.iter_mut() {
+                r.reverse();
+            }
+        }
+    }
+
+    // Directed edges and half-edges.
+    let mut edge_ix: HashMap<(usize, usize), usize> = HashMap::new();
+    for (fi, f) in t.faces.iter().enumerate() {
+        for r in &f.rings {
+            for i in 0..r.len() {
+                let (a, b) = (r[i], r[(i + 1) % r.len()]);
+                let k = (a.min(b), a.max(b));
+                let e = *edge_ix.entry(k).or_insert_with(|| {
+                    t.edges.push((a, b));
+                    t.edges.len() - 1
+                });
+                let sign = if t.edges[e] == (a, b) { 1 } else { -1 };
+                t.half_edges.push((e, sign, fi));
+            }
+        }
+    }
+    Ok(t)
+}
+
+/// Shared faces always have their back solid processed first (solids in index order, the back solid
+/// is the one that listed the polygon first), so the front side never decides.
+fn faces_has_back_decided(f: &TopoFace, s: usize) -> bool {
+    f.back < s
+}
+
+/// A cycle's key independent of start node and direction.
+fn cycle_key(r: &[usize]) -> Vec<usize> {
+    let n = r.len();
+    let m = (0..n).min_by_key(|&i| r[i]).unwrap_or(0);
+    let fwd: Vec<usize> = (0..n).map(|i| r[(m + i) % n]).collect();
+    let bwd: Vec<usize> = (0..n).map(|i| r[(m + n - i) % n]).collect();
+    fwd.min(bwd)
+}
