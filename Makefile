@@ -11,12 +11,14 @@ export GEOFIT_SHARED := $(SHARED)
 
 # Debian packages the project uses (libraries it links and tools its tests call).
 APT_PACKAGES := pkg-config libgdal-dev gdal-bin libproj-dev proj-bin ocl-icd-opencl-dev \
-  pocl-opencl-icd clinfo libxml2-utils libxml2-dev libclang-dev python3-numpy freecad-python3
+  pocl-opencl-icd clinfo libxml2-utils libxml2-dev libclang-dev python3-numpy freecad-python3 nodejs
 # Python packages for independent checks and reference tools.
 PIP_PACKAGES := numpy scipy lxml pymeshlab trimesh
-# npm: the Khronos glTF validator.
+# npm: the Khronos glTF validator. It is a library: tests run it through the small CLI
+# tests/scripts/gltf_validator.js, which finds the package in $(NPM_PREFIX) (no PATH wrapper).
 NPM_PREFIX := $(HOME)/.cache/geofit/npm
-export PATH := $(NPM_PREFIX)/bin:$(PATH)
+export GEOFIT_NPM_PREFIX := $(NPM_PREFIX)
+GLTF_VALIDATOR_VERSION := 2.0.0-dev.3.10
 
 .PHONY: setup setup-apt setup-pip setup-npm build release test demo bench clean-demo
 
@@ -35,14 +37,22 @@ setup-apt:
 setup-pip:
 	@python3 -c "import numpy, scipy, lxml, pymeshlab, trimesh" 2>/dev/null \
 	  && echo "setup: Python packages present" \
-	  || { echo "setup: installing Python packages: $(PIP_PACKAGES)"; python3 -m pip install -q $(PIP_PACKAGES); }
+	  || { echo "setup: installing Python packages: $(PIP_PACKAGES)"; \
+	       python3 -m pip --version >/dev/null 2>&1 || { SUDO=""; [ "$$(id -u)" = 0 ] || SUDO=sudo; \
+	         $$SUDO apt-get install -y -qq --no-install-recommends python3-pip >/dev/null; }; \
+	       PIP_BREAK_SYSTEM_PACKAGES=1 python3 -m pip install -q $(PIP_PACKAGES); }
+	@# FreeCAD's Python modules (Debian freecad-python3) are built for the system interpreter.
+	@/usr/bin/python3 tests/scripts/export_freecad.py --check >/dev/null 2>&1 \
+	  && echo "setup: FreeCAD Python modules importable" \
+	  || echo "setup: WARNING: FreeCAD (freecad-python3) not importable by /usr/bin/python3"
 
 setup-npm:
-	@command -v gltf_validator >/dev/null 2>&1 && echo "setup: gltf-validator present" || { \
-	  echo "setup: installing npm gltf-validator"; mkdir -p $(NPM_PREFIX); \
-	  npm install -g -s --prefix $(NPM_PREFIX) gltf-validator >/dev/null && \
-	  printf '#!/usr/bin/env node\n%s\n' "$$(cat tests/scripts/gltf_validator.js)" > $(NPM_PREFIX)/bin/gltf_validator && \
-	  chmod +x $(NPM_PREFIX)/bin/gltf_validator; }
+	@node tests/scripts/gltf_validator.js --version >/dev/null 2>&1 && echo "setup: gltf-validator present" || { \
+	  command -v npm >/dev/null || { SUDO=""; [ "$$(id -u)" = 0 ] || SUDO=sudo; \
+	    $$SUDO apt-get install -y -qq --no-install-recommends npm >/dev/null; }; \
+	  echo "setup: installing npm gltf-validator into $(NPM_PREFIX)"; mkdir -p $(NPM_PREFIX); \
+	  npm install -g --silent --prefix $(NPM_PREFIX) gltf-validator@$(GLTF_VALIDATOR_VERSION) >/dev/null && \
+	  node tests/scripts/gltf_validator.js --version >/dev/null; }
 
 build: setup
 	$(CARGO) build --workspace
