@@ -1,0 +1,472 @@
+//! Evaluation of the rational T-spline (spec §3.2, eq. 2.7) through its PB-spline form
+//! (control points + local knots, spec §6.3), with a uniform bucket grid as the search
+//! structure. The same flat arrays feed the OpenCL kernels (`ocl_eval.rs`), so CPU and GPU run
+//! the same algorithm in the same operation order.
+//!
+//! Decisions:
+//! - **A1** upper border: spans are half-open [a, b). A point on the upper s (or t) border of the
+//!   domain — no leaf cell holds it half-open in that direction — is evaluated as the limit from
+//!   inside, i.e. with spans (a, b] in that direction. The same rule gives the inside limit on
+//!   the upper edge of a hole or a merged mesh's notch.
+//! - **A2** the standard Cox–de Boor recursion (terms with a zero denominator are 0).
+//! - **A15** device encoding: we do not port the thesis' int8 R-tree pages to the device; a
+//!   uniform bucket grid (CSR lists of control points whose closed support meets the bucket, and
+//!   of leaf cells for the domain test) needs no queue and no integer rounding, so A15's rounding
+//!   caveat disappears. The thesis' int8 page encoding is kept for reference in `rtree_pages.rs`.
+//! - Outside the domain (no leaf cell holds the point) the result is NaN (spec §6.3, Alg. 6).
+
+use rayon::prelude::*;
+
+use crate::knots::{self, LocalKnots};
+use crate::mesh::{Degree, TMesh};
+
+/// One degree-K B-spline basis function on its K+2 local knots (spec eqs. 2.3/2.4 in standard
+/// form, A2), evaluated with half-open spans [a,b) or, when `left` is set, (a,b] (A1).
+#[inline]
+pub fn basis(kn: &[f64], k: usize, u: f64, left: bool) -> f64 {
+    if u < kn[0] || u > kn[k + 1] {
+        return 0.0;
+    }
+    let mut n = [0.0f64; 4];
+    for j in 0..=k {
+        let (a, b) = (kn[j], kn[j + 1]);
+        let inside = if left { a < u && u <= b } else { a <= u && u < b };
+        n[j] = if inside { 1.0 } else { 0.0 };
+    }
+    for r in 1..=k {
+        for j in 0..=(k - r) {
+            let d1 = kn[j + r] - kn[j];
+            let d2 = kn[j + r + 1] - kn[j + 1];
+            let mut v = 0.0;
+            if d1 > 0.0 {
+                v += (u - kn[j]) / d1 * n[j];
+            }
+            if d2 > 0.0 {
+                v += (kn[j + r + 1] - u) / d2 * n[j + 1];
+            }
+            n[j] = v;
+        }
+    }
+    n[0]
+}
+
+/// The PB-spline form of a T-mesh plus the bucket grids, flat and device-ready.
+#[derive(Debug, Clone)]
+pub struct PbSpline {
+    pub degree: Degree,
+    /// Mesh point id of each PB point (inactive mesh points are skipped).
+    pub point_ids: Vec<u32>,
+    /// Per point: σ (5) then τ (5); K=1 uses the first 3 of each.
+    pub knots: Vec<[f64; 10]>,
+    /// Per point: x, y, z, w.
+    pub geom: Vec<[f64; 4]>,
+    /// Leaf cell rectangles (s_min, t_min, s_max, t_max).
+    pub cells: Vec<[f64; 4]>,
+    pub grid: BucketGrid,
+    /// CSR: points whose closed support meets bucket b: `pt_items[pt_start[b]..pt_start[b+1]]`.
+    pub pt_start: Vec<u32>,
+    pub pt_items: Vec<u32>,
+    /// CSR: leaf cells meeting bucket b.
+    pub cell_start: Vec<u32>,
+    pub cell_items: Vec<u32>,
+}
+
+/// A uniform grid over the domain's bounding box.
+#[derive(Debug, Clone, Copy)]
+pub struct BucketGrid {
+    pub s0: f64,
+    pub t0: f64,
+    pub ds: f64,
+    pub dt: f64,
+    pub ns: u32,
+    pub nt: u32,
+}
+
+impl BucketGrid {
+    #[inline]
+    pub fn index_range(&self, lo: f64, hi: f64, horizontal: bool) -> (u32, u32) {
+        let (o, d, n) = if horizontal { (self.s0, self.ds, self.ns) } else { (self.t0, self.dt, self.nt) };
+        let a = ((lo - o) / d).floor().max(0.0).min((n - 1) as f64) as u32;
+        let b = ((hi - o) / d).floor().max(0.0).min((n - 1) as f64) as u32;
+        (a, b)
+    }
+}
+
+fn csr(nb: usize, lists: impl Iterator<Item = (u32, (u32, u32), (u32, u32))>, ns: u32) -> (Vec<u32>, Vec<u32>) {
+    let lists: Vec<_> = lists.collect();
+    let mut count = vec![0u32; nb + 1];
+    for &(_, (i0, i1), (j0, j1)) in &lists {
+        for j in j0..=j1 {
+            for i in i0..=i1 {
+                count[(j * ns + i) as usize + 1] += 1;
+            }
+        }
+    }
+    for b in 0..nb {
+        count[b + 1] += count[b];
+    }
+    let mut fill = count.clone();
+    let mut items = vec![0u32; count[nb] as usize];
+    for &(id, (i0, i1), (j0, j1)) in &lists {
+        for j in j0..=j1 {
+            for i in i0..=i1 {
+                let b = (j * ns + i) as usize;
+                items[fill[b] as usize] = id;
+                fill[b] += 1;
+            }
+        }
+    }
+    (count, items)
+}
+
+impl PbSpline {
+    /// Compiles a mesh: knot inference for every active point (in parallel), then the bucket
+    /// grids (about one bucket per leaf cell, capped).
+    pub fn build(mesh: &TMesh) -> PbSpline {
+        let active = mesh.active_points();
+        let point_ids: Vec<u32> = (0..mesh.points.len() as u32).filter(|&i| active[i as usize]).collect();
+        let knots: Vec<LocalKnots> = point_ids
+            .par_iter()
+            .map(|&i| {
+                let p = mesh.points[i as usize];
+                knots::infer(mesh, p.s, p.t)
+            })
+            .collect();
+        PbSpline::from_parts(mesh, point_ids, knots)
+    }
+
+    /// Compiles with knots computed elsewhere (the OpenCL knot kernel).
+    pub fn from_parts(mesh: &TMesh, point_ids: Vec<u32>, knots: Vec<LocalKnots>) -> PbSpline {
+        let k = mesh.degree.k();
+        let knots: Vec<[f64; 10]> = knots
+            .iter()
+            .map(|kn| {
+                let mut a = [0.0; 10];
+                a[..k + 2].copy_from_slice(&kn.s[..k + 2]);
+                a[5..5 + k + 2].copy_from_slice(&kn.t[..k + 2]);
+                a
+            })
+            .collect();
+        let geom = point_ids.iter().map(|&i| mesh.points[i as usize]).map(|p| [p.x, p.y, p.z, p.w]).collect();
+        let cells: Vec<[f64; 4]> =
+            mesh.cells.iter().filter(|c| c.is_leaf()).map(|c| [c.rect.s_min, c.rect.t_min, c.rect.s_max, c.rect.t_max]).collect();
+        let b = mesh.bounds();
+        let n = cells.len().max(1) as f64;
+        let aspect = (b.width() / b.height()).clamp(1e-6, 1e6);
+        let ns = ((n * aspect).sqrt().ceil() as u32).clamp(1, 4096);
+        let nt = ((n / aspect).sqrt().ceil() as u32).clamp(1, 4096);
+        let grid = BucketGrid { s0: b.s_min, t0: b.t_min, ds: b.width() / ns as f64, dt: b.height() / nt as f64, ns, nt };
+        let nb = (ns * nt) as usize;
+        let (pt_start, pt_items) = csr(
+            nb,
+            knots.iter().enumerate().map(|(i, kn)| {
+                (i as u32, grid.index_range(kn[0], kn[k + 1], true), grid.index_range(kn[5], kn[5 + k + 1], false))
+            }),
+            ns,
+        );
+        let (cell_start, cell_items) = csr(
+            nb,
+            cells.iter().enumerate().map(|(i, c)| (i as u32, grid.index_range(c[0], c[2], true), grid.index_range(c[1], c[3], false))),
+            ns,
+        );
+        PbSpline { degree: mesh.degree, point_ids, knots, geom, cells, grid, pt_start, pt_items, cell_start, cell_items }
+    }
+
+    #[inline]
+    fn bucket(&self, s: f64, t: f64) -> usize {
+        let (i, _) = self.grid.index_range(s, s, true);
+        let (j, _) = self.grid.index_range(t, t, false);
+        (j * self.grid.ns + i) as usize
+    }
+
+    /// Domain test with the border rule of A1. Returns the (possibly adjusted) evaluation point
+    /// and the left-limit flags, or None outside the domain.
+    ///
+    /// A point is on an upper (lower) border in s when every leaf cell holding it ends (starts)
+    /// at s. Degree 1: upper borders use (a,b] spans, which is exact. Degree 3: the thesis'
+    /// border padding gives the border knot multiplicity 3, so every cubic basis function is C0
+    /// and 0 there and the rational form is 0/0 on all four borders; we evaluate the limit from
+    /// inside by moving the point 2^-30 cell widths inwards (the fit never samples the mesh
+    /// border: the data lies strictly inside the overhang).
+    #[inline]
+    pub fn locate(&self, s: f64, t: f64) -> Option<(f64, f64, bool, bool)> {
+        let b = self.bucket(s, t);
+        let (mut found, mut up_s, mut lo_s, mut up_t, mut lo_t) = (false, true, true, true, true);
+        let (mut ws, mut wt) = (f64::INFINITY, f64::INFINITY);
+        for &ci in &self.cell_items[self.cell_start[b] as usize..self.cell_start[b + 1] as usize] {
+            let c = &self.cells[ci as usize];
+            if s < c[0] || s > c[2] || t < c[1] || t > c[3] {
+                continue;
+            }
+            found = true;
+            up_s &= s == c[2];
+            lo_s &= s == c[0];
+            up_t &= t == c[3];
+            lo_t &= t == c[1];
+            ws = ws.min(c[2] - c[0]);
+            wt = wt.min(c[3] - c[1]);
+        }
+        if !found {
+            return None;
+        }
+        if self.degree == Degree::Linear {
+            return Some((s, t, up_s, up_t));
+        }
+        const EPS: f64 = 1.0 / (1u64 << 30) as f64;
+        let s = if up_s { s - EPS * ws } else if lo_s { s + EPS * ws } else { s };
+        let t = if up_t { t - EPS * wt } else if lo_t { t + EPS * wt } else { t };
+        Some((s, t, false, false))
+    }
+
+    /// Visits the non-zero rational basis values w_i N_i / Σ w N at (s, t); returns false outside
+    /// the domain (or where Σ w N = 0). `f(index, value)` gets the PB index.
+    pub fn for_each_basis(&self, s: f64, t: f64, scratch: &mut Vec<(u32, f64)>, mut f: impl FnMut(u32, f64)) -> bool {
+        scratch.clear();
+        let Some((s, t, ls, lt)) = self.locate(s, t) else { return false };
+        let k = self.degree.k();
+        let b = self.bucket(s, t);
+        let mut den = 0.0;
+        for &pi in &self.pt_items[self.pt_start[b] as usize..self.pt_start[b + 1] as usize] {
+            let kn = &self.knots[pi as usize];
+            if s < kn[0] || s > kn[k + 1] || t < kn[5] || t > kn[5 + k + 1] {
+                continue;
+            }
+            let bs = basis(&kn[0..5], k, s, ls);
+            if bs == 0.0 {
+                continue;
+            }
+            let bt = basis(&kn[5..10], k, t, lt);
+            if bt == 0.0 {
+                continue;
+            }
+            let wn = self.geom[pi as usize][3] * bs * bt;
+            den += wn;
+            scratch.push((pi, wn));
+        }
+        if den == 0.0 {
+            return false;
+        }
+        for &(i, v) in scratch.iter() {
+            f(i, v / den);
+        }
+        true
+    }
+
+    /// Surface point (x, y, z) at (s, t), NaN outside the domain (spec §6.3 Alg. 6).
+    #[inline]
+    pub fn point(&self, s: f64, t: f64) -> [f64; 3] {
+        let nan = [f64::NAN; 3];
+        let Some((s, t, ls, lt)) = self.locate(s, t) else { return nan };
+        let k = self.degree.k();
+        let b = self.bucket(s, t);
+        let (mut x, mut y, mut z, mut den) = (0.0, 0.0, 0.0, 0.0);
+        for &pi in &self.pt_items[self.pt_start[b] as usize..self.pt_start[b + 1] as usize] {
+            let kn = &self.knots[pi as usize];
+            if s < kn[0] || s > kn[k + 1] || t < kn[5] || t > kn[5 + k + 1] {
+                continue;
+            }
+            let bs = basis(&kn[0..5], k, s, ls);
+            let bt = basis(&kn[5..10], k, t, lt);
+            let g = &self.geom[pi as usize];
+            let wn = g[3] * bs * bt;
+            x += wn * g[0];
+            y += wn * g[1];
+            z += wn * g[2];
+            den += wn;
+        }
+        if den == 0.0 {
+            return nan;
+        }
+        [x / den, y / den, z / den]
+    }
+
+    /// The unnormalised Σ w_i N_i at (s, t) (partition-of-unity checks), NaN outside.
+    pub fn weight_sum(&self, s: f64, t: f64) -> f64 {
+        let Some((s, t, ls, lt)) = self.locate(s, t) else { return f64::NAN };
+        let k = self.degree.k();
+        let b = self.bucket(s, t);
+        let mut den = 0.0;
+        for &pi in &self.pt_items[self.pt_start[b] as usize..self.pt_start[b + 1] as usize] {
+            let kn = &self.knots[pi as usize];
+            den += self.geom[pi as usize][3] * basis(&kn[0..5], k, s, ls) * basis(&kn[5..10], k, t, lt);
+        }
+        den
+    }
+
+    /// Heights at many parameter points, in parallel (rayon) or on one thread.
+    pub fn eval_z(&self, st: &[[f64; 2]], parallel: bool) -> Vec<f64> {
+        if parallel {
+            st.par_iter().with_min_len(4096).map(|p| self.point(p[0], p[1])[2]).collect()
+        } else {
+            st.iter().map(|p| self.point(p[0], p[1])[2]).collect()
+        }
+    }
+
+    /// Heights on a regular grid: point (i, j) at (s0 + i·ds, t0 + j·dt), row-major in j.
+    pub fn eval_grid(&self, g: &GridSpec, parallel: bool) -> Vec<f64> {
+        let f = |idx: usize| {
+            let i = idx % g.ns;
+            let j = idx / g.ns;
+            self.point(g.s0 + i as f64 * g.ds, g.t0 + j as f64 * g.dt)[2]
+        };
+        if parallel {
+            (0..g.ns * g.nt).into_par_iter().with_min_len(4096).map(f).collect()
+        } else {
+            (0..g.ns * g.nt).map(f).collect()
+        }
+    }
+
+    /// Floating-point operations per evaluated point, counted from the average number of
+    /// candidates and non-zero basis functions at the given sample (for the benchmark).
+    pub fn flops_estimate(&self, st: &[[f64; 2]]) -> f64 {
+        let k = self.degree.k() as f64;
+        // One basis function: (K+1) indicator tests + Σ_{r=1..K} (K+1−r) · 8 flops.
+        let basis_flops = (1..=self.degree.k()).map(|r| (self.degree.k() + 1 - r) as f64 * 8.0).sum::<f64>() + k + 1.0;
+        let mut cand = 0usize;
+        let mut hit = 0usize;
+        for p in st.iter().take(10000) {
+            let b = self.bucket(p[0], p[1]);
+            let items = &self.pt_items[self.pt_start[b] as usize..self.pt_start[b + 1] as usize];
+            cand += items.len();
+            hit += items
+                .iter()
+                .filter(|&&i| {
+                    let kn = &self.knots[i as usize];
+                    kn[0] <= p[0] && p[0] <= kn[self.degree.k() + 1] && kn[5] <= p[1] && p[1] <= kn[5 + self.degree.k() + 1]
+                })
+                .count();
+        }
+        let n = st.len().min(10000).max(1) as f64;
+        // 4 compares per candidate; per hit 2 basis evaluations + 2 mul + 4 fma (8 flops) ; final 3 divisions.
+        (cand as f64 * 4.0 + hit as f64 * (2.0 * basis_flops + 10.0)) / n + 3.0
+    }
+}
+
+/// A regular evaluation grid in parameter space.
+#[derive(Debug, Clone, Copy)]
+pub struct GridSpec {
+    pub s0: f64,
+    pub t0: f64,
+    pub ds: f64,
+    pub dt: f64,
+    pub ns: usize,
+    pub nt: usize,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::{ControlPoint, Degree, TMesh};
+
+    fn lcg(seed: &mut u64) -> f64 {
+        *seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (*seed >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    #[test]
+    fn basis_known_values() {
+        // uniform cubic B-spline on [0,1,2,3,4]: 1/6, 2/3, 1/6 at 1, 2, 3
+        let kn = [0., 1., 2., 3., 4.];
+        assert!((basis(&kn, 3, 1.0, false) - 1.0 / 6.0).abs() < 1e-15);
+        assert!((basis(&kn, 3, 2.0, false) - 2.0 / 3.0).abs() < 1e-15);
+        assert!((basis(&kn, 3, 3.0, false) - 1.0 / 6.0).abs() < 1e-15);
+        assert_eq!(basis(&kn, 3, 4.0, false), 0.0);
+        // hat function
+        assert!((basis(&[0., 1., 2.], 1, 0.5, false) - 0.5).abs() < 1e-15);
+        // A1: the upper border value is the inside limit
+        assert_eq!(basis(&[1., 2., 2.], 1, 2.0, false), 0.0);
+        assert_eq!(basis(&[1., 2., 2.], 1, 2.0, true), 1.0);
+    }
+
+    /// A refined mesh that stays analysis-suitable: linear with one 4-split; cubic with a whole
+    /// band of cells split (T-junction extensions are parallel). A single 4-split in a cubic mesh
+    /// is NOT analysis-suitable (the edge extensions meet at the centre) and Σ N ≠ 1 there —
+    /// which is why evaluation always normalises (rational form).
+    pub(crate) fn standard_refined(degree: Degree) -> TMesh {
+        let mut m = TMesh::grid(degree, 0.0, 0.0, 4.0, 8, 8);
+        let mut g = |s: f64, t: f64| (s, t, 0.0);
+        if degree == Degree::Linear {
+            let c = m.leaves_in(crate::mesh::Rect::new(15.0, 15.0, 15.5, 15.5))[0];
+            m.split(c, &mut g);
+        } else {
+            for c in m.leaves_in(crate::mesh::Rect::new(0.5, 13.0, 31.5, 15.0)) {
+                m.split(c, &mut g);
+            }
+        }
+        m
+    }
+
+    #[test]
+    fn partition_of_unity_in_the_interior_of_a_refined_standard_mesh() {
+        for degree in [Degree::Linear, Degree::Cubic] {
+            let m = standard_refined(degree);
+            let pb = PbSpline::build(&m);
+            let mut seed = 7u64;
+            // interior: two cells away from the border
+            for _ in 0..5000 {
+                let s = 8.0 + 16.0 * lcg(&mut seed);
+                let t = 8.0 + 16.0 * lcg(&mut seed);
+                let sum = pb.weight_sum(s, t);
+                assert!((sum - 1.0).abs() < 1e-12, "{degree:?} Σ N = {sum} at ({s},{t})");
+            }
+        }
+        // the counter-example: a single split in a cubic mesh
+        let mut m = TMesh::grid(Degree::Cubic, 0.0, 0.0, 4.0, 6, 6);
+        let mut g = |s: f64, t: f64| (s, t, 0.0);
+        let c = m.leaves_in(crate::mesh::Rect::new(11.0, 11.0, 11.5, 11.5))[0];
+        m.split(c, &mut g);
+        let pb = PbSpline::build(&m);
+        assert!((pb.weight_sum(11.945698134713837, 15.645276307242288) - 1.0).abs() > 1e-3);
+    }
+
+    #[test]
+    fn nan_outside_and_border_handled() {
+        let mut m = TMesh::grid(Degree::Cubic, 0.0, 0.0, 1.0, 3, 3);
+        for p in &mut m.points {
+            p.z = 2.0 + p.s;
+        }
+        let pb = PbSpline::build(&m);
+        assert!(pb.point(-0.1, 1.0)[2].is_nan());
+        assert!(pb.point(1.0, 3.0001)[2].is_nan());
+        // corners and upper borders are finite (A1)
+        for (s, t) in [(3.0, 3.0), (0.0, 0.0), (3.0, 1.5), (1.5, 3.0)] {
+            assert!(pb.point(s, t)[2].is_finite(), "({s},{t})");
+        }
+        // the upper border equals the limit from inside
+        let a = pb.point(3.0, 1.5)[2];
+        let b = pb.point(3.0 - 1e-9, 1.5)[2];
+        assert!((a - b).abs() < 1e-7);
+    }
+
+    /// Planes are reproduced exactly by the linear T-spline on a refined mesh (control points on
+    /// the plane), and by the cubic one where Σ N = 1 with control points at the Greville
+    /// abscissae of their local knots.
+    #[test]
+    fn planes_reproduced_on_refined_meshes() {
+        let plane = |x: f64, y: f64| 3.0 + 0.25 * x - 0.5 * y;
+        for degree in [Degree::Linear, Degree::Cubic] {
+            let mut m = standard_refined(degree);
+            let pb0 = PbSpline::build(&m);
+            let k = degree.k();
+            for (i, &pid) in pb0.point_ids.iter().enumerate() {
+                let kn = pb0.knots[i];
+                let gs = kn[1..=k].iter().sum::<f64>() / k as f64;
+                let gt = kn[6..=5 + k].iter().sum::<f64>() / k as f64;
+                let p: &mut ControlPoint = &mut m.points[pid as usize];
+                p.x = gs;
+                p.y = gt;
+                p.z = plane(gs, gt);
+            }
+            let pb = PbSpline::build(&m);
+            let mut seed = 3u64;
+            let (a, b) = if degree == Degree::Linear { (0.0, 32.0) } else { (8.0, 24.0) };
+            for _ in 0..3000 {
+                let s = a + (b - a) * lcg(&mut seed);
+                let t = a + (b - a) * lcg(&mut seed);
+                let p = pb.point(s, t);
+                assert!((p[2] - plane(p[0], p[1])).abs() < 1e-12, "{degree:?} at ({s},{t})");
+                assert!((p[0] - s).abs() < 1e-12 && (p[1] - t).abs() < 1e-12);
+            }
+        }
+    }
+}

@@ -1,0 +1,395 @@
+//! The T-mesh file format (`.tmesh`, XML, schema `xsd/tmesh.xsd`, namespace
+//! `urn:geofit:tmesh:1`). Spec §5.2 "Export" and item 26: leaf cells, control points
+//! (s, t, x, y, z, w), degree, plus what later steps need: the georeference (affine map from
+//! parameters to world coordinates, CRS), the data mask and, for indirect fits, the warp field.
+//!
+//! ```xml
+//! <tmesh xmlns="urn:geofit:tmesh:1" version="1" degree="3">
+//!   <georef x0="500015" y0="2150015" dx="30" dy="30"><crs>EPSG:32605</crs></georef>
+//!   <points count="9">s t x y z w   (one control point per line)</points>
+//!   <cells count="4">i0 i1 i2 i3     (corner indices: (s_min,t_max) (s_max,t_max) (s_min,t_min) (s_max,t_min))</cells>
+//!   <mask width="857" height="793" encoding="rle">runs</mask>          (optional)
+//!   <warp x0=".." y0=".." dx=".." dy=".." nx=".." ny="..">u v ...</warp> (optional)
+//! </tmesh>
+//! ```
+//!
+//! - World coordinates of parameter (s, t): x = x0 + s·dx, y = y0 + t·dy (A21: s, t in raster
+//!   cells, t counted from the bottom row; x0, y0 is the centre of the bottom-left raster cell).
+//! - Numbers are written in Rust's shortest round-trip form, so write → read is exact.
+//! - Mask: cell (i, j) is parameter (s = i, t = j), stored row by row from t = 0, as run lengths
+//!   of alternating 0 (no data) and 1 (data), starting with a (possibly empty) run of 0.
+//! - Warp: the forward displacement sampled on a grid in original world coordinates: node (i, j)
+//!   at (x0 + i·dx, y0 + j·dy) maps to (x + u, y + v) in the fitted space; pairs "u v" row by row.
+
+use std::io::Write;
+
+use quick_xml::events::Event;
+use quick_xml::Reader;
+
+use crate::mesh::{ControlPoint, Degree, PointId, TMesh};
+use crate::TsplineError;
+
+pub const NAMESPACE: &str = "urn:geofit:tmesh:1";
+
+/// Affine parameter → world map and CRS.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Georef {
+    pub x0: f64,
+    pub y0: f64,
+    pub dx: f64,
+    pub dy: f64,
+    /// CRS as given by the source raster (WKT, EPSG code or empty).
+    pub crs: String,
+}
+
+impl Georef {
+    pub fn identity() -> Georef {
+        Georef { x0: 0.0, y0: 0.0, dx: 1.0, dy: 1.0, crs: String::new() }
+    }
+    pub fn world(&self, s: f64, t: f64) -> (f64, f64) {
+        (self.x0 + s * self.dx, self.y0 + t * self.dy)
+    }
+    pub fn param(&self, x: f64, y: f64) -> (f64, f64) {
+        ((x - self.x0) / self.dx, (y - self.y0) / self.dy)
+    }
+}
+
+/// Bit mask of the data footprint at raster resolution (spec §2.2 masking).
+#[derive(Debug, Clone, PartialEq)]
+pub struct DataMask {
+    pub width: usize,
+    pub height: usize,
+    /// Row-major from t = 0 (bottom row).
+    pub bits: Vec<bool>,
+}
+
+impl DataMask {
+    pub fn get(&self, i: usize, j: usize) -> bool {
+        self.bits[j * self.width + i]
+    }
+    fn runs(&self) -> Vec<usize> {
+        let mut runs = Vec::new();
+        let mut cur = false;
+        let mut n = 0usize;
+        for &b in &self.bits {
+            if b == cur {
+                n += 1;
+            } else {
+                runs.push(n);
+                cur = b;
+                n = 1;
+            }
+        }
+        runs.push(n);
+        runs
+    }
+}
+
+/// Forward displacement field of an indirect reduction (see module doc).
+#[derive(Debug, Clone, PartialEq)]
+pub struct WarpField {
+    pub x0: f64,
+    pub y0: f64,
+    pub dx: f64,
+    pub dy: f64,
+    pub nx: usize,
+    pub ny: usize,
+    /// (u, v) per node, row-major from j = 0.
+    pub uv: Vec<[f64; 2]>,
+}
+
+/// Everything a `.tmesh` file holds.
+#[derive(Debug, Clone)]
+pub struct TMeshFile {
+    pub mesh: TMesh,
+    pub georef: Georef,
+    pub mask: Option<DataMask>,
+    pub warp: Option<WarpField>,
+}
+
+fn esc(s: &str) -> String {
+    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;").replace('"', "&quot;")
+}
+
+/// Writes a T-mesh file (leaf cells only, compact point numbering).
+pub fn write(f: &TMeshFile, w: &mut dyn Write) -> std::io::Result<()> {
+    let m = f.mesh.compacted();
+    let g = &f.georef;
+    writeln!(w, r#"<?xml version="1.0" encoding="UTF-8"?>"#)?;
+    writeln!(w, r#"<tmesh xmlns="{NAMESPACE}" version="1" degree="{}">"#, m.degree.k())?;
+    writeln!(w, r#"  <georef x0="{:?}" y0="{:?}" dx="{:?}" dy="{:?}"><crs>{}</crs></georef>"#, g.x0, g.y0, g.dx, g.dy, esc(&g.crs))?;
+    writeln!(w, r#"  <points count="{}">"#, m.points.len())?;
+    for p in &m.points {
+        writeln!(w, "{:?} {:?} {:?} {:?} {:?} {:?}", p.s, p.t, p.x, p.y, p.z, p.w)?;
+    }
+    writeln!(w, "  </points>")?;
+    writeln!(w, r#"  <cells count="{}">"#, m.leaf_count())?;
+    for c in m.cells.iter().filter(|c| c.is_leaf()) {
+        writeln!(w, "{} {} {} {}", c.corners[0], c.corners[1], c.corners[2], c.corners[3])?;
+    }
+    writeln!(w, "  </cells>")?;
+    if let Some(mask) = &f.mask {
+        write!(w, r#"  <mask width="{}" height="{}" encoding="rle">"#, mask.width, mask.height)?;
+        for (i, r) in mask.runs().iter().enumerate() {
+            if i > 0 {
+                write!(w, " ")?;
+            }
+            write!(w, "{r}")?;
+        }
+        writeln!(w, "</mask>")?;
+    }
+    if let Some(wf) = &f.warp {
+        writeln!(w, r#"  <warp x0="{:?}" y0="{:?}" dx="{:?}" dy="{:?}" nx="{}" ny="{}">"#, wf.x0, wf.y0, wf.dx, wf.dy, wf.nx, wf.ny)?;
+        for uv in &wf.uv {
+            writeln!(w, "{:?} {:?}", uv[0], uv[1])?;
+        }
+        writeln!(w, "  </warp>")?;
+    }
+    writeln!(w, "</tmesh>")?;
+    Ok(())
+}
+
+fn line_col(data: &[u8], pos: usize) -> String {
+    let pos = pos.min(data.len());
+    let line = data[..pos].iter().filter(|&&b| b == b'\n').count() + 1;
+    let col = pos - data[..pos].iter().rposition(|&b| b == b'\n').map(|p| p + 1).unwrap_or(0) + 1;
+    format!("line {line}:{col}")
+}
+
+/// Reads a T-mesh file; every problem is reported with its line:column and element.
+pub fn read(data: &[u8]) -> Result<TMeshFile, TsplineError> {
+    let ferr = |pos: usize, msg: String| TsplineError::Format { pos: line_col(data, pos), msg };
+    let mut r = Reader::from_reader(data);
+    r.config_mut().trim_text(false);
+    let mut stack: Vec<String> = Vec::new();
+    let mut degree = None;
+    let mut georef: Option<Georef> = None;
+    let mut points: Option<(usize, Vec<ControlPoint>)> = None;
+    let mut cells: Option<(usize, Vec<[PointId; 4]>)> = None;
+    let mut mask: Option<DataMask> = None;
+    let mut warp: Option<WarpField> = None;
+    let mut pending_attrs: Vec<(String, String)> = Vec::new();
+    let mut text = String::new();
+    let mut text_pos = 0usize;
+    let mut root_seen = false;
+    loop {
+        let pos = r.buffer_position() as usize;
+        let ev = r.read_event().map_err(|e| ferr(pos, format!("not well-formed XML: {e}")))?;
+        match ev {
+            Event::Start(ref e) | Event::Empty(ref e) => {
+                let name = String::from_utf8_lossy(e.local_name().as_ref()).to_string();
+                let mut attrs = Vec::new();
+                for a in e.attributes() {
+                    let a = a.map_err(|x| ferr(pos, format!("<{name}>: bad attribute: {x}")))?;
+                    let v = a.unescape_value().map_err(|x| ferr(pos, format!("<{name}>: bad attribute value: {x}")))?.to_string();
+                    attrs.push((String::from_utf8_lossy(a.key.local_name().as_ref()).to_string(), v));
+                }
+                let get = |k: &str| attrs.iter().find(|(n, _)| n == k).map(|(_, v)| v.clone());
+                let num = |k: &str| -> Result<f64, TsplineError> {
+                    let v = get(k).ok_or_else(|| ferr(pos, format!("<{name}> lacks attribute {k}")))?;
+                    let x: f64 = v.trim().parse().map_err(|_| ferr(pos, format!("<{name}> {k}=\"{v}\" is not a number")))?;
+                    if !x.is_finite() {
+                        return Err(ferr(pos, format!("<{name}> {k} is not finite")));
+                    }
+                    Ok(x)
+                };
+                let uint = |k: &str| -> Result<usize, TsplineError> {
+                    let v = get(k).ok_or_else(|| ferr(pos, format!("<{name}> lacks attribute {k}")))?;
+                    v.trim().parse().map_err(|_| ferr(pos, format!("<{name}> {k}=\"{v}\" is not a non-negative integer")))
+                };
+                match (stack.len(), name.as_str()) {
+                    (0, "tmesh") => {
+                        root_seen = true;
+                        let ns = attrs.iter().find(|(n, _)| n == "xmlns").map(|(_, v)| v.as_str()).unwrap_or("");
+                        if ns != NAMESPACE {
+                            return Err(ferr(pos, format!("<tmesh> namespace is \"{ns}\", expected \"{NAMESPACE}\"")));
+                        }
+                        let k = uint("degree")?;
+                        degree = Some(Degree::from_u32(k as u32).ok_or_else(|| ferr(pos, format!("degree {k} is not supported (1 or 3)")))?);
+                    }
+                    (0, other) => return Err(ferr(pos, format!("root element is <{other}>, expected <tmesh>"))),
+                    (1, "georef") => {
+                        georef = Some(Georef { x0: num("x0")?, y0: num("y0")?, dx: num("dx")?, dy: num("dy")?, crs: String::new() });
+                        let g = georef.as_ref().unwrap();
+                        if g.dx == 0.0 || g.dy == 0.0 {
+                            return Err(ferr(pos, "<georef> dx and dy must be non-zero".into()));
+                        }
+                    }
+                    (2, "crs") => {}
+                    (1, "points") => points = Some((uint("count")?, Vec::new())),
+                    (1, "cells") => cells = Some((uint("count")?, Vec::new())),
+                    (1, "mask") => {
+                        if get("encoding").as_deref() != Some("rle") {
+                            return Err(ferr(pos, "<mask> encoding must be \"rle\"".into()));
+                        }
+                        mask = Some(DataMask { width: uint("width")?, height: uint("height")?, bits: Vec::new() });
+                    }
+                    (1, "warp") => {
+                        warp = Some(WarpField {
+                            x0: num("x0")?,
+                            y0: num("y0")?,
+                            dx: num("dx")?,
+                            dy: num("dy")?,
+                            nx: uint("nx")?,
+                            ny: uint("ny")?,
+                            uv: Vec::new(),
+                        })
+                    }
+                    (d, other) => return Err(ferr(pos, format!("unexpected element <{other}> at depth {d}"))),
+                }
+                pending_attrs = attrs;
+                if matches!(ev, Event::Start(_)) {
+                    stack.push(name);
+                    text.clear();
+                    text_pos = r.buffer_position() as usize;
+                }
+            }
+            Event::Text(t) => {
+                let s = t.decode().map_err(|e| ferr(pos, format!("bad text: {e}")))?;
+                let s = quick_xml::escape::unescape(&s).map_err(|e| ferr(pos, format!("bad text: {e}")))?;
+                text.push_str(&s);
+            }
+            Event::GeneralRef(e) => {
+                let n = String::from_utf8_lossy(&e).to_string();
+                text.push_str(match n.as_str() {
+                    "amp" => "&",
+                    "lt" => "<",
+                    "gt" => ">",
+                    "quot" => "\"",
+                    "apos" => "'",
+                    _ => return Err(ferr(pos, format!("unknown entity &{n};"))),
+                });
+            }
+            Event::End(_) => {
+                let name = stack.pop().unwrap_or_default();
+                let tp = text_pos;
+                match name.as_str() {
+                    "crs" => {
+                        if let Some(g) = georef.as_mut() {
+                            g.crs = text.trim().to_string();
+                        }
+                    }
+                    "points" => {
+                        let (count, v) = points.as_mut().unwrap();
+                        let nums = parse_f64s(&text).map_err(|m| ferr(tp, format!("<points>: {m}")))?;
+                        if nums.len() != *count * 6 {
+                            return Err(ferr(tp, format!("<points count=\"{count}\"> holds {} numbers, expected {}", nums.len(), *count * 6)));
+                        }
+                        *v = nums.chunks_exact(6).map(|c| ControlPoint { s: c[0], t: c[1], x: c[2], y: c[3], z: c[4], w: c[5] }).collect();
+                    }
+                    "cells" => {
+                        let (count, v) = cells.as_mut().unwrap();
+                        let mut ids = Vec::with_capacity(*count * 4);
+                        for tok in text.split_ascii_whitespace() {
+                            ids.push(tok.parse::<u32>().map_err(|_| ferr(tp, format!("<cells>: \"{tok}\" is not a point index")))?);
+                        }
+                        if ids.len() != *count * 4 {
+                            return Err(ferr(tp, format!("<cells count=\"{count}\"> holds {} indices, expected {}", ids.len(), *count * 4)));
+                        }
+                        *v = ids.chunks_exact(4).map(|c| [c[0], c[1], c[2], c[3]]).collect();
+                    }
+                    "mask" => {
+                        let m = mask.as_mut().unwrap();
+                        let mut bit = false;
+                        let total = m.width * m.height;
+                        for tok in text.split_ascii_whitespace() {
+                            let n: usize = tok.parse().map_err(|_| ferr(tp, format!("<mask>: \"{tok}\" is not a run length")))?;
+                            if m.bits.len() + n > total {
+                                return Err(ferr(tp, format!("<mask>: runs exceed {}×{} cells", m.width, m.height)));
+                            }
+                            m.bits.extend(std::iter::repeat_n(bit, n));
+                            bit = !bit;
+                        }
+                        if m.bits.len() != total {
+                            return Err(ferr(tp, format!("<mask>: runs cover {} of {} cells", m.bits.len(), total)));
+                        }
+                    }
+                    "warp" => {
+                        let wf = warp.as_mut().unwrap();
+                        let nums = parse_f64s(&text).map_err(|m| ferr(tp, format!("<warp>: {m}")))?;
+                        if nums.len() != wf.nx * wf.ny * 2 {
+                            return Err(ferr(tp, format!("<warp> holds {} numbers, expected {}", nums.len(), wf.nx * wf.ny * 2)));
+                        }
+                        wf.uv = nums.chunks_exact(2).map(|c| [c[0], c[1]]).collect();
+                    }
+                    _ => {}
+                }
+                text.clear();
+            }
+            Event::Eof => break,
+            _ => {}
+        }
+    }
+    let _ = pending_attrs;
+    if !root_seen {
+        return Err(ferr(0, "no <tmesh> element".into()));
+    }
+    let end = data.len();
+    let degree = degree.ok_or_else(|| ferr(end, "<tmesh> lacks degree".into()))?;
+    let georef = georef.ok_or_else(|| ferr(end, "missing <georef>".into()))?;
+    let (_, points) = points.ok_or_else(|| ferr(end, "missing <points>".into()))?;
+    let (_, cells) = cells.ok_or_else(|| ferr(end, "missing <cells>".into()))?;
+    let mesh = TMesh::from_cells(degree, points, cells)?;
+    Ok(TMeshFile { mesh, georef, mask, warp })
+}
+
+fn parse_f64s(text: &str) -> Result<Vec<f64>, String> {
+    let mut v = Vec::new();
+    for tok in text.split_ascii_whitespace() {
+        let x: f64 = tok.parse().map_err(|_| format!("\"{tok}\" is not a number"))?;
+        if !x.is_finite() {
+            return Err(format!("\"{tok}\" is not finite"));
+        }
+        v.push(x);
+    }
+    Ok(v)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn write_read_exact() {
+        let mut m = TMesh::grid(Degree::Cubic, -3.0, 2.0, 4.0, 3, 2);
+        let mut g = |s: f64, t: f64| (s * 0.1 + 1e-300, t / 3.0, (s * t).sin());
+        m.split(1, &mut g);
+        for (i, p) in m.points.iter_mut().enumerate() {
+            p.z = (i as f64).sqrt() * 1e-7 - 12345.678;
+            p.w = 1.0 + i as f64 / 7.0;
+        }
+        let file = TMeshFile {
+            mesh: m.clone(),
+            georef: Georef { x0: 500015.0, y0: 2150015.5, dx: 30.0, dy: 30.0, crs: "PROJCS[\"WGS 84 / UTM <5N>\"] & co".into() },
+            mask: Some(DataMask { width: 5, height: 3, bits: (0..15).map(|i| i % 4 != 0).collect() }),
+            warp: Some(WarpField { x0: 1.0, y0: 2.0, dx: 0.5, dy: 0.25, nx: 2, ny: 2, uv: vec![[0.1, -0.2], [1.0 / 3.0, 0.0], [0.0, 0.0], [5e-17, 2.0]] }),
+        };
+        let mut buf = Vec::new();
+        write(&file, &mut buf).unwrap();
+        let back = read(&buf).unwrap();
+        assert_eq!(back.georef, file.georef);
+        assert_eq!(back.mask, file.mask);
+        assert_eq!(back.warp, file.warp);
+        let c = m.compacted();
+        assert_eq!(back.mesh.points, c.points);
+        let cells_a: Vec<_> = c.cells.iter().map(|c| c.corners).collect();
+        let cells_b: Vec<_> = back.mesh.cells.iter().map(|c| c.corners).collect();
+        assert_eq!(cells_a, cells_b);
+        // writing again gives the same bytes
+        let mut buf2 = Vec::new();
+        write(&back, &mut buf2).unwrap();
+        assert_eq!(buf, buf2);
+    }
+
+    #[test]
+    fn errors_name_the_position() {
+        let bad = b"<tmesh xmlns=\"urn:geofit:tmesh:1\" version=\"1\" degree=\"3\">\n<georef x0=\"0\" y0=\"0\" dx=\"1\" dy=\"1\"/>\n<points count=\"2\">0 0 0 0 0 1\n1 x 0 0 0 1</points></tmesh>";
+        let e = read(bad).unwrap_err().to_string();
+        assert!(e.contains("line 3") && e.contains("\"x\""), "{e}");
+        let bad = b"<tmesh xmlns=\"urn:geofit:tmesh:1\" degree=\"2\"/>";
+        assert!(read(bad).unwrap_err().to_string().contains("degree 2"));
+        // a mesh breaking the T-mesh rules (cell corners not a rectangle)
+        let bad = b"<tmesh xmlns=\"urn:geofit:tmesh:1\" degree=\"1\"><georef x0=\"0\" y0=\"0\" dx=\"1\" dy=\"1\"/><points count=\"4\">0 1 0 1 0 1 1 1 1 1 0 1 0 0 0 0 0 1 2 0 2 0 0 1</points><cells count=\"1\">0 1 2 3</cells></tmesh>";
+        assert!(read(bad).unwrap_err().to_string().contains("rectangle"));
+    }
+}

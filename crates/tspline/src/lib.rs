@@ -1,0 +1,39 @@
+//! T-spline surfaces for terrain reduction (digest `spec/tspline-bathymetry.md` of Asche 2016).
+//!
+//! - [`mesh`]: the T-mesh in a rectangle R-tree (refinement, repair, merge, coarsen).
+//! - [`knots`]: local knot vectors by ray casting.
+//! - [`eval`]: the rational T-spline through its PB-spline form, CPU (rayon) evaluation.
+//! - [`ocl_eval`]: the same evaluation and the knot derivation as OpenCL kernels.
+//! - [`rtree_pages`]: the thesis' Nearest-X int8 page encoding (Tables 5.2, 6.3).
+//! - [`format`]: the T-mesh file format (`xsd/tmesh.xsd`).
+//! - [`fit`]: adaptive approximation (Alg. 3) with sparse least squares or dragging.
+//!
+//! Parameterization (A21): parameter units are raster cells. s = column index, t = row index
+//! counted from the bottom row, so raster cell centres sit at integer (s, t) and the sample
+//! spacing is 1. The affine map to world coordinates is stored with the mesh ([`format::Georef`]).
+
+pub mod eval;
+// pub mod fit;
+pub mod format;
+pub mod knots;
+pub mod mesh;
+pub mod ocl_eval;
+pub mod rtree_pages;
+
+pub use eval::{GridSpec, PbSpline};
+pub use mesh::{CellId, ControlPoint, Degree, PointId, Rect, TMesh};
+
+/// Errors of the T-spline library.
+#[derive(Debug, thiserror::Error)]
+pub enum TsplineError {
+    #[error("invalid T-mesh: {0}")]
+    InvalidMesh(String),
+    #[error("T-mesh file, {pos}: {msg}")]
+    Format { pos: String, msg: String },
+    #[error("OpenCL: {0}")]
+    OpenCl(String),
+    #[error("fit: {0}")]
+    Fit(String),
+    #[error("{0}")]
+    Io(#[from] std::io::Error),
+}

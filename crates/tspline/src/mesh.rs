@@ -1,0 +1,597 @@
+//! The T-mesh stored in a rectangle R-tree (spec §5.2): cells are axis-aligned parameter
+//! rectangles with exactly four corner control points; refined parent cells stay in the tree
+//! (history, enables coarsening) and are filtered out of leaf queries.
+//!
+//! Decisions (spec §9.2):
+//! - **A13** rule-2 / 1:2 repair: we split whole cells into four (never in two), so with square
+//!   initial cells every cell stays a square of dyadic size. A leaf cell is split when a leaf
+//!   neighbour is more than twice as fine along the shared side (1:2 balance), or when both
+//!   opposite sides carry a hanging vertex (rule 2: the two vertices could be joined). The two
+//!   checks alternate until neither fires ([`TMesh::repair`]). Rule 3 is satisfied by
+//!   construction: new edge points are mid-points of straight edges.
+//! - **A14** rays stop at the domain boundary: a ray that would have to cross a gap of a
+//!   non-convex or disconnected (merged) domain ends there and is padded like a border ray.
+//! - **A22** degrees 1 and 3 only, no zero knot intervals (all cells have positive extent).
+
+use std::collections::HashMap;
+
+use rstar::{RTree, RTreeObject, AABB};
+
+use crate::TsplineError;
+
+/// Index of a control point in [`TMesh::points`].
+pub type PointId = u32;
+/// Index of a cell in [`TMesh::cells`] (parents included).
+pub type CellId = u32;
+
+/// Polynomial degree K of the T-spline (spec §3.3: only odd degrees 1 and 3).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+pub enum Degree {
+    Linear = 1,
+    Cubic = 3,
+}
+
+impl Degree {
+    pub fn from_u32(k: u32) -> Option<Degree> {
+        match k {
+            1 => Some(Degree::Linear),
+            3 => Some(Degree::Cubic),
+            _ => None,
+        }
+    }
+    pub fn k(self) -> usize {
+        self as usize
+    }
+    /// Knots collected per ray direction: (K+1)/2.
+    pub fn half(self) -> usize {
+        (self as usize).div_ceil(2)
+    }
+}
+
+/// A control point: parameter pair, geometry and weight (spec §3.4).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ControlPoint {
+    pub s: f64,
+    pub t: f64,
+    pub x: f64,
+    pub y: f64,
+    pub z: f64,
+    pub w: f64,
+}
+
+/// An axis-aligned parameter rectangle.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Rect {
+    pub s_min: f64,
+    pub t_min: f64,
+    pub s_max: f64,
+    pub t_max: f64,
+}
+
+impl Rect {
+    pub fn new(s_min: f64, t_min: f64, s_max: f64, t_max: f64) -> Rect {
+        Rect { s_min, t_min, s_max, t_max }
+    }
+    pub fn width(&self) -> f64 {
+        self.s_max - self.s_min
+    }
+    pub fn height(&self) -> f64 {
+        self.t_max - self.t_min
+    }
+    pub fn contains_closed(&self, s: f64, t: f64) -> bool {
+        self.s_min <= s && s <= self.s_max && self.t_min <= t && t <= self.t_max
+    }
+    fn aabb(&self) -> AABB<[f64; 2]> {
+        AABB::from_corners([self.s_min, self.t_min], [self.s_max, self.t_max])
+    }
+    pub fn union(&self, o: &Rect) -> Rect {
+        Rect::new(self.s_min.min(o.s_min), self.t_min.min(o.t_min), self.s_max.max(o.s_max), self.t_max.max(o.t_max))
+    }
+}
+
+/// A T-mesh cell. Corner order as in the thesis' Table 5.3:
+/// (s_min,t_max), (s_max,t_max), (s_min,t_min), (s_max,t_min).
+#[derive(Debug, Clone)]
+pub struct Cell {
+    pub corners: [PointId; 4],
+    pub rect: Rect,
+    pub parent: Option<CellId>,
+    pub children: Option<[CellId; 4]>,
+    /// False once removed by coarsening.
+    pub alive: bool,
+}
+
+impl Cell {
+    pub fn is_leaf(&self) -> bool {
+        self.alive && self.children.is_none()
+    }
+}
+
+/// One R-tree entry: a cell's exact box and id.
+#[derive(Debug, Clone, PartialEq)]
+struct CellEntry {
+    id: CellId,
+    env: AABB<[f64; 2]>,
+}
+
+impl RTreeObject for CellEntry {
+    type Envelope = AABB<[f64; 2]>;
+    fn envelope(&self) -> Self::Envelope {
+        self.env
+    }
+}
+
+/// Direction of a neighbour relative to a cell (spec §5.2 neighbour classification).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Side {
+    West,
+    East,
+    South,
+    North,
+}
+
+/// A T-mesh: control points, cells (leaves and retained parents) and the rectangle R-tree.
+#[derive(Debug, Clone)]
+pub struct TMesh {
+    pub degree: Degree,
+    pub points: Vec<ControlPoint>,
+    pub cells: Vec<Cell>,
+    tree: RTree<CellEntry>,
+    point_at: HashMap<(u64, u64), PointId>,
+}
+
+fn key(s: f64, t: f64) -> (u64, u64) {
+    // +0.0 and -0.0 must be the same vertex.
+    ((s + 0.0).to_bits(), (t + 0.0).to_bits())
+}
+
+impl TMesh {
+    /// Builds a mesh from control points and leaf cells given by their four corner points;
+    /// the R-tree is bulk loaded. Checks the T-mesh rules that the format can break: corners must
+    /// form a rectangle of positive size, leaves must not overlap, no duplicate points.
+    pub fn from_cells(degree: Degree, points: Vec<ControlPoint>, corners: Vec<[PointId; 4]>) -> Result<TMesh, TsplineError> {
+        let mut point_at = HashMap::with_capacity(points.len());
+        for (i, p) in points.iter().enumerate() {
+            if !(p.s.is_finite() && p.t.is_finite() && p.x.is_finite() && p.y.is_finite() && p.z.is_finite() && p.w.is_finite()) {
+                return Err(TsplineError::InvalidMesh(format!("control point {i} has a non-finite value")));
+            }
+            if p.w <= 0.0 {
+                return Err(TsplineError::InvalidMesh(format!("control point {i} has weight {} (must be > 0)", p.w)));
+            }
+            if point_at.insert(key(p.s, p.t), i as PointId).is_some() {
+                return Err(TsplineError::InvalidMesh(format!("control point {i} duplicates the parameter pair ({}, {})", p.s, p.t)));
+            }
+        }
+        let mut cells = Vec::with_capacity(corners.len());
+        for (ci, c) in corners.iter().enumerate() {
+            for &p in c {
+                if p as usize >= points.len() {
+                    return Err(TsplineError::InvalidMesh(format!("cell {ci} refers to control point {p}, but there are {}", points.len())));
+                }
+            }
+            let [a, b, cc, d] = c.map(|i| points[i as usize]);
+            let ok = a.s == cc.s && b.s == d.s && a.t == b.t && cc.t == d.t && a.s < b.s && cc.t < a.t;
+            if !ok {
+                return Err(TsplineError::InvalidMesh(format!(
+                    "cell {ci}: corners {:?} do not form a rectangle in the order (s_min,t_max),(s_max,t_max),(s_min,t_min),(s_max,t_min)",
+                    c
+                )));
+            }
+            cells.push(Cell { corners: *c, rect: Rect::new(a.s, cc.t, b.s, a.t), parent: None, children: None, alive: true });
+        }
+        if cells.is_empty() {
+            return Err(TsplineError::InvalidMesh("the mesh has no cells".into()));
+        }
+        let entries = cells.iter().enumerate().map(|(i, c)| CellEntry { id: i as CellId, env: c.rect.aabb() }).collect();
+        let mesh = TMesh { degree, points, cells, tree: RTree::bulk_load(entries), point_at };
+        // Overlap check: two leaves may share edges but not area.
+        for (i, c) in mesh.cells.iter().enumerate() {
+            for o in mesh.tree.locate_in_envelope_intersecting(c.rect.aabb()) {
+                if o.id as usize == i {
+                    continue;
+                }
+                let r = mesh.cells[o.id as usize].rect;
+                let ow = c.rect.s_max.min(r.s_max) - c.rect.s_min.max(r.s_min);
+                let oh = c.rect.t_max.min(r.t_max) - c.rect.t_min.max(r.t_min);
+                if ow > 0.0 && oh > 0.0 {
+                    return Err(TsplineError::InvalidMesh(format!("cells {i} and {} overlap", o.id)));
+                }
+            }
+        }
+        // Every control point must be a corner of some cell (no I-points, spec §5.2).
+        let mut used = vec![false; mesh.points.len()];
+        for c in &mesh.cells {
+            for &p in &c.corners {
+                used[p as usize] = true;
+            }
+        }
+        if let Some(i) = used.iter().position(|u| !u) {
+            return Err(TsplineError::InvalidMesh(format!("control point {i} is not a corner of any cell")));
+        }
+        // A vertex lying inside a cell's side must be a corner of a neighbouring cell (no
+        // I-points); a vertex strictly inside a cell is an error.
+        for (i, p) in mesh.points.iter().enumerate() {
+            for e in mesh.tree.locate_in_envelope_intersecting(AABB::from_point([p.s, p.t])) {
+                let r = mesh.cells[e.id as usize].rect;
+                if r.s_min < p.s && p.s < r.s_max && r.t_min < p.t && p.t < r.t_max {
+                    return Err(TsplineError::InvalidMesh(format!("control point {i} lies inside cell {}", e.id)));
+                }
+            }
+        }
+        Ok(mesh)
+    }
+
+    /// A regular grid of `ns × nt` square cells of side `size` starting at (s0, t0); geometry
+    /// (x, y) = (s, t), z = 0, w = 1. Used as the initial mesh of the fit (spec §4.1.1).
+    pub fn grid(degree: Degree, s0: f64, t0: f64, size: f64, ns: usize, nt: usize) -> TMesh {
+        let mut points = Vec::with_capacity((ns + 1) * (nt + 1));
+        for j in 0..=nt {
+            for i in 0..=ns {
+                let s = s0 + i as f64 * size;
+                let t = t0 + j as f64 * size;
+                points.push(ControlPoint { s, t, x: s, y: t, z: 0.0, w: 1.0 });
+            }
+        }
+        let id = |i: usize, j: usize| (j * (ns + 1) + i) as PointId;
+        let mut corners = Vec::with_capacity(ns * nt);
+        for j in 0..nt {
+            for i in 0..ns {
+                corners.push([id(i, j + 1), id(i + 1, j + 1), id(i, j), id(i + 1, j)]);
+            }
+        }
+        TMesh::from_cells(degree, points, corners).expect("a regular grid is a valid T-mesh")
+    }
+
+    pub fn point_id_at(&self, s: f64, t: f64) -> Option<PointId> {
+        self.point_at.get(&key(s, t)).copied()
+    }
+
+    /// Ids of leaf cells.
+    pub fn leaves(&self) -> impl Iterator<Item = CellId> + '_ {
+        self.cells.iter().enumerate().filter(|(_, c)| c.is_leaf()).map(|(i, _)| i as CellId)
+    }
+
+    pub fn leaf_count(&self) -> usize {
+        self.cells.iter().filter(|c| c.is_leaf()).count()
+    }
+
+    /// Points that are corners of at least one leaf (after coarsening some points are orphaned).
+    pub fn active_points(&self) -> Vec<bool> {
+        let mut used = vec![false; self.points.len()];
+        for c in self.cells.iter().filter(|c| c.is_leaf()) {
+            for &p in &c.corners {
+                used[p as usize] = true;
+            }
+        }
+        used
+    }
+
+    /// Bounding rectangle of all leaves.
+    pub fn bounds(&self) -> Rect {
+        let mut it = self.cells.iter().filter(|c| c.is_leaf()).map(|c| c.rect);
+        let first = it.next().expect("a mesh has at least one cell");
+        it.fold(first, |a, r| a.union(&r))
+    }
+
+    /// Point query: all cells (leaves and retained parents) whose closed box holds (s, t).
+    pub fn cells_at(&self, s: f64, t: f64) -> Vec<CellId> {
+        let mut v: Vec<CellId> = self.tree.locate_in_envelope_intersecting(AABB::from_point([s, t])).map(|e| e.id).collect();
+        v.sort_unstable();
+        v
+    }
+
+    /// Point-in-domain test (the domain is the union of leaf rectangles, closed).
+    pub fn contains(&self, s: f64, t: f64) -> bool {
+        self.tree.locate_in_envelope_intersecting(AABB::from_point([s, t])).any(|e| self.cells[e.id as usize].is_leaf())
+    }
+
+    /// Area query: leaf cells whose closed box intersects `r`.
+    pub fn leaves_in(&self, r: Rect) -> Vec<CellId> {
+        let mut v: Vec<CellId> =
+            self.tree.locate_in_envelope_intersecting(r.aabb()).map(|e| e.id).filter(|&id| self.cells[id as usize].is_leaf()).collect();
+        v.sort_unstable();
+        v
+    }
+
+    /// Neighbour query: leaf cells sharing a side segment of positive length with `cell`,
+    /// classified by direction with coordinate comparisons (west: s_max ≤ this s_min, ...).
+    pub fn neighbours(&self, cell: CellId) -> Vec<(Side, CellId)> {
+        let r = self.cells[cell as usize].rect;
+        let mut out = Vec::new();
+        for e in self.tree.locate_in_envelope_intersecting(r.aabb()) {
+            if e.id == cell || !self.cells[e.id as usize].is_leaf() {
+                continue;
+            }
+            let o = self.cells[e.id as usize].rect;
+            let overlap_t = r.t_max.min(o.t_max) - r.t_min.max(o.t_min);
+            let overlap_s = r.s_max.min(o.s_max) - r.s_min.max(o.s_min);
+            let side = if o.s_max <= r.s_min && overlap_t > 0.0 {
+                Side::West
+            } else if o.s_min >= r.s_max && overlap_t > 0.0 {
+                Side::East
+            } else if o.t_max <= r.t_min && overlap_s > 0.0 {
+                Side::South
+            } else if o.t_min >= r.t_max && overlap_s > 0.0 {
+                Side::North
+            } else {
+                continue; // corner contact or a retained ancestor/descendant
+            };
+            out.push((side, e.id));
+        }
+        out.sort_unstable_by_key(|&(s, id)| (s as u8, id));
+        out
+    }
+
+    fn add_point(&mut self, s: f64, t: f64, z: f64) -> PointId {
+        if let Some(&id) = self.point_at.get(&key(s, t)) {
+            return id;
+        }
+        let id = self.points.len() as PointId;
+        self.points.push(ControlPoint { s, t, x: s, y: t, z, w: 1.0 });
+        self.point_at.insert(key(s, t), id);
+        id
+    }
+
+    /// Splits a leaf cell at its centre into four children (spec §5.2 refinement). New points
+    /// (edge mid-points and centre) are shared with neighbours that already have them; their
+    /// geometry is set by `geom(s, t) -> (x, y, z)` (interpolated from the current surface).
+    /// The parent stays in the tree. Returns the children ids.
+    pub fn split(&mut self, cell: CellId, geom: &mut dyn FnMut(f64, f64) -> (f64, f64, f64)) -> [CellId; 4] {
+        let c = self.cells[cell as usize].clone();
+        assert!(c.is_leaf(), "split of a non-leaf cell");
+        let r = c.rect;
+        let sm = 0.5 * (r.s_min + r.s_max);
+        let tm = 0.5 * (r.t_min + r.t_max);
+        let mut pt = |m: &mut TMesh, s: f64, t: f64| {
+            if let Some(id) = m.point_id_at(s, t) {
+                id
+            } else {
+                let (x, y, z) = geom(s, t);
+                let id = m.add_point(s, t, z);
+                m.points[id as usize].x = x;
+                m.points[id as usize].y = y;
+                id
+            }
+        };
+        let [nw, ne, sw, se] = c.corners;
+        let n = pt(self, sm, r.t_max);
+        let s_ = pt(self, sm, r.t_min);
+        let w = pt(self, r.s_min, tm);
+        let e = pt(self, r.s_max, tm);
+        let ctr = pt(self, sm, tm);
+        let kids = [
+            ([nw, n, w, ctr], Rect::new(r.s_min, tm, sm, r.t_max)),
+            ([n, ne, ctr, e], Rect::new(sm, tm, r.s_max, r.t_max)),
+            ([w, ctr, sw, s_], Rect::new(r.s_min, r.t_min, sm, tm)),
+            ([ctr, e, s_, se], Rect::new(sm, r.t_min, r.s_max, tm)),
+        ];
+        let mut ids = [0; 4];
+        for (k, (corners, rect)) in kids.into_iter().enumerate() {
+            let id = self.cells.len() as CellId;
+            self.cells.push(Cell { corners, rect, parent: Some(cell), children: None, alive: true });
+            self.tree.insert(CellEntry { id, env: rect.aabb() });
+            ids[k] = id;
+        }
+        self.cells[cell as usize].children = Some(ids);
+        ids
+    }
+
+    /// Coarsening (spec §5.2, T28): removes all descendants of `cell` (an area query with the
+    /// parent's box), making it a leaf again. Points only used by removed cells become inactive
+    /// (see [`TMesh::active_points`]); a later split at the same place reuses them.
+    pub fn coarsen(&mut self, cell: CellId) -> Result<(), TsplineError> {
+        if self.cells[cell as usize].children.is_none() {
+            return Err(TsplineError::InvalidMesh(format!("cell {cell} has no children to remove")));
+        }
+        let mut stack = vec![cell];
+        let mut removed = Vec::new();
+        while let Some(c) = stack.pop() {
+            if let Some(kids) = self.cells[c as usize].children {
+                stack.extend(kids);
+            }
+            if c != cell {
+                removed.push(c);
+            }
+        }
+        for c in removed {
+            let env = self.cells[c as usize].rect.aabb();
+            self.tree.remove(&CellEntry { id: c, env });
+            self.cells[c as usize].alive = false;
+            self.cells[c as usize].children = None;
+        }
+        self.cells[cell as usize].children = None;
+        // A coarsened cell may now hold hanging vertices of its neighbours on its sides; those
+        // are still corners of the neighbours, so the mesh stays valid. Points strictly inside
+        // the parent are orphaned.
+        Ok(())
+    }
+
+    /// Whether a leaf needs a split by the repair rules (A13, see module doc).
+    pub fn needs_repair(&self, cell: CellId) -> bool {
+        let r = self.cells[cell as usize].rect;
+        let mut hanging = [false; 4];
+        for (side, n) in self.neighbours(cell) {
+            let o = self.cells[n as usize].rect;
+            let (mine, theirs) = match side {
+                Side::West | Side::East => (r.height(), o.height()),
+                Side::South | Side::North => (r.width(), o.width()),
+            };
+            if theirs * 2.0 < mine {
+                return true; // 1:2 balance violated
+            }
+            if theirs < mine {
+                hanging[side as usize] = true;
+            }
+        }
+        // rule 2: vertices on opposite sides can be joined
+        (hanging[Side::West as usize] && hanging[Side::East as usize]) || (hanging[Side::South as usize] && hanging[Side::North as usize])
+    }
+
+    /// Alternating rule-2 / 1:2 repair until stable (A13). Cells smaller than `2·min_size` are
+    /// never split (their children would undercut the sample spacing, spec §2.2); returns how
+    /// many splits were done.
+    pub fn repair(&mut self, min_size: f64, geom: &mut dyn FnMut(f64, f64) -> (f64, f64, f64)) -> usize {
+        let mut splits = 0;
+        let mut todo: Vec<CellId> = self.leaves().collect();
+        while !todo.is_empty() {
+            let mut next = Vec::new();
+            todo.sort_unstable();
+            todo.dedup();
+            for c in todo {
+                if !self.cells[c as usize].is_leaf() {
+                    continue;
+                }
+                let r = self.cells[c as usize].rect;
+                if r.width().min(r.height()) < 2.0 * min_size || !self.needs_repair(c) {
+                    continue;
+                }
+                let nbrs: Vec<CellId> = self.neighbours(c).into_iter().map(|(_, n)| n).collect();
+                let kids = self.split(c, geom);
+                splits += 1;
+                next.extend(nbrs);
+                next.extend(kids);
+            }
+            todo = next;
+        }
+        splits
+    }
+
+    /// Merging (spec §3.9, T26): the union of two meshes' leaf cells (C0 seam). Points at equal
+    /// parameter pairs are identified (their geometry is taken from `self`); overlapping cells are
+    /// an error. Knot inference then treats the union like any other mesh; rays stop at gaps (A14).
+    pub fn merge(&self, other: &TMesh) -> Result<TMesh, TsplineError> {
+        if self.degree != other.degree {
+            return Err(TsplineError::InvalidMesh("cannot merge meshes of different degree".into()));
+        }
+        let mut points = Vec::new();
+        let mut map: HashMap<(u64, u64), PointId> = HashMap::new();
+        let mut corners = Vec::new();
+        for m in [self, other] {
+            for c in m.cells.iter().filter(|c| c.is_leaf()) {
+                let mut q = [0; 4];
+                for (k, &p) in c.corners.iter().enumerate() {
+                    let cp = m.points[p as usize];
+                    q[k] = *map.entry(key(cp.s, cp.t)).or_insert_with(|| {
+                        points.push(cp);
+                        (points.len() - 1) as PointId
+                    });
+                }
+                corners.push(q);
+            }
+        }
+        TMesh::from_cells(self.degree, points, corners)
+    }
+
+    /// Leaf-only copy with compact point numbering (what the file format stores).
+    pub fn compacted(&self) -> TMesh {
+        let active = self.active_points();
+        let mut remap = vec![u32::MAX; self.points.len()];
+        let mut points = Vec::new();
+        for (i, a) in active.iter().enumerate() {
+            if *a {
+                remap[i] = points.len() as u32;
+                points.push(self.points[i]);
+            }
+        }
+        let corners = self.cells.iter().filter(|c| c.is_leaf()).map(|c| c.corners.map(|p| remap[p as usize])).collect();
+        TMesh::from_cells(self.degree, points, corners).expect("a valid mesh stays valid when compacted")
+    }
+
+    /// Leaf cells crossed by the horizontal (`horizontal = true`) or vertical line through
+    /// `at`, within the coordinate window [lo, hi] along the line (inclusive boxes).
+    pub(crate) fn leaves_on_line(&self, horizontal: bool, at: f64, lo: f64, hi: f64, out: &mut Vec<Rect>) {
+        out.clear();
+        let env = if horizontal { AABB::from_corners([lo, at], [hi, at]) } else { AABB::from_corners([at, lo], [at, hi]) };
+        for e in self.tree.locate_in_envelope_intersecting(env) {
+            let c = &self.cells[e.id as usize];
+            if c.is_leaf() {
+                out.push(c.rect);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Thesis Tables 5.1/5.3: 8 points, cells Z1, Z2, Z3 (P4 is a T-junction on Z3's top edge).
+    pub(crate) fn thesis_mesh(degree: Degree) -> TMesh {
+        let st = [(0., 2.), (1., 2.), (2., 2.), (0., 1.), (1., 1.), (2., 1.), (0., 0.), (2., 0.)];
+        let points = st.iter().map(|&(s, t)| ControlPoint { s, t, x: s, y: t, z: 0.0, w: 1.0 }).collect();
+        TMesh::from_cells(degree, points, vec![[0, 1, 3, 4], [1, 2, 4, 5], [3, 5, 6, 7]]).unwrap()
+    }
+
+    #[test]
+    fn table_5_3_cells_and_queries() {
+        let m = thesis_mesh(Degree::Linear);
+        // Table 5.3 rectangles (A20: Z2 is (1,1)-(2,2), the thesis prints (1,1)-(2,1)).
+        assert_eq!(m.cells[0].rect, Rect::new(0., 1., 1., 2.));
+        assert_eq!(m.cells[1].rect, Rect::new(1., 1., 2., 2.));
+        assert_eq!(m.cells[2].rect, Rect::new(0., 0., 2., 1.));
+        assert_eq!(m.bounds(), Rect::new(0., 0., 2., 2.));
+        assert_eq!(m.cells_at(1.0, 1.0), vec![0, 1, 2]);
+        assert_eq!(m.cells_at(1.5, 0.5), vec![2]);
+        assert!(m.contains(2.0, 2.0) && !m.contains(2.0001, 1.0));
+        assert_eq!(m.neighbours(2), vec![(Side::North, 0), (Side::North, 1)]);
+        assert_eq!(m.neighbours(0), vec![(Side::East, 1), (Side::South, 2)]);
+        assert_eq!(m.leaves_in(Rect::new(1.2, 1.2, 1.3, 1.3)), vec![1]);
+    }
+
+    #[test]
+    fn rejects_broken_meshes() {
+        let p = |s, t| ControlPoint { s, t, x: s, y: t, z: 0.0, w: 1.0 };
+        // not a rectangle
+        let e = TMesh::from_cells(Degree::Linear, vec![p(0., 1.), p(1., 1.), p(0., 0.), p(2., 0.)], vec![[0, 1, 2, 3]]);
+        assert!(e.is_err());
+        // overlapping cells
+        let pts = vec![p(0., 1.), p(1., 1.), p(0., 0.), p(1., 0.), p(0.5, 1.), p(1.5, 1.), p(0.5, 0.), p(1.5, 0.)];
+        assert!(TMesh::from_cells(Degree::Linear, pts, vec![[0, 1, 2, 3], [4, 5, 6, 7]]).is_err());
+        // bad index
+        assert!(TMesh::from_cells(Degree::Linear, vec![p(0., 0.)], vec![[0, 1, 2, 3]]).is_err());
+    }
+
+    #[test]
+    fn split_shares_points_and_keeps_parent() {
+        let mut m = TMesh::grid(Degree::Linear, 0.0, 0.0, 4.0, 2, 1);
+        let n0 = m.points.len();
+        let mut g = |s: f64, t: f64| (s, t, 0.0);
+        m.split(0, &mut g);
+        assert_eq!(m.points.len(), n0 + 5);
+        m.split(1, &mut g);
+        // the shared edge mid-point (4, 2) is reused: only 4 new points
+        assert_eq!(m.points.len(), n0 + 9);
+        assert_eq!(m.leaf_count(), 8);
+        // parents are still found by point queries (history)
+        assert!(m.cells_at(1.0, 1.0).contains(&0));
+        m.coarsen(0).unwrap();
+        assert_eq!(m.leaf_count(), 5);
+        assert!(m.cells[0].is_leaf());
+    }
+
+    #[test]
+    fn repair_enforces_balance_and_rule_2() {
+        let mut m = TMesh::grid(Degree::Linear, 0.0, 0.0, 8.0, 3, 1);
+        let mut g = |s: f64, t: f64| (s, t, 0.0);
+        let kids = m.split(0, &mut g);
+        m.split(kids[1], &mut g); // a size-2 cell next to the size-8 cell 1 → 1:4
+        m.repair(1.0, &mut g);
+        for c in m.leaves().collect::<Vec<_>>() {
+            assert!(!m.needs_repair(c), "cell {c} still violates the rules");
+        }
+        // cell 1 (size 8) must have been split
+        assert!(!m.cells[1].is_leaf());
+    }
+
+    #[test]
+    fn merge_two_meshes_with_a_seam() {
+        let a = TMesh::grid(Degree::Linear, 0.0, 0.0, 1.0, 2, 2);
+        let b = TMesh::grid(Degree::Linear, 2.0, 0.0, 1.0, 2, 2);
+        let m = a.merge(&b).unwrap();
+        assert_eq!(m.leaf_count(), 8);
+        assert_eq!(m.points.len(), 15);
+        // overlapping meshes are refused
+        let c = TMesh::grid(Degree::Linear, 1.0, 0.0, 1.0, 2, 2);
+        assert!(a.merge(&c).is_err());
+    }
+}

@@ -1,0 +1,242 @@
+//! OpenCL host side (spec §6): surface evaluation, knot derivation and dragging vectors on any
+//! OpenCL device (PoCL on CPUs in CI). The kernels (`tspline.cl`) mirror the CPU code in
+//! `eval.rs` / `knots.rs` operation by operation, in f64, with FP contraction off, so results
+//! agree to rounding (tested to 1e-12 relative).
+//!
+//! Nothing here panics when OpenCL is missing: [`OclEvaluator::new`] checks the platform list
+//! through `ocl::core::get_platform_ids` (which returns an error, unlike `Platform::list`) and
+//! reports a typed error; a kernel that fails to build is an error too. The caller decides
+//! whether to fall back to the CPU (`--device auto`) or to fail (`--device opencl`).
+
+use ocl::{flags, Buffer, Context, Device, Kernel, Platform, Program, Queue};
+
+use crate::eval::{GridSpec, PbSpline};
+use crate::knots::LocalKnots;
+use crate::mesh::TMesh;
+use crate::TsplineError;
+
+/// The kernel source, compiled at run time.
+pub const KERNEL_SRC: &str = include_str!("tspline.cl");
+
+fn err(e: impl std::fmt::Display) -> TsplineError {
+    TsplineError::OpenCl(e.to_string())
+}
+
+/// An OpenCL device with the compiled T-spline program.
+pub struct OclEvaluator {
+    queue: Queue,
+    program: Program,
+    device_name: String,
+}
+
+/// Device buffers of one compiled PB-spline.
+pub struct OclSpline {
+    knots: Buffer<f64>,
+    geom: Buffer<f64>,
+    cells: Buffer<f64>,
+    pstart: Buffer<u32>,
+    pitems: Buffer<u32>,
+    cstart: Buffer<u32>,
+    citems: Buffer<u32>,
+    pb: PbSplineGrid,
+}
+
+#[derive(Clone, Copy)]
+struct PbSplineGrid {
+    s0: f64,
+    t0: f64,
+    ds: f64,
+    dt: f64,
+    ns: u32,
+    nt: u32,
+    k: u32,
+}
+
+/// Lists "platform: device" names, or an error when no OpenCL platform exists.
+pub fn list_devices() -> Result<Vec<String>, TsplineError> {
+    let ids = ocl::core::get_platform_ids().map_err(err)?;
+    let mut out = Vec::new();
+    for id in ids {
+        let p = Platform::new(id);
+        let pname = p.name().unwrap_or_default();
+        for d in Device::list_all(p).map_err(err)? {
+            out.push(format!("{pname}: {}", d.name().unwrap_or_default()));
+        }
+    }
+    Ok(out)
+}
+
+impl OclEvaluator {
+    /// The first device of the first platform that has one, with the T-spline kernels built.
+    pub fn new() -> Result<OclEvaluator, TsplineError> {
+        Self::with_source(KERNEL_SRC)
+    }
+
+    /// As [`OclEvaluator::new`] with another kernel source (tests feed a broken one).
+    pub fn with_source(src: &str) -> Result<OclEvaluator, TsplineError> {
+        let ids = ocl::core::get_platform_ids().map_err(|e| err(format!("no OpenCL platform available ({e})")))?;
+        let mut chosen = None;
+        for id in ids {
+            let p = Platform::new(id);
+            if let Ok(devs) = Device::list_all(p) {
+                if let Some(d) = devs.into_iter().next() {
+                    chosen = Some((p, d));
+                    break;
+                }
+            }
+        }
+        let (platform, device) = chosen.ok_or_else(|| err("no OpenCL platform with a device found"))?;
+        let context = Context::builder().platform(platform).devices(device).build().map_err(err)?;
+        let queue = Queue::new(&context, device, None).map_err(err)?;
+        let program = Program::builder()
+            .src(src)
+            .devices(device)
+            .cmplr_opt("-cl-std=CL1.2")
+            .build(&context)
+            .map_err(|e| err(format!("kernel build failed: {}", first_lines(&e.to_string(), 6))))?;
+        let device_name = format!("{} / {}", platform.name().unwrap_or_default(), device.name().unwrap_or_default());
+        Ok(OclEvaluator { queue, program, device_name })
+    }
+
+    pub fn device_name(&self) -> &str {
+        &self.device_name
+    }
+
+    fn buf<T: ocl::OclPrm>(&self, data: &[T]) -> Result<Buffer<T>, TsplineError> {
+        // OpenCL refuses zero-sized buffers: pad with one default element.
+        let pad = [T::default()];
+        let data = if data.is_empty() { &pad[..] } else { data };
+        Buffer::<T>::builder()
+            .queue(self.queue.clone())
+            .flags(flags::MEM_READ_ONLY)
+            .len(data.len())
+            .copy_host_slice(data)
+            .build()
+            .map_err(err)
+    }
+
+    fn out_buf(&self, n: usize) -> Result<Buffer<f64>, TsplineError> {
+        Buffer::<f64>::builder().queue(self.queue.clone()).flags(flags::MEM_WRITE_ONLY).len(n.max(1)).build().map_err(err)
+    }
+
+    /// Uploads a compiled PB-spline.
+    pub fn upload(&self, pb: &PbSpline) -> Result<OclSpline, TsplineError> {
+        let knots: Vec<f64> = pb.knots.iter().flatten().copied().collect();
+        let geom: Vec<f64> = pb.geom.iter().flatten().copied().collect();
+        let cells: Vec<f64> = pb.cells.iter().flatten().copied().collect();
+        let g = pb.grid;
+        Ok(OclSpline {
+            knots: self.buf(&knots)?,
+            geom: self.buf(&geom)?,
+            cells: self.buf(&cells)?,
+            pstart: self.buf(&pb.pt_start)?,
+            pitems: self.buf(&pb.pt_items)?,
+            cstart: self.buf(&pb.cell_start)?,
+            citems: self.buf(&pb.cell_items)?,
+            pb: PbSplineGrid { s0: g.s0, t0: g.t0, ds: g.ds, dt: g.dt, ns: g.ns, nt: g.nt, k: pb.degree.k() as u32 },
+        })
+    }
+
+    /// Replaces the geometry (after a fit step) without re-uploading the rest.
+    pub fn update_geometry(&self, sp: &mut OclSpline, pb: &PbSpline) -> Result<(), TsplineError> {
+        let geom: Vec<f64> = pb.geom.iter().flatten().copied().collect();
+        sp.geom.write(&geom).enq().map_err(err)
+    }
+
+    fn kernel(&self, name: &str, sp: &OclSpline, n: usize) -> Result<ocl::builders::KernelBuilder<'_>, TsplineError> {
+        let g = sp.pb;
+        let mut kb = Kernel::builder();
+        kb.program(&self.program).name(name).queue(self.queue.clone()).global_work_size(n.max(1));
+        kb.arg(g.s0).arg(g.t0).arg(g.ds).arg(g.dt).arg(g.ns).arg(g.nt).arg(g.k);
+        Ok(kb)
+    }
+
+    /// Heights at parameter points (NaN outside the domain).
+    pub fn eval_points(&self, sp: &OclSpline, st: &[[f64; 2]]) -> Result<Vec<f64>, TsplineError> {
+        let n = st.len();
+        if n == 0 {
+            return Ok(Vec::new());
+        }
+        let flat: Vec<f64> = st.iter().flatten().copied().collect();
+        let stb = self.buf(&flat)?;
+        let out = self.out_buf(n)?;
+        let mut kb = self.kernel("eval_points", sp, n)?;
+        kb.arg(&sp.knots).arg(&sp.geom).arg(&sp.cells).arg(&sp.pstart).arg(&sp.pitems).arg(&sp.cstart).arg(&sp.citems);
+        kb.arg(&stb).arg(&out).arg(n as u32);
+        let k = kb.build().map_err(err)?;
+        unsafe { k.enq().map_err(err)? };
+        let mut v = vec![0.0; n];
+        out.read(&mut v).enq().map_err(err)?;
+        Ok(v)
+    }
+
+    /// Heights on a regular grid (row-major in t), like [`PbSpline::eval_grid`].
+    pub fn eval_grid(&self, sp: &OclSpline, g: &GridSpec) -> Result<Vec<f64>, TsplineError> {
+        let n = g.ns * g.nt;
+        if n == 0 {
+            return Ok(Vec::new());
+        }
+        let out = self.out_buf(n)?;
+        let mut kb = self.kernel("eval_grid", sp, n)?;
+        kb.arg(&sp.knots).arg(&sp.geom).arg(&sp.cells).arg(&sp.pstart).arg(&sp.pitems).arg(&sp.cstart).arg(&sp.citems);
+        kb.arg(g.s0).arg(g.t0).arg(g.ds).arg(g.dt).arg(g.ns as u32).arg(g.nt as u32).arg(&out);
+        let k = kb.build().map_err(err)?;
+        unsafe { k.enq().map_err(err)? };
+        let mut v = vec![0.0; n];
+        out.read(&mut v).enq().map_err(err)?;
+        Ok(v)
+    }
+
+    /// Dragging vectors δ_i = ref_i − t(s_i, t_i) at the PB points' parameter pairs.
+    pub fn drag_vectors(&self, sp: &OclSpline, params: &[[f64; 2]], refz: &[f64]) -> Result<Vec<f64>, TsplineError> {
+        let n = params.len();
+        let flat: Vec<f64> = params.iter().flatten().copied().collect();
+        let pb = self.buf(&flat)?;
+        let rb = self.buf(refz)?;
+        let out = self.out_buf(n)?;
+        let mut kb = self.kernel("drag_vectors", sp, n)?;
+        kb.arg(&sp.knots).arg(&sp.geom).arg(&sp.cells).arg(&sp.pstart).arg(&sp.pitems).arg(&sp.cstart).arg(&sp.citems);
+        kb.arg(&pb).arg(&rb).arg(&out).arg(n as u32);
+        let k = kb.build().map_err(err)?;
+        unsafe { k.enq().map_err(err)? };
+        let mut v = vec![0.0; n];
+        out.read(&mut v).enq().map_err(err)?;
+        Ok(v)
+    }
+
+    /// Knot derivation on the device for every active point of `mesh` (spec §6.4); returns the
+    /// PB-spline built from the device's knots.
+    pub fn build_pbspline(&self, mesh: &TMesh) -> Result<PbSpline, TsplineError> {
+        // The cell bucket grid does not depend on knots: build it with placeholder knots first.
+        let active = mesh.active_points();
+        let ids: Vec<u32> = (0..mesh.points.len() as u32).filter(|&i| active[i as usize]).collect();
+        let zero = LocalKnots { s: [0.0; 5], t: [0.0; 5] };
+        let tmp = PbSpline::from_parts(mesh, ids.clone(), vec![zero; ids.len()]);
+        let sp = self.upload(&tmp)?;
+        let params: Vec<f64> = ids.iter().flat_map(|&i| [mesh.points[i as usize].s, mesh.points[i as usize].t]).collect();
+        let n = ids.len();
+        let pbuf = self.buf(&params)?;
+        let out = self.out_buf(10 * n)?;
+        let mut kb = self.kernel("derive_knots", &sp, n)?;
+        kb.arg(&sp.cells).arg(&sp.cstart).arg(&sp.citems).arg(&pbuf).arg(&out).arg(n as u32);
+        let k = kb.build().map_err(err)?;
+        unsafe { k.enq().map_err(err)? };
+        let mut v = vec![0.0; 10 * n];
+        out.read(&mut v).enq().map_err(err)?;
+        let knots = v
+            .chunks_exact(10)
+            .map(|c| {
+                let mut s = [0.0; 5];
+                let mut t = [0.0; 5];
+                s.copy_from_slice(&c[..5]);
+                t.copy_from_slice(&c[5..]);
+                LocalKnots { s, t }
+            })
+            .collect();
+        Ok(PbSpline::from_parts(mesh, ids, knots))
+    }
+}
+
+fn first_lines(s: &str, n: usize) -> String {
+    s.lines().filter(|l| !l.trim().is_empty()).take(n).collect::<Vec<_>>().join(" | ")
+}

@@ -1,0 +1,216 @@
+// T-spline kernels (spec §6.3/§6.4): surface evaluation, knot derivation, dragging vectors.
+// The CPU twins live in eval.rs / knots.rs / fit.rs and follow the same operation order.
+// Double precision throughout (PoCL supports cl_khr_fp64).
+#pragma OPENCL EXTENSION cl_khr_fp64 : enable
+#pragma OPENCL FP_CONTRACT OFF
+
+typedef struct {
+    double s0, t0, ds, dt;
+    uint ns, nt, k, pad;
+} grid_t;
+
+#define GRID_ARGS const double gs0, const double gt0, const double gds, const double gdt, const uint gns, const uint gnt, const uint gk
+#define MAKE_GRID grid_t g; g.s0 = gs0; g.t0 = gt0; g.ds = gds; g.dt = gdt; g.ns = gns; g.nt = gnt; g.k = gk; g.pad = 0
+
+inline uint clampidx(double v, double o, double d, uint n) {
+    double f = floor((v - o) / d);
+    f = fmax(f, 0.0);
+    f = fmin(f, (double)(n - 1));
+    return (uint)f;
+}
+
+inline uint bucket_of(const grid_t g, double s, double t) {
+    return clampidx(t, g.t0, g.dt, g.nt) * g.ns + clampidx(s, g.s0, g.ds, g.ns);
+}
+
+// One degree-K basis function on K+2 knots, half-open [a,b) or (a,b] spans (A1).
+inline double basis(__global const double* kn, uint k, double u, int left) {
+    if (u < kn[0] || u > kn[k + 1]) return 0.0;
+    double n[4];
+    for (uint j = 0; j <= k; j++) {
+        double a = kn[j], b = kn[j + 1];
+        int inside = left ? (a < u && u <= b) : (a <= u && u < b);
+        n[j] = inside ? 1.0 : 0.0;
+    }
+    for (uint r = 1; r <= k; r++) {
+        for (uint j = 0; j + r <= k; j++) {
+            double d1 = kn[j + r] - kn[j];
+            double d2 = kn[j + r + 1] - kn[j + 1];
+            double v = 0.0;
+            if (d1 > 0.0) v += (u - kn[j]) / d1 * n[j];
+            if (d2 > 0.0) v += (kn[j + r + 1] - u) / d2 * n[j + 1];
+            n[j] = v;
+        }
+    }
+    return n[0];
+}
+
+// Domain test with the A1 border rule (see PbSpline::locate): returns 0 outside; may move
+// (s, t) inwards for cubic borders and sets the left-limit flags for linear upper borders.
+inline int locate(const grid_t g, __global const double* cells, __global const uint* cstart,
+                  __global const uint* citems, double* sp, double* tp, int* ls, int* lt) {
+    double s = *sp, t = *tp;
+    uint b = bucket_of(g, s, t);
+    int found = 0, up_s = 1, lo_s = 1, up_t = 1, lo_t = 1;
+    double ws = INFINITY, wt = INFINITY;
+    for (uint q = cstart[b]; q < cstart[b + 1]; q++) {
+        __global const double* c = cells + 4 * (size_t)citems[q];
+        if (s < c[0] || s > c[2] || t < c[1] || t > c[3]) continue;
+        found = 1;
+        up_s &= (s == c[2]);
+        lo_s &= (s == c[0]);
+        up_t &= (t == c[3]);
+        lo_t &= (t == c[1]);
+        ws = fmin(ws, c[2] - c[0]);
+        wt = fmin(wt, c[3] - c[1]);
+    }
+    if (!found) return 0;
+    if (g.k == 1) { *ls = up_s; *lt = up_t; return 1; }
+    const double EPS = 1.0 / 1073741824.0;
+    if (up_s) s = s - EPS * ws; else if (lo_s) s = s + EPS * ws;
+    if (up_t) t = t - EPS * wt; else if (lo_t) t = t + EPS * wt;
+    *sp = s; *tp = t; *ls = 0; *lt = 0;
+    return 1;
+}
+
+inline double surface_z(const grid_t g, __global const double* knots, __global const double* geom,
+                        __global const double* cells, __global const uint* pstart, __global const uint* pitems,
+                        __global const uint* cstart, __global const uint* citems, double s, double t) {
+    int ls = 0, lt = 0;
+    if (!locate(g, cells, cstart, citems, &s, &t, &ls, &lt)) return NAN;
+    uint k = g.k;
+    uint b = bucket_of(g, s, t);
+    double z = 0.0, den = 0.0;
+    for (uint q = pstart[b]; q < pstart[b + 1]; q++) {
+        uint pi = pitems[q];
+        __global const double* kn = knots + 10 * (size_t)pi;
+        if (s < kn[0] || s > kn[k + 1] || t < kn[5] || t > kn[5 + k + 1]) continue;
+        double bs = basis(kn, k, s, ls);
+        double bt = basis(kn + 5, k, t, lt);
+        __global const double* gm = geom + 4 * (size_t)pi;
+        double wn = gm[3] * bs * bt;
+        z += wn * gm[2];
+        den += wn;
+    }
+    if (den == 0.0) return NAN;
+    return z / den;
+}
+
+// Surface heights at arbitrary parameter points st[2i], st[2i+1].
+__kernel void eval_points(GRID_ARGS, __global const double* knots, __global const double* geom,
+                          __global const double* cells, __global const uint* pstart, __global const uint* pitems,
+                          __global const uint* cstart, __global const uint* citems,
+                          __global const double* st, __global double* out, const uint n) {
+    size_t i = get_global_id(0);
+    if (i >= n) return;
+    MAKE_GRID;
+    out[i] = surface_z(g, knots, geom, cells, pstart, pitems, cstart, citems, st[2 * i], st[2 * i + 1]);
+}
+
+// Surface heights on a regular grid (i, j) -> (s0 + i ds, t0 + j dt), row-major in j.
+__kernel void eval_grid(GRID_ARGS, __global const double* knots, __global const double* geom,
+                        __global const double* cells, __global const uint* pstart, __global const uint* pitems,
+                        __global const uint* cstart, __global const uint* citems,
+                        const double s0, const double t0, const double ds, const double dt,
+                        const uint ns, const uint nt, __global double* out) {
+    size_t idx = get_global_id(0);
+    if (idx >= (size_t)ns * nt) return;
+    MAKE_GRID;
+    uint i = idx % ns, j = idx / ns;
+    out[idx] = surface_z(g, knots, geom, cells, pstart, pitems, cstart, citems, s0 + (double)i * ds, t0 + (double)j * dt);
+}
+
+// Dragging vectors (spec §4.6, A11: compared at the control point's parameter pair):
+// delta_i = ref(s_i, t_i) - t(s_i, t_i); NaN where either is undefined.
+__kernel void drag_vectors(GRID_ARGS, __global const double* knots, __global const double* geom,
+                           __global const double* cells, __global const uint* pstart, __global const uint* pitems,
+                           __global const uint* cstart, __global const uint* citems,
+                           __global const double* params, __global const double* refz, __global double* delta, const uint n) {
+    size_t i = get_global_id(0);
+    if (i >= n) return;
+    MAKE_GRID;
+    double z = surface_z(g, knots, geom, cells, pstart, pitems, cstart, citems, params[2 * i], params[2 * i + 1]);
+    delta[i] = refz[i] - z;
+}
+
+// Nearest edge value along a line beyond `cur` (dir = +1 east/north, -1 west/south), with the
+// A14 coverage test. horizontal: the line is t = at and values are s; else s = at, values t.
+// Returns 0 when the ray ends (border or gap).
+inline int next_knot(const grid_t g, __global const double* cells, __global const uint* cstart,
+                     __global const uint* citems, int horizontal, double at, double cur, int dir, double* out) {
+    uint row = horizontal ? clampidx(at, g.t0, g.dt, g.nt) : clampidx(at, g.s0, g.ds, g.ns);
+    uint nb = horizontal ? g.ns : g.nt;
+    uint b0 = horizontal ? clampidx(cur, g.s0, g.ds, g.ns) : clampidx(cur, g.t0, g.dt, g.nt);
+    double o = horizontal ? g.s0 : g.t0;
+    double d = horizontal ? g.ds : g.dt;
+    // coverage: a leaf touching the line that continues beyond cur in direction dir
+    int covered = 0;
+    {
+        uint b = horizontal ? row * g.ns + b0 : b0 * g.ns + row;
+        for (uint q = cstart[b]; q < cstart[b + 1]; q++) {
+            __global const double* c = cells + 4 * (size_t)citems[q];
+            double lo = horizontal ? c[0] : c[1], hi = horizontal ? c[2] : c[3];
+            double plo = horizontal ? c[1] : c[0], phi = horizontal ? c[3] : c[2];
+            if (at < plo || at > phi) continue;
+            if (dir > 0 ? (lo <= cur && cur < hi) : (lo < cur && cur <= hi)) { covered = 1; break; }
+        }
+    }
+    if (!covered) return 0;
+    double best = dir > 0 ? INFINITY : -INFINITY;
+    int bi = (int)b0;
+    while (bi >= 0 && bi < (int)nb) {
+        double bstart = o + (double)bi * d;
+        double bend = o + (double)(bi + 1) * d;
+        if (dir > 0 && bi != (int)b0 && bstart > best) break;
+        if (dir < 0 && bi != (int)b0 && bend < best) break;
+        uint b = horizontal ? row * g.ns + (uint)bi : (uint)bi * g.ns + row;
+        for (uint q = cstart[b]; q < cstart[b + 1]; q++) {
+            __global const double* c = cells + 4 * (size_t)citems[q];
+            double lo = horizontal ? c[0] : c[1], hi = horizontal ? c[2] : c[3];
+            double plo = horizontal ? c[1] : c[0], phi = horizontal ? c[3] : c[2];
+            if (at < plo || at > phi) continue;
+            if (dir > 0) {
+                if (lo > cur && lo < best) best = lo;
+                if (hi > cur && hi < best) best = hi;
+            } else {
+                if (hi < cur && hi > best) best = hi;
+                if (lo < cur && lo > best) best = lo;
+            }
+        }
+        bi += dir;
+    }
+    if (isinf(best)) return 0;
+    *out = best;
+    return 1;
+}
+
+// Knot derivation (spec §3.6, §6.4): one work item per control point; writes the full local
+// knot vectors (10 doubles: sigma[5], tau[5]; K = 1 uses the first 3 of each).
+__kernel void derive_knots(GRID_ARGS, __global const double* cells, __global const uint* cstart,
+                           __global const uint* citems, __global const double* params, __global double* out, const uint n) {
+    size_t i = get_global_id(0);
+    if (i >= n) return;
+    MAKE_GRID;
+    uint k = g.k;
+    uint h = (k + 1) / 2;
+    double s = params[2 * i], t = params[2 * i + 1];
+    __global double* o = out + 10 * i;
+    for (int dim = 0; dim < 2; dim++) {
+        int horizontal = dim == 0;
+        double centre = horizontal ? s : t;
+        double at = horizontal ? t : s;
+        __global double* dst = o + 5 * dim;
+        for (uint q = 0; q < 5; q++) dst[q] = 0.0;
+        for (int dir = -1; dir <= 1; dir += 2) {
+            double cur = centre;
+            double last = centre;
+            for (uint m = 0; m < h; m++) {
+                double v;
+                if (next_knot(g, cells, cstart, citems, horizontal, at, cur, dir, &v)) { cur = v; last = v; }
+                // padding by repetition of the outermost found value (or the centre)
+                if (dir > 0) dst[h + 1 + m] = last; else dst[h - 1 - m] = last;
+            }
+        }
+        dst[h] = centre;
+    }
+}
