@@ -326,9 +326,11 @@ impl<'a> Parser<'a> {
             quick_xml::Error::IllFormed(IllFormedError::MismatchedEndTag { expected, found }) => {
                 format!("malformed XML: end tag </{found}> does not match the open <{expected}>")
             }
+            quick_xml::Error::Syntax(SyntaxError::UnclosedTag) => {
+                "unexpected end of file inside a tag: `>` missing (truncated document?)".to_string()
+            }
             quick_xml::Error::Syntax(
-                SyntaxError::UnclosedTag
-                | SyntaxError::UnclosedComment
+                SyntaxError::UnclosedComment
                 | SyntaxError::UnclosedCData
                 | SyntaxError::UnclosedDoctype
                 | SyntaxError::UnclosedPIOrXmlDecl,

@@ -62,6 +62,8 @@ pub struct InfoReport {
     pub solids: usize,
     pub polygons: usize,
     pub rings: usize,
+    /// Triangles of TIN reliefs (gml:TriangulatedSurface / gml:Tin), not counted as polygons.
+    pub triangles: usize,
     pub interior_rings: usize,
     pub points: usize,
     pub xlinks_resolved: usize,
@@ -85,6 +87,7 @@ pub fn run(args: Args, _config: &Config) -> CmdResult {
     let (mut top, mut solids, mut polygons, mut rings, mut interior_rings, mut points, mut xlinks) =
         (0, 0, 0, 0, 0, 0, 0usize);
     let mut findings: Vec<String> = Vec::new();
+    let mut triangles = 0usize;
     for obj in &mut stream {
         let obj: CityObject = obj.map_err(located)?;
         // One href may stand for several polygons (a CompositeSurface): count hrefs, not copies.
@@ -102,7 +105,12 @@ pub fn run(args: Args, _config: &Config) -> CmdResult {
                     citygml_io::GeometryKind::Solids(v) => v.len(),
                     citygml_io::GeometryKind::Surfaces(_) => 0,
                 };
+                let tin = matches!(g.gml_type.as_str(), "TriangulatedSurface" | "Tin");
                 for p in g.polygons() {
+                    if tin {
+                        triangles += 1;
+                        continue;
+                    }
                     if let Some(v) = &p.via_xlink {
                         hrefs.insert(v.bytes.start);
                         continue;
@@ -145,6 +153,7 @@ pub fn run(args: Args, _config: &Config) -> CmdResult {
         solids,
         polygons,
         rings,
+        triangles,
         interior_rings,
         points,
         xlinks_resolved: xlinks,
@@ -190,6 +199,9 @@ fn write_text(w: &mut dyn Write, r: &InfoReport) -> std::io::Result<()> {
     writeln!(w, "polygons:    {}", r.polygons)?;
     writeln!(w, "rings:       {} ({} interior)", r.rings, r.interior_rings)?;
     writeln!(w, "points:      {}", r.points)?;
+    if r.triangles > 0 {
+        writeln!(w, "triangles:   {} (TIN)", r.triangles)?;
+    }
     writeln!(w, "xlinks:      {} resolved, {} unresolved", r.xlinks_resolved, r.unresolved_xlinks)?;
     Ok(())
 }
