@@ -36,6 +36,8 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     // One line per subcommand; keep alphabetical. Each `cmd::<name>` module has `Args` and `run`.
+    /// Implicit surfaces by DSI on adaptive tetrahedral meshes.
+    Implicit(cmd::implicit::Args),
     Info(cmd::info::Args),
     Validate(cmd::validate::Args),
 }
@@ -44,6 +46,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let config = Config { quiet: cli.quiet };
     let result = match cli.command {
+        Command::Implicit(a) => cmd::implicit::run(a, &config),
         Command::Info(a) => cmd::info::run(a, &config),
         Command::Validate(a) => cmd::validate::run(a, &config),
     };
