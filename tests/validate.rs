@@ -1,2 +1,366 @@
-//! End-to-end tests of `geofit validate` (filled in below).
+//! End-to-end tests of `geofit validate`, against independent truth:
+//! * XSD: `xmllint --noout --nonet --schema` on every fixture and on broken copies;
+//! * geometry: the error code each QIE file carries in its name (tudelft3d/CityGML-QIE-3Dvalidation),
+//!   the valid QIE files, and for the tolerance cases the deviation measured by
+//!   `tests/scripts/validate_tolerance.py` (numpy SVD plane fit), with the verdict flipping
+//!   between a tolerance just below and just above it.
 mod common;
+
+use std::collections::BTreeSet;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use serde_json::Value;
+
+fn shared_xsd_dir() -> Option<PathBuf> {
+    common::shared_xsd()
+}
+
+/// `geofit validate --json ARGS…` → (exit code, report).
+fn validate_json(args: &[&str]) -> (i32, Value) {
+    let mut a = vec!["--quiet", "validate", "--json"];
+    a.extend_from_slice(args);
+    let o = common::run(&a, None);
+    let code = common::code(&o);
+    let v: Value = serde_json::from_slice(&o.stdout).unwrap_or_else(|e| {
+        panic!("no JSON from geofit {:?} (exit {code}): {e}\nstderr: {}", args, String::from_utf8_lossy(&o.stderr))
+    });
+    (code, v)
+}
+
+fn codes(report: &Value) -> BTreeSet<u64> {
+    report["geometry"]["findings"].as_array().unwrap().iter().map(|f| f["code"].as_u64().unwrap()).collect()
+}
+
+fn all_gml(dir: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                stack.push(p);
+            } else if p.extension().is_some_and(|x| x == "gml") {
+                out.push(p);
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
+/// CityGML version from the namespace bound in the first 20 kB (independent of geofit's sniffing).
+fn version_of(bytes: &[u8]) -> &'static str {
+    let head = String::from_utf8_lossy(&bytes[..bytes.len().min(20000)]);
+    for v in ["3.0", "2.0", "1.0"] {
+        if head.contains(&format!("http://www.opengis.net/citygml/{v}\"")) {
+            return v;
+        }
+    }
+    panic!("no CityGML namespace")
+}
+
+/// xmllint's verdict: (valid, set of error lines).
+fn xmllint(file: &Path, xsd: &Path) -> (bool, BTreeSet<u64>) {
+    let o = Command::new("xmllint").args(["--noout", "--nonet", "--schema"]).arg(xsd).arg(file).output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    let name = file.display().to_string();
+    let mut lines = BTreeSet::new();
+    for l in err.lines() {
+        if let Some(rest) = l.strip_prefix(&format!("{name}:")) {
+            if let Some(n) = rest.split(':').next().and_then(|n| n.parse::<u64>().ok()) {
+                lines.insert(n);
+            }
+        }
+    }
+    match o.status.code() {
+        Some(0) => (true, lines),
+        Some(3) => (false, lines),
+        c => panic!("xmllint {name}: unexpected exit {c:?}: {err}"),
+    }
+}
+
+fn geofit_xsd(file: &Path, schemas: &Path) -> (bool, BTreeSet<u64>, Value) {
+    let (code, r) = validate_json(&["--no-geometry", "--schemas", schemas.to_str().unwrap(), file.to_str().unwrap()]);
+    assert!(r["xsd"]["checked"].as_bool().unwrap(), "{}: XSD not checked: {}", file.display(), r["xsd"]);
+    let valid = r["xsd"]["valid"].as_bool().unwrap();
+    assert_eq!(code, if valid { 0 } else { 1 }, "{}: exit code", file.display());
+    let lines = r["xsd"]["errors"].as_array().unwrap().iter().map(|e| e["line"].as_u64().unwrap()).collect();
+    (valid, lines, r)
+}
+
+#[test]
+fn xsd_agrees_with_xmllint_on_every_fixture() {
+    let (Some(dir), Some(xsd)) = (common::fixture("citygml"), shared_xsd_dir()) else { return };
+    if !common::tool("xmllint") {
+        return;
+    }
+    let files = all_gml(&dir);
+    assert!(files.len() >= 60, "expected the whole fixture set, found {}", files.len());
+    let mut invalid = 0;
+    for f in &files {
+        let v = version_of(&std::fs::read(f).unwrap());
+        let (lint_ok, lint_lines) = xmllint(f, &xsd.join(format!("citygml-{v}.xsd")));
+        let (ok, lines, _) = geofit_xsd(f, &xsd);
+        assert_eq!(ok, lint_ok, "{}: geofit and xmllint disagree on validity", f.display());
+        assert_eq!(lines, lint_lines, "{}: error lines differ from xmllint", f.display());
+        invalid += (!ok) as usize;
+    }
+    // the two fixtures documented as schema-invalid (qie/i101_1.gml, v3/invalid_building_v3.gml)
+    assert_eq!(invalid, 2);
+}
+
+/// Writes `text` to `dir/name` and returns the path.
+fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+#[test]
+fn xsd_agrees_with_xmllint_on_broken_copies() {
+    let Some(xsd) = shared_xsd_dir() else { return };
+    if !common::tool("xmllint") {
+        return;
+    }
+    let tmp = common::tempdir();
+    let mut cases: Vec<PathBuf> = Vec::new();
+    for (rel, v) in [
+        ("citygml/v2/FZK-Haus-LoD2-KIT-IAI-KHH-B36-V1.gml", "2.0"),
+        ("citygml/v3/FZK-Haus-LoD2-KIT-IAI-KHH-B36-V1__v3.gml", "3.0"),
+        ("citygml/nrw/LoD2_32_324_5729_1_NW.gml", "1.0"),
+    ] {
+        let Some(src) = common::fixture(rel) else { return };
+        let text = std::fs::read_to_string(&src).unwrap();
+        let stem = format!("v{}", v.replace('.', ""));
+        // 1. a required element removed: the coordinates of the first LinearRing
+        let (ra, rb) = find_element(&text, "LinearRing").expect("a LinearRing");
+        let inner_start = text[ra..].find('>').unwrap() + ra + 1;
+        let inner_end = text[..rb].rfind("</").unwrap();
+        let removed = format!("{}{}", &text[..inner_start], &text[inner_end..]);
+        cases.push(write(tmp.path(), &format!("{stem}_removed.gml"), &removed));
+        // 2. two elements swapped: the document's boundedBy moved behind the first
+        //    cityObjectMember (wrong order inside CityModel)
+        let (ba, bb) = find_element(&text, "boundedBy").expect("boundedBy");
+        let (ma, mb) = find_element(&text, "cityObjectMember").expect("cityObjectMember");
+        assert!(bb <= ma, "{rel}: boundedBy precedes the first member");
+        let swapped = format!("{}{}{}{}{}", &text[..ba], &text[ma..mb], &text[bb..ma], &text[ba..bb], &text[mb..]);
+        cases.push(write(tmp.path(), &format!("{stem}_swapped.gml"), &swapped));
+        // 3. an invalid gml:id (an xs:ID must not start with a digit)
+        let k = text.find("gml:id=\"").expect("a gml:id") + 8;
+        let bad_id = format!("{}1{}", &text[..k], &text[k..]);
+        cases.push(write(tmp.path(), &format!("{stem}_badid.gml"), &bad_id));
+    }
+    for f in &cases {
+        let v = version_of(&std::fs::read(f).unwrap());
+        let (lint_ok, lint_lines) = xmllint(f, &xsd.join(format!("citygml-{v}.xsd")));
+        assert!(!lint_ok, "{}: the broken copy should fail xmllint", f.display());
+        let (ok, lines, r) = geofit_xsd(f, &xsd);
+        assert!(!ok, "{}: geofit accepted a broken copy", f.display());
+        assert_eq!(lines, lint_lines, "{}: error lines differ from xmllint", f.display());
+        for e in r["xsd"]["errors"].as_array().unwrap() {
+            assert!(e["column"].as_u64().unwrap() >= 1, "{}: every error has a column: {e}", f.display());
+        }
+    }
+}
+
+/// Byte range of the first element with this local name (any prefix), start tag to end tag.
+fn find_element(text: &str, local: &str) -> Option<(usize, usize)> {
+    let mut from = 0;
+    loop {
+        let k = text[from..].find('<')? + from;
+        let name: String = text[k + 1..].chars().take_while(|c| !c.is_whitespace() && *c != '>' && *c != '/').collect();
+        if name.rsplit(':').next() == Some(local) && !name.is_empty() {
+            let close = format!("</{name}>");
+            let end = text[k..].find(&close)? + k + close.len();
+            return Some((k, end));
+        }
+        from = k + 1;
+    }
+}
+
+#[test]
+fn truncated_xml_is_unreadable_for_both() {
+    let Some(src) = common::fixture("citygml/v2/FZK-Haus-LoD2-KIT-IAI-KHH-B36-V1.gml") else { return };
+    let text = std::fs::read(&src).unwrap();
+    let tmp = common::tempdir();
+    let p = tmp.path().join("truncated.gml");
+    std::fs::write(&p, &text[..text.len() / 2]).unwrap();
+    let o = common::run(&["validate", p.to_str().unwrap()], None);
+    assert_eq!(common::code(&o), 3, "stderr: {}", String::from_utf8_lossy(&o.stderr));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(err.trim().lines().filter(|l| l.starts_with("geofit: error:")).count(), 1, "{err}");
+    assert!(err.contains("truncated.gml:"), "names the file: {err}");
+    if common::tool("xmllint") {
+        let s = Command::new("xmllint").args(["--noout", "--nonet"]).arg(&p).status().unwrap();
+        assert_eq!(s.code(), Some(1), "xmllint also rejects it as not well-formed");
+    }
+}
+
+/// The code a QIE file name carries, with the legacy codes mapped to val3dity's current ones.
+fn expected_code(name: &str) -> u64 {
+    let c: u64 = name[1..4].parse().unwrap();
+    match c {
+        105 => 104,
+        304 => 303,
+        308 => 405,
+        c => c,
+    }
+}
+
+#[test]
+fn qie_invalid_files_report_their_code_and_nothing_else() {
+    let Some(dir) = common::fixture("citygml/qie") else { return };
+    let mut n = 0;
+    for f in all_gml(&dir) {
+        let name = f.file_name().unwrap().to_str().unwrap().to_string();
+        if !name.starts_with('i') {
+            continue;
+        }
+        let (code, r) = validate_json(&["--no-xsd", f.to_str().unwrap()]);
+        assert_eq!(code, 1, "{name}: exit code");
+        let want = BTreeSet::from([expected_code(&name)]);
+        assert_eq!(codes(&r), want, "{name}: {}", r["geometry"]["findings"]);
+        n += 1;
+    }
+    assert!(n >= 16, "expected all i*.gml files, found {n}");
+}
+
+#[test]
+fn qie_valid_files_report_nothing() {
+    let Some(dir) = common::fixture("citygml/qie") else { return };
+    let mut n = 0;
+    for f in all_gml(&dir) {
+        let name = f.file_name().unwrap().to_str().unwrap().to_string();
+        if !name.starts_with('v') {
+            continue;
+        }
+        let (code, r) = validate_json(&["--no-xsd", f.to_str().unwrap()]);
+        assert_eq!(code, 0, "{name}: {}", r["geometry"]["findings"]);
+        assert!(codes(&r).is_empty());
+        n += 1;
+    }
+    assert!(n >= 7);
+}
+
+#[test]
+fn reference_buildings_are_geometrically_valid() {
+    for rel in [
+        "citygml/v2/FZK-Haus-LoD2-KIT-IAI-KHH-B36-V1.gml",
+        "citygml/v3/FZK-Haus-LoD2-KIT-IAI-KHH-B36-V1__v3.gml",
+        "citygml/v3/FZK-Haus-LoD3-KIT-IAI-KHH-B36-V1__v3.gml",
+        "citygml/ogc-building/CityGMLv2/Building_LOD2-EPSG25832.gml",
+        "citygml/ogc-building/CityGMLv3/Building_LOD2-EPSG25832.gml",
+        "citygml/ogc-building/CityGMLv2/Building_LOD1-EPSG25832.gml",
+    ] {
+        let Some(f) = common::fixture(rel) else { return };
+        let (code, r) = validate_json(&["--no-xsd", f.to_str().unwrap()]);
+        assert_eq!(code, 0, "{rel}: {}", r["geometry"]["findings"]);
+    }
+}
+
+fn measure(f: &Path) -> Value {
+    let o = common::python()
+        .arg(common::repo_root().join("tests/scripts/validate_tolerance.py"))
+        .arg(f)
+        .output()
+        .expect("python3");
+    assert!(o.status.success(), "validate_tolerance.py: {}", String::from_utf8_lossy(&o.stderr));
+    serde_json::from_slice(&o.stdout).unwrap()
+}
+
+#[test]
+fn planarity_verdict_flips_at_the_measured_plane_distance() {
+    let Some(dir) = common::fixture("citygml/qie") else { return };
+    for name in ["t203_1.gml", "t203_3.gml", "t203_5.gml"] {
+        let f = dir.join(name);
+        let d = measure(&f)["plane_distance"].as_f64().unwrap();
+        assert!(d > 0.0);
+        let below = format!("{}", d * 0.99);
+        let above = format!("{}", d * 1.01);
+        let (code, r) = validate_json(&["--no-xsd", "--planarity-tol", &below, f.to_str().unwrap()]);
+        assert_eq!(code, 1, "{name}: tolerance {below} < {d} must fail");
+        assert!(codes(&r).contains(&203), "{name}: {}", r["geometry"]["findings"]);
+        // the largest distance geofit reports is the one numpy measures
+        let worst = r["geometry"]["findings"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|x| x["code"] == 203)
+            .map(|x| x["value"].as_f64().unwrap())
+            .fold(0.0, f64::max);
+        assert!((worst - d).abs() <= 1e-9 * d.max(1.0), "{name}: geofit {worst} vs numpy {d}");
+        let (code, r) = validate_json(&["--no-xsd", "--planarity-tol", &above, f.to_str().unwrap()]);
+        assert_eq!(code, 0, "{name}: tolerance {above} > {d} must pass: {}", r["geometry"]["findings"]);
+    }
+}
+
+#[test]
+fn snapping_verdict_flips_at_the_measured_vertex_gap() {
+    let Some(f) = common::fixture("citygml/qie/t302_2.gml") else { return };
+    let gap = measure(&f)["min_vertex_gap"].as_f64().unwrap();
+    assert!(gap > 0.001 && gap < 0.1, "the moved vertex is about 1 cm off: {gap}");
+    let (code, r) = validate_json(&["--no-xsd", "--snap-tol", &format!("{}", gap * 0.99), f.to_str().unwrap()]);
+    assert_eq!(code, 1);
+    assert_eq!(codes(&r), BTreeSet::from([302]), "{}", r["geometry"]["findings"]);
+    let (code, r) = validate_json(&["--no-xsd", "--snap-tol", &format!("{}", gap * 1.01), f.to_str().unwrap()]);
+    assert_eq!(code, 0, "{}", r["geometry"]["findings"]);
+}
+
+#[test]
+fn findings_point_at_the_primitive() {
+    // i101_1.gml: the first polygon's ring has 3 positions; the finding names its line:column.
+    let Some(f) = common::fixture("citygml/qie/i101_1.gml") else { return };
+    let text = std::fs::read_to_string(&f).unwrap();
+    let (_, r) = validate_json(&["--no-xsd", f.to_str().unwrap()]);
+    let x = &r["geometry"]["findings"][0];
+    assert_eq!(x["code"], 101);
+    assert_eq!(x["name"], "TOO_FEW_POINTS");
+    let line = x["line"].as_u64().unwrap() as usize;
+    let col = x["column"].as_u64().unwrap() as usize;
+    let l = text.lines().nth(line - 1).unwrap();
+    assert!(l[col - 1..].starts_with("<gml:LinearRing") || l[col - 1..].starts_with("<gml:Polygon"), "{line}:{col} → {l}");
+    // the first LinearRing of the file is that ring
+    let first = text.lines().position(|l| l.contains("<gml:LinearRing")).unwrap() + 1;
+    assert!(line == first || line + 2 == first, "line {line}, first ring at {first}");
+}
+
+#[test]
+fn stdin_text_output_and_exit_codes() {
+    let Some(f) = common::fixture("citygml/qie/i201_1.gml") else { return };
+    let bytes = std::fs::read(&f).unwrap();
+    let o = common::run(&["-q", "validate", "--no-xsd", "-"], Some(&bytes));
+    assert_eq!(common::code(&o), 1);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(out.contains("201 INTERSECTION_RINGS"), "{out}");
+    assert!(out.contains("<stdin>:"), "{out}");
+    let Some(v) = common::fixture("citygml/qie/v001.gml") else { return };
+    let o = common::run(&["-q", "validate", v.to_str().unwrap()], None);
+    assert_eq!(common::code(&o), 0, "{}", String::from_utf8_lossy(&o.stdout));
+    // bad options are usage errors
+    let o = common::run(&["validate", "--planarity-tol", "-1", v.to_str().unwrap()], None);
+    assert_eq!(common::code(&o), 2);
+    let o = common::run(&["validate", "--schemas", "/nonexistent/dir", v.to_str().unwrap()], None);
+    assert_eq!(common::code(&o), 2);
+    // empty and binary input: one-line error, exit 3
+    let o = common::run(&["validate", "-"], Some(b""));
+    assert_eq!(common::code(&o), 3);
+    let o = common::run(&["validate", "-"], Some(&[0u8, 159, 146, 150, 1, 2, 3]));
+    assert_eq!(common::code(&o), 3);
+}
+
+#[test]
+fn without_schemas_it_says_how_to_get_them_and_checks_geometry() {
+    let Some(f) = common::fixture("citygml/qie/i103_1.gml") else { return };
+    let o = common::geofit()
+        .args(["validate", "--json", f.to_str().unwrap()])
+        .env("GEOFIT_SCHEMAS", "")
+        .output()
+        .unwrap();
+    assert_eq!(common::code(&o), 1);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("schemas not found") && err.contains("--schemas"), "{err}");
+    let r: Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(r["xsd"]["checked"], false);
+    assert_eq!(codes(&r), BTreeSet::from([103]));
+}

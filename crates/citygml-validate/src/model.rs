@@ -21,6 +21,9 @@ pub struct Finding {
     pub code: u16,
     pub name: &'static str,
     pub detail: String,
+    /// The measured quantity (plane distance m, normal deviation °, ring gap m), when there is one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub value: Option<f64>,
     pub line: usize,
     pub column: usize,
 }
@@ -69,6 +72,7 @@ fn locate(obj: &CityObject, geom: &Geometry, shells: &[Vec<&Polygon>], issue: Is
         code: issue.code.code(),
         name: issue.code.name(),
         detail,
+        value: issue.value,
         line: span.line,
         column: span.column,
     }

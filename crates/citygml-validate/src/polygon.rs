@@ -35,7 +35,12 @@ pub struct PreparedPolygon {
 }
 
 fn issue(code: ErrorCode, polygon: usize, ring: Option<usize>, detail: String) -> Issue {
-    Issue { code, polygon: Some(polygon), ring, shell: None, detail }
+    Issue { code, polygon: Some(polygon), ring, shell: None, detail, value: None }
+}
+
+fn with_value(v: f64, mut i: Issue) -> Issue {
+    i.value = Some(v);
+    i
 }
 
 fn fmt_pt(p: &V3, origin: &V3) -> String {
@@ -82,12 +87,9 @@ fn check_ring(pi: usize, ri: usize, mut ids: Vec<u32>, snap: &Snapper) -> Result
     if ids.len() >= 2 && ids[0] != ids[ids.len() - 1] {
         let a = snap.points[ids[0] as usize];
         let b = snap.points[ids[ids.len() - 1] as usize];
-        return Err(issue(
-            ErrorCode::RingNotClosed,
-            pi,
-            Some(ri),
-            format!("first and last points are {:.6} m apart", (a - b).norm()),
-        ));
+        let mut is = issue(ErrorCode::RingNotClosed, pi, Some(ri), format!("first and last points are {:.6} m apart", (a - b).norm()));
+        is.value = Some((a - b).norm());
+        return Err(is);
     }
     ids.pop();
     if ids.len() < 3 {
@@ -149,7 +151,7 @@ fn check_polygon(
             }
         }
         if dmax > opts.planarity_tol {
-            return Err(issue(
+            return Err(with_value(dmax, issue(
                 ErrorCode::NonPlanarPolygonDistancePlane,
                 pi,
                 None,
@@ -159,7 +161,7 @@ fn check_polygon(
                     fmt_pt(&all3[at], &snap.origin()),
                     opts.planarity_tol
                 ),
-            ));
+            )));
         }
         if pl.normal.dot(&newell) < 0.0 {
             pl.normal = -pl.normal;
@@ -228,12 +230,12 @@ fn check_polygon(
             }
         }
         if worst > opts.normals_tol_deg {
-            return Err(issue(
+            return Err(with_value(worst, issue(
                 ErrorCode::NonPlanarPolygonNormalsDeviation,
                 pi,
                 None,
                 format!("normals of its triangles deviate by {:.4}° (tolerance {}°)", worst, opts.normals_tol_deg),
-            ));
+            )));
         }
     }
     let (normal, triangles) = if poly.reversed {

@@ -47,7 +47,7 @@ impl ShellMesh {
 }
 
 fn shell_issue(code: ErrorCode, polygon: Option<usize>, detail: String) -> Issue {
-    Issue { code, polygon, ring: None, shell: None, detail }
+    Issue { code, polygon, ring: None, shell: None, detail, value: None }
 }
 
 fn fmt_abs(p: &V3) -> String {
@@ -249,8 +249,17 @@ fn shell_topology_and_geometry(mesh: &ShellMesh, opts: &Options) -> Vec<Issue> {
                 }
             }
         }
-        let roots: HashSet<usize> = (0..cs.len()).map(|i| d.find(i)).collect();
-        if roots.len() > 1 {
+        // A fan is closed when each of its edges at `v` is used by two of its corners. Several
+        // fans with at least one closed is a non-manifold vertex (val3dity cannot attach a face to
+        // a closed vertex umbrella); several open fans is a hole or a T-junction (302).
+        let mut fans: HashMap<usize, HashMap<u32, usize>> = HashMap::new();
+        for (ci, (a, b)) in cs.iter().enumerate() {
+            let r = d.find(ci);
+            let m = fans.entry(r).or_default();
+            *m.entry(*a).or_default() += 1;
+            *m.entry(*b).or_default() += 1;
+        }
+        if fans.len() > 1 && fans.values().any(|m| m.values().all(|&c| c == 2)) {
             nonmanifold_vertices.push(*v);
         }
     }

@@ -11,7 +11,7 @@ use crate::tritri::contact;
 use crate::{Issue, Options};
 
 fn solid_issue(code: ErrorCode, shell: usize, detail: String) -> Issue {
-    Issue { code, polygon: None, ring: None, shell: Some(shell), detail }
+    Issue { code, polygon: None, ring: None, shell: Some(shell), detail, value: None }
 }
 
 /// Checks a solid given as its shells (index 0 = exterior, then cavities).

@@ -94,14 +94,25 @@ struct Report {
     geometry: GeometryReport,
 }
 
+const HOW_TO_GET: &str = "CityGML schemas not found (no --schemas DIR, GEOFIT_SCHEMAS unset or empty, no ../shared/xsd \
+beside the checkout): XSD validation skipped, geometric checks only. To enable it, point --schemas or GEOFIT_SCHEMAS \
+at an offline bundle holding citygml-1.0.xsd, citygml-2.0.xsd and citygml-3.0.xsd wrappers that import the OGC \
+CityGML/GML schemas by relative paths (e.g. the schemas shipped in citygml4j, \
+citygml4j-xml/src/main/resources/org/citygml4j/schemas, plus the wrappers described in shared/xsd/README.md)";
+
 /// Where the schemas are: --schemas, $GEOFIT_SCHEMAS, ../shared/xsd beside the checkout.
 fn find_schema_dir(explicit: Option<&Path>) -> Result<PathBuf, String> {
     if let Some(d) = explicit {
         return if d.is_dir() { Ok(d.to_path_buf()) } else { Err(format!("--schemas {}: not a directory", d.display())) };
     }
-    if let Some(d) = std::env::var_os("GEOFIT_SCHEMAS") {
-        let d = PathBuf::from(d);
-        return if d.is_dir() { Ok(d) } else { Err(format!("GEOFIT_SCHEMAS={}: not a directory", d.display())) };
+    match std::env::var_os("GEOFIT_SCHEMAS") {
+        // set but empty: no schemas on purpose, no search
+        Some(d) if d.is_empty() => return Err(HOW_TO_GET.to_string()),
+        Some(d) => {
+            let d = PathBuf::from(d);
+            return if d.is_dir() { Ok(d) } else { Err(format!("GEOFIT_SCHEMAS={}: not a directory", d.display())) };
+        }
+        None => {}
     }
     let mut cands: Vec<PathBuf> = Vec::new();
     if let Ok(cwd) = std::env::current_dir() {
@@ -117,12 +128,7 @@ fn find_schema_dir(explicit: Option<&Path>) -> Result<PathBuf, String> {
             return Ok(c.canonicalize().unwrap_or(c));
         }
     }
-    Err(format!(
-        "CityGML schemas not found (no --schemas, no GEOFIT_SCHEMAS, no ../shared/xsd beside the checkout); \
-         XSD validation skipped. To enable it, pass --schemas DIR with the offline bundle (citygml-1.0/2.0/3.0.xsd \
-         wrappers importing the OGC CityGML schemas with relative locations, e.g. citygml4j's \
-         citygml4j-xml/src/main/resources/org/citygml4j/schemas plus the wrappers described in ../shared/xsd/README.md)"
-    ))
+    Err(HOW_TO_GET.to_string())
 }
 
 fn check_opts(args: &Args) -> Result<Options, CliError> {
@@ -166,7 +172,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
 
     let schema_dir = if args.no_xsd { None } else { Some(find_schema_dir(args.schemas.as_deref())) };
     if let Some(Err(why)) = &schema_dir {
-        if args.schemas.is_some() || std::env::var_os("GEOFIT_SCHEMAS").is_some() {
+        if args.schemas.is_some() || std::env::var_os("GEOFIT_SCHEMAS").is_some_and(|v| !v.is_empty()) {
             return Err(CliError::usage(why.clone()));
         }
         config.notice(why);
@@ -194,6 +200,12 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         (xsd_job.join(), geometry)
     });
     let xsd = xsd.map_err(|_| CliError::internal("XSD validation thread panicked"))?;
+    if let (false, Some(why), Some(Ok(_))) = (xsd.checked, &xsd.reason, &schema_dir) {
+        if version.is_some() {
+            // the schema directory was found but the wrapper could not be loaded
+            return Err(CliError::usage(why.clone()));
+        }
+    }
     let geometry = match geometry {
         Ok(g) => g,
         Err(e) => {
