@@ -11,7 +11,7 @@ export GEOFIT_SHARED := $(SHARED)
 
 # Debian packages the project uses (libraries it links and tools its tests call).
 APT_PACKAGES := pkg-config libgdal-dev gdal-bin libproj-dev proj-bin ocl-icd-opencl-dev \
-  pocl-opencl-icd clinfo libxml2-utils libxml2-dev libclang-dev python3-numpy freecad-python3 nodejs
+  pocl-opencl-icd clinfo libxml2-utils libxml2-dev libclang-dev python3-numpy freecad-python3 nodejs time
 # Python packages for independent checks and reference tools.
 PIP_PACKAGES := numpy scipy lxml pymeshlab trimesh
 # npm: the Khronos glTF validator. It is a library: tests run it through the small CLI

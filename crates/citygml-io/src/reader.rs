@@ -99,7 +99,13 @@ impl Tag<'_> {
         attr_raw(&self.raw, local)
     }
     pub fn attr_string(&self, local: &[u8]) -> Option<String> {
-        self.attr(local).map(|v| String::from_utf8_lossy(&v).into_owned())
+        if self.raw.attributes_raw().is_empty() {
+            return None;
+        }
+        self.attr(local).map(|v| match String::from_utf8(v.into_owned()) {
+            Ok(s) => s,
+            Err(e) => String::from_utf8_lossy(e.as_bytes()).into_owned(),
+        })
     }
     fn is_gml(&self, local: &[u8]) -> bool {
         self.ns == Ns::Gml && self.local() == local
@@ -352,7 +358,8 @@ impl<'a> Parser<'a> {
     }
 
     fn declare(&mut self, e: &BytesStart<'_>, depth: usize) {
-        if memchr::memmem::find(e.attributes_raw(), b"xmlns").is_none() {
+        let raw = e.attributes_raw();
+        if !memchr::memchr_iter(b'x', raw).any(|i| raw[i..].starts_with(b"xmlns")) {
             return;
         }
         for a in e.attributes().with_checks(false).flatten() {
@@ -367,11 +374,15 @@ impl<'a> Parser<'a> {
     }
 
     fn binding_of(&self, qname: &[u8]) -> Option<&Binding> {
-        let prefix = match memchr::memchr(b':', qname) {
+        let prefix = match qname.iter().position(|&c| c == b':') {
             Some(i) => &qname[..i],
             None => &b""[..],
         };
-        self.bindings.iter().rev().find(|b| b.prefix == prefix)
+        // Prefixes are a few bytes: compare length and bytes inline, no memcmp call.
+        self.bindings
+            .iter()
+            .rev()
+            .find(|b| b.prefix.len() == prefix.len() && b.prefix.iter().zip(prefix).all(|(x, y)| x == y))
     }
 
     /// Namespace URI of a tag (for messages).
@@ -918,7 +929,7 @@ impl<'a> Parser<'a> {
                                     ),
                                 ));
                             }
-                            points = vals.chunks_exact(d as usize).map(|v| to_point(v)).collect();
+                            points = vals.chunks_exact(d as usize).map(to_point).collect();
                             dim = d;
                             let tr = self.trimmed(r);
                             text_span = self.span(tr.start, tr.end);
@@ -1084,7 +1095,45 @@ fn lossy(b: &[u8]) -> String {
     }
 }
 
-fn parse_f64(tok: &[u8]) -> Option<f64> {
+/// Decimal text → f64. Coordinates are short plain decimals (`385421.123`), so the common case
+/// takes Clinger's fast path: an integer mantissa below 2^53 divided by an exact power of ten
+/// (≤ 10^22) is one correctly rounded IEEE operation, i.e. the same value std's parser gives.
+/// Everything else (exponents, long mantissas, inf/nan spellings) goes to `str::parse`.
+pub(crate) fn parse_f64(tok: &[u8]) -> Option<f64> {
+    const POW10: [f64; 23] = [
+        1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15, 1e16, 1e17, 1e18,
+        1e19, 1e20, 1e21, 1e22,
+    ];
+    let (neg, digits) = match tok.first() {
+        Some(b'-') => (true, &tok[1..]),
+        Some(b'+') => (false, &tok[1..]),
+        _ => (false, tok),
+    };
+    let mut mant: u64 = 0;
+    let mut ndig = 0usize;
+    let mut frac = 0usize;
+    let mut seen_dot = false;
+    let mut ok = !digits.is_empty();
+    for &c in digits {
+        match c {
+            b'0'..=b'9' => {
+                mant = mant.wrapping_mul(10).wrapping_add((c - b'0') as u64);
+                ndig += 1;
+                if seen_dot {
+                    frac += 1;
+                }
+            }
+            b'.' if !seen_dot => seen_dot = true,
+            _ => {
+                ok = false;
+                break;
+            }
+        }
+    }
+    if ok && ndig > 0 && ndig <= 15 && frac <= 22 {
+        let v = mant as f64 / POW10[frac];
+        return Some(if neg { -v } else { v });
+    }
     std::str::from_utf8(tok).ok()?.parse::<f64>().ok()
 }
 
@@ -1345,4 +1394,35 @@ pub(crate) fn build_index(
         }
     }
     Ok(map)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::parse_f64;
+
+    #[test]
+    fn fast_float_path_agrees_with_std() {
+        let cases = [
+            "0", "1", "-0.0", "385421.123", "5729890.812", "0.1", "0.3", "123456789012345", "1234567890123456",
+            "0.000000000000000000001", "1e3", "-2.5E-3", "3333399999990.0", "17.854", "+4.25", ".5", "5.",
+        ];
+        for c in cases {
+            assert_eq!(parse_f64(c.as_bytes()), c.parse::<f64>().ok(), "{c}");
+        }
+        // Pseudo-random decimals with up to 15 significant digits.
+        let mut x: u64 = 0x9E3779B97F4A7C15;
+        for _ in 0..200_000 {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            let int = x % 10_000_000;
+            let frac = (x >> 24) % 100_000_000;
+            let digits = (x >> 56) as usize % 9;
+            let s = format!("{int}.{:0width$}", frac % 10u64.pow(digits as u32), width = digits);
+            assert_eq!(parse_f64(s.as_bytes()), s.parse::<f64>().ok(), "{s}");
+        }
+        for bad in ["", "-", ".", "abc", "1.2.3", "1,5", "nan"] {
+            assert_eq!(parse_f64(bad.as_bytes()).map(|v| v.is_finite()), bad.parse::<f64>().ok().map(|v| v.is_finite()), "{bad}");
+        }
+    }
 }
