@@ -38,7 +38,9 @@ enum Command {
     // One line per subcommand; keep alphabetical. Each `cmd::<name>` module has `Args` and `run`.
     /// Implicit surfaces by DSI on adaptive tetrahedral meshes.
     Implicit(cmd::implicit::Args),
+    Citygml2popa3d(cmd::citygml2popa3d::Args),
     Info(cmd::info::Args),
+    Obj2popa3d(cmd::obj2popa3d::Args),
     Validate(cmd::validate::Args),
 }
 
@@ -47,7 +49,9 @@ fn main() -> ExitCode {
     let config = Config { quiet: cli.quiet };
     let result = match cli.command {
         Command::Implicit(a) => cmd::implicit::run(a, &config),
+        Command::Citygml2popa3d(a) => cmd::citygml2popa3d::run(a, &config),
         Command::Info(a) => cmd::info::run(a, &config),
+        Command::Obj2popa3d(a) => cmd::obj2popa3d::run(a, &config),
         Command::Validate(a) => cmd::validate::run(a, &config),
     };
     match result {

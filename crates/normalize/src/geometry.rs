@@ -40,6 +40,10 @@ fn newell(pts: &[[f64; 3]]) -> Vector3<f64> {
 /// Computes planes, normals, parameters for the topology and builds the part's model. `origin` is
 /// the model's local origin (subtracted from every coordinate).
 pub fn build(soup: &Soup, topo: &Topo, tol: &Tolerances, origin: [f64; 3]) -> Result<Part, Rejection> {
+    build_depth(soup, topo, tol, origin, 0)
+}
+
+fn build_depth(soup: &Soup, topo: &Topo, tol: &Tolerances, origin: [f64; 3], depth: usize) -> Result<Part, Rejection> {
     let pts: Vec<[f64; 3]> =
         topo.points.iter().map(|p| [p[0] - origin[0], p[1] - origin[1], p[2] - origin[2]]).collect();
     let nf = topo.faces.len();
@@ -193,6 +197,41 @@ pub fn build(soup: &Soup, topo: &Topo, tol: &Tolerances, origin: [f64; 3]) -> Re
             }
             planes.push((c, d, first));
             start = end;
+        }
+    }
+    // GA01 repair (spec §7.4): nodes whose faces span fewer than 3 independent plane directions.
+    if depth < 4 {
+        let mut node_planes: Vec<Vec<usize>> = vec![Vec::new(); pts.len()];
+        for (fi, f) in topo.faces.iter().enumerate() {
+            for r in &f.rings {
+                for &n in r {
+                    if !node_planes[n].contains(&fplane[fi]) {
+                        node_planes[n].push(fplane[fi]);
+                    }
+                }
+            }
+        }
+        let deficient: Vec<usize> = (0..pts.len())
+            .filter(|&n| {
+                let vals: Vec<popa3d_model::geometry::PlaneValue> = node_planes[n]
+                    .iter()
+                    .map(|&p| {
+                        let c = cnormal[planes[p].0];
+                        popa3d_model::geometry::PlaneValue { n: [c.x, c.y, c.z], d: planes[p].1 }
+                    })
+                    .collect();
+                !node_planes[n].is_empty() && popa3d_model::geometry::normals_rank(&vals) < 3
+            })
+            .collect();
+        if !deficient.is_empty() {
+            let semantic: Vec<Option<String>> = topo.faces.iter().map(|f| soup.polygons[f.polygon].source.semantic.clone()).collect();
+            let mut t2 = topo.clone();
+            if crate::topology::repair(&mut t2, &deficient, &fplane, &semantic) {
+                let mut part = build_depth(soup, &t2, tol, origin, depth + 1)?;
+                // Report the soup as it was read.
+                part.counts.stages[0] = StageCounts::new("points", topo.soup_nodes, topo.soup_edges, topo.soup_faces, 0, 0, 0);
+                return Ok(part);
+            }
         }
     }
     // Order planes by their first face so ids follow the source order.

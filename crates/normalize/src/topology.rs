@@ -340,22 +340,7 @@ pub fn build(soup: &Soup, tol: &Tolerances, notices: &mut Vec<Notice>) -> Result
         }
     }
 
-    // Directed edges and half-edges.
-    let mut edge_ix: HashMap<(usize, usize), usize> = HashMap::new();
-    for (fi, f) in t.faces.iter().enumerate() {
-        for r in &f.rings {
-            for i in 0..r.len() {
-                let (a, b) = (r[i], r[(i + 1) % r.len()]);
-                let k = (a.min(b), a.max(b));
-                let e = *edge_ix.entry(k).or_insert_with(|| {
-                    t.edges.push((a, b));
-                    t.edges.len() - 1
-                });
-                let sign = if t.edges[e] == (a, b) { 1 } else { -1 };
-                t.half_edges.push((e, sign, fi));
-            }
-        }
-    }
+    rebuild_edges(&mut t);
     Ok(t)
 }
 
@@ -372,4 +357,186 @@ fn cycle_key(r: &[usize]) -> Vec<usize> {
     let fwd: Vec<usize> = (0..n).map(|i| r[(m + i) % n]).collect();
     let bwd: Vec<usize> = (0..n).map(|i| r[(m + n - i) % n]).collect();
     fwd.min(bwd)
+}
+
+/// (Re)builds directed edges and half-edges from the faces' rings: an edge takes the direction of
+/// its first use.
+pub fn rebuild_edges(t: &mut Topo) {
+    t.edges.clear();
+    t.half_edges.clear();
+    let mut edge_ix: HashMap<(usize, usize), usize> = HashMap::new();
+    for (fi, f) in t.faces.iter().enumerate() {
+        for r in &f.rings {
+            for i in 0..r.len() {
+                let (a, b) = (r[i], r[(i + 1) % r.len()]);
+                let k = (a.min(b), a.max(b));
+                let e = *edge_ix.entry(k).or_insert_with(|| {
+                    t.edges.push((a, b));
+                    t.edges.len() - 1
+                });
+                let sign = if t.edges[e] == (a, b) { 1 } else { -1 };
+                t.half_edges.push((e, sign, fi));
+            }
+        }
+    }
+}
+
+/// Repairs nodes that are not the intersection of three independent planes (GA01), the two typical
+/// cases of spec §7.4 / Fig. 6.3: an edge between two coplanar faces of the same semantic type and
+/// solids is deleted and the faces merged; a node left with only two neighbours on a straight line
+/// ("a face side split at a node with only 2 edges", TA01) is removed and its two edges merged.
+/// `deficient` are the nodes to repair, `fplane` the plane of each face, `semantic` the semantic
+/// type of each face. Returns whether anything changed. Removed nodes keep no popa3d node: their
+/// source vertices lie on the line of their neighbours.
+pub fn repair(t: &mut Topo, deficient: &[usize], fplane: &[usize], semantic: &[Option<String>]) -> bool {
+    let mut changed = false;
+    let def: std::collections::HashSet<usize> = deficient.iter().cloned().collect();
+    // 1. Merge coplanar faces across edges at deficient nodes.
+    let mut uses: HashMap<(usize, usize), Vec<usize>> = HashMap::new();
+    for (fi, f) in t.faces.iter().enumerate() {
+        for r in &f.rings {
+            for i in 0..r.len() {
+                let (a, b) = (r[i], r[(i + 1) % r.len()]);
+                uses.entry((a.min(b), a.max(b))).or_default().push(fi);
+            }
+        }
+    }
+    let mut parent: Vec<usize> = (0..t.faces.len()).collect();
+    fn find(p: &mut Vec<usize>, x: usize) -> usize {
+        let mut r = x;
+        while p[r] != r {
+            r = p[r];
+        }
+        p[x] = r;
+        r
+    }
+    let mut keys: Vec<&(usize, usize)> = uses.keys().collect();
+    keys.sort();
+    for k in keys {
+        let v = &uses[k];
+        if v.len() != 2 || !(def.contains(&k.0) || def.contains(&k.1)) {
+            continue;
+        }
+        let (f, g) = (v[0], v[1]);
+        if f == g || fplane[f] != fplane[g] || semantic[f] != semantic[g] {
+            continue;
+        }
+        if t.faces[f].back != t.faces[g].back || t.faces[f].front != t.faces[g].front {
+            continue;
+        }
+        let (rf, rg) = (find(&mut parent, f), find(&mut parent, g));
+        if rf != rg {
+            parent[rf.max(rg)] = rf.min(rg);
+            changed = true;
+        }
+    }
+    if changed {
+        let mut groups: HashMap<usize, Vec<usize>> = HashMap::new();
+        for f in 0..t.faces.len() {
+            let r = find(&mut parent, f);
+            groups.entry(r).or_default().push(f);
+        }
+        let mut new_faces = Vec::new();
+        for f in 0..t.faces.len() {
+            let g = match groups.get(&f) {
+                Some(g) => g,
+                None => continue, // not a group root
+            };
+            if g.len() == 1 {
+                new_faces.push(t.faces[f].clone());
+                continue;
+            }
+            // Directed boundary edges minus the internal ones (used in both directions).
+            let mut de: Vec<(usize, usize)> = Vec::new();
+            for &h in g {
+                for r in &t.faces[h].rings {
+                    for i in 0..r.len() {
+                        de.push((r[i], r[(i + 1) % r.len()]));
+                    }
+                }
+            }
+            let set: std::collections::HashSet<(usize, usize)> = de.iter().cloned().collect();
+            let mut rest: Vec<(usize, usize)> = de.into_iter().filter(|(a, b)| !set.contains(&(*b, *a))).collect();
+            rest.sort();
+            let mut rings = Vec::new();
+            while let Some(&(a0, b0)) = rest.first() {
+                rest.remove(0);
+                let mut ring = vec![a0];
+                let mut cur = b0;
+                while cur != a0 {
+                    ring.push(cur);
+                    match rest.iter().position(|(a, _)| *a == cur) {
+                        Some(i) => cur = rest.remove(i).1,
+                        None => break,
+                    }
+                }
+                if ring.len() >= 3 {
+                    rings.push(ring);
+                }
+            }
+            if rings.is_empty() {
+                continue;
+            }
+            // Outer ring first: the largest |Newell| area.
+            let area = |r: &Vec<usize>| {
+                let p: Vec<[f64; 3]> = r.iter().map(|&i| t.points[i]).collect();
+                let n = popa3d_model::topology::newell(&p);
+                (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt()
+            };
+            let imax = (0..rings.len()).max_by(|&a, &b| area(&rings[a]).total_cmp(&area(&rings[b]))).unwrap_or(0);
+            rings.swap(0, imax);
+            let mut nf = t.faces[f].clone();
+            nf.rings = rings;
+            new_faces.push(nf);
+        }
+        t.faces = new_faces;
+    }
+    // 2. Remove deficient nodes with exactly two neighbours.
+    let mut nb: HashMap<usize, std::collections::BTreeSet<usize>> = HashMap::new();
+    for f in &t.faces {
+        for r in &f.rings {
+            for i in 0..r.len() {
+                let (a, b) = (r[i], r[(i + 1) % r.len()]);
+                nb.entry(a).or_default().insert(b);
+                nb.entry(b).or_default().insert(a);
+            }
+        }
+    }
+    let removable: std::collections::HashSet<usize> =
+        deficient.iter().cloned().filter(|n| nb.get(n).is_some_and(|s| s.len() == 2)).collect();
+    if !removable.is_empty() {
+        for f in t.faces.iter_mut() {
+            for r in f.rings.iter_mut() {
+                let before = r.len();
+                r.retain(|n| !removable.contains(n));
+                if r.len() != before {
+                    changed = true;
+                }
+            }
+            f.rings.retain(|r| r.len() >= 3);
+        }
+        t.faces.retain(|f| !f.rings.is_empty());
+    }
+    if changed {
+        // Drop nodes no ring uses any more and renumber.
+        let mut map = vec![usize::MAX; t.points.len()];
+        let mut points = Vec::new();
+        let mut sources = Vec::new();
+        for f in t.faces.iter_mut() {
+            for r in f.rings.iter_mut() {
+                for n in r.iter_mut() {
+                    if map[*n] == usize::MAX {
+                        map[*n] = points.len();
+                        points.push(t.points[*n]);
+                        sources.push(t.node_sources[*n].clone());
+                    }
+                    *n = map[*n];
+                }
+            }
+        }
+        t.points = points;
+        t.node_sources = sources;
+        rebuild_edges(t);
+    }
+    changed
 }

@@ -17,6 +17,7 @@
 //! Element ids are dense per-type indices (`NodeId(5)` is `model.nodes[5]`), which makes MA01
 //! (uniqueness per type namespace) structural; the XML reader enforces density with a precise message.
 
+pub mod csv;
 pub mod geometry;
 pub mod ids;
 pub mod model;

@@ -1,0 +1,268 @@
+//! `geofit citygml2popa3d`: CityGML buildings → a normalized popa3d model with generated conditions
+//! (spec §3, §8.2 step 1 and step 5).
+
+use clap::Args as ClapArgs;
+use serde::Serialize;
+
+use crate::config::{write_json_report, Config, Input, Output};
+use crate::error::{CliError, CmdResult, Exit};
+use normalize::conditions::{self, ConditionCounts, ConditionOptions, Ranges};
+use normalize::{Counts, Notice, Rejection, Tolerances};
+use popa3d_model::{Popa3d, SourceDocument};
+
+const AFTER_HELP: &str = "\
+Example:
+  geofit citygml2popa3d FZK-Haus-LoD2.gml -o haus.popa3d --report haus.json
+  geofit citygml2popa3d tile.gml --id DENW39AL10003Yy0 | geofit adjust - -o adjusted.popa3d
+
+Each Building / BuildingPart with geometry becomes one closed solid: points within --snap become
+nodes, edges are shared through half-edges, every face gets a least-squares plane; parallel normals
+(within --normal-angle) and coplanar planes (within --plane-distance) are merged, so nodes are plane
+intersections. Conditions are generated as in the spec's CityGML use case: parallelism and
+orthogonality between normals within --parallel-angle / --orthogonal-angle, coplanarity (distance 0)
+between parallel planes of the same semantic type closer than --epsilon, wall-window distances kept
+at their source value even below --epsilon, unit-norm conditions, and weak identity observations of
+every plane distance and normal parameter (the soft datum).
+
+Coordinates are reduced to a local origin (the envelope centre, rounded to metres) written into the
+document. Every node keeps the polygon gml:id, ring and vertex index it came from.
+
+Buildings that cannot be converted (open shell, MultiSurface-only geometry that does not close,
+rings with < 3 distinct points, faces far from planar, nodes without 3 independent planes) are
+listed on stderr with rule and gml:id; the others are still converted and the exit code is 1.";
+
+#[derive(ClapArgs, Debug)]
+#[command(after_help = AFTER_HELP)]
+pub struct Args {
+    /// CityGML file (1.0, 2.0 or 3.0), `-` for stdin.
+    pub input: String,
+    /// Output popa3d document (stdout when missing or `-`).
+    #[arg(short, long)]
+    pub output: Option<String>,
+    /// Convert only the building(s) with this gml:id (repeatable).
+    #[arg(long = "id")]
+    pub ids: Vec<String>,
+    /// Highest LoD to read (the best solid ≤ this LoD is used).
+    #[arg(long, default_value_t = 4)]
+    pub lod: u8,
+    /// Snap tolerance: points closer than this are one node (m).
+    #[arg(long, default_value_t = 0.001)]
+    pub snap: f64,
+    /// Reject faces whose vertices lie further than this from their best-fitting plane (m).
+    #[arg(long, default_value_t = 0.1)]
+    pub planarity: f64,
+    /// Merge normals within this angle into one normal object (degrees).
+    #[arg(long, default_value_t = 0.01)]
+    pub normal_angle: f64,
+    /// Merge planes on one normal whose distances differ by less than this (m).
+    #[arg(long, default_value_t = 0.001)]
+    pub plane_distance: f64,
+    /// Share parameters between orthogonal normals ((a,b,c) and (−b,a,c)); snaps near-zero components.
+    #[arg(long)]
+    pub share_orthogonal: bool,
+    /// Generate parallelism conditions for normals within this angle of parallel (degrees).
+    #[arg(long, default_value_t = 2.0)]
+    pub parallel_angle: f64,
+    /// Generate orthogonality conditions for normals within this angle of orthogonal (degrees).
+    #[arg(long, default_value_t = 2.0)]
+    pub orthogonal_angle: f64,
+    /// ε: parallel planes of the same semantic type closer than this become coplanar (m).
+    #[arg(long, default_value_t = 0.2)]
+    pub epsilon: f64,
+    /// σ of generated angle conditions (cosine units).
+    #[arg(long, default_value_t = 1e-4)]
+    pub sigma_angle: f64,
+    /// σ of coplanarity and wall-window distances (m).
+    #[arg(long, default_value_t = 0.001)]
+    pub sigma_distance: f64,
+    /// σ of the identity observations of plane distances (soft datum, m).
+    #[arg(long, default_value_t = 0.1)]
+    pub sigma_identity_d: f64,
+    /// σ of the identity observations of normal parameters (soft datum).
+    #[arg(long, default_value_t = 0.05)]
+    pub sigma_identity_param: f64,
+    /// σ of unit-norm pseudo-observations; without it they are restrictions.
+    #[arg(long)]
+    pub sigma_norm: Option<f64>,
+    /// Write no conditions (topology and geometry only).
+    #[arg(long)]
+    pub no_conditions: bool,
+    /// Write a JSON report (counts per building, conditions, rejections) to this path (`-` = stdout).
+    #[arg(long)]
+    pub report: Option<String>,
+}
+
+#[derive(Serialize)]
+struct BuildingReport {
+    id: String,
+    counts: Counts,
+    conditions: ConditionCounts,
+    notices: Vec<Notice>,
+}
+
+#[derive(Serialize)]
+struct Report {
+    input: String,
+    origin: [f64; 3],
+    tolerances: Tolerances,
+    conditions: ConditionOptions,
+    converted: usize,
+    rejected: Vec<Rejection>,
+    total: Counts,
+    buildings: Vec<BuildingReport>,
+}
+
+fn positive(name: &str, v: f64) -> Result<(), CliError> {
+    if v.is_finite() && v > 0.0 {
+        Ok(())
+    } else {
+        Err(CliError::usage(format!("--{name} must be a positive number, got {v}")))
+    }
+}
+
+pub fn run(args: Args, config: &Config) -> CmdResult {
+    for (n, v) in [
+        ("snap", args.snap),
+        ("planarity", args.planarity),
+        ("normal-angle", args.normal_angle),
+        ("plane-distance", args.plane_distance),
+        ("parallel-angle", args.parallel_angle),
+        ("orthogonal-angle", args.orthogonal_angle),
+        ("epsilon", args.epsilon),
+        ("sigma-angle", args.sigma_angle),
+        ("sigma-distance", args.sigma_distance),
+        ("sigma-identity-d", args.sigma_identity_d),
+        ("sigma-identity-param", args.sigma_identity_param),
+    ] {
+        positive(n, v)?;
+    }
+    if let Some(s) = args.sigma_norm {
+        positive("sigma-norm", s)?;
+    }
+    let input = Input::from_arg(&args.input);
+    let name = input.display_name();
+    let bytes = input.read_all()?;
+    let city = citygml_io::parse(&bytes).map_err(|e| CliError::unreadable(format!("{name}: {e}")))?;
+    let tol = Tolerances {
+        snap: args.snap,
+        planarity: args.planarity,
+        normal_angle_deg: args.normal_angle,
+        plane_distance: args.plane_distance,
+        share_orthogonal: args.share_orthogonal,
+    };
+    let copt = ConditionOptions {
+        parallel_deg: args.parallel_angle,
+        orthogonal_deg: args.orthogonal_angle,
+        epsilon: args.epsilon,
+        sigma_angle: args.sigma_angle,
+        sigma_distance: args.sigma_distance,
+        sigma_identity_d: args.sigma_identity_d,
+        sigma_identity_param: args.sigma_identity_param,
+        sigma_norm: args.sigma_norm,
+    };
+    let origin = normalize::citygml::local_origin(&city);
+    let mut model = Popa3d::new(origin);
+    model.srs_name = city.srs_name.clone();
+    model.source = Some(SourceDocument { format: "citygml".into(), file: name.clone() });
+
+    let mut units: Vec<&citygml_io::CityObject> =
+        normalize::citygml::buildings(&city).into_iter().filter(|b| normalize::citygml::has_own_geometry(b)).collect();
+    if !args.ids.is_empty() {
+        for id in &args.ids {
+            if !units.iter().any(|b| b.id.as_deref() == Some(id.as_str())) {
+                return Err(CliError::usage(format!("{name}: no building or building part with gml:id `{id}` and geometry")));
+            }
+        }
+        units.retain(|b| b.id.as_ref().is_some_and(|i| args.ids.contains(i)));
+    }
+    if units.is_empty() {
+        return Err(CliError::findings(format!("{name}: no Building or BuildingPart with geometry")));
+    }
+    let progress = config.progress("citygml2popa3d", units.len() as u64);
+    let mut rejected = Vec::new();
+    let mut reports = Vec::new();
+    for (i, b) in units.iter().enumerate() {
+        let bid = b.id.clone().unwrap_or_else(|| format!("Building@{}:{}", b.span.line, b.span.column));
+        progress.set(i as u64 + 1, &bid);
+        let soup = match normalize::citygml::building_soup(b, args.lod) {
+            Ok(s) => s,
+            Err(r) => {
+                rejected.push(with_building(r, &bid));
+                continue;
+            }
+        };
+        let before = (model.faces.len(), model.planes.len(), model.normals.len(), model.parameters.len());
+        match normalize::normalize_into(&mut model, &soup, &tol) {
+            Ok(n) => {
+                let ranges = Ranges {
+                    faces: before.0..model.faces.len(),
+                    planes: before.1..model.planes.len(),
+                    normals: before.2..model.normals.len(),
+                    parameters: before.3..model.parameters.len(),
+                };
+                let cc = if args.no_conditions { ConditionCounts::default() } else { conditions::semantic(&mut model, &ranges, &copt) };
+                reports.push(BuildingReport { id: bid, counts: n.counts, conditions: cc, notices: n.notices });
+            }
+            Err(r) => rejected.push(with_building(r, &bid)),
+        }
+    }
+    progress.finish(&format!("{} converted, {} rejected", reports.len(), rejected.len()));
+    let total = Counts::sum(&name, reports.iter().map(|r| &r.counts));
+    if !config.quiet {
+        eprint!("{}", total.table());
+        let mut cc = ConditionCounts::default();
+        for r in &reports {
+            cc.parallelism += r.conditions.parallelism;
+            cc.coplanarity += r.conditions.coplanarity;
+            cc.orthogonality += r.conditions.orthogonality;
+            cc.wall_window += r.conditions.wall_window;
+            cc.identity += r.conditions.identity;
+            cc.norm += r.conditions.norm;
+        }
+        eprintln!(
+            "conditions: parallelism {}, coplanarity {}, orthogonality {}, wall-window {}, identity {}, normal-norm {}",
+            cc.parallelism, cc.coplanarity, cc.orthogonality, cc.wall_window, cc.identity, cc.norm
+        );
+        for r in &reports {
+            for n in &r.notices {
+                eprintln!("geofit: notice: {}: {}: {}: {}", r.id, n.rule, n.element, n.message);
+            }
+        }
+    }
+    for r in &rejected {
+        eprintln!("geofit: rejected: {r}");
+    }
+    if !reports.is_empty() {
+        let out = Output::from_arg(args.output.as_deref());
+        out.write_with(|w| popa3d_model::write(&model, w).map_err(|e| CliError::internal(e.to_string())))?;
+    }
+    if let Some(p) = &args.report {
+        let report = Report {
+            input: name.clone(),
+            origin,
+            tolerances: tol,
+            conditions: copt,
+            converted: reports.len(),
+            rejected: rejected.clone(),
+            total,
+            buildings: reports,
+        };
+        write_json_report(p, &report)?;
+    }
+    if rejected.is_empty() {
+        Ok(Exit::Ok)
+    } else {
+        if units.len() == rejected.len() {
+            eprintln!("geofit: error: {name}: no building could be converted");
+        }
+        Ok(Exit::Findings)
+    }
+}
+
+/// Puts the building's gml:id in front of the element when the rejection names a polygon.
+fn with_building(mut r: Rejection, bid: &str) -> Rejection {
+    if r.element != bid {
+        r.element = format!("{bid}: {}", r.element);
+    }
+    r
+}

@@ -1,0 +1,168 @@
+//! `geofit obj2popa3d`: an OBJ sketch of rooms → a popa3d model with sketch priors, plus measured
+//! distances from a CSV (spec §8.1, the first use case).
+
+use clap::Args as ClapArgs;
+use serde::Serialize;
+
+use crate::config::{write_json_report, Config, Input, Output};
+use crate::error::{CliError, CmdResult, Exit};
+use normalize::conditions::{self, Ranges, SketchOptions};
+use normalize::{Counts, Notice, Tolerances};
+use popa3d_model::{Popa3d, SourceDocument};
+
+const AFTER_HELP: &str = "\
+Example:
+  geofit obj2popa3d floor.obj --distances tape.csv -o floor.popa3d
+  geofit obj2popa3d floor.obj | geofit adjust - -o floor-adjusted.popa3d
+
+The sketch is drawn by eye in any modeller (SketchUp, Blender, FreeCAD) and exported as OBJ; each
+object/group is a room (a closed solid); a wall drawn in both rooms becomes one shared face. It is
+normalized like CityGML input and gets the sketch priors of the spec (weak plane differences per
+normal, relative normal angles, unit norms).
+
+Distances CSV: `type,a,b,value,sigma` per line, `#` comments, optional header. type = `distance`
+(or DistanceFaceFace, DistanceFaceEdge, ...). a, b = `face:ID`, `edge:ID`, `node:ID` (popa3d ids),
+`v:N` (OBJ vertex N, 1-based), or `OBJECT/fK` (the K-th face of an OBJ object). Face-face,
+face-edge and edge-edge distances add their induced parallelism constraint.
+
+  # room width and height
+  distance,room1/f3,room1/f4,4.012,0.001
+  distance,room1/f1,room1/f2,2.745,0.001";
+
+#[derive(ClapArgs, Debug)]
+#[command(after_help = AFTER_HELP)]
+pub struct Args {
+    /// OBJ sketch, `-` for stdin.
+    pub input: String,
+    /// Output popa3d document (stdout when missing or `-`).
+    #[arg(short, long)]
+    pub output: Option<String>,
+    /// CSV of measured distances to attach.
+    #[arg(long, visible_alias = "add")]
+    pub distances: Option<String>,
+    /// Snap tolerance: points closer than this are one node (m).
+    #[arg(long, default_value_t = 0.001)]
+    pub snap: f64,
+    /// Reject faces whose vertices lie further than this from their best-fitting plane (m).
+    #[arg(long, default_value_t = 0.1)]
+    pub planarity: f64,
+    /// Merge normals within this angle into one normal object (degrees).
+    #[arg(long, default_value_t = 0.01)]
+    pub normal_angle: f64,
+    /// Merge planes on one normal whose distances differ by less than this (m).
+    #[arg(long, default_value_t = 0.001)]
+    pub plane_distance: f64,
+    /// Share parameters between orthogonal normals.
+    #[arg(long)]
+    pub share_orthogonal: bool,
+    /// σ of the sketch plane differences (m).
+    #[arg(long, default_value_t = 0.1)]
+    pub sigma_plane_difference: f64,
+    /// σ of the sketch relative normal angles (cosine units).
+    #[arg(long, default_value_t = 0.001)]
+    pub sigma_relative_angle: f64,
+    /// σ of the unit-norm pseudo-observations.
+    #[arg(long, default_value_t = 0.001)]
+    pub sigma_norm: f64,
+    /// σ of the angle constraints induced by distances (cosine units).
+    #[arg(long, default_value_t = 1e-4)]
+    pub sigma_induced: f64,
+    /// Write a JSON report (counts, priors, distances) to this path (`-` = stdout).
+    #[arg(long)]
+    pub report: Option<String>,
+}
+
+#[derive(Serialize)]
+struct Report {
+    input: String,
+    counts: Counts,
+    plane_differences: usize,
+    relative_angles: usize,
+    norms: usize,
+    distances: usize,
+    induced: usize,
+    notices: Vec<Notice>,
+}
+
+pub fn run(args: Args, config: &Config) -> CmdResult {
+    for (n, v) in [
+        ("snap", args.snap),
+        ("planarity", args.planarity),
+        ("normal-angle", args.normal_angle),
+        ("plane-distance", args.plane_distance),
+        ("sigma-plane-difference", args.sigma_plane_difference),
+        ("sigma-relative-angle", args.sigma_relative_angle),
+        ("sigma-norm", args.sigma_norm),
+        ("sigma-induced", args.sigma_induced),
+    ] {
+        if !(v.is_finite() && v > 0.0) {
+            return Err(CliError::usage(format!("--{n} must be a positive number, got {v}")));
+        }
+    }
+    let input = Input::from_arg(&args.input);
+    let name = input.display_name();
+    let bytes = input.read_all()?;
+    let soup = normalize::obj::read_sketch(&bytes, &name).map_err(|e| CliError::unreadable(e.to_string()))?;
+    let tol = Tolerances {
+        snap: args.snap,
+        planarity: args.planarity,
+        normal_angle_deg: args.normal_angle,
+        plane_distance: args.plane_distance,
+        share_orthogonal: args.share_orthogonal,
+    };
+    // Sketches are drawn in local coordinates; keep the origin at 0 unless they are far from it.
+    let mut origin = [0.0f64; 3];
+    let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+    for p in soup.polygons.iter().flat_map(|p| p.rings.iter().flatten()) {
+        for k in 0..3 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
+    }
+    for k in 0..3 {
+        let c = (lo[k] + hi[k]) / 2.0;
+        if c.abs() > 1000.0 {
+            origin[k] = c.floor();
+        }
+    }
+    let mut model = Popa3d::new(origin);
+    model.source = Some(SourceDocument { format: "obj".into(), file: name.clone() });
+    let n = normalize::normalize_into(&mut model, &soup, &tol).map_err(|r| CliError::findings(format!("{name}: rejected: {r}")))?;
+    let r = Ranges { faces: 0..model.faces.len(), planes: 0..model.planes.len(), normals: 0..model.normals.len(), parameters: 0..model.parameters.len() };
+    let so = SketchOptions { sigma_plane_difference: args.sigma_plane_difference, sigma_relative_angle: args.sigma_relative_angle, sigma_norm: args.sigma_norm };
+    let (nd, na, nn) = conditions::sketch_priors(&mut model, &r, &so);
+    let (mut ndist, mut nind) = (0, 0);
+    if let Some(csv) = &args.distances {
+        let ci = Input::from_arg(csv);
+        let text = String::from_utf8(ci.read_all()?).map_err(|_| CliError::unreadable(format!("{csv}: not UTF-8 text")))?;
+        let obs = popa3d_model::csv::parse_distances(&text, &model).map_err(|e| CliError::findings(format!("{csv}: {e}")))?;
+        for o in obs {
+            let ids = conditions::add_distance(&mut model, o, args.sigma_induced);
+            ndist += 1;
+            nind += ids.len() - 1;
+        }
+    }
+    if !config.quiet {
+        eprint!("{}", n.counts.table());
+        eprintln!("sketch priors: {nd} plane differences, {na} relative angles, {nn} unit norms; {ndist} distances, {nind} induced constraints");
+        for x in &n.notices {
+            eprintln!("geofit: notice: {}: {}: {}", x.rule, x.element, x.message);
+        }
+    }
+    let out = Output::from_arg(args.output.as_deref());
+    out.write_with(|w| popa3d_model::write(&model, w).map_err(|e| CliError::internal(e.to_string())))?;
+    if let Some(p) = &args.report {
+        let rep = Report {
+            input: name,
+            counts: n.counts,
+            plane_differences: nd,
+            relative_angles: na,
+            norms: nn,
+            distances: ndist,
+            induced: nind,
+            notices: n.notices,
+        };
+        write_json_report(p, &rep)?;
+    }
+    Ok(Exit::Ok)
+}
