@@ -7,8 +7,7 @@
 //! Points with identical (x, y) are merged into one vertex with the mean z (a Delaunay
 //! triangulation cannot hold both); this is reported in [`TinStats::merged_duplicates`].
 
-use rayon::prelude::*;
-use spade::{DelaunayTriangulation, HasPosition, Point2, PositionInTriangulation, Triangulation};
+use spade::{DelaunayTriangulation, HasPosition, Point2, Triangulation};
 
 use raster_io::{PointCloud, Raster};
 
@@ -81,43 +80,51 @@ pub fn tin_points(cloud: &PointCloud, grid: &GridSpec, opts: &TinOptions, crs: O
     let max2 = opts.max_edge.map(|m| m * m);
     let long = |a: Point2<f64>, b: Point2<f64>| max2.is_some_and(|m| (a.x - b.x).powi(2) + (a.y - b.y).powi(2) > m);
 
+    // Scan-convert every triangle over the cell centres in its bounding box (O(cells + triangles);
+    // locating each cell would walk the triangulation, slow for sparse survey lines). A centre on
+    // a shared edge is taken by the first triangle in spade's fixed face order; both give the
+    // same value up to rounding.
     let mut data = vec![f64::NAN; grid.width * grid.height];
-    data.par_chunks_mut(grid.width).enumerate().for_each(|(row, out)| {
-        for (col, v) in out.iter_mut().enumerate() {
-            let (x, y) = grid.cell_centre(col, row);
-            let p = Point2::new(x, y);
-            *v = match tri.locate(p) {
-                PositionInTriangulation::OnVertex(h) => tri.vertex(h).data().z,
-                PositionInTriangulation::OnEdge(e) => {
-                    let e = tri.directed_edge(e);
-                    let [a, b] = e.vertices();
-                    let (pa, pb) = (a.position(), b.position());
-                    if long(pa, pb) {
-                        f64::NAN
-                    } else {
-                        let len2 = (pb.x - pa.x).powi(2) + (pb.y - pa.y).powi(2);
-                        let t = ((p.x - pa.x) * (pb.x - pa.x) + (p.y - pa.y) * (pb.y - pa.y)) / len2;
-                        a.data().z + t * (b.data().z - a.data().z)
-                    }
-                }
-                PositionInTriangulation::OnFace(f) => {
-                    let f = tri.face(f);
-                    let [a, b, c] = f.vertices();
-                    let (pa, pb, pc) = (a.position(), b.position(), c.position());
-                    if long(pa, pb) || long(pb, pc) || long(pc, pa) {
-                        f64::NAN
-                    } else {
-                        let det = (pb.y - pc.y) * (pa.x - pc.x) + (pc.x - pb.x) * (pa.y - pc.y);
-                        let l1 = ((pb.y - pc.y) * (p.x - pc.x) + (pc.x - pb.x) * (p.y - pc.y)) / det;
-                        let l2 = ((pc.y - pa.y) * (p.x - pc.x) + (pa.x - pc.x) * (p.y - pc.y)) / det;
-                        let l3 = 1.0 - l1 - l2;
-                        l1 * a.data().z + l2 * b.data().z + l3 * c.data().z
-                    }
-                }
-                PositionInTriangulation::OutsideOfConvexHull(_) | PositionInTriangulation::NoTriangulation => f64::NAN,
-            };
+    for f in tri.inner_faces() {
+        let [a, b, c] = f.vertices();
+        let (pa, pb, pc) = (a.position(), b.position(), c.position());
+        if long(pa, pb) || long(pb, pc) || long(pc, pa) {
+            continue;
         }
-    });
+        let (za, zb, zc) = (a.data().z, b.data().z, c.data().z);
+        let det = (pb.y - pc.y) * (pa.x - pc.x) + (pc.x - pb.x) * (pa.y - pc.y);
+        if det == 0.0 {
+            continue;
+        }
+        // Pixel-space bounding box of the triangle (centre-based pixel coordinates).
+        let (ax, ay) = grid.world_to_pixel(pa.x, pa.y);
+        let (bx, by) = grid.world_to_pixel(pb.x, pb.y);
+        let (cx, cy) = grid.world_to_pixel(pc.x, pc.y);
+        let c0 = ax.min(bx).min(cx).ceil().max(0.0);
+        let c1 = ax.max(bx).max(cx).floor().min(grid.width as f64 - 1.0);
+        let r0 = ay.min(by).min(cy).ceil().max(0.0);
+        let r1 = ay.max(by).max(cy).floor().min(grid.height as f64 - 1.0);
+        if c0 > c1 || r0 > r1 {
+            continue;
+        }
+        // Relative slack so centres exactly on an edge are not lost to rounding.
+        let eps = -1e-12;
+        for row in r0 as usize..=r1 as usize {
+            for col in c0 as usize..=c1 as usize {
+                let i = row * grid.width + col;
+                if !data[i].is_nan() {
+                    continue;
+                }
+                let (x, y) = grid.cell_centre(col, row);
+                let l1 = ((pb.y - pc.y) * (x - pc.x) + (pc.x - pb.x) * (y - pc.y)) / det;
+                let l2 = ((pc.y - pa.y) * (x - pc.x) + (pa.x - pc.x) * (y - pc.y)) / det;
+                let l3 = 1.0 - l1 - l2;
+                if l1 >= eps && l2 >= eps && l3 >= eps {
+                    data[i] = l1 * za + l2 * zb + l3 * zc;
+                }
+            }
+        }
+    }
     Ok((Raster::from_values(grid.width, grid.height, grid.geotransform, crs, data)?, stats))
 }
 
