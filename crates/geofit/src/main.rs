@@ -38,6 +38,7 @@ enum Command {
     // One line per subcommand; keep alphabetical. Each `cmd::<name>` module has `Args` and `run`.
     /// Implicit surfaces by DSI on adaptive tetrahedral meshes.
     Implicit(cmd::implicit::Args),
+    Export(cmd::export::Args),
     Citygml2popa3d(cmd::citygml2popa3d::Args),
     Info(cmd::info::Args),
     Obj2popa3d(cmd::obj2popa3d::Args),
@@ -49,6 +50,7 @@ fn main() -> ExitCode {
     let config = Config { quiet: cli.quiet };
     let result = match cli.command {
         Command::Implicit(a) => cmd::implicit::run(a, &config),
+        Command::Export(a) => cmd::export::run(a, &config),
         Command::Citygml2popa3d(a) => cmd::citygml2popa3d::run(a, &config),
         Command::Info(a) => cmd::info::run(a, &config),
         Command::Obj2popa3d(a) => cmd::obj2popa3d::run(a, &config),

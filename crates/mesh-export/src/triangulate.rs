@@ -22,6 +22,22 @@ pub struct PolygonTriangles {
     pub triangles: Vec<[u32; 3]>,
     /// Unit Newell normal of the exterior ring (the triangles' orientation).
     pub normal: [f64; 3],
+    /// A point of the polygon's plane (the exterior ring's vertex mean); with `normal` it
+    /// defines the plane the triangulation was made in.
+    pub plane_point: [f64; 3],
+}
+
+impl PolygonTriangles {
+    /// Moves every vertex onto the polygon's plane (orthogonal projection). The triangles' total
+    /// area then equals the polygon's Newell (projected) area exactly, at the price of opening
+    /// gaps, as wide as the polygon's non-planarity, towards neighbours that share its vertices.
+    pub fn flatten(&mut self) {
+        let (n, c) = (self.normal, self.plane_point);
+        for p in &mut self.positions {
+            let d = dot(sub(*p, c), n);
+            *p = [p[0] - d * n[0], p[1] - d * n[1], p[2] - d * n[2]];
+        }
+    }
 }
 
 /// Why a polygon could not be triangulated.
@@ -219,6 +235,7 @@ pub fn triangulate_polygon(
         positions,
         triangles,
         normal: n,
+        plane_point: c,
     })
 }
 
@@ -371,6 +388,20 @@ mod tests {
         assert!(t.positions.iter().all(|p| ring.contains(p)));
         let nn = newell_normal(&ring);
         assert!((area(&t) - 0.5 * norm(nn)).abs() / area(&t) < 1e-5);
+    }
+
+    #[test]
+    fn flatten_gives_the_newell_area() {
+        let ring = [[0.0, 0.0, 10.0], [8.0, 0.0, 10.05], [8.0, 6.0, 13.0], [0.0, 6.0, 13.05]];
+        let mut t = triangulate_polygon(&ring, &[]).unwrap();
+        let kept = area(&t);
+        t.flatten();
+        let newell = 0.5 * norm(newell_normal(&ring));
+        assert!(kept > newell);
+        assert!((area(&t) - newell).abs() < 1e-9 * newell, "{} vs {newell}", area(&t));
+        for p in &t.positions {
+            assert!(dot(sub(*p, t.plane_point), t.normal).abs() < 1e-9);
+        }
     }
 
     #[test]

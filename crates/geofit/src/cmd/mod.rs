@@ -1,5 +1,6 @@
 //! One module per subcommand (alphabetical).
 
+pub mod export;
 pub mod implicit;
 pub mod citygml2popa3d;
 pub mod info;

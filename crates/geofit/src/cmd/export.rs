@@ -1,0 +1,520 @@
+//! `geofit export`: CityGML buildings as triangle meshes (glb, glTF, OBJ) for viewers and CAD.
+//!
+//! The CityGML → scene mapping lives here (which polygons, which node, which material); the
+//! triangulation and the file formats are `mesh_export`'s.
+
+use std::collections::HashSet;
+use std::path::{Path, PathBuf};
+
+use citygml_io::{CityModel, CityObject, Polygon, SurfaceType};
+use clap::{Args as ClapArgs, ValueEnum};
+use mesh_export::{GltfBuffer, Material, MeshNode, Scene};
+use serde::Serialize;
+
+use crate::config::{write_atomic, write_json_report, Config, Input, Output};
+use crate::error::{CliError, CmdResult, Exit};
+
+const EXAMPLE: &str = "\
+Example:
+  $ geofit export LoD2_32_332_5729_1_NW.gml -o tile.glb
+  $ geofit export FZK-Haus-LoD2.gml --lod 2 -o haus.obj        # also writes haus.mtl
+  $ geofit export tile.gml --t-srs EPSG:4647 --origin 32332000,5729000,0 -o tile.gltf
+  $ cat city.gml | geofit export - --format glb > city.glb
+
+What is exported: every top-level city object with polygons of the chosen LoD becomes one node
+(glTF node / OBJ object) named by its gml:id; BuildingParts become child nodes (OBJ objects
+`building/part`); boundary surfaces, openings, installations and rooms are merged into their
+building's node, one mesh (glTF primitive / OBJ `usemtl` run) per semantic surface type, whose
+material is named after it (WallSurface, RoofSurface, GroundSurface, ClosureSurface, Window, ...;
+`Unclassified` without semantics). A polygon referenced by xlink:href (the faces of an NRW
+lod2Solid) is exported once. Without --lod each object is exported at its highest LoD.
+
+Polygons (holes included) are triangulated in their own plane (Newell normal, constrained
+Delaunay); the triangles keep the original vertices, so neighbouring polygons still share
+their edges (closed shells stay closed), and the polygon's orientation (`orientation=\"-\"`
+flips it). Real data are not exactly planar (NRW tiles: up to 4 cm), so the mesh area is then
+slightly larger than the polygons' projected (Newell) area; --planar moves each polygon's
+vertices onto its plane instead (exact area, small gaps between neighbours). A polygon that cannot be triangulated (collinear, too few points)
+is skipped and listed: exit 1, the rest is still written.
+
+Coordinates: --origin auto (default) subtracts the bounding-box centre (x, y) and bottom (z),
+rounded to whole units; `none` keeps world coordinates; `x,y,z` gives it. The origin is recorded:
+glTF root node `extras.origin` (f64; world = local + origin), OBJ header `# origin: x y z`.
+glTF is Y-up: vertex data stay Z-up and the root node's matrix turns them. --t-srs reprojects x
+and y with PROJ from the file's CRS (or --s-srs); heights are kept.";
+
+/// Output format.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Format {
+    /// Binary glTF 2.0.
+    Glb,
+    /// glTF 2.0 JSON, buffer embedded as base64 (or in OUT.bin with --gltf-bin).
+    Gltf,
+    /// Wavefront OBJ, materials in OUT.mtl beside it.
+    Obj,
+}
+
+#[derive(ClapArgs, Debug)]
+#[command(about = "Export CityGML buildings as triangle meshes: glb, glTF or OBJ (+MTL)", after_help = EXAMPLE)]
+pub struct Args {
+    /// CityGML file (1.0, 2.0 or 3.0), or `-` for stdin.
+    pub input: String,
+    /// Output file (.glb, .gltf, .obj); `-` or none = stdout (then --format is required).
+    #[arg(short, long)]
+    pub output: Option<String>,
+    /// Output format; default from the output file's extension.
+    #[arg(long, value_enum)]
+    pub format: Option<Format>,
+    /// Level of detail to export (0-4); default: each object's highest.
+    #[arg(long, value_parser = clap::value_parser!(u8).range(0..=4))]
+    pub lod: Option<u8>,
+    /// Target CRS for x and y (anything PROJ accepts, e.g. EPSG:4647).
+    #[arg(long, value_name = "CRS")]
+    pub t_srs: Option<String>,
+    /// Source CRS, overriding the file's srsName (needed with --t-srs when the file has none).
+    #[arg(long, value_name = "CRS")]
+    pub s_srs: Option<String>,
+    /// Local origin: `auto`, `none` or `x,y,z` (subtracted from every coordinate, recorded in the file).
+    #[arg(long, default_value = "auto")]
+    pub origin: String,
+    /// Move each polygon's vertices onto its plane: the mesh area then equals the polygons'
+    /// (Newell) area exactly, but shared edges of non-planar polygons no longer meet.
+    #[arg(long)]
+    pub planar: bool,
+    /// glTF: write the binary buffer to OUT.bin beside OUT.gltf instead of embedding it.
+    #[arg(long)]
+    pub gltf_bin: bool,
+    /// Write a JSON report (objects, polygons, triangles, area, skipped polygons) to PATH (`-` = stdout).
+    #[arg(long, value_name = "PATH")]
+    pub report: Option<String>,
+}
+
+/// What `--report` writes.
+#[derive(Debug, Serialize)]
+pub struct ExportReport {
+    pub file: String,
+    pub format: Format,
+    /// `--lod` as given (null: each object's highest).
+    pub lod: Option<u8>,
+    pub crs: Option<String>,
+    pub origin: [f64; 3],
+    /// Top-level nodes written.
+    pub objects: usize,
+    pub polygons: usize,
+    pub triangles: usize,
+    /// Sum of the triangle areas (world units², before the origin shift).
+    pub area: f64,
+    /// Polygons left out, each `FILE:LINE:COL: what`.
+    pub skipped: Vec<String>,
+}
+
+/// The semantic materials, in a fixed order (the output does not depend on which come first).
+/// Colours follow common CityGML viewer conventions; closure surfaces and windows are translucent.
+fn materials() -> Vec<Material> {
+    let m = |name: &str, rgba: [f32; 4]| Material::new(name, rgba);
+    vec![
+        m("WallSurface", [0.86, 0.84, 0.78, 1.0]),
+        m("RoofSurface", [0.62, 0.18, 0.12, 1.0]),
+        m("GroundSurface", [0.35, 0.33, 0.30, 1.0]),
+        m("ClosureSurface", [0.70, 0.80, 0.90, 0.4]),
+        m("FloorSurface", [0.60, 0.50, 0.38, 1.0]),
+        m("CeilingSurface", [0.90, 0.90, 0.88, 1.0]),
+        m("InteriorWallSurface", [0.95, 0.93, 0.88, 1.0]),
+        m("OuterFloorSurface", [0.55, 0.53, 0.48, 1.0]),
+        m("OuterCeilingSurface", [0.78, 0.76, 0.72, 1.0]),
+        m("Window", [0.45, 0.70, 0.90, 0.6]),
+        m("Door", [0.45, 0.30, 0.16, 1.0]),
+        m("Unclassified", [0.75, 0.75, 0.75, 1.0]),
+    ]
+}
+
+fn material_index(s: Option<SurfaceType>) -> usize {
+    match s {
+        Some(SurfaceType::Wall) => 0,
+        Some(SurfaceType::Roof) => 1,
+        Some(SurfaceType::Ground) => 2,
+        Some(SurfaceType::Closure) => 3,
+        Some(SurfaceType::Floor) => 4,
+        Some(SurfaceType::Ceiling) => 5,
+        Some(SurfaceType::InteriorWall) => 6,
+        Some(SurfaceType::OuterFloor) => 7,
+        Some(SurfaceType::OuterCeiling) => 8,
+        Some(SurfaceType::Window) => 9,
+        Some(SurfaceType::Door) => 10,
+        None => 11,
+    }
+}
+
+/// A srsName as PROJ understands it. PROJ reads `EPSG:n`, OGC URNs and URLs itself; the AdV
+/// URNs of German state data (`urn:adv:crs:ETRS89_UTM32*DE_DHHN2016_NH*GCG2016`) are mapped to
+/// their horizontal EPSG code, and compound URNs to their first (horizontal) component, since
+/// only x and y are transformed.
+pub fn proj_crs(srs_name: &str) -> String {
+    let s = srs_name.trim();
+    if let Some(rest) = s.strip_prefix("urn:adv:crs:") {
+        let horizontal = rest.split('*').next().unwrap_or(rest);
+        let code = match horizontal {
+            "ETRS89_UTM32" => Some(25832),
+            "ETRS89_UTM33" => Some(25833),
+            "ETRS89_Lat-Lon" | "ETRS89_Lat-Lon-h" => Some(4258),
+            "DE_DHDN_3GK2" => Some(31466),
+            "DE_DHDN_3GK3" => Some(31467),
+            "DE_DHDN_3GK4" => Some(31468),
+            "DE_DHDN_3GK5" => Some(31469),
+            _ => None,
+        };
+        if let Some(c) = code {
+            return format!("EPSG:{c}");
+        }
+    }
+    // urn:ogc:def:crs,crs:EPSG::25832,crs:EPSG::5783 → its first component.
+    if let Some(rest) = s.strip_prefix("urn:ogc:def:crs,") {
+        if let Some(first) = rest.split(',').next() {
+            let first = first.strip_prefix("crs:").unwrap_or(first);
+            let parts: Vec<&str> = first.split(':').collect();
+            if parts.len() >= 2 && parts[0].eq_ignore_ascii_case("EPSG") {
+                if let Some(code) = parts.last() {
+                    return format!("EPSG:{code}");
+                }
+            }
+        }
+    }
+    // urn:ogc:def:crs:EPSG:6.12:3068 / urn:ogc:def:crs:EPSG::25832 → EPSG:code
+    if let Some(rest) = s.strip_prefix("urn:ogc:def:crs:EPSG:") {
+        if let Some(code) = rest.rsplit(':').next() {
+            if code.chars().all(|c| c.is_ascii_digit()) && !code.is_empty() {
+                return format!("EPSG:{code}");
+            }
+        }
+    }
+    s.to_string()
+}
+
+fn parse_origin(s: &str) -> Result<Option<[f64; 3]>, CliError> {
+    match s {
+        "auto" => Ok(None),
+        "none" => Ok(Some([0.0; 3])),
+        _ => {
+            let v: Vec<f64> = s
+                .split(',')
+                .map(|t| t.trim().parse::<f64>())
+                .collect::<Result<_, _>>()
+                .map_err(|_| CliError::usage(format!("--origin '{s}': expected auto, none or x,y,z")))?;
+            if v.len() != 3 || v.iter().any(|x| !x.is_finite()) {
+                return Err(CliError::usage(format!("--origin '{s}': expected auto, none or three finite numbers x,y,z")));
+            }
+            Ok(Some([v[0], v[1], v[2]]))
+        }
+    }
+}
+
+fn is_part(o: &CityObject) -> bool {
+    matches!(o.kind.as_str(), "BuildingPart" | "BridgePart" | "TunnelPart")
+}
+
+/// Highest LoD with polygons in this object and everything nested in it.
+fn max_lod(o: &CityObject) -> Option<u8> {
+    o.walk().iter().flat_map(|c| c.geometries.iter()).filter(|g| !g.polygons().is_empty()).filter_map(|g| g.lod).max()
+}
+
+/// Builds scenes from a model; keeps the dedup state and the findings.
+struct Builder<'a> {
+    name: &'a str,
+    /// Definition span starts of every polygon defined in an exported geometry.
+    defined: HashSet<usize>,
+    /// Definition span starts already written.
+    emitted: HashSet<usize>,
+    transform: Option<proj::Proj>,
+    skipped: Vec<String>,
+    polygons: usize,
+    planar: bool,
+}
+
+impl Builder<'_> {
+    fn polygon_label(p: &Polygon) -> String {
+        match &p.id {
+            Some(id) => format!("polygon gml:id=\"{id}\""),
+            None => "polygon".to_string(),
+        }
+    }
+
+    fn skip(&mut self, p: &Polygon, owner: &str, why: &str) {
+        self.skipped.push(format!(
+            "{}:{}:{}: {} of {owner} skipped: {why}",
+            self.name,
+            p.span.line,
+            p.span.column,
+            Self::polygon_label(p)
+        ));
+    }
+
+    fn reproject(&self, ring: &[[f64; 3]]) -> Result<Vec<[f64; 3]>, String> {
+        let Some(t) = &self.transform else { return Ok(ring.to_vec()) };
+        ring.iter()
+            .map(|p| {
+                let (x, y) = t.convert((p[0], p[1])).map_err(|e| format!("reprojection failed at ({}, {}): {e}", p[0], p[1]))?;
+                if !(x.is_finite() && y.is_finite()) {
+                    return Err(format!("reprojection of ({}, {}) gave no finite result", p[0], p[1]));
+                }
+                Ok([x, y, p[2]])
+            })
+            .collect()
+    }
+
+    fn add_polygon(&mut self, node: &mut MeshNode, p: &Polygon, owner: &str) {
+        let key = p.span.bytes.start;
+        if p.via_xlink.is_some() && self.defined.contains(&key) {
+            return; // exported where it is defined
+        }
+        if !self.emitted.insert(key) {
+            return;
+        }
+        let rings: Result<Vec<Vec<[f64; 3]>>, String> =
+            std::iter::once(&p.exterior).chain(p.interiors.iter()).map(|r| self.reproject(&r.points)).collect();
+        let rings = match rings {
+            Ok(r) => r,
+            Err(e) => return self.skip(p, owner, &e),
+        };
+        let holes: Vec<&[[f64; 3]]> = rings[1..].iter().map(|h| h.as_slice()).collect();
+        let mut t = match mesh_export::triangulate_polygon(&rings[0], &holes) {
+            Ok(t) => t,
+            Err(e) => return self.skip(p, owner, &e.to_string()),
+        };
+        if self.planar {
+            t.flatten();
+        }
+        self.polygons += 1;
+        let mesh = node.mesh_for(Some(material_index(p.semantic)));
+        let base = mesh.positions.len() as u32;
+        mesh.positions.extend_from_slice(&t.positions);
+        for tri in &t.triangles {
+            let [a, b, c] = tri.map(|i| base + i);
+            if p.reversed {
+                mesh.indices.extend_from_slice(&[a, c, b]);
+            } else {
+                mesh.indices.extend_from_slice(&[a, b, c]);
+            }
+        }
+    }
+
+    /// Adds the polygons of `o` and of its nested non-part objects into `node`, and returns the
+    /// nested parts (which become child nodes).
+    fn collect<'o>(&mut self, node: &mut MeshNode, o: &'o CityObject, lod: u8, owner: &str, parts: &mut Vec<&'o CityObject>) {
+        for g in o.geometries.iter().filter(|g| g.lod == Some(lod)) {
+            for p in g.polygons() {
+                self.add_polygon(node, p, owner);
+            }
+        }
+        for c in &o.children {
+            if is_part(c) {
+                parts.push(c);
+            } else {
+                self.collect(node, c, lod, owner, parts);
+            }
+        }
+    }
+
+    fn node(&mut self, o: &CityObject, lod: u8, index: usize) -> Option<MeshNode> {
+        let name = o.id.clone().unwrap_or_else(|| format!("{}_{index}", o.kind));
+        let owner = match &o.id {
+            Some(id) => format!("{} gml:id=\"{id}\"", o.kind),
+            None => o.kind.clone(),
+        };
+        let mut node = MeshNode::new(name);
+        let mut extras = serde_json::Map::new();
+        if let Some(id) = &o.id {
+            extras.insert("gml_id".into(), serde_json::json!(id));
+        }
+        extras.insert("type".into(), serde_json::json!(o.kind));
+        extras.insert("lod".into(), serde_json::json!(lod));
+        node.extras = Some(serde_json::Value::Object(extras));
+        let mut parts = Vec::new();
+        self.collect(&mut node, o, lod, &owner, &mut parts);
+        for (i, part) in parts.into_iter().enumerate() {
+            if let Some(child) = self.node(part, lod, i + 1) {
+                node.children.push(child);
+            }
+        }
+        (!node.meshes.is_empty() || !node.children.is_empty()).then_some(node)
+    }
+}
+
+/// The LoD each top-level object is exported at.
+fn object_lods(model: &CityModel, lod: Option<u8>) -> Vec<Option<u8>> {
+    model.objects.iter().map(|o| lod.or_else(|| max_lod(o))).collect()
+}
+
+pub fn run(args: Args, config: &Config) -> CmdResult {
+    let input = Input::from_arg(&args.input);
+    let name = input.display_name();
+    let output = Output::from_arg(args.output.as_deref());
+    let format = match (args.format, output.extension().as_deref()) {
+        (Some(f), _) => f,
+        (None, Some("glb")) => Format::Glb,
+        (None, Some("gltf")) => Format::Gltf,
+        (None, Some("obj")) => Format::Obj,
+        (None, Some(e)) => {
+            return Err(CliError::usage(format!("unknown output extension '.{e}': use .glb, .gltf or .obj, or --format")))
+        }
+        (None, None) => {
+            return Err(CliError::usage("writing to stdout: say which format with --format glb|gltf|obj"))
+        }
+    };
+    if args.gltf_bin && (format != Format::Gltf || output.path().is_none()) {
+        return Err(CliError::usage("--gltf-bin needs a .gltf output file (-o OUT.gltf)"));
+    }
+    let fixed_origin = parse_origin(&args.origin)?;
+
+    let src = input.read_all()?;
+    let progress = config.progress("export: read", 0);
+    let model = citygml_io::parse(&src).map_err(|e| CliError::unreadable(format!("{name}:{e}")))?;
+    drop(src);
+    progress.finish(&format!("{} top-level objects", model.objects.len()));
+
+    let source_crs = args.s_srs.clone().or_else(|| model.srs_name.clone());
+    let transform = match &args.t_srs {
+        None => None,
+        Some(t) => {
+            let Some(s) = &source_crs else {
+                return Err(CliError::usage(format!("{name} names no CRS (srsName); give the source CRS with --s-srs")));
+            };
+            let from = proj_crs(s);
+            let p = proj::Proj::new_known_crs(&from, t, None).map_err(|e| {
+                CliError::usage(format!("cannot transform from '{s}' (as '{from}') to '{t}': {e}"))
+            })?;
+            Some(p)
+        }
+    };
+
+    let lods = object_lods(&model, args.lod);
+    let mut b = Builder {
+        name: &name,
+        defined: HashSet::new(),
+        emitted: HashSet::new(),
+        transform,
+        skipped: Vec::new(),
+        polygons: 0,
+        planar: args.planar,
+    };
+    for (o, lod) in model.objects.iter().zip(&lods) {
+        let Some(lod) = *lod else { continue };
+        for c in o.walk() {
+            for g in c.geometries.iter().filter(|g| g.lod == Some(lod)) {
+                b.defined.extend(g.polygons().iter().filter(|p| p.via_xlink.is_none()).map(|p| p.span.bytes.start));
+            }
+        }
+    }
+
+    let mut scene = Scene {
+        materials: materials(),
+        crs: args.t_srs.clone().or(source_crs),
+        generator: Some(format!("geofit {}", env!("CARGO_PKG_VERSION"))),
+        ..Default::default()
+    };
+    let progress = config.progress("export: triangulate", model.objects.len() as u64);
+    for (i, (o, lod)) in model.objects.iter().zip(&lods).enumerate() {
+        if let Some(lod) = *lod {
+            if let Some(n) = b.node(o, lod, i + 1) {
+                scene.nodes.push(n);
+            }
+        }
+        progress.set(i as u64 + 1, "");
+    }
+    progress.finish(&format!("{} polygons, {} triangles", b.polygons, scene.triangle_count()));
+    scene.origin = fixed_origin.unwrap_or_else(|| scene.auto_origin());
+
+    let mut findings = std::mem::take(&mut b.skipped);
+    for u in &model.unresolved_xlinks {
+        findings.push(format!("{name}:{}:{}: xlink:href=\"{}\" points to nothing in the document", u.span.line, u.span.column, u.href));
+    }
+    if scene.nodes.is_empty() {
+        findings.push(match args.lod {
+            Some(l) => format!("{name}: no polygons of LoD {l} to export"),
+            None => format!("{name}: no polygons in any lod0..lod4 geometry to export"),
+        });
+    }
+
+    let export_err = |e: mesh_export::ExportError| match e {
+        mesh_export::ExportError::Io(e) => CliError::io_out(e),
+        e => CliError::internal(format!("export: {e}")),
+    };
+    match format {
+        Format::Glb => output.write_with(|w| mesh_export::write_glb(&scene, w).map_err(export_err))?,
+        Format::Gltf if args.gltf_bin => {
+            let path = output.path().expect("checked above");
+            let bin_path = path.with_extension("bin");
+            let uri = file_name(&bin_path)?;
+            let (mut json, mut bin) = (Vec::new(), Vec::new());
+            mesh_export::write_gltf(&scene, &mut json, GltfBuffer::External { uri: &uri, bin: &mut bin })
+                .map_err(export_err)?;
+            write_atomic(&bin_path, |w| w.write_all(&bin).map_err(CliError::io_out))?;
+            output.write_bytes(&json)?;
+        }
+        Format::Gltf => {
+            output.write_with(|w| mesh_export::write_gltf(&scene, w, GltfBuffer::Embedded).map_err(export_err))?
+        }
+        Format::Obj => match output.path() {
+            Some(path) => {
+                let mtl_path = path.with_extension("mtl");
+                let mtl_name = file_name(&mtl_path)?;
+                let (mut obj, mut mtl) = (Vec::new(), Vec::new());
+                mesh_export::write_obj(&scene, &mut obj, Some((&mtl_name, &mut mtl))).map_err(export_err)?;
+                write_atomic(&mtl_path, |w| w.write_all(&mtl).map_err(CliError::io_out))?;
+                output.write_bytes(&obj)?;
+            }
+            None => output.write_with(|w| mesh_export::write_obj(&scene, w, None).map_err(export_err))?,
+        },
+    }
+
+    if let Some(path) = &args.report {
+        let report = ExportReport {
+            file: name.clone(),
+            format,
+            lod: args.lod,
+            crs: scene.crs.clone(),
+            origin: scene.origin,
+            objects: scene.nodes.len(),
+            polygons: b.polygons,
+            triangles: scene.triangle_count(),
+            area: scene.area(),
+            skipped: findings.clone(),
+        };
+        write_json_report(path, &report)?;
+    }
+    for f in &findings {
+        eprintln!("{f}");
+    }
+    Ok(if findings.is_empty() { Exit::Ok } else { Exit::Findings })
+}
+
+fn file_name(p: &Path) -> Result<String, CliError> {
+    p.file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .ok_or_else(|| CliError::usage(format!("{}: not a file name", PathBuf::from(p).display())))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn crs_names_for_proj() {
+        assert_eq!(proj_crs("urn:adv:crs:ETRS89_UTM32*DE_DHHN2016_NH*GCG2016"), "EPSG:25832");
+        assert_eq!(proj_crs("urn:adv:crs:ETRS89_UTM32*DE_DHHN92_NH"), "EPSG:25832");
+        assert_eq!(proj_crs("urn:ogc:def:crs,crs:EPSG::25832,crs:EPSG::5783"), "EPSG:25832");
+        assert_eq!(proj_crs("urn:ogc:def:crs,crs:EPSG:6.12:3068,crs:EPSG:6.12:5783"), "EPSG:3068");
+        assert_eq!(proj_crs("urn:ogc:def:crs:EPSG::25832"), "EPSG:25832");
+        assert_eq!(proj_crs("EPSG:25832"), "EPSG:25832");
+        assert_eq!(proj_crs("#local-CRS-1"), "#local-CRS-1");
+    }
+
+    #[test]
+    fn origin_option() {
+        assert_eq!(parse_origin("auto").unwrap(), None);
+        assert_eq!(parse_origin("none").unwrap(), Some([0.0; 3]));
+        assert_eq!(parse_origin("1,2.5,-3").unwrap(), Some([1.0, 2.5, -3.0]));
+        assert!(parse_origin("1,2").is_err());
+        assert!(parse_origin("1,2,nan").is_err());
+    }
+}
