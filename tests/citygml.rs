@@ -146,12 +146,15 @@ fn expect_error(dir: &Path, name: &str, bytes: &[u8], exit: i32, line: usize, co
 
 #[test]
 fn bad_input_gives_one_line_with_position() {
-    let Some(f) = common::fixture("citygml/v2/b1_lod2_s.gml") else { return };
+    // An NRW tile: CityGML 1.0, one posList per ring.
+    let Some(f) = common::fixture("citygml/nrw/LoD2_32_324_5729_1_NW.gml") else { return };
     let good = std::fs::read_to_string(&f).unwrap();
     let dir = common::tempdir();
     let d = dir.path();
-    // Position of the first <gml:posList ...> (1-based line/column) in the unmodified text.
-    let at = good.find("<gml:posList").unwrap();
+    // Position of the first ring's <gml:posList ...> (1-based line/column) in the unmodified text
+    // (the tile's first posList is a terrain-intersection curve).
+    let first_ring = good.find("<gml:LinearRing").unwrap();
+    let at = first_ring + good[first_ring..].find("<gml:posList").unwrap();
     let line = good[..at].matches('\n').count() + 1;
     let col = at - good[..at].rfind('\n').map(|i| i + 1).unwrap_or(0) + 1;
 
@@ -179,7 +182,7 @@ fn bad_input_gives_one_line_with_position() {
     assert_eq!(common::code(&o), 3);
     assert!(String::from_utf8_lossy(&o.stderr).contains("is not closed"), "{}", String::from_utf8_lossy(&o.stderr));
 
-    let wrong = good.replace("\"http://www.opengis.net/citygml/2.0\"", "\"http://example.com/not-citygml\"");
+    let wrong = good.replace("\"http://www.opengis.net/citygml/1.0\"", "\"http://example.com/not-citygml\"");
     assert_ne!(wrong, good);
     let root_at = good.find("<core:CityModel").or_else(|| good.find("<CityModel")).unwrap();
     let rl = good[..root_at].matches('\n').count() + 1;

@@ -1,0 +1,199 @@
+//! Hand-written small documents for what the shared fixtures do not contain: gml:coordinates,
+//! 2D rings, OrientableSurface reversal, an XLink to a CompositeSurface, CityGML 3.0 nesting,
+//! opaque features, writer edge cases and read errors with their positions.
+
+use citygml_io::*;
+
+fn doc(version: &str, body: &str) -> String {
+    let (core, bldg, gml) = match version {
+        "3.0" => (
+            "http://www.opengis.net/citygml/3.0",
+            "http://www.opengis.net/citygml/building/3.0",
+            "http://www.opengis.net/gml/3.2",
+        ),
+        v => (
+            if v == "1.0" { "http://www.opengis.net/citygml/1.0" } else { "http://www.opengis.net/citygml/2.0" },
+            if v == "1.0" {
+                "http://www.opengis.net/citygml/building/1.0"
+            } else {
+                "http://www.opengis.net/citygml/building/2.0"
+            },
+            "http://www.opengis.net/gml",
+        ),
+    };
+    format!(
+        "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n<core:CityModel xmlns:core=\"{core}\" xmlns:bldg=\"{bldg}\" \
+         xmlns:con=\"http://www.opengis.net/citygml/construction/3.0\" xmlns:gen=\"http://www.opengis.net/citygml/generics/2.0\" \
+         xmlns:gml=\"{gml}\" xmlns:xlink=\"http://www.w3.org/1999/xlink\">\n{body}\n</core:CityModel>\n"
+    )
+}
+
+const SQUARE: &str = "0 0 0 1 0 0 1 1 0 0 1 0 0 0 0";
+
+#[test]
+fn coordinates_encoding_and_2d_rings() {
+    let body = r##"<core:cityObjectMember><bldg:Building gml:id="b"><bldg:lod0FootPrint><gml:MultiSurface>
+<gml:surfaceMember><gml:Polygon gml:id="p1"><gml:exterior><gml:LinearRing>
+<gml:coordinates>0,0,5 4,0,5 4,3,5 0,0,5</gml:coordinates></gml:LinearRing></gml:exterior></gml:Polygon></gml:surfaceMember>
+<gml:surfaceMember><gml:Polygon gml:id="p2"><gml:exterior><gml:LinearRing>
+<gml:posList srsDimension="2">10 10 12 10 12 12 10 10</gml:posList></gml:LinearRing></gml:exterior></gml:Polygon></gml:surfaceMember>
+</gml:MultiSurface></bldg:lod0FootPrint></bldg:Building></core:cityObjectMember>"##;
+    let src = doc("1.0", body);
+    let m = parse(src.as_bytes()).unwrap();
+    assert_eq!(m.version, CityGmlVersion::V1_0);
+    let polys = m.all_polygons();
+    assert_eq!(polys.len(), 2);
+    let r1 = &polys[0].exterior;
+    assert_eq!(r1.encoding, CoordEncoding::Coordinates);
+    assert_eq!(r1.points, vec![[0.0, 0.0, 5.0], [4.0, 0.0, 5.0], [4.0, 3.0, 5.0], [0.0, 0.0, 5.0]]);
+    assert_eq!(format_coordinates(r1, &[[1.5, 2.0, 3.0], [0.1, 0.2, 0.3]]), "1.5,2,3 0.1,0.2,0.3");
+    let r2 = &polys[1].exterior;
+    assert_eq!((r2.srs_dimension, r2.points[1]), (2, [12.0, 10.0, 0.0]));
+    assert_eq!(format_coordinates(r2, &[[1.0, 2.0, 99.0]]), "1 2");
+    assert_eq!(m.objects[0].geometries[0].lod, Some(0));
+    assert_eq!(m.envelope.min, [0.0, 0.0, 0.0]);
+    assert_eq!(m.envelope.max, [12.0, 12.0, 5.0]);
+    // Edit the coordinates text: the writer splices exactly the text span.
+    let edits = ring_edits(r1, &[[0.0, 0.0, 6.0], [4.0, 0.0, 6.0], [4.0, 3.0, 6.0], [0.0, 0.0, 6.0]]).unwrap();
+    let mut out = Vec::new();
+    write_with_edits(src.as_bytes(), &edits, &mut out).unwrap();
+    let expected = src.replace("0,0,5 4,0,5 4,3,5 0,0,5", "0,0,6 4,0,6 4,3,6 0,0,6");
+    assert_eq!(String::from_utf8(out).unwrap(), expected);
+}
+
+#[test]
+fn orientable_surface_and_xlink_to_composite_surface() {
+    // A 3.0 building: WallSurface under core:boundary holding a CompositeSurface; the solid
+    // references the composite (two polygons) and a reversed polygon through OrientableSurface.
+    let body = format!(
+        r##"<core:cityObjectMember><bldg:Building gml:id="b">
+<core:boundary><con:WallSurface gml:id="w"><core:lod2MultiSurface><gml:MultiSurface><gml:surfaceMember>
+<gml:CompositeSurface gml:id="cs"><gml:surfaceMember><gml:Polygon gml:id="a"><gml:exterior><gml:LinearRing><gml:posList>{SQUARE}</gml:posList></gml:LinearRing></gml:exterior></gml:Polygon></gml:surfaceMember>
+<gml:surfaceMember><gml:Polygon gml:id="c"><gml:exterior><gml:LinearRing><gml:posList>{SQUARE}</gml:posList></gml:LinearRing></gml:exterior></gml:Polygon></gml:surfaceMember></gml:CompositeSurface>
+</gml:surfaceMember></gml:MultiSurface></core:lod2MultiSurface></con:WallSurface></core:boundary>
+<core:boundary><con:RoofSurface gml:id="r"><core:lod2MultiSurface><gml:MultiSurface><gml:surfaceMember><gml:Polygon gml:id="roof"><gml:exterior><gml:LinearRing><gml:posList>{SQUARE}</gml:posList></gml:LinearRing></gml:exterior>
+<gml:interior><gml:LinearRing><gml:posList>0.2 0.2 0 0.2 0.4 0 0.4 0.4 0 0.2 0.2 0</gml:posList></gml:LinearRing></gml:interior></gml:Polygon></gml:surfaceMember></gml:MultiSurface></core:lod2MultiSurface></con:RoofSurface></core:boundary>
+<core:lod2Solid><gml:Solid gml:id="s"><gml:exterior><gml:Shell gml:id="sh">
+<gml:surfaceMember xlink:href="#cs"/>
+<gml:surfaceMember><gml:OrientableSurface orientation="-"><gml:baseSurface xlink:href="#roof"/></gml:OrientableSurface></gml:surfaceMember>
+</gml:Shell></gml:exterior></gml:Solid></core:lod2Solid>
+</bldg:Building></core:cityObjectMember>
+<core:cityObjectMember><gen:GenericCityObject gml:id="g"><gml:boundedBy><gml:Envelope srsName="EPSG:25832"><gml:lowerCorner>1 2 3</gml:lowerCorner><gml:upperCorner>4 5 6</gml:upperCorner></gml:Envelope></gml:boundedBy></gen:GenericCityObject></core:cityObjectMember>"##
+    );
+    let src = doc("3.0", &body);
+    let m = parse(src.as_bytes()).unwrap();
+    assert_eq!(m.version, CityGmlVersion::V3_0);
+    assert_eq!(m.objects.len(), 2);
+    let b = &m.objects[0];
+    assert_eq!(b.children.iter().map(|c| c.kind.as_str()).collect::<Vec<_>>(), ["WallSurface", "RoofSurface"]);
+    let solid = b.geometries.iter().find(|g| g.gml_type == "Solid").unwrap();
+    assert_eq!(solid.lod, Some(2));
+    let GeometryKind::Solid { exterior, interior } = &solid.kind else { panic!("not a solid") };
+    assert!(interior.is_empty());
+    assert_eq!(exterior.id.as_deref(), Some("sh"));
+    let ids: Vec<_> = exterior.polygons.iter().map(|p| p.id.as_deref().unwrap()).collect();
+    assert_eq!(ids, ["a", "c", "roof"]);
+    let sem: Vec<_> = exterior.polygons.iter().map(|p| p.semantic.unwrap()).collect();
+    assert_eq!(sem, [SurfaceType::Wall, SurfaceType::Wall, SurfaceType::Roof]);
+    assert_eq!(exterior.polygons[0].semantic_owner.as_deref(), Some("w"));
+    assert_eq!(exterior.polygons.iter().map(|p| p.reversed).collect::<Vec<_>>(), [false, false, true]);
+    assert!(exterior.polygons.iter().all(|p| p.via_xlink.is_some()));
+    assert_eq!(exterior.polygons[2].interiors.len(), 1);
+    // Definitions are counted once.
+    assert_eq!(m.all_polygons().len(), 3);
+    // The opaque feature keeps id, type and its declared envelope.
+    let g = &m.objects[1];
+    assert_eq!((g.id.as_deref(), g.kind.as_str(), g.module.as_deref()), (Some("g"), "GenericCityObject", Some("gen")));
+    assert_eq!(g.envelope.min, [1.0, 2.0, 3.0]);
+    assert!(m.unresolved_xlinks.is_empty());
+}
+
+#[test]
+fn missing_xlink_target_is_reported_not_fatal() {
+    let body = r##"<core:cityObjectMember><bldg:Building gml:id="b"><bldg:lod2MultiSurface><gml:MultiSurface>
+<gml:surfaceMember xlink:href="#nowhere"/></gml:MultiSurface></bldg:lod2MultiSurface></bldg:Building></core:cityObjectMember>"##;
+    let m = parse(doc("2.0", body).as_bytes()).unwrap();
+    assert_eq!(m.unresolved_xlinks.len(), 1);
+    assert_eq!(m.unresolved_xlinks[0].href, "#nowhere");
+    assert_eq!(m.unresolved_xlinks[0].span.line, 4);
+    assert!(m.all_polygons().is_empty());
+}
+
+fn err(src: &str) -> ReadError {
+    parse(src.as_bytes()).expect_err("should not parse")
+}
+
+#[test]
+fn read_errors_carry_position_and_message() {
+    assert_eq!(err("").message, "empty file (0 bytes), not a CityGML document");
+    let e = err("\u{1}\u{2}binary\u{0}");
+    assert_eq!((e.line, e.column), (1, 1));
+    assert!(e.message.contains("not an XML document"));
+    let e = err("<?xml version=\"1.0\"?>\n<foo:Bar xmlns:foo=\"urn:x\"/>");
+    assert_eq!((e.line, e.column), (2, 1));
+    assert!(e.message.contains("root element is <foo:Bar>"), "{}", e.message);
+    let ring = |pl: &str| {
+        doc(
+            "2.0",
+            &format!(
+                "<core:cityObjectMember><bldg:Building><bldg:lod1MultiSurface><gml:MultiSurface><gml:surfaceMember><gml:Polygon><gml:exterior>\n  <gml:LinearRing>{pl}</gml:LinearRing></gml:exterior></gml:Polygon></gml:surfaceMember></gml:MultiSurface></bldg:lod1MultiSurface></bldg:Building></core:cityObjectMember>"
+            ),
+        )
+    };
+    let e = err(&ring(""));
+    assert_eq!((e.line, e.column), (4, 3));
+    assert!(e.message.contains("no coordinates"));
+    let e = err(&ring("<gml:posList>0 0 0 1 1</gml:posList>"));
+    assert_eq!((e.line, e.column), (4, 19));
+    assert!(e.message.contains("5 values, not a multiple of srsDimension 3"), "{}", e.message);
+    let e = err(&ring("<gml:posList>0 0 0 1 x 1 0 0 0</gml:posList>"));
+    assert_eq!((e.line, e.column), (4, 32 + 8));
+    assert!(e.message.contains("'x' is not a number"));
+    let e = err(&ring("<gml:posList>0 0 0 1 NaN 1 0 0 0</gml:posList>"));
+    assert!(e.message.contains("non-finite"));
+    // A ring with 3 positions is readable (validators report QIE 101 on it).
+    let m = parse(ring("<gml:posList>0 0 0 1 0 0 0 0 0</gml:posList>").as_bytes()).unwrap();
+    assert_eq!(m.all_polygons()[0].exterior.points.len(), 3);
+    // Truncation anywhere is an error, never a panic.
+    let full = ring("<gml:posList>0 0 0 1 0 0 1 1 0 0 0 0</gml:posList>");
+    for cut in 1..full.len() - 2 {
+        if let Ok(m) = parse(&full.as_bytes()[..cut]) {
+            panic!("truncated at {cut} parsed: {m:?}");
+        }
+    }
+}
+
+#[test]
+fn writer_rejects_overlaps_and_applies_unsorted_edits() {
+    let src = b"0123456789";
+    let e = |a: usize, b: usize, r: &str| Edit { bytes: a..b, replacement: r.as_bytes().to_vec() };
+    let mut out = Vec::new();
+    write_with_edits(src, &[e(6, 8, "x"), e(1, 2, "ab"), e(9, 9, "!")], &mut out).unwrap();
+    assert_eq!(out, b"0ab2345x8!9");
+    assert!(matches!(write_with_edits(src, &[e(1, 5, ""), e(4, 6, "")], &mut Vec::new()), Err(WriteError::Overlap { .. })));
+    assert!(matches!(write_with_edits(src, &[e(5, 11, "")], &mut Vec::new()), Err(WriteError::OutOfBounds { .. })));
+}
+
+#[test]
+fn pos_rings_edit_each_pos_and_keep_markup() {
+    let body = r##"<core:cityObjectMember><bldg:Building><bldg:lod1MultiSurface><gml:MultiSurface><gml:surfaceMember><gml:Polygon><gml:exterior><gml:LinearRing>
+<gml:pos>0 0 0</gml:pos>
+<gml:pos> 1 0 0 </gml:pos>
+<gml:pos>1 1 0</gml:pos>
+<gml:pos>0 0 0</gml:pos>
+</gml:LinearRing></gml:exterior></gml:Polygon></gml:surfaceMember></gml:MultiSurface></bldg:lod1MultiSurface></bldg:Building></core:cityObjectMember>"##;
+    let src = doc("2.0", body);
+    let m = parse(src.as_bytes()).unwrap();
+    let r = &m.all_polygons()[0].exterior;
+    assert_eq!(r.encoding, CoordEncoding::Pos);
+    let new = [[0.0, 0.0, 0.5], [1.0, 0.0, 0.5], [1.0, 1.0, 0.5], [0.0, 0.0, 0.5]];
+    let mut out = Vec::new();
+    write_with_edits(src.as_bytes(), &ring_edits(r, &new).unwrap(), &mut out).unwrap();
+    let want = src
+        .replace("<gml:pos>0 0 0</gml:pos>", "<gml:pos>0 0 0.5</gml:pos>")
+        .replace("<gml:pos> 1 0 0 </gml:pos>", "<gml:pos> 1 0 0.5 </gml:pos>")
+        .replace("<gml:pos>1 1 0</gml:pos>", "<gml:pos>1 1 0.5</gml:pos>");
+    assert_eq!(String::from_utf8(out).unwrap(), want);
+    assert!(ring_edits(r, &new[..3]).is_err());
+    assert!(ring_edits(r, &[[f64::NAN, 0.0, 0.0]; 4]).is_err());
+}
