@@ -1,7 +1,7 @@
 //! Measurements from CSV (`geofit obj2popa3d --distances`, `geofit observe --add`).
 //!
 //! One measurement per line, comma-separated: `type,a,b,value,sigma`. `#` starts a comment line;
-//! a first line starting with `type` is a header. `type` is `distance` (the class follows from the
+//! a first non-comment line starting with `type,` is a header. `type` is `distance` (the class follows from the
 //! kinds of a and b) or a Table B.1 distance class name (`DistanceFaceFace`, ...). A primitive is
 //! `face:ID`, `edge:ID`, `node:ID` (popa3d ids), `v:N` (the node of OBJ vertex N, 1-based as in the
 //! OBJ file), or any other text = the face whose source polygon is that id (CityGML gml:id, or
@@ -46,10 +46,16 @@ pub fn parse_distances(text: &str, m: &Popa3d) -> Result<Vec<Observation>, CsvEr
         }
     }
     let mut out = Vec::new();
+    let mut first = true;
     for (ln, raw) in text.lines().enumerate() {
         let line = ln + 1;
         let t = raw.trim();
-        if t.is_empty() || t.starts_with('#') || (ln == 0 && t.to_ascii_lowercase().starts_with("type")) {
+        if t.is_empty() || t.starts_with('#') {
+            continue;
+        }
+        let header = first && t.to_ascii_lowercase().starts_with("type,");
+        first = false;
+        if header {
             continue;
         }
         // Field start columns for messages.

@@ -16,7 +16,8 @@ Example:
   geofit obj2popa3d floor.obj | geofit adjust - -o floor-adjusted.popa3d
 
 The sketch is drawn by eye in any modeller (SketchUp, Blender, FreeCAD) and exported as OBJ; each
-object/group is a room (a closed solid); a wall drawn in both rooms becomes one shared face. It is
+object/group is a room (a closed solid); a wall drawn in both rooms becomes one shared face, named
+after the room that comes first in the file (OBJECT/fK of that room). It is
 normalized like CityGML input and gets the sketch priors of the spec (weak plane differences per
 normal, relative normal angles, unit norms).
 
