@@ -62,3 +62,6 @@ pub fn check_surfaces(polys: &[PolygonInput], opts: &Options) -> Vec<Issue> {
 }
 
 pub use solid::check_solid;
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,186 @@
+//! Unit tests on hand-made rings, polygons and shells whose verdicts are known by construction.
+
+use crate::codes::ErrorCode;
+use crate::polygon::PolygonInput;
+use crate::{check_solid, check_surfaces, Options};
+
+type P = [f64; 3];
+
+fn poly(ext: &[P]) -> Vec<P> {
+    let mut v = ext.to_vec();
+    v.push(ext[0]);
+    v
+}
+
+fn codes_surfaces(rings: &[(Vec<P>, Vec<Vec<P>>)], opts: &Options) -> Vec<u16> {
+    let inp: Vec<PolygonInput> = rings
+        .iter()
+        .map(|(e, i)| PolygonInput { exterior: e, interiors: i.iter().map(|r| r.as_slice()).collect(), reversed: false })
+        .collect();
+    check_surfaces(&inp, opts).iter().map(|i| i.code.code()).collect()
+}
+
+fn square(z: f64) -> Vec<P> {
+    poly(&[[0., 0., z], [1., 0., z], [1., 1., z], [0., 1., z]])
+}
+
+/// The six faces of the unit cube [0,1]³, counter-clockwise seen from outside.
+fn cube() -> Vec<Vec<P>> {
+    vec![
+        poly(&[[0., 0., 0.], [0., 1., 0.], [1., 1., 0.], [1., 0., 0.]]),
+        poly(&[[0., 0., 1.], [1., 0., 1.], [1., 1., 1.], [0., 1., 1.]]),
+        poly(&[[0., 0., 0.], [1., 0., 0.], [1., 0., 1.], [0., 0., 1.]]),
+        poly(&[[1., 0., 0.], [1., 1., 0.], [1., 1., 1.], [1., 0., 1.]]),
+        poly(&[[1., 1., 0.], [0., 1., 0.], [0., 1., 1.], [1., 1., 1.]]),
+        poly(&[[0., 1., 0.], [0., 0., 0.], [0., 0., 1.], [0., 1., 1.]]),
+    ]
+}
+
+fn solid_codes(faces: &[Vec<P>], opts: &Options) -> Vec<u16> {
+    let inp: Vec<PolygonInput> = faces.iter().map(|f| PolygonInput { exterior: f, interiors: vec![], reversed: false }).collect();
+    check_solid(&[inp], opts).iter().map(|i| i.code.code()).collect()
+}
+
+#[test]
+fn codes_and_names_are_val3dity_s() {
+    assert_eq!(ErrorCode::from_code(307).unwrap().name(), "POLYGON_WRONG_ORIENTATION");
+    assert_eq!(ErrorCode::from_code(405).unwrap().name(), "WRONG_ORIENTATION_SHELL");
+    assert_eq!(ErrorCode::ALL.len(), 25);
+}
+
+#[test]
+fn ring_level() {
+    let o = Options::default();
+    assert_eq!(codes_surfaces(&[(square(0.), vec![])], &o), Vec::<u16>::new());
+    // 101: two distinct points
+    assert_eq!(codes_surfaces(&[(vec![[0., 0., 0.], [1., 0., 0.], [0., 0., 0.]], vec![])], &o), vec![101]);
+    // 102: a repeated point (within the snap tolerance)
+    let r = poly(&[[0., 0., 0.], [1., 0., 0.], [1., 0.0005, 0.], [1., 1., 0.], [0., 1., 0.]]);
+    assert_eq!(codes_surfaces(&[(r, vec![])], &o), vec![102]);
+    // 103: not closed
+    let r = vec![[0., 0., 0.], [1., 0., 0.], [1., 1., 0.], [0., 1., 0.]];
+    assert_eq!(codes_surfaces(&[(r, vec![])], &o), vec![103]);
+    // 104: bow-tie
+    let r = poly(&[[0., 0., 0.], [1., 1., 0.], [1., 0., 0.], [0., 1., 0.]]);
+    assert_eq!(codes_surfaces(&[(r, vec![])], &o), vec![104]);
+    // 104: collapsed triangle
+    let r = poly(&[[0., 0., 0.], [1., 0., 0.], [2., 0., 0.]]);
+    assert_eq!(codes_surfaces(&[(r, vec![])], &o), vec![104]);
+}
+
+#[test]
+fn polygon_level() {
+    let o = Options::default();
+    let hole = |pts: &[P]| poly(pts);
+    // a proper hole (clockwise) is valid
+    let h = hole(&[[0.25, 0.25, 0.], [0.25, 0.75, 0.], [0.75, 0.75, 0.], [0.75, 0.25, 0.]]);
+    assert_eq!(codes_surfaces(&[(square(0.), vec![h.clone()])], &o), Vec::<u16>::new());
+    // 208: same orientation as the exterior
+    let mut h2 = h.clone();
+    h2.reverse();
+    assert_eq!(codes_surfaces(&[(square(0.), vec![h2])], &o), vec![208]);
+    // 202: the same hole twice
+    assert_eq!(codes_surfaces(&[(square(0.), vec![h.clone(), h.clone()])], &o), vec![202]);
+    // 206: hole outside
+    let out = hole(&[[2., 2., 0.], [2., 3., 0.], [3., 3., 0.], [3., 2., 0.]]);
+    assert_eq!(codes_surfaces(&[(square(0.), vec![out])], &o), vec![206]);
+    // 201: hole crossing the exterior
+    let cross = hole(&[[0.5, 0.5, 0.], [0.5, 1.5, 0.], [1.5, 1.5, 0.], [1.5, 0.5, 0.]]);
+    assert_eq!(codes_surfaces(&[(square(0.), vec![cross])], &o), vec![201]);
+    // 207: hole inside another hole
+    let inner = hole(&[[0.4, 0.4, 0.], [0.4, 0.6, 0.], [0.6, 0.6, 0.], [0.6, 0.4, 0.]]);
+    assert_eq!(codes_surfaces(&[(square(0.), vec![h.clone(), inner])], &o), vec![207]);
+    // 205: a hole touching the exterior at two points cuts the polygon in two
+    let cut = hole(&[[0., 0.5, 0.], [0.5, 0.6, 0.], [1., 0.5, 0.], [0.5, 0.4, 0.]]);
+    assert_eq!(codes_surfaces(&[(square(0.), vec![cut])], &o), vec![205]);
+    // a hole touching the exterior at one point is valid
+    let touch = hole(&[[0., 0.5, 0.], [0.5, 0.6, 0.], [0.6, 0.5, 0.], [0.5, 0.4, 0.]]);
+    assert_eq!(codes_surfaces(&[(square(0.), vec![touch])], &o), Vec::<u16>::new());
+}
+
+#[test]
+fn planarity_distance_is_the_least_squares_residual() {
+    // one corner of the unit square lifted by h: the least-squares plane leaves residuals of ±h/4
+    let h = 0.1;
+    let r = poly(&[[0., 0., 0.], [1., 0., 0.], [1., 1., h], [0., 1., 0.]]);
+    let inp = [PolygonInput { exterior: &r, interiors: vec![], reversed: false }];
+    let is = check_surfaces(&inp, &Options { planarity_tol: 0.02, ..Options::default() });
+    assert_eq!(is.len(), 1);
+    assert_eq!(is[0].code.code(), 203);
+    let d = is[0].value.unwrap();
+    // the same square as QIE t203_1.gml, for which tests/scripts/validate_tolerance.py (numpy SVD)
+    // gives 0.02506179826000084; ordinary least squares in z would give h/4/sqrt(1+h²/2) = 0.024938
+    assert!((d - 0.02506179826000084).abs() < 1e-12, "{d}");
+    assert!(check_surfaces(&inp, &Options { planarity_tol: 0.03, ..Options::default() }).is_empty());
+}
+
+#[test]
+fn shell_level() {
+    let o = Options::default();
+    assert_eq!(solid_codes(&cube(), &o), Vec::<u16>::new());
+    // 302: a missing face
+    assert_eq!(solid_codes(&cube()[1..], &o), vec![302]);
+    // 301
+    assert_eq!(solid_codes(&cube()[..3], &o), vec![301]);
+    // 307: one face flipped
+    let mut c = cube();
+    c[1].reverse();
+    assert_eq!(solid_codes(&c, &o), vec![307]);
+    // 405: all faces flipped
+    let c: Vec<Vec<P>> = cube()
+        .into_iter()
+        .map(|mut f| {
+            f.reverse();
+            f
+        })
+        .collect();
+    assert_eq!(solid_codes(&c, &o), vec![405]);
+    // 305: two cubes apart
+    let mut two = cube();
+    two.extend(cube().into_iter().map(|f| f.into_iter().map(|p| [p[0] + 3., p[1], p[2]]).collect()));
+    assert_eq!(solid_codes(&two, &o), vec![305]);
+    // two overlapping cubes are two closed components: 305 comes first, as in val3dity
+    let mut two = cube();
+    two.extend(cube().into_iter().map(|f| f.into_iter().map(|p| [p[0] + 0.5, p[1] + 0.5, p[2] + 0.5]).collect()));
+    assert_eq!(solid_codes(&two, &o), vec![305]);
+    // 306: a closed, connected shell whose roof apex touches the floor (QIE i306_2)
+    let apex = [0.5, 0.5, 0.0];
+    let mut house = vec![cube()[0].clone()];
+    house.extend(cube()[2..].iter().cloned());
+    for (a, b) in [([0., 0., 1.], [1., 0., 1.]), ([1., 0., 1.], [1., 1., 1.]), ([1., 1., 1.], [0., 1., 1.]), ([0., 1., 1.], [0., 0., 1.])] {
+        house.push(poly(&[a, b, apex]));
+    }
+    let c = solid_codes(&house, &o);
+    assert!(!c.is_empty() && c.iter().all(|&c| c == 306), "{c:?}");
+}
+
+fn inp(s: &[Vec<P>]) -> Vec<PolygonInput<'_>> {
+    s.iter().map(|f| PolygonInput { exterior: f, interiors: vec![], reversed: false }).collect()
+}
+
+#[test]
+fn cavity_checks() {
+    let o = Options::default();
+    let ext: Vec<Vec<P>> = cube().into_iter().map(|f| f.into_iter().map(|p| [p[0] * 4., p[1] * 4., p[2] * 4.]).collect()).collect();
+    // a cavity is an inward-facing shell inside the exterior
+    let cav: Vec<Vec<P>> = cube()
+        .into_iter()
+        .map(|f| {
+            let mut f: Vec<P> = f.into_iter().map(|p| [p[0] + 1.5, p[1] + 1.5, p[2] + 1.5]).collect();
+            f.reverse();
+            f
+        })
+        .collect();
+    assert!(check_solid(&[inp(&ext), inp(&cav)], &o).is_empty());
+    // outside the exterior: 403
+    let far: Vec<Vec<P>> = cav.iter().map(|f| f.iter().map(|p| [p[0] + 10., p[1], p[2]]).collect()).collect();
+    let c: Vec<u16> = check_solid(&[inp(&ext), inp(&far)], &o).iter().map(|i| i.code.code()).collect();
+    assert_eq!(c, vec![403]);
+    // crossing the exterior: 401
+    let cross: Vec<Vec<P>> = cav.iter().map(|f| f.iter().map(|p| [p[0] + 2., p[1], p[2]]).collect()).collect();
+    let c: Vec<u16> = check_solid(&[inp(&ext), inp(&cross)], &o).iter().map(|i| i.code.code()).collect();
+    assert_eq!(c, vec![401]);
+    // the same cavity twice: 402
+    let c: Vec<u16> = check_solid(&[inp(&ext), inp(&cav), inp(&cav)], &o).iter().map(|i| i.code.code()).collect();
+    assert_eq!(c, vec![402]);
+}
