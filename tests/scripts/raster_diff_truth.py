@@ -12,13 +12,28 @@ import sys
 import numpy as np
 
 
+def read_asc_values(path):
+    """ESRI ASCII grid values with numpy alone (GDAL's AAIGrid reader rounds to Float32)."""
+    with open(path) as f:
+        lines = f.read().split("\n")
+    k = 0
+    while lines[k].split() and lines[k].split()[0].lower() in (
+            "ncols", "nrows", "xllcorner", "yllcorner", "xllcenter", "yllcenter", "cellsize", "nodata_value", "dx", "dy"):
+        k += 1
+    return np.array([float(v) for line in lines[k:] for v in line.split()], dtype=np.float64)
+
+
+
 def load(path):
     env = dict(os.environ, GDAL_PAM_ENABLED="NO")
     info = json.loads(subprocess.run(["gdalinfo", "-json", path], check=True, capture_output=True, env=env).stdout)
     nodata = info["bands"][0].get("noDataValue")
-    xyz = subprocess.run(["gdal_translate", "-q", "-of", "XYZ", "-co", "SIGNIFICANT_DIGITS=17", path, "/vsistdout/"],
-                         check=True, capture_output=True, env=env).stdout
-    v = np.loadtxt(xyz.decode().splitlines(), usecols=2, dtype=np.float64)
+    if path.lower().endswith(".asc"):
+        v = read_asc_values(path)
+    else:
+        xyz = subprocess.run(["gdal_translate", "-q", "-of", "XYZ", "-co", "SIGNIFICANT_DIGITS=17", path, "/vsistdout/"],
+                             check=True, capture_output=True, env=env).stdout
+        v = np.loadtxt(xyz.decode().splitlines(), usecols=2, dtype=np.float64)
     ok = np.isfinite(v)
     if nodata is not None:
         ok &= v != float(nodata)

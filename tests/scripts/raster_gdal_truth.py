@@ -11,6 +11,18 @@ import sys
 
 import numpy as np
 
+
+def read_asc_values(path):
+    """ESRI ASCII grid values with numpy alone (GDAL's AAIGrid reader rounds to Float32)."""
+    with open(path) as f:
+        lines = f.read().split("\n")
+    k = 0
+    while lines[k].split() and lines[k].split()[0].lower() in (
+            "ncols", "nrows", "xllcorner", "yllcorner", "xllcenter", "yllcenter", "cellsize", "nodata_value", "dx", "dy"):
+        k += 1
+    return np.array([float(v) for line in lines[k:] for v in line.split()], dtype=np.float64)
+
+
 path = sys.argv[1]
 env = dict(os.environ, GDAL_PAM_ENABLED="NO")
 info = json.loads(subprocess.run(["gdalinfo", "-json", path], check=True, capture_output=True, env=env).stdout)
@@ -19,11 +31,14 @@ w, h = info["size"]
 nodata = band.get("noDataValue")
 if isinstance(nodata, str):  # "nan"
     nodata = float(nodata)
-xyz = subprocess.run(
-    ["gdal_translate", "-q", "-of", "XYZ", "-co", "SIGNIFICANT_DIGITS=17", "-b", "1", path, "/vsistdout/"],
-    check=True, capture_output=True, env=env,
-).stdout
-vals = np.loadtxt(xyz.decode().splitlines(), usecols=2, dtype=np.float64)
+if path.lower().endswith(".asc"):
+    vals = read_asc_values(path)
+else:
+    xyz = subprocess.run(
+        ["gdal_translate", "-q", "-of", "XYZ", "-co", "SIGNIFICANT_DIGITS=17", "-b", "1", path, "/vsistdout/"],
+        check=True, capture_output=True, env=env,
+    ).stdout
+    vals = np.loadtxt(xyz.decode().splitlines(), usecols=2, dtype=np.float64)
 assert vals.size == w * h, (vals.size, w, h)
 # the band type's precision decides equality with the nodata marker
 if band["type"] == "Float32" and nodata is not None:

@@ -40,9 +40,13 @@ enum Command {
     Implicit(cmd::implicit::Args),
     Export(cmd::export::Args),
     Citygml2popa3d(cmd::citygml2popa3d::Args),
+    Diff(cmd::diff::Args),
     Info(cmd::info::Args),
     Obj2popa3d(cmd::obj2popa3d::Args),
+    Rasterize(cmd::rasterize::Args),
+    Unwarp(cmd::unwarp::Args),
     Validate(cmd::validate::Args),
+    Warp(cmd::warp::Args),
 }
 
 fn main() -> ExitCode {
@@ -52,9 +56,13 @@ fn main() -> ExitCode {
         Command::Implicit(a) => cmd::implicit::run(a, &config),
         Command::Export(a) => cmd::export::run(a, &config),
         Command::Citygml2popa3d(a) => cmd::citygml2popa3d::run(a, &config),
+        Command::Diff(a) => cmd::diff::run(a, &config),
         Command::Info(a) => cmd::info::run(a, &config),
         Command::Obj2popa3d(a) => cmd::obj2popa3d::run(a, &config),
+        Command::Rasterize(a) => cmd::rasterize::run(a, &config),
+        Command::Unwarp(a) => cmd::unwarp::run(a, &config),
         Command::Validate(a) => cmd::validate::run(a, &config),
+        Command::Warp(a) => cmd::warp::run(a, &config),
     };
     match result {
         Ok(exit) => exit.into(),

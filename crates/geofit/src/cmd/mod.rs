@@ -1,8 +1,12 @@
 //! One module per subcommand (alphabetical).
 
+pub mod diff;
 pub mod export;
 pub mod implicit;
 pub mod citygml2popa3d;
 pub mod info;
 pub mod obj2popa3d;
+pub mod rasterize;
+pub mod unwarp;
 pub mod validate;
+pub mod warp;
