@@ -77,13 +77,17 @@ pub enum CoordEncoding {
 
 /// A closed linear ring. `points` keeps the closing point as written in the file
 /// (first == last for valid rings); `text_span` is the byte span of the coordinate text.
+/// The reader keeps rings exactly as written, also invalid ones (fewer than 4 positions, not
+/// closed): reporting them is the validator's job (QIE 101/103), not a read error.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Ring {
     pub id: Option<String>,
     pub points: Vec<Point3>,
     pub srs_dimension: u8,
     pub encoding: CoordEncoding,
-    /// Span of the `gml:posList`/`gml:coordinates` text, or of the first..last `gml:pos` text.
+    /// Span of the `gml:posList`/`gml:coordinates` text, or of the first..last `gml:pos` text
+    /// (leading/trailing whitespace excluded, so an edit keeps the indentation). Use
+    /// [`crate::ring_edits`] to build the edits that replace the coordinates.
     pub text_span: SourceSpan,
     /// For `CoordEncoding::Pos`: the text span of each `gml:pos`.
     pub pos_spans: Vec<SourceSpan>,
@@ -152,11 +156,15 @@ pub struct Polygon {
     pub id: Option<String>,
     pub exterior: Ring,
     pub interiors: Vec<Ring>,
-    /// Semantic type of the thematic surface that owns this polygon, if any.
+    /// Semantic type of the thematic surface that owns this polygon where it is DEFINED, if any
+    /// (a Solid face reached by XLink carries the type of the WallSurface/RoofSurface... that
+    /// defines it).
     pub semantic: Option<SurfaceType>,
     /// gml:id of the thematic surface / opening feature that owns this polygon, if any.
     pub semantic_owner: Option<String>,
     /// `-` orientation (`gml:OrientableSurface orientation="-"`) reverses the rings' sense.
+    /// `points` are always as written; a consumer that needs the effective orientation reverses
+    /// them when this is true (nested `-` orientations cancel out).
     pub reversed: bool,
     /// Span of the `gml:Polygon` element (where it is defined, not where it is referenced).
     pub span: SourceSpan,
@@ -178,7 +186,10 @@ pub struct Shell {
     pub polygons: Vec<Polygon>,
 }
 
-/// A geometry primitive or aggregate as found under a `lodN…` property.
+/// A geometry primitive or aggregate as found under a `lodN…` property. Polygons appear where
+/// the geometry lists them: a Solid whose faces are `xlink:href`s contains copies of the
+/// referenced polygons (`Polygon::via_xlink` is `Some`), the boundary surfaces that define them
+/// contain the originals. Use `CityObject::all_polygons` to see each polygon once.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub enum GeometryKind {
     /// MultiSurface / CompositeSurface / a single Polygon / TIN triangles: a set of polygons.
@@ -202,6 +213,8 @@ pub struct Geometry {
     pub gml_type: String,
     pub srs_name: Option<String>,
     pub kind: GeometryKind,
+    /// Span of the GML geometry element (`gml:Solid`, `gml:MultiSurface`, ...), or of the
+    /// property element when the whole geometry is an `xlink:href` (then `gml_type` is `xlink`).
     pub span: SourceSpan,
 }
 
@@ -230,12 +243,17 @@ pub struct CityObject {
     pub id: Option<String>,
     /// Local element name (`Building`, `BuildingPart`, `WallSurface`, `Window`, `TINRelief`, ...).
     pub kind: String,
-    /// Namespace prefix-independent module name (`bldg`, `dem`, `gen`, `core`, ...) when known.
+    /// Namespace prefix-independent module name (`bldg`, `dem`, `gen`, `core`, `con`, ...) from
+    /// the element's CityGML namespace (`other` for an unknown CityGML module, `None` outside
+    /// CityGML, e.g. an ADE).
     pub module: Option<String>,
     pub geometries: Vec<Geometry>,
     /// Nested city objects: parts, boundary surfaces, openings, rooms, installations.
     pub children: Vec<CityObject>,
+    /// Envelope of all coordinates of this object and its children; for an object without
+    /// geometry, its declared `gml:boundedBy` envelope (or empty).
     pub envelope: Envelope,
+    /// Span of the feature element (`<bldg:Building ...>` .. `</bldg:Building>`).
     pub span: SourceSpan,
 }
 
