@@ -916,20 +916,17 @@ impl<'a> Parser<'a> {
                             }
                             let d = c.attr(b"srsDimension").and_then(|v| parse_dim(&v)).or(self.dim_hint).unwrap_or(3);
                             let r = self.content(&c)?;
-                            let vals = self.numbers(r.clone(), "gml:posList")?;
-                            if vals.is_empty() {
+                            let (pts, nvals) = self.pos_list(r.clone(), d)?;
+                            if nvals == 0 {
                                 return Err(self.err(c.start, "empty gml:posList (missing coordinates)"));
                             }
-                            if vals.len() % d as usize != 0 {
+                            if nvals % d as usize != 0 {
                                 return Err(self.err(
                                     c.start,
-                                    format!(
-                                        "gml:posList has {} values, not a multiple of srsDimension {d}",
-                                        vals.len()
-                                    ),
+                                    format!("gml:posList has {nvals} values, not a multiple of srsDimension {d}"),
                                 ));
                             }
-                            points = vals.chunks_exact(d as usize).map(to_point).collect();
+                            points = pts;
                             dim = d;
                             let tr = self.trimmed(r);
                             text_span = self.span(tr.start, tr.end);
@@ -1006,6 +1003,39 @@ impl<'a> Parser<'a> {
             ));
         };
         Ok(Ring { id, points, srs_dimension: dim, encoding, text_span, pos_spans, span: self.span(t.start, end) })
+    }
+
+    /// A posList straight into points (no intermediate Vec<f64>): returns the complete
+    /// positions and the number of values read (a count that is not a multiple of `d` is the
+    /// caller's error to report).
+    fn pos_list(&self, r: Range<usize>, d: u8) -> Result<(Vec<Point3>, usize), ReadError> {
+        let mut pts = Vec::with_capacity((r.end - r.start) / (8 * d as usize) + 1);
+        let mut cur = [0.0f64; 3];
+        let mut k = 0usize;
+        let mut n = 0usize;
+        for (at, tok) in tokens(&self.src[r.clone()], r.start) {
+            let x = match parse_f64(tok) {
+                Some(x) if x.is_finite() => x,
+                Some(_) => return Err(self.err(at, format!("gml:posList: non-finite coordinate '{}'", lossy(tok)))),
+                None => {
+                    if tok.contains(&b'<') {
+                        return Err(self.err(at, "gml:posList: unexpected markup inside the coordinate text"));
+                    }
+                    return Err(self.err(at, format!("gml:posList: '{}' is not a number", lossy(tok))));
+                }
+            };
+            cur[k] = x;
+            k += 1;
+            n += 1;
+            if k == d as usize {
+                if d == 2 {
+                    cur[2] = 0.0;
+                }
+                pts.push(cur);
+                k = 0;
+            }
+        }
+        Ok((pts, n))
     }
 
     /// Whitespace-separated numbers of `src[r]`; a bad token is an error at its own position.
