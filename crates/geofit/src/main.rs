@@ -38,7 +38,9 @@ enum Command {
     // One line per subcommand; keep alphabetical. Each `cmd::<name>` module has `Args` and `run`.
     /// Implicit surfaces by DSI on adaptive tetrahedral meshes.
     Implicit(cmd::implicit::Args),
+    Eval(cmd::eval::Args),
     Export(cmd::export::Args),
+    Fit(cmd::fit::Args),
     Citygml2popa3d(cmd::citygml2popa3d::Args),
     Diff(cmd::diff::Args),
     Info(cmd::info::Args),
@@ -54,7 +56,9 @@ fn main() -> ExitCode {
     let config = Config { quiet: cli.quiet };
     let result = match cli.command {
         Command::Implicit(a) => cmd::implicit::run(a, &config),
+        Command::Eval(a) => cmd::eval::run(a, &config),
         Command::Export(a) => cmd::export::run(a, &config),
+        Command::Fit(a) => cmd::fit::run(a, &config),
         Command::Citygml2popa3d(a) => cmd::citygml2popa3d::run(a, &config),
         Command::Diff(a) => cmd::diff::run(a, &config),
         Command::Info(a) => cmd::info::run(a, &config),

@@ -13,7 +13,7 @@
 //! spacing is 1. The affine map to world coordinates is stored with the mesh ([`format::Georef`]).
 
 pub mod eval;
-// pub mod fit;
+pub mod fit;
 pub mod format;
 pub mod knots;
 pub mod mesh;

@@ -1,7 +1,9 @@
 //! One module per subcommand (alphabetical).
 
 pub mod diff;
+pub mod eval;
 pub mod export;
+pub mod fit;
 pub mod implicit;
 pub mod citygml2popa3d;
 pub mod info;

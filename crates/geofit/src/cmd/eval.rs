@@ -1,0 +1,139 @@
+//! `geofit eval`: evaluates a T-mesh's surface on a raster grid (spec §6.4 surface evaluation,
+//! §2.2 masking), on OpenCL or the CPU.
+
+use clap::Args as ClapArgs;
+
+use raster_io::Raster;
+use tspline::PbSpline;
+
+use super::fit::{read_tmesh_arg, select_device, tspline_err, Device};
+use super::rasterize::{read_raster_arg, write_raster_arg};
+use crate::config::Config;
+use crate::error::{CliError, CmdResult, Exit};
+
+const EXAMPLE: &str = "\
+Example:
+  $ geofit fit bathy.tif -o bathy.tmesh --max-error 0.5
+  $ geofit eval bathy.tmesh -o surface.tif            # the fitted raster's grid, masked by its data
+  $ geofit eval bathy.tmesh -o full.tif --no-mask     # also the holes and survey gaps
+  $ geofit eval bathy.tmesh -o on-b.tif --like other.tif --mask other.tif
+  $ geofit diff bathy.tif surface.tif --tolerance 0.5
+
+Without --like the grid is the one the mesh was fitted on (stored in the .tmesh with its data
+mask), cells without data stay nodata unless --no-mask; without a stored mask the grid covers the
+mesh domain at the parameter spacing. --like takes size, geotransform and CRS from a raster;
+--mask keeps only cells valid in a raster of the output's size. Outside the mesh domain: nodata.";
+
+#[derive(ClapArgs, Debug)]
+#[command(about = "Evaluate a T-mesh surface on a raster grid (GeoTIFF, netCDF, ASCII grid)", after_help = EXAMPLE)]
+pub struct Args {
+    /// T-mesh file (`-` = stdin).
+    pub mesh: String,
+    /// Output raster (format from the extension; `-` or none = GeoTIFF on stdout).
+    #[arg(short, long)]
+    pub output: Option<String>,
+    /// Take the output grid (size, geotransform, CRS) from this raster.
+    #[arg(long)]
+    pub like: Option<String>,
+    /// Keep only cells that have a value in this raster (same size as the output).
+    #[arg(long)]
+    pub mask: Option<String>,
+    /// Do not apply the data mask stored in the T-mesh.
+    #[arg(long)]
+    pub no_mask: bool,
+    /// Where the evaluation runs.
+    #[arg(long, value_enum, default_value_t = Device::Auto)]
+    pub device: Device,
+}
+
+pub fn run(args: Args, config: &Config) -> CmdResult {
+    let file = read_tmesh_arg(&args.mesh)?;
+    let g = &file.georef;
+    let crs = if g.crs.is_empty() { None } else { Some(g.crs.clone()) };
+    // Output grid and the parameter pair of each output cell.
+    let (mut out, st, stored_mask): (Raster, Vec<[f64; 2]>, Option<Vec<bool>>) = if let Some(like) = &args.like {
+        let (r, name) = read_raster_arg(like)?;
+        let gt = r.geotransform;
+        if gt[2] != 0.0 || gt[4] != 0.0 {
+            return Err(CliError::findings(format!("{name}: rotated rasters are not supported")));
+        }
+        let mut st = Vec::with_capacity(r.width * r.height);
+        for row in 0..r.height {
+            for col in 0..r.width {
+                let (x, y) = r.cell_centre(col, row);
+                let (s, t) = g.param(x, y);
+                st.push([s, t]);
+            }
+        }
+        let out = Raster::new_empty(r.width, r.height, gt, r.crs.clone().or(crs));
+        (out, st, None)
+    } else {
+        let (w, h, s0, t0) = match &file.mask {
+            Some(m) => (m.width, m.height, 0.0, 0.0),
+            None => {
+                let b = file.mesh.bounds();
+                let s0 = b.s_min.ceil();
+                let t0 = b.t_min.ceil();
+                ((b.s_max.floor() - s0) as usize + 1, (b.t_max.floor() - t0) as usize + 1, s0, t0)
+            }
+        };
+        if w.saturating_mul(h) > 2_000_000_000 {
+            return Err(CliError::usage(format!("{}: the output grid {w}×{h} is too large; pass --like", args.mesh)));
+        }
+        // North-up output: row r holds t = t0 + h − 1 − r.
+        let (x0, ytop) = g.world(s0, t0 + (h as f64 - 1.0));
+        let gt = Raster::geotransform_from_centres(x0, ytop, g.dx, -g.dy);
+        let mut st = Vec::with_capacity(w * h);
+        for row in 0..h {
+            for col in 0..w {
+                st.push([s0 + col as f64, t0 + (h - 1 - row) as f64]);
+            }
+        }
+        let mask = file.mask.as_ref().map(|m| {
+            let mut v = vec![false; w * h];
+            for row in 0..h {
+                for col in 0..w {
+                    v[row * w + col] = m.get(col, h - 1 - row);
+                }
+            }
+            v
+        });
+        (Raster::new_empty(w, h, gt, crs), st, mask)
+    };
+    let extra_mask = match &args.mask {
+        Some(m) => {
+            let (r, name) = read_raster_arg(m)?;
+            if r.width != out.width || r.height != out.height {
+                return Err(CliError::usage(format!(
+                    "--mask {name} is {}×{}, the output grid is {}×{}",
+                    r.width, r.height, out.width, out.height
+                )));
+            }
+            Some(r.valid)
+        }
+        None => None,
+    };
+    let ocl = select_device(args.device, config)?;
+    let pb = match &ocl {
+        Some(o) => o.build_pbspline(&file.mesh).map_err(|e| tspline_err(&args.mesh, e))?,
+        None => PbSpline::build(&file.mesh),
+    };
+    let z = match &ocl {
+        Some(o) => {
+            let sp = o.upload(&pb).map_err(|e| tspline_err(&args.mesh, e))?;
+            o.eval_points(&sp, &st).map_err(|e| tspline_err(&args.mesh, e))?
+        }
+        None => pb.eval_z(&st, true),
+    };
+    for (q, v) in z.into_iter().enumerate() {
+        let keep = v.is_finite()
+            && (args.no_mask || stored_mask.as_ref().map(|m| m[q]).unwrap_or(true))
+            && extra_mask.as_ref().map(|m| m[q]).unwrap_or(true);
+        if keep {
+            out.data[q] = v;
+            out.valid[q] = true;
+        }
+    }
+    write_raster_arg(&out, args.output.as_deref())?;
+    Ok(Exit::Ok)
+}

@@ -1,0 +1,277 @@
+//! `geofit fit`: raster → T-mesh by adaptive refinement and least squares or dragging
+//! (spec §4.1, Alg. 3). Also holds the helpers the other T-spline commands share
+//! (raster ↔ parameter layout, `--device` selection, error mapping).
+
+use clap::{Args as ClapArgs, ValueEnum};
+
+use raster_io::Raster;
+use tspline::fit::{Backend, FitOptions, IterationStats, Method, Samples, StopReason};
+use tspline::format::{DataMask, Georef, TMeshFile};
+use tspline::ocl_eval::OclEvaluator;
+use tspline::{Degree, TsplineError};
+
+use super::rasterize::read_raster_arg;
+use crate::config::{write_json_report, Config, Input, Output};
+use crate::error::{CliError, CmdResult, Exit};
+
+const EXAMPLE: &str = "\
+Example:
+  $ geofit fit bathy.tif -o bathy.tmesh --max-error 0.5 --degree 3 --report fit.json
+  geofit: fit
+  geofit:   iteration 0: 16 control points, max 12.3 m, RMS 3.1 m, 401233 cells over 0.5 m (0.2 s)
+  ...
+  geofit:   iteration 7: 5120 control points, max 0.49 m, RMS 0.08 m, 0 cells over 0.5 m (1.9 s)
+  geofit:   tolerance reached: every valid cell within 0.5 m
+
+The T-mesh starts as a few square cells covering the data plus 25 % overhang; every iteration
+fits the control-point heights (least squares over all valid cells, or dragging), evaluates the
+surface at every valid cell, and splits cells whose 3x3 probes or cells miss --max-error (rule 2
+and 1:2 balance repaired). The fit ends when every valid cell is within --max-error (exit 0), or
+with exit 1 and the error reached when --max-points, --max-iterations or the minimum cell size
+(one raster cell) stops it first. The output stores the data mask (and the CRS) for `geofit eval`.";
+
+/// `--device`: where dense evaluations run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Device {
+    /// OpenCL when a platform exists and the kernels build, otherwise the CPU (with a notice).
+    Auto,
+    /// OpenCL or fail.
+    Opencl,
+    /// Multi-threaded CPU (rayon).
+    Cpu,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum MethodArg {
+    Lsq,
+    Drag,
+}
+
+#[derive(ClapArgs, Debug)]
+#[command(about = "Fit a T-spline surface (T-mesh) to a raster within a maximum error", after_help = EXAMPLE)]
+pub struct Args {
+    /// Input raster (GeoTIFF, netCDF, ASCII grid, ...; `-` = stdin).
+    pub input: String,
+    /// Output T-mesh file (`-` or none = stdout).
+    #[arg(short, long)]
+    pub output: Option<String>,
+    /// Maximum |Δz| allowed at every valid raster cell (raster units).
+    #[arg(long, allow_negative_numbers = true)]
+    pub max_error: f64,
+    /// Polynomial degree (1 or 3).
+    #[arg(long, default_value_t = 3)]
+    pub degree: u32,
+    /// Geometry optimiser.
+    #[arg(long, value_enum, default_value_t = MethodArg::Lsq)]
+    pub method: MethodArg,
+    /// Fit the raster after the warp stored in it by `geofit warp` (indirect reduction).
+    #[arg(long)]
+    pub indirect: bool,
+    /// Stop before the mesh would exceed this many control points.
+    #[arg(long)]
+    pub max_points: Option<usize>,
+    /// Stop after this many refinement iterations.
+    #[arg(long, default_value_t = 100)]
+    pub max_iterations: usize,
+    /// Overhang of the initial mesh on every side, as a fraction of the data extent.
+    #[arg(long, default_value_t = 0.25)]
+    pub overhang: f64,
+    /// Where dense evaluations run.
+    #[arg(long, value_enum, default_value_t = Device::Auto)]
+    pub device: Device,
+    /// Write a JSON report (options, per-iteration table, stop reason) to this path.
+    #[arg(long)]
+    pub report: Option<String>,
+}
+
+/// One line per T-spline library error.
+pub fn tspline_err(what: &str, e: TsplineError) -> CliError {
+    match e {
+        TsplineError::Format { .. } | TsplineError::InvalidMesh(_) => CliError::unreadable(format!("{what}: {e}")),
+        TsplineError::Fit(_) => CliError::findings(format!("{what}: {e}")),
+        TsplineError::OpenCl(_) | TsplineError::Io(_) => CliError::internal(format!("{what}: {e}")),
+    }
+}
+
+/// The OpenCL evaluator per `--device`: `auto` falls back to the CPU with one notice when no
+/// platform exists (checked first, never a panic) or the kernels do not build.
+pub fn select_device(device: Device, config: &Config) -> Result<Option<OclEvaluator>, CliError> {
+    match device {
+        Device::Cpu => Ok(None),
+        Device::Opencl => OclEvaluator::new().map(Some).map_err(|e| CliError::internal(format!("--device opencl: {e}"))),
+        Device::Auto => {
+            let has_platform = ocl::core::get_platform_ids().map(|v| !v.is_empty()).unwrap_or(false);
+            if !has_platform {
+                config.notice("notice: no OpenCL platform found; evaluating on the CPU");
+                return Ok(None);
+            }
+            match OclEvaluator::new() {
+                Ok(o) => Ok(Some(o)),
+                Err(e) => {
+                    config.notice(&format!("notice: {e}; evaluating on the CPU"));
+                    Ok(None)
+                }
+            }
+        }
+    }
+}
+
+/// Raster → parameter layout (A21): s = column, t = row counted from the bottom, the affine map
+/// to world coordinates in the georeference. Needs an axis-aligned raster.
+pub fn samples_from_raster(r: &Raster, name: &str) -> Result<(Samples, Georef, DataMask), CliError> {
+    let gt = r.geotransform;
+    if gt[2] != 0.0 || gt[4] != 0.0 {
+        return Err(CliError::findings(format!("{name}: rotated rasters are not supported (geotransform {gt:?})")));
+    }
+    let (w, h) = (r.width, r.height);
+    let north_up = gt[5] < 0.0;
+    let mut z = vec![f64::NAN; w * h];
+    for row in 0..h {
+        let j = if north_up { h - 1 - row } else { row };
+        for i in 0..w {
+            let q = row * w + i;
+            if r.valid[q] {
+                z[j * w + i] = r.data[q];
+            }
+        }
+    }
+    let x0 = gt[0] + 0.5 * gt[1];
+    let (y0, dy) = if north_up { (gt[3] + (h as f64 - 0.5) * gt[5], -gt[5]) } else { (gt[3] + 0.5 * gt[5], gt[5]) };
+    let mask = DataMask { width: w, height: h, bits: z.iter().map(|v| !v.is_nan()).collect() };
+    Ok((Samples { width: w, height: h, z }, Georef { x0, y0, dx: gt[1], dy, crs: r.crs.clone().unwrap_or_default() }, mask))
+}
+
+/// Reads a `.tmesh` argument.
+pub fn read_tmesh_arg(arg: &str) -> Result<TMeshFile, CliError> {
+    let input = Input::from_arg(arg);
+    let bytes = input.read_all()?;
+    tspline::format::read(&bytes).map_err(|e| CliError::unreadable(format!("{}: {e}", input.display_name())))
+}
+
+#[derive(serde::Serialize)]
+struct Report<'a> {
+    input: &'a str,
+    width: usize,
+    height: usize,
+    valid_cells: usize,
+    degree: u32,
+    method: Method,
+    max_error: f64,
+    max_points: Option<usize>,
+    device: String,
+    stop: &'a StopReason,
+    control_points: usize,
+    cells: usize,
+    max_abs_error: f64,
+    compression_ratio: f64,
+    iterations: &'a [IterationStats],
+    seconds: f64,
+}
+
+pub fn run(args: Args, config: &Config) -> CmdResult {
+    if !(args.max_error > 0.0 && args.max_error.is_finite()) {
+        return Err(CliError::usage(format!("--max-error must be a positive number, got {}", args.max_error)));
+    }
+    let degree = Degree::from_u32(args.degree).ok_or_else(|| CliError::usage(format!("--degree must be 1 or 3, got {}", args.degree)))?;
+    if !(args.overhang >= 0.0 && args.overhang <= 4.0) {
+        return Err(CliError::usage(format!("--overhang must be within 0..4, got {}", args.overhang)));
+    }
+    if args.indirect {
+        return Err(CliError::usage(
+            "--indirect is not available yet: run `geofit warp` first and fit its output directly (the warp field is then not stored in the T-mesh)",
+        ));
+    }
+    let t_start = std::time::Instant::now();
+    let (raster, name) = read_raster_arg(&args.input)?;
+    let (samples, georef, mask) = samples_from_raster(&raster, &name)?;
+    let valid = samples.valid_count();
+    if valid == 0 {
+        return Err(CliError::findings(format!("{name}: the raster has no valid cell")));
+    }
+    // Tolerance below the data's own precision: integer-valued data resolve 1 unit at best.
+    let integers = samples.z.iter().filter(|v| !v.is_nan()).all(|v| v.fract() == 0.0);
+    if integers && args.max_error < 0.5 {
+        config.notice(&format!(
+            "warning: {name} holds integer values (precision 1); --max-error {} is below the data's own precision and forces interpolation of every cell",
+            args.max_error
+        ));
+    }
+    let ocl = select_device(args.device, config)?;
+    let backend = match &ocl {
+        Some(o) => Backend::OpenCl(o),
+        None => Backend::Cpu,
+    };
+    let device_name = ocl.as_ref().map(|o| format!("opencl: {}", o.device_name())).unwrap_or_else(|| "cpu (rayon)".into());
+    let mut opts = FitOptions::new(degree, args.max_error);
+    opts.max_points = args.max_points;
+    opts.max_iterations = args.max_iterations;
+    opts.overhang = args.overhang;
+    opts.method = match args.method {
+        MethodArg::Lsq => Method::Lsq,
+        MethodArg::Drag => Method::Drag,
+    };
+    let progress = config.progress("fit", args.max_iterations as u64);
+    let e = args.max_error;
+    let mut cb = |st: &IterationStats| {
+        progress.set(
+            st.iteration as u64,
+            &format!(
+                "iteration {}: {} control points, max {:.4}, mean {:.4}, RMS {:.4}, {} cells over {} ({:.2} s)",
+                st.iteration, st.control_points, st.error.max, st.error.mean, st.error.rms, st.error.over_tolerance, e, st.seconds
+            ),
+        );
+    };
+    let result = tspline::fit::fit(&samples, &opts, &backend, &mut cb).map_err(|e| tspline_err(&name, e))?;
+    let last = result.iterations.last().cloned().expect("at least one iteration");
+    let (exit, line) = match &result.stop {
+        StopReason::ToleranceReached => (Exit::Ok, format!("tolerance reached: every valid cell within {e}")),
+        StopReason::MaxPoints { cap } => (
+            Exit::Findings,
+            format!("stopped at the control-point cap {cap}: max error {:.4} > {e} at {} cells", last.error.max, last.error.over_tolerance),
+        ),
+        StopReason::MaxIterations => (
+            Exit::Findings,
+            format!("stopped after {} iterations: max error {:.4} > {e} at {} cells", args.max_iterations, last.error.max, last.error.over_tolerance),
+        ),
+        StopReason::MinCellSize { cells_over } => (
+            Exit::Findings,
+            format!("the minimum cell size (one raster cell) stops refinement: {cells_over} cells still over {e}, max error {:.4}", last.error.max),
+        ),
+    };
+    progress.finish(&line);
+    let points = last.control_points;
+    if points as f64 > 0.25 * valid as f64 {
+        config.notice(&format!(
+            "warning: {name} does not compress: {points} control points for {valid} valid cells ({:.0} %)",
+            100.0 * points as f64 / valid as f64
+        ));
+    }
+    if exit != Exit::Ok {
+        eprintln!("geofit: {name}: {line}");
+    }
+    let file = TMeshFile { mesh: result.mesh, georef, mask: Some(mask), warp: None };
+    Output::from_arg(args.output.as_deref())
+        .write_with(|w| tspline::format::write(&file, w).map_err(CliError::io_out))?;
+    if let Some(path) = &args.report {
+        let rep = Report {
+            input: &name,
+            width: samples.width,
+            height: samples.height,
+            valid_cells: valid,
+            degree: args.degree,
+            method: opts.method,
+            max_error: e,
+            max_points: args.max_points,
+            device: device_name,
+            stop: &result.stop,
+            control_points: points,
+            cells: last.cells,
+            max_abs_error: last.error.max,
+            compression_ratio: valid as f64 / points as f64,
+            iterations: &result.iterations,
+            seconds: t_start.elapsed().as_secs_f64(),
+        };
+        write_json_report(path, &rep)?;
+    }
+    Ok(exit)
+}

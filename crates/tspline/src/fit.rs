@@ -1,0 +1,822 @@
+//! Adaptive approximation of a raster by a T-spline (spec §4.1, Alg. 3): initial mesh with
+//! overhang, optimise, probe, refine, repair, repeat.
+//!
+//! Decisions:
+//! - **A7/A17** the error is |Δz| at every valid raster cell centre (no sampling): the loop stops
+//!   with "tolerance reached" only when EVERY valid cell has |Δz| ≤ e_max. Refinement marks the
+//!   thesis' cells (a 3×3 probe inside the data with |Δz| > e_max) plus every leaf holding a valid
+//!   cell over the tolerance, so the loop cannot stall on errors the probes miss.
+//! - **A8** initial mesh: square cells of a power-of-two size c0 (so every split lands on integer
+//!   parameters down to the sample spacing 1), about `initial_cells` cells along the longer side of
+//!   the data extent grown by `overhang` (default 25 %, §3.2.5) on every side; the mesh border lies
+//!   strictly outside the data.
+//! - **A9** least squares on all valid cells (streamed into the sparse normal equations, never the
+//!   model matrix), solved by Jacobi-preconditioned conjugate gradients. Control points with little
+//!   data (column sum of the model matrix below 0.5 samples) get a regulariser whose weight fades
+//!   in as the support vanishes: second divided differences along the mesh lines (zero on planes,
+//!   so planes stay exact) plus a weak pull to the current surface; a 1e-12 ridge keeps the system
+//!   definite. Well-supported points are not biased.
+//! - **A10** raster outside its extent or next to a no-data corner is NaN (probes there do not
+//!   count; dragging leaves such points in place).
+//! - **A11** refinement and least squares compare at the parameter pair (s, t) = raster cell; the
+//!   surface is a height field z(s, t) over the parameter plane, x, y of control points are kept
+//!   at their parameters (direct) and only matter for export/indirect back-mapping.
+//! - **A12** dragging step limit: each |δ_i| is clamped to half the previous step's max |δ|.
+//! - **A19** weights are not fitted (the thesis found them within a tight interval around 1);
+//!   all w = 1.
+//! - Minimum cell edge = 1 = sample spacing (§2.2 rule): cells of edge < 2 are never split.
+
+use std::time::Instant;
+
+use rayon::prelude::*;
+
+use crate::eval::{GridSpec, PbSpline};
+use crate::mesh::{CellId, Degree, TMesh};
+use crate::ocl_eval::OclEvaluator;
+use crate::TsplineError;
+
+/// A raster in parameter layout: value (i, j) at (s = i, t = j), row-major from the bottom row,
+/// NaN = no data.
+#[derive(Debug, Clone)]
+pub struct Samples {
+    pub width: usize,
+    pub height: usize,
+    pub z: Vec<f64>,
+}
+
+impl Samples {
+    #[inline]
+    pub fn get(&self, i: usize, j: usize) -> f64 {
+        self.z[j * self.width + i]
+    }
+
+    /// Standard bilinear interpolation (spec eq. 4.1 in the corrected form of §2.1 / A2); NaN
+    /// when outside or when any of the four corners has no data.
+    pub fn bilinear(&self, s: f64, t: f64) -> f64 {
+        if !(s >= 0.0 && t >= 0.0 && s <= (self.width - 1) as f64 && t <= (self.height - 1) as f64) {
+            return f64::NAN;
+        }
+        let i = (s.floor() as usize).min(self.width.saturating_sub(2));
+        let j = (t.floor() as usize).min(self.height.saturating_sub(2));
+        let fs = s - i as f64;
+        let ft = t - j as f64;
+        let i1 = (i + 1).min(self.width - 1);
+        let j1 = (j + 1).min(self.height - 1);
+        let (a, b, c, d) = (self.get(i, j), self.get(i1, j), self.get(i, j1), self.get(i1, j1));
+        // corners with zero weight do not matter (exact integer positions next to no data)
+        let w = [(1.0 - fs) * (1.0 - ft), fs * (1.0 - ft), (1.0 - fs) * ft, fs * ft];
+        let mut v = 0.0;
+        for (wk, zk) in w.iter().zip([a, b, c, d]) {
+            if *wk != 0.0 {
+                if zk.is_nan() {
+                    return f64::NAN;
+                }
+                v += wk * zk;
+            }
+        }
+        v
+    }
+
+    pub fn valid_count(&self) -> usize {
+        self.z.iter().filter(|v| !v.is_nan()).count()
+    }
+}
+
+/// Geometry optimiser (spec §4.3–4.6).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Method {
+    Lsq,
+    Drag,
+}
+
+/// Where dense evaluations and dragging run.
+pub enum Backend<'a> {
+    Cpu,
+    OpenCl(&'a OclEvaluator),
+}
+
+#[derive(Debug, Clone)]
+pub struct FitOptions {
+    pub degree: Degree,
+    pub max_error: f64,
+    pub max_points: Option<usize>,
+    pub max_iterations: usize,
+    pub method: Method,
+    /// Overhang on every side as a fraction of the data extent (A8).
+    pub overhang: f64,
+    /// Initial cells along the longer side.
+    pub initial_cells: usize,
+    /// Dragging: steps per iteration.
+    pub drag_steps: usize,
+}
+
+impl FitOptions {
+    pub fn new(degree: Degree, max_error: f64) -> FitOptions {
+        FitOptions { degree, max_error, max_points: None, max_iterations: 100, method: Method::Lsq, overhang: 0.25, initial_cells: 4, drag_steps: 40 }
+    }
+}
+
+/// Error statistics of |Δz| over all valid cells (spec §4.2, A17).
+#[derive(Debug, Clone, Default, serde::Serialize)]
+pub struct ErrorStats {
+    pub count: usize,
+    pub mean: f64,
+    pub sigma: f64,
+    pub median: f64,
+    pub max: f64,
+    pub rms: f64,
+    pub over_tolerance: usize,
+}
+
+impl ErrorStats {
+    pub fn from_abs(mut e: Vec<f64>, tol: f64) -> ErrorStats {
+        let n = e.len();
+        if n == 0 {
+            return ErrorStats::default();
+        }
+        let mean = e.iter().sum::<f64>() / n as f64;
+        let var = e.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / n as f64;
+        let rms = (e.iter().map(|v| v * v).sum::<f64>() / n as f64).sqrt();
+        let over = e.iter().filter(|&&v| v > tol).count();
+        let max = e.iter().cloned().fold(0.0, f64::max);
+        let mid = n / 2;
+        let (_, m, _) = e.select_nth_unstable_by(mid, |a, b| a.partial_cmp(b).unwrap());
+        let mut median = *m;
+        if n % 2 == 0 {
+            let lo = e[..mid].iter().cloned().fold(f64::MIN, f64::max);
+            median = 0.5 * (median + lo);
+        }
+        ErrorStats { count: n, mean, sigma: var.sqrt(), median, max, rms, over_tolerance: over }
+    }
+}
+
+/// One row of the per-iteration table (thesis Tables 7.1/7.2 plus max, RMS, time).
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct IterationStats {
+    pub iteration: usize,
+    pub control_points: usize,
+    pub cells: usize,
+    pub refined_cells: usize,
+    #[serde(flatten)]
+    pub error: ErrorStats,
+    pub seconds: f64,
+}
+
+/// Why the loop ended.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+#[serde(tag = "reason", rename_all = "snake_case")]
+pub enum StopReason {
+    /// Every valid cell is within the tolerance.
+    ToleranceReached,
+    /// The next refinement would exceed the control-point cap.
+    MaxPoints { cap: usize },
+    MaxIterations,
+    /// Cells over the tolerance remain, but their mesh cells are at the minimum size.
+    MinCellSize { cells_over: usize },
+}
+
+pub struct FitResult {
+    pub mesh: TMesh,
+    pub iterations: Vec<IterationStats>,
+    pub stop: StopReason,
+}
+
+/// Builds the PB-spline on the backend (device knot kernel or CPU ray casting).
+pub fn build_pb(mesh: &TMesh, backend: &Backend) -> Result<PbSpline, TsplineError> {
+    match backend {
+        Backend::Cpu => Ok(PbSpline::build(mesh)),
+        Backend::OpenCl(o) => o.build_pbspline(mesh),
+    }
+}
+
+/// Heights at every raster cell (row-major from t = 0).
+pub fn eval_samples(pb: &PbSpline, w: usize, h: usize, backend: &Backend) -> Result<Vec<f64>, TsplineError> {
+    let g = GridSpec { s0: 0.0, t0: 0.0, ds: 1.0, dt: 1.0, ns: w, nt: h };
+    match backend {
+        Backend::Cpu => Ok(pb.eval_grid(&g, true)),
+        Backend::OpenCl(o) => {
+            let sp = o.upload(pb)?;
+            o.eval_grid(&sp, &g)
+        }
+    }
+}
+
+/// The initial mesh (A8): returns it with x = s, y = t, z = mean of the data.
+pub fn initial_mesh(samples: &Samples, opts: &FitOptions) -> TMesh {
+    let (w, h) = ((samples.width - 1).max(1) as f64, (samples.height - 1).max(1) as f64);
+    let ext = w.max(h) * (1.0 + 2.0 * opts.overhang);
+    let mut c0 = 1.0f64;
+    while c0 * (opts.initial_cells.max(1) as f64) < ext {
+        c0 *= 2.0;
+    }
+    let n_for = |len: f64| -> usize {
+        let need = len * (1.0 + 2.0 * opts.overhang);
+        ((need / c0).ceil() as usize).max(1)
+    };
+    let mut ns = n_for(w);
+    let mut nt = n_for(h);
+    // strictly outside the data when there is an overhang: one more cell if needed
+    let place = |len: f64, n: &mut usize| -> f64 {
+        loop {
+            let o = ((len - *n as f64 * c0) * 0.5).floor();
+            let covers = if opts.overhang > 0.0 { o < 0.0 && o + *n as f64 * c0 > len } else { o <= 0.0 && o + *n as f64 * c0 >= len };
+            if covers {
+                return o;
+            }
+            *n += 1;
+        }
+    };
+    let s0 = place((samples.width - 1) as f64, &mut ns);
+    let t0 = place((samples.height - 1) as f64, &mut nt);
+    let mut m = TMesh::grid(opts.degree, s0, t0, c0, ns, nt);
+    let valid: Vec<f64> = samples.z.iter().copied().filter(|v| !v.is_nan()).collect();
+    let mean = if valid.is_empty() { 0.0 } else { valid.iter().sum::<f64>() / valid.len() as f64 };
+    for p in &mut m.points {
+        p.z = mean;
+    }
+    m
+}
+
+/// Sparse symmetric matrix in CSR (full pattern, both triangles).
+struct Csr {
+    start: Vec<usize>,
+    cols: Vec<u32>,
+    vals: Vec<f64>,
+}
+
+impl Csr {
+    fn mul(&self, x: &[f64], y: &mut [f64]) {
+        y.par_iter_mut().enumerate().with_min_len(1024).for_each(|(i, yi)| {
+            let mut acc = 0.0;
+            for k in self.start[i]..self.start[i + 1] {
+                acc += self.vals[k] * x[self.cols[k] as usize];
+            }
+            *yi = acc;
+        });
+    }
+    fn pos(&self, i: usize, j: u32) -> usize {
+        let row = &self.cols[self.start[i]..self.start[i + 1]];
+        self.start[i] + row.binary_search(&j).expect("pattern covers every overlapping pair")
+    }
+}
+
+/// Pattern: pairs of PB points whose supports overlap with positive area, plus mesh-line
+/// neighbours used by the regulariser.
+fn pattern(pb: &PbSpline, extra: &[Vec<u32>]) -> Csr {
+    let k = pb.degree.k();
+    let n = pb.knots.len();
+    let rows: Vec<Vec<u32>> = (0..n)
+        .into_par_iter()
+        .map(|i| {
+            let a = &pb.knots[i];
+            let (i0, i1) = pb.grid.index_range(a[0], a[k + 1], true);
+            let (j0, j1) = pb.grid.index_range(a[5], a[5 + k + 1], false);
+            let mut v = Vec::new();
+            for bj in j0..=j1 {
+                for bi in i0..=i1 {
+                    let b = (bj * pb.grid.ns + bi) as usize;
+                    for &q in &pb.pt_items[pb.pt_start[b] as usize..pb.pt_start[b + 1] as usize] {
+                        let c = &pb.knots[q as usize];
+                        let ow = a[k + 1].min(c[k + 1]) - a[0].max(c[0]);
+                        let oh = a[5 + k + 1].min(c[5 + k + 1]) - a[5].max(c[5]);
+                        if ow > 0.0 && oh > 0.0 {
+                            v.push(q);
+                        }
+                    }
+                }
+            }
+            v.push(i as u32);
+            v.extend_from_slice(&extra[i]);
+            v.sort_unstable();
+            v.dedup();
+            v
+        })
+        .collect();
+    let mut start = Vec::with_capacity(n + 1);
+    start.push(0);
+    for r in &rows {
+        start.push(start.last().unwrap() + r.len());
+    }
+    let cols: Vec<u32> = rows.into_iter().flatten().collect();
+    let vals = vec![0.0; cols.len()];
+    Csr { start, cols, vals }
+}
+
+/// Mesh-line neighbour triples for the regulariser: (left, right, weight_left, weight_right) so
+/// that z_i − (wl·z_l + wr·z_r) is the second divided difference (zero on planes).
+fn line_triples(mesh: &TMesh, pb: &PbSpline) -> Vec<Vec<(u32, u32, f64, f64)>> {
+    let h = pb.degree.half();
+    let mut pb_of = std::collections::HashMap::with_capacity(pb.point_ids.len());
+    for (i, &pid) in pb.point_ids.iter().enumerate() {
+        pb_of.insert(pid, i as u32);
+    }
+    (0..pb.knots.len())
+        .map(|i| {
+            let kn = &pb.knots[i];
+            let p = mesh.points[pb.point_ids[i] as usize];
+            let mut v = Vec::new();
+            for dim in 0..2 {
+                let o = 5 * dim;
+                let (lo, c, hi) = (kn[o + h - 1], kn[o + h], kn[o + h + 1]);
+                if lo == c || hi == c {
+                    continue;
+                }
+                let (a, b) = if dim == 0 { ((lo, p.t), (hi, p.t)) } else { ((p.s, lo), (p.s, hi)) };
+                let (Some(pa), Some(pbb)) = (mesh.point_id_at(a.0, a.1), mesh.point_id_at(b.0, b.1)) else { continue };
+                let (Some(&ia), Some(&ib)) = (pb_of.get(&pa), pb_of.get(&pbb)) else { continue };
+                let wl = (hi - c) / (hi - lo);
+                let wr = (c - lo) / (hi - lo);
+                v.push((ia, ib, wl, wr));
+            }
+            v
+        })
+        .collect()
+}
+
+/// Least-squares geometry fit (spec §4.5, eq. 4.35 with W = 1 ⇒ ordinary least squares with the
+/// rational basis): z of every PB point; the current z are the warm start and the regulariser's
+/// prior. Returns the new z per PB point.
+pub fn fit_lsq(mesh: &TMesh, pb: &PbSpline, samples: &Samples) -> Result<Vec<f64>, TsplineError> {
+    let n = pb.knots.len();
+    let triples = line_triples(mesh, pb);
+    // The regulariser couples i, l and r of each triple: all pairs enter the pattern.
+    let mut extra: Vec<Vec<u32>> = vec![Vec::new(); n];
+    for (i, ts) in triples.iter().enumerate() {
+        for &(l, r, _, _) in ts {
+            let ids = [i as u32, l, r];
+            for &x in &ids {
+                for &y in &ids {
+                    if x != y {
+                        extra[x as usize].push(y);
+                    }
+                }
+            }
+        }
+    }
+    let mut a = pattern(pb, &extra);
+    let w = samples.width;
+    let rows: Vec<usize> = (0..samples.height).collect();
+    let nthreads = rayon::current_num_threads().max(1);
+    let chunk = rows.len().div_ceil(nthreads).max(1);
+    let parts: Vec<(Vec<f64>, Vec<f64>, Vec<f64>)> = rows
+        .par_chunks(chunk)
+        .map(|js| {
+            let mut vals = vec![0.0; a.vals.len()];
+            let mut rhs = vec![0.0; n];
+            let mut support = vec![0.0; n];
+            let mut scratch = Vec::new();
+            let mut row: Vec<(u32, f64)> = Vec::with_capacity(32);
+            for &j in js {
+                for i in 0..w {
+                    let d = samples.get(i, j);
+                    if d.is_nan() {
+                        continue;
+                    }
+                    row.clear();
+                    if !pb.for_each_basis(i as f64, j as f64, &mut scratch, |q, v| row.push((q, v))) {
+                        continue;
+                    }
+                    for &(p, vp) in &row {
+                        rhs[p as usize] += vp * d;
+                        support[p as usize] += vp;
+                        for &(q, vq) in &row {
+                            vals[a.pos(p as usize, q)] += vp * vq;
+                        }
+                    }
+                }
+            }
+            (vals, rhs, support)
+        })
+        .collect();
+    let mut rhs = vec![0.0; n];
+    let mut support = vec![0.0; n];
+    for (v, r, s) in parts {
+        a.vals.iter_mut().zip(&v).for_each(|(x, y)| *x += y);
+        rhs.iter_mut().zip(&r).for_each(|(x, y)| *x += y);
+        support.iter_mut().zip(&s).for_each(|(x, y)| *x += y);
+    }
+    let prior: Vec<f64> = pb.geom.iter().map(|g| g[2]).collect();
+    let diag: Vec<f64> = (0..n).map(|i| a.vals[a.pos(i, i as u32)]).collect();
+    let supported: Vec<f64> = diag.iter().cloned().filter(|&d| d > 0.0).collect();
+    if supported.is_empty() {
+        return Err(TsplineError::Fit("no valid raster cell lies inside the mesh".into()));
+    }
+    let mean_diag = supported.iter().sum::<f64>() / supported.len() as f64;
+    // A9 regulariser
+    for i in 0..n {
+        let lack = (1.0 - support[i] / 0.5).max(0.0);
+        let lam = 1e-3 * mean_diag * lack * lack;
+        // ridge: tiny everywhere, stronger where data is lacking
+        let ridge = 1e-12 * diag[i].max(mean_diag * 1e-6) + 1e-6 * lam;
+        let pii = a.pos(i, i as u32);
+        a.vals[pii] += ridge;
+        rhs[i] += ridge * prior[i];
+        if lam == 0.0 {
+            continue;
+        }
+        for &(l, r, wl, wr) in &triples[i] {
+            // λ (z_i − wl z_l − wr z_r)²
+            let idx = [i as u32, l, r];
+            let c = [1.0, -wl, -wr];
+            for x in 0..3 {
+                for y in 0..3 {
+                    let p = a.pos(idx[x] as usize, idx[y]);
+                    a.vals[p] += lam * c[x] * c[y];
+                }
+            }
+        }
+    }
+    Ok(cg(&a, &rhs, &prior, 1e-13, 20 * n + 2000))
+}
+
+/// Jacobi-preconditioned conjugate gradients.
+fn cg(a: &Csr, b: &[f64], x0: &[f64], tol: f64, max_iter: usize) -> Vec<f64> {
+    let n = b.len();
+    let dinv: Vec<f64> = (0..n).map(|i| 1.0 / a.vals[a.pos(i, i as u32)]).collect();
+    let mut x = x0.to_vec();
+    let mut r = vec![0.0; n];
+    a.mul(&x, &mut r);
+    r.par_iter_mut().zip(b).for_each(|(ri, bi)| *ri = bi - *ri);
+    let bnorm = b.iter().map(|v| v * v).sum::<f64>().sqrt().max(1e-300);
+    let mut z: Vec<f64> = r.iter().zip(&dinv).map(|(a, d)| a * d).collect();
+    let mut p = z.clone();
+    let mut rz: f64 = r.iter().zip(&z).map(|(a, b)| a * b).sum();
+    let mut ap = vec![0.0; n];
+    for _ in 0..max_iter {
+        let rnorm = r.iter().map(|v| v * v).sum::<f64>().sqrt();
+        if rnorm <= tol * bnorm {
+            break;
+        }
+        a.mul(&p, &mut ap);
+        let pap: f64 = p.par_iter().zip(&ap).map(|(a, b)| a * b).sum();
+        if pap <= 0.0 {
+            break;
+        }
+        let alpha = rz / pap;
+        x.par_iter_mut().zip(&p).for_each(|(xi, pi)| *xi += alpha * pi);
+        r.par_iter_mut().zip(&ap).for_each(|(ri, api)| *ri -= alpha * api);
+        z.par_iter_mut().zip(&r).zip(&dinv).for_each(|((zi, ri), d)| *zi = ri * d);
+        let rz_new: f64 = r.par_iter().zip(&z).map(|(a, b)| a * b).sum();
+        let beta = rz_new / rz;
+        rz = rz_new;
+        p.par_iter_mut().zip(&z).for_each(|(pi, zi)| *pi = zi + beta * *pi);
+    }
+    x
+}
+
+/// Dragging (spec §4.6, Alg. 4): z-only, Jacobi-style simultaneous update, step limit A12.
+/// Returns the new z per PB point.
+pub fn fit_drag(pb: &PbSpline, samples: &Samples, steps: usize, threshold: f64, backend: &Backend) -> Result<Vec<f64>, TsplineError> {
+    let params: Vec<[f64; 2]> = pb.point_ids.iter().enumerate().map(|(i, _)| pb_param(pb, i)).collect();
+    // Dragging needs a continuous reference (spec §4.6): holes are filled by dilation and
+    // points outside the raster take the nearest edge value (A10: clamp to edge).
+    let filled = dilation_fill(samples);
+    let (wm, hm) = ((samples.width - 1) as f64, (samples.height - 1) as f64);
+    let refz: Vec<f64> = params.iter().map(|p| filled.bilinear(p[0].clamp(0.0, wm), p[1].clamp(0.0, hm))).collect();
+    let mut pb = pb.clone();
+    let dev = match backend {
+        Backend::OpenCl(o) => Some((o, o.upload(&pb)?)),
+        Backend::Cpu => None,
+    };
+    let mut dev = dev;
+    let mut prev_max = f64::INFINITY;
+    for _ in 0..steps {
+        let delta: Vec<f64> = match &mut dev {
+            Some((o, sp)) => {
+                o.update_geometry(sp, &pb)?;
+                o.drag_vectors(sp, &params, &refz)?
+            }
+            None => params.par_iter().zip(&refz).map(|(p, r)| r - pb.point(p[0], p[1])[2]).collect(),
+        };
+        let max = delta.iter().filter(|d| d.is_finite()).fold(0.0f64, |m, d| m.max(d.abs()));
+        let limit = 0.5 * prev_max;
+        for (g, d) in pb.geom.iter_mut().zip(&delta) {
+            if d.is_finite() {
+                g[2] += d.clamp(-limit, limit);
+            }
+        }
+        prev_max = max.min(prev_max * 2.0);
+        if max < threshold {
+            break;
+        }
+    }
+    Ok(pb.geom.iter().map(|g| g[2]).collect())
+}
+
+/// Fills every no-data cell by wave-front dilation (spec §2.3.5, Alg. 2): each pass gives the
+/// cells next to valued ones the mean of their valued 8-neighbours from the previous pass, so the
+/// result does not depend on scan order.
+pub fn dilation_fill(samples: &Samples) -> Samples {
+    let (w, h) = (samples.width, samples.height);
+    let mut z = samples.z.clone();
+    if z.iter().all(|v| v.is_nan()) {
+        return samples.clone();
+    }
+    let nbrs = |q: usize| {
+        let (i, j) = ((q % w) as isize, (q / w) as isize);
+        let mut v = Vec::with_capacity(8);
+        for dj in -1..=1 {
+            for di in -1..=1 {
+                let (a, b) = (i + di, j + dj);
+                if (di, dj) != (0, 0) && a >= 0 && b >= 0 && (a as usize) < w && (b as usize) < h {
+                    v.push(b as usize * w + a as usize);
+                }
+            }
+        }
+        v
+    };
+    let mut front: Vec<usize> = (0..z.len()).filter(|&q| z[q].is_nan() && nbrs(q).iter().any(|&n| !z[n].is_nan())).collect();
+    while !front.is_empty() {
+        let vals: Vec<f64> = front
+            .iter()
+            .map(|&q| {
+                let v: Vec<f64> = nbrs(q).into_iter().map(|n| z[n]).filter(|x| !x.is_nan()).collect();
+                v.iter().sum::<f64>() / v.len() as f64
+            })
+            .collect();
+        for (&q, v) in front.iter().zip(vals) {
+            z[q] = v;
+        }
+        let mut next: Vec<usize> = front.iter().flat_map(|&q| nbrs(q)).filter(|&n| z[n].is_nan()).collect();
+        next.sort_unstable();
+        next.dedup();
+        front = next;
+    }
+    Samples { width: w, height: h, z }
+}
+
+/// The parameter pair of PB point i (the centre knots).
+fn pb_param(pb: &PbSpline, i: usize) -> [f64; 2] {
+    let h = pb.degree.half();
+    [pb.knots[i][h], pb.knots[i][5 + h]]
+}
+
+/// Leaves to refine: the thesis' 3×3 probes plus leaves holding valid cells over the tolerance.
+fn mark_cells(mesh: &TMesh, pb: &PbSpline, samples: &Samples, surf: &[f64], tol: f64) -> Vec<CellId> {
+    let leaves: Vec<CellId> = mesh.leaves().collect();
+    let mut marked: Vec<CellId> = leaves
+        .par_iter()
+        .copied()
+        .filter(|&c| {
+            let r = mesh.cells[c as usize].rect;
+            let mut inside = false;
+            let mut over = false;
+            for a in 0..3 {
+                for b in 0..3 {
+                    let s = r.s_min + r.width() * a as f64 * 0.5;
+                    let t = r.t_min + r.height() * b as f64 * 0.5;
+                    let d = samples.bilinear(s, t);
+                    if d.is_nan() {
+                        continue;
+                    }
+                    inside = true;
+                    let z = pb.point(s, t)[2];
+                    if (z - d).abs() > tol {
+                        over = true;
+                    }
+                }
+            }
+            inside && over
+        })
+        .collect();
+    let w = samples.width;
+    let extra: Vec<CellId> = (0..samples.z.len())
+        .into_par_iter()
+        .filter(|&q| {
+            let d = samples.z[q];
+            !d.is_nan() && !((surf[q] - d).abs() <= tol)
+        })
+        .flat_map_iter(|q| {
+            let (i, j) = (q % w, q / w);
+            mesh.cells_at(i as f64, j as f64).into_iter().filter(|&c| mesh.cells[c as usize].is_leaf())
+        })
+        .collect();
+    marked.extend(extra);
+    marked.sort_unstable();
+    marked.dedup();
+    marked
+}
+
+/// Per-cell |Δz| over valid cells.
+fn abs_errors(samples: &Samples, surf: &[f64]) -> Vec<f64> {
+    samples.z.iter().zip(surf).filter(|(d, _)| !d.is_nan()).map(|(d, z)| if z.is_nan() { f64::INFINITY } else { (z - d).abs() }).collect()
+}
+
+/// The approximation loop (Alg. 3). `progress` gets every iteration's statistics.
+pub fn fit(samples: &Samples, opts: &FitOptions, backend: &Backend, progress: &mut dyn FnMut(&IterationStats)) -> Result<FitResult, TsplineError> {
+    if !(opts.max_error > 0.0 && opts.max_error.is_finite()) {
+        return Err(TsplineError::Fit(format!("the maximum error must be a positive number, got {}", opts.max_error)));
+    }
+    if samples.width * samples.height == 0 || samples.z.len() != samples.width * samples.height {
+        return Err(TsplineError::Fit("the raster is empty".into()));
+    }
+    if samples.valid_count() == 0 {
+        return Err(TsplineError::Fit("the raster has no valid cell".into()));
+    }
+    let mut mesh = initial_mesh(samples, opts);
+    let mut iterations = Vec::new();
+    let mut refined = 0usize;
+    for it in 0.. {
+        let t0 = Instant::now();
+        let mut pb = build_pb(&mesh, backend)?;
+        let z = match opts.method {
+            Method::Lsq => fit_lsq(&mesh, &pb, samples)?,
+            Method::Drag => fit_drag(&pb, samples, opts.drag_steps, 0.01 * opts.max_error, backend)?,
+        };
+        for (i, &pid) in pb.point_ids.iter().enumerate() {
+            mesh.points[pid as usize].z = z[i];
+            pb.geom[i][2] = z[i];
+        }
+        let surf = eval_samples(&pb, samples.width, samples.height, backend)?;
+        let err = ErrorStats::from_abs(abs_errors(samples, &surf), opts.max_error);
+        let st = IterationStats {
+            iteration: it,
+            control_points: pb.point_ids.len(),
+            cells: mesh.leaf_count(),
+            refined_cells: refined,
+            error: err.clone(),
+            seconds: t0.elapsed().as_secs_f64(),
+        };
+        progress(&st);
+        iterations.push(st);
+        if err.over_tolerance == 0 {
+            return Ok(FitResult { mesh, iterations, stop: StopReason::ToleranceReached });
+        }
+        if it >= opts.max_iterations {
+            return Ok(FitResult { mesh, iterations, stop: StopReason::MaxIterations });
+        }
+        let marked = mark_cells(&mesh, &pb, samples, &surf, opts.max_error);
+        let splittable: Vec<CellId> = marked
+            .into_iter()
+            .filter(|&c| {
+                let r = mesh.cells[c as usize].rect;
+                r.width().min(r.height()) >= 2.0
+            })
+            .collect();
+        if splittable.is_empty() {
+            return Ok(FitResult { mesh, iterations, stop: StopReason::MinCellSize { cells_over: err.over_tolerance } });
+        }
+        let mut next = mesh.clone();
+        let mut geom = |s: f64, t: f64| (s, t, {
+            let z = pb.point(s, t)[2];
+            if z.is_nan() { 0.0 } else { z }
+        });
+        for &c in &splittable {
+            if next.cells[c as usize].is_leaf() {
+                next.split(c, &mut geom);
+            }
+        }
+        next.repair(1.0, &mut geom);
+        if let Some(cap) = opts.max_points {
+            let n = next.active_points().iter().filter(|a| **a).count();
+            if n > cap {
+                return Ok(FitResult { mesh, iterations, stop: StopReason::MaxPoints { cap } });
+            }
+        }
+        refined = splittable.len();
+        mesh = next;
+    }
+    unreachable!("the loop returns")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::Rect;
+
+    fn lcg(seed: &mut u64) -> f64 {
+        *seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (*seed >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    fn sample(pb: &PbSpline, w: usize, h: usize) -> Samples {
+        let g = GridSpec { s0: 0.0, t0: 0.0, ds: 1.0, dt: 1.0, ns: w, nt: h };
+        Samples { width: w, height: h, z: pb.eval_grid(&g, true) }
+    }
+
+    #[test]
+    fn bilinear_standard_form() {
+        let s = Samples { width: 2, height: 2, z: vec![1.0, 2.0, 3.0, f64::NAN] };
+        assert_eq!(s.bilinear(0.0, 0.0), 1.0);
+        assert_eq!(s.bilinear(1.0, 0.0), 2.0); // integer position next to a no-data corner
+        assert_eq!(s.bilinear(0.5, 0.0), 1.5);
+        assert!(s.bilinear(0.5, 0.5).is_nan());
+        assert!(s.bilinear(-0.1, 0.0).is_nan());
+    }
+
+    /// Synthetic truth: a raster sampled from a known T-spline whose mesh is the fit's initial
+    /// mesh refined by 4-way splits is recovered to 1e-9 — the surface, and (linear: nested
+    /// spaces keep vertex values) the truth's control points.
+    #[test]
+    fn synthetic_truth_recovered() {
+        for degree in [Degree::Linear, Degree::Cubic] {
+            let samples0 = Samples { width: 65, height: 65, z: vec![0.0; 65 * 65] };
+            let mut opts = FitOptions::new(degree, 1e-9);
+            opts.overhang = 0.0;
+            let mut truth = initial_mesh(&samples0, &opts);
+            assert_eq!(truth.bounds(), Rect::new(0.0, 0.0, 64.0, 64.0));
+            let mut g = |s: f64, t: f64| (s, t, 0.0);
+            for (s, t) in [(20.0, 20.0), (21.0, 21.0), (40.0, 50.0)] {
+                let c = truth.leaves_in(Rect::new(s, t, s, t))[0];
+                truth.split(c, &mut g);
+            }
+            truth.repair(1.0, &mut g);
+            let mut seed = 5u64;
+            for p in &mut truth.points {
+                p.z = 100.0 * lcg(&mut seed) - 50.0;
+            }
+            let tpb = PbSpline::build(&truth);
+            let samples = sample(&tpb, 65, 65);
+            // geometry only, on the truth topology: the same control points
+            let mut m = truth.clone();
+            for p in &mut m.points {
+                p.z = 0.0;
+            }
+            let pb = PbSpline::build(&m);
+            let z = fit_lsq(&m, &pb, &samples).unwrap();
+            for (i, &pid) in pb.point_ids.iter().enumerate() {
+                assert!((z[i] - truth.points[pid as usize].z).abs() < 1e-9, "{degree:?}: {} vs {}", z[i], truth.points[pid as usize].z);
+            }
+            // the whole loop
+            let r = fit(&samples, &opts, &Backend::Cpu, &mut |_| {}).unwrap();
+            assert_eq!(r.stop, StopReason::ToleranceReached, "{degree:?}");
+            assert!(r.iterations.last().unwrap().error.max <= 1e-9);
+            if degree == Degree::Linear {
+                for p in &truth.points {
+                    let id = r.mesh.point_id_at(p.s, p.t).expect("truth point in the fitted mesh");
+                    assert!((r.mesh.points[id as usize].z - p.z).abs() < 1e-9);
+                }
+            }
+        }
+    }
+
+    /// A plane is fitted with the initial mesh only (no refinement).
+    #[test]
+    fn plane_needs_only_the_initial_mesh() {
+        let (w, h) = (120, 80);
+        let z = (0..w * h).map(|q| 12.0 + 0.3 * (q % w) as f64 - 0.7 * (q / w) as f64).collect();
+        let s = Samples { width: w, height: h, z };
+        let r = fit(&s, &FitOptions::new(Degree::Linear, 1e-6), &Backend::Cpu, &mut |_| {}).unwrap();
+        assert_eq!(r.stop, StopReason::ToleranceReached);
+        assert_eq!(r.iterations.len(), 1);
+        assert!(r.iterations[0].error.max < 1e-8);
+    }
+
+    /// The loop honours the tolerance on a bumpy surface with holes, for both methods.
+    #[test]
+    fn tolerance_reached_everywhere() {
+        let (w, h) = (90, 70);
+        let z: Vec<f64> = (0..w * h)
+            .map(|q| {
+                let (x, y) = ((q % w) as f64, (q / w) as f64);
+                if (x - 30.0).powi(2) + (y - 40.0).powi(2) < 60.0 {
+                    f64::NAN
+                } else {
+                    (x * 0.15).sin() * 8.0 + (y * 0.07).cos() * 5.0 + 0.02 * x * y
+                }
+            })
+            .collect();
+        let s = Samples { width: w, height: h, z };
+        for (degree, method) in [(Degree::Linear, Method::Lsq), (Degree::Cubic, Method::Lsq), (Degree::Linear, Method::Drag)] {
+            let mut o = FitOptions::new(degree, 0.25);
+            o.method = method;
+            let r = fit(&s, &o, &Backend::Cpu, &mut |_| {}).unwrap();
+            let last = r.iterations.last().unwrap();
+            match r.stop {
+                StopReason::ToleranceReached => assert!(last.error.max <= 0.25),
+                ref other => panic!("{degree:?} {method:?}: {other:?}, max {}", last.error.max),
+            }
+            // every leaf at least the sample spacing
+            for c in r.mesh.leaves() {
+                assert!(r.mesh.cells[c as usize].rect.width() >= 1.0);
+            }
+        }
+    }
+
+    #[test]
+    fn control_point_cap_is_reported() {
+        let (w, h) = (64, 64);
+        let z = (0..w * h).map(|q| ((q % w) as f64 * 0.3).sin() * 10.0).collect();
+        let s = Samples { width: w, height: h, z };
+        let mut o = FitOptions::new(Degree::Linear, 0.01);
+        o.max_points = Some(60);
+        let r = fit(&s, &o, &Backend::Cpu, &mut |_| {}).unwrap();
+        assert_eq!(r.stop, StopReason::MaxPoints { cap: 60 });
+        assert!(r.iterations.last().unwrap().control_points <= 60);
+    }
+
+    #[test]
+    fn bad_inputs() {
+        let s = Samples { width: 3, height: 3, z: vec![f64::NAN; 9] };
+        assert!(fit(&s, &FitOptions::new(Degree::Linear, 1.0), &Backend::Cpu, &mut |_| {}).is_err());
+        let s = Samples { width: 1, height: 1, z: vec![5.0] };
+        assert!(fit(&s, &FitOptions::new(Degree::Linear, 0.0), &Backend::Cpu, &mut |_| {}).is_err());
+        let r = fit(&s, &FitOptions::new(Degree::Cubic, 0.1), &Backend::Cpu, &mut |_| {}).unwrap();
+        assert_eq!(r.stop, StopReason::ToleranceReached);
+        // constant raster
+        let s = Samples { width: 10, height: 7, z: vec![-3.0; 70] };
+        let r = fit(&s, &FitOptions::new(Degree::Cubic, 1e-9), &Backend::Cpu, &mut |_| {}).unwrap();
+        assert_eq!(r.iterations.len(), 1);
+    }
+}
