@@ -59,18 +59,28 @@ pub fn check_polygons(
     snap: &mut Snapper,
     opts: &Options,
 ) -> (Vec<Issue>, Vec<Option<PreparedPolygon>>) {
-    let ids: Vec<Vec<Vec<u32>>> = polys
+    let finite = |p: &PolygonInput| {
+        std::iter::once(p.exterior).chain(p.interiors.iter().copied()).all(|r| r.iter().all(|q| q.iter().all(|c| c.is_finite())))
+    };
+    let ids: Vec<Option<Vec<Vec<u32>>>> = polys
         .iter()
         .map(|p| {
-            std::iter::once(p.exterior)
-                .chain(p.interiors.iter().copied())
-                .map(|r| r.iter().map(|pt| snap.add(pt)).collect())
-                .collect()
+            finite(p).then(|| {
+                std::iter::once(p.exterior)
+                    .chain(p.interiors.iter().copied())
+                    .map(|r| r.iter().map(|pt| snap.add(pt)).collect())
+                    .collect()
+            })
         })
         .collect();
     let mut issues = Vec::new();
     let mut out = Vec::with_capacity(polys.len());
     for (i, (poly, rings)) in polys.iter().zip(ids).enumerate() {
+        let Some(rings) = rings else {
+            issues.push(issue(ErrorCode::InvalidInputFile, i, None, "a coordinate is not a finite number".into()));
+            out.push(None);
+            continue;
+        };
         match check_polygon(i, poly, rings, snap, opts) {
             Ok(p) => out.push(Some(p)),
             Err(is) => {
@@ -254,6 +264,46 @@ fn seg_bbox_overlap(a: &V2, b: &V2, c: &V2, d: &V2) -> bool {
     a.x.min(b.x) <= c.x.max(d.x) && c.x.min(d.x) <= a.x.max(b.x) && a.y.min(b.y) <= c.y.max(d.y) && c.y.min(d.y) <= a.y.max(b.y)
 }
 
+/// Pairs (i, j) of segments of rings `a` and `b` whose bounding boxes overlap, found by a sweep
+/// along x (sorted by the segments' smallest x), so long rings do not cost n². With `same`, `a`
+/// and `b` are one ring and each pair is listed once with i < j.
+fn overlapping_segments(a: &[V2], b: &[V2], same: bool) -> Vec<(usize, usize)> {
+    let seg = |r: &[V2], k: usize| (r[k], r[(k + 1) % r.len()]);
+    // (min x, max x, ring 0/1, index)
+    let mut ev: Vec<(f64, f64, u8, usize)> = Vec::with_capacity(a.len() + b.len());
+    for k in 0..a.len() {
+        let (p, q) = seg(a, k);
+        ev.push((p.x.min(q.x), p.x.max(q.x), 0, k));
+    }
+    if !same {
+        for k in 0..b.len() {
+            let (p, q) = seg(b, k);
+            ev.push((p.x.min(q.x), p.x.max(q.x), 1, k));
+        }
+    }
+    ev.sort_by(|u, v| u.0.total_cmp(&v.0).then(u.2.cmp(&v.2)).then(u.3.cmp(&v.3)));
+    let mut out = Vec::new();
+    for x in 0..ev.len() {
+        let (_, hi, ra, ka) = ev[x];
+        for &(lo2, _, rb, kb) in &ev[x + 1..] {
+            if lo2 > hi {
+                break;
+            }
+            if !same && ra == rb {
+                continue;
+            }
+            let (i, j) = if same || ra == 0 { (ka, kb) } else { (kb, ka) };
+            let (p, q) = seg(a, i);
+            let (s, t) = seg(if same { a } else { b }, j);
+            if seg_bbox_overlap(&p, &q, &s, &t) {
+                out.push(if same { (i.min(j), i.max(j)) } else { (i, j) });
+            }
+        }
+    }
+    out.sort_unstable();
+    out
+}
+
 /// Why a projected ring is not simple (crossing, touching itself, spike, zero area), if it is not.
 fn ring_not_simple(r: &[V2], ids: &[u32]) -> Option<String> {
     let n = r.len();
@@ -268,13 +318,10 @@ fn ring_not_simple(r: &[V2], ids: &[u32]) -> Option<String> {
             return Some(format!("ring passes twice through the same point (points {} and {})", j + 1, k + 1));
         }
     }
-    for i in 0..n {
+    for (i, j) in overlapping_segments(r, r, true) {
         let (a, b) = (r[i], r[(i + 1) % n]);
-        for j in i + 1..n {
+        {
             let (c, d) = (r[j], r[(j + 1) % n]);
-            if !seg_bbox_overlap(&a, &b, &c, &d) {
-                continue;
-            }
             let adjacent = j == i + 1 || (i == 0 && j == n - 1);
             match line_intersection(gline(&a, &b), gline(&c, &d)) {
                 None => {}
@@ -321,13 +368,10 @@ fn check_ring_topology(
         for b in a + 1..nr {
             let (ra, rb) = (&rings[a], &rings[b]);
             let mut pts: Vec<V2> = Vec::new();
-            for i in 0..ra.len() {
+            for (i, j) in overlapping_segments(ra, rb, false) {
                 let (p, q) = (ra[i], ra[(i + 1) % ra.len()]);
-                for j in 0..rb.len() {
+                {
                     let (s, t) = (rb[j], rb[(j + 1) % rb.len()]);
-                    if !seg_bbox_overlap(&p, &q, &s, &t) {
-                        continue;
-                    }
                     match line_intersection(gline(&p, &q), gline(&s, &t)) {
                         None => {}
                         Some(LineIntersection::SinglePoint { is_proper: true, .. }) => {

@@ -63,6 +63,14 @@ fn ring_level() {
     // 104: bow-tie
     let r = poly(&[[0., 0., 0.], [1., 1., 0.], [1., 0., 0.], [0., 1., 0.]]);
     assert_eq!(codes_surfaces(&[(r, vec![])], &o), vec![104]);
+    // 901: a coordinate that is not a number (the reader may accept "NaN")
+    let r = poly(&[[0., 0., 0.], [1., 0., f64::NAN], [1., 1., 0.]]);
+    assert_eq!(codes_surfaces(&[(r, vec![])], &o), vec![901]);
+    // 104: a long zig-zag ring whose last segment crosses the first (sweep over many segments)
+    let mut z: Vec<P> = (0..2000).map(|k| [k as f64 * 0.01, if k % 2 == 0 { 0.0 } else { 0.5 }, 0.]).collect();
+    z.push([19.99, -1.0, 0.]);
+    z.push([0.005, 0.2, 0.]);
+    assert_eq!(codes_surfaces(&[(poly(&z), vec![])], &o), vec![104]);
     // 104: collapsed triangle
     let r = poly(&[[0., 0., 0.], [1., 0., 0.], [2., 0., 0.]]);
     assert_eq!(codes_surfaces(&[(r, vec![])], &o), vec![104]);
