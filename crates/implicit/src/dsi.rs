@@ -17,7 +17,7 @@
 //!   penalised, and a face between tetrahedra on two sides of a fault is not in the graph).
 //!
 //! The minimiser of seed eq. 12 solves `A·φ = b` with `A = Σ A_c A_cᵗ = A_B + A_F` (seed eq. 1–3),
-//! solved by conjugate gradients with a Jacobi preconditioner (rayon-parallel products).
+//! solved by conjugate gradients with an incomplete-Cholesky IC(0) preconditioner.
 
 use rayon::prelude::*;
 
@@ -41,7 +41,7 @@ impl Default for Weights {
 
 /// Default ϖ_r: the minimum of the U-shaped error curve of the noisy sphere and plane sweeps
 /// (tests/implicit.rs `roughness_sweep_traces_u_shape`).
-pub const DEFAULT_ROUGHNESS: f64 = 0.3;
+pub const DEFAULT_ROUGHNESS: f64 = 5.0;
 
 /// Solver and constraint parameters stored with a model.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -300,43 +300,150 @@ pub struct CgStats {
     pub converged: bool,
 }
 
-/// Preconditioned conjugate gradients on `Σ mats · x = b` from the start value in `x`
-/// (Hestenes & Stiefel 1952, seed ref. [HS52]); Jacobi preconditioner.
-pub fn pcg(mats: &[&Csr], shift: f64, b: &[f64], x: &mut [f64], tol: f64, max_iter: usize) -> CgStats {
-    let n = b.len();
-    let mut diag = vec![shift; n];
-    for m in mats {
-        for (d, v) in diag.iter_mut().zip(m.diag()) {
-            *d += v;
+/// Sum of symmetric CSR matrices plus `shift`·I (A = A_B + A_F merged, seed §3).
+pub fn csr_sum(mats: &[&Csr], shift: f64) -> Csr {
+    let n = mats[0].n;
+    let mut out = Csr { n, ptr: vec![0; n + 1], idx: Vec::new(), val: Vec::new() };
+    let mut acc: Vec<(u32, f64)> = Vec::new();
+    for r in 0..n {
+        acc.clear();
+        for m in mats {
+            for k in m.ptr[r]..m.ptr[r + 1] {
+                acc.push((m.idx[k], m.val[k]));
+            }
+        }
+        acc.push((r as u32, shift));
+        acc.sort_by_key(|e| e.0); // stable: deterministic sums
+        let mut i = 0;
+        while i < acc.len() {
+            let c = acc[i].0;
+            let mut s = 0.0;
+            while i < acc.len() && acc[i].0 == c {
+                s += acc[i].1;
+                i += 1;
+            }
+            out.idx.push(c);
+            out.val.push(s);
+        }
+        out.ptr[r + 1] = out.idx.len();
+    }
+    out
+}
+
+/// Incomplete Cholesky IC(0) factor: L with the pattern of A's lower triangle, A ≈ L·Lᵀ.
+/// A non-positive pivot (A is not an M-matrix) restarts with a diagonal shift (Manteuffel).
+pub struct Ic0 {
+    ptr: Vec<usize>,
+    idx: Vec<u32>,
+    val: Vec<f64>,
+}
+
+impl Ic0 {
+    pub fn new(a: &Csr) -> Ic0 {
+        let n = a.n;
+        let mut ptr = vec![0usize; n + 1];
+        let mut idx = Vec::new();
+        let mut base = Vec::new();
+        for r in 0..n {
+            for k in a.ptr[r]..a.ptr[r + 1] {
+                if a.idx[k] as usize <= r {
+                    idx.push(a.idx[k]);
+                    base.push(a.val[k]);
+                }
+            }
+            ptr[r + 1] = idx.len();
+        }
+        let mut alpha = 0.0;
+        loop {
+            let mut val = base.clone();
+            let mut ok = true;
+            'rows: for i in 0..n {
+                let (s, e) = (ptr[i], ptr[i + 1]);
+                if alpha > 0.0 {
+                    val[e - 1] *= 1.0 + alpha;
+                }
+                for kk in s..e {
+                    let k = idx[kk] as usize;
+                    // dot of rows i and k over columns j < k
+                    let (mut p, mut q) = (s, ptr[k]);
+                    let mut sum = 0.0;
+                    while p < kk && q < ptr[k + 1] - 1 {
+                        let (cp, cq) = (idx[p], idx[q]);
+                        if cp == cq {
+                            sum += val[p] * val[q];
+                            p += 1;
+                            q += 1;
+                        } else if cp < cq {
+                            p += 1;
+                        } else {
+                            q += 1;
+                        }
+                    }
+                    if k == i {
+                        let d = val[kk] - sum;
+                        if !(d > 0.0) {
+                            ok = false;
+                            break 'rows;
+                        }
+                        val[kk] = d.sqrt();
+                    } else {
+                        val[kk] = (val[kk] - sum) / val[ptr[k + 1] - 1];
+                    }
+                }
+            }
+            if ok {
+                return Ic0 { ptr, idx, val };
+            }
+            alpha = if alpha == 0.0 { 1e-3 } else { alpha * 10.0 };
         }
     }
-    let inv: Vec<f64> = diag.iter().map(|&d| if d > 0.0 { 1.0 / d } else { 1.0 }).collect();
-    let apply = |p: &[f64], out: &mut [f64], tmp: &mut [f64]| {
-        mats[0].mul(p, out);
-        for m in &mats[1..] {
-            m.mul(p, tmp);
-            out.par_iter_mut().zip(tmp.par_iter()).for_each(|(o, t)| *o += t);
+
+    /// z = (L·Lᵀ)⁻¹ r.
+    pub fn apply(&self, r: &[f64], z: &mut [f64]) {
+        let n = r.len();
+        for i in 0..n {
+            let (s, e) = (self.ptr[i], self.ptr[i + 1]);
+            let mut v = r[i];
+            for k in s..e - 1 {
+                v -= self.val[k] * z[self.idx[k] as usize];
+            }
+            z[i] = v / self.val[e - 1];
         }
-        out.par_iter_mut().zip(p.par_iter()).for_each(|(o, q)| *o += shift * q);
-    };
+        for i in (0..n).rev() {
+            let (s, e) = (self.ptr[i], self.ptr[i + 1]);
+            z[i] /= self.val[e - 1];
+            let zi = z[i];
+            for k in s..e - 1 {
+                z[self.idx[k] as usize] -= self.val[k] * zi;
+            }
+        }
+    }
+}
+
+/// Preconditioned conjugate gradients on `A·x = b` from the start value in `x`
+/// (Hestenes & Stiefel 1952, seed ref. [HS52]) with an IC(0) preconditioner.
+/// Stops when ‖r‖ ≤ tol·‖b‖.
+pub fn pcg(a: &Csr, b: &[f64], x: &mut [f64], tol: f64, max_iter: usize) -> CgStats {
+    let n = b.len();
     let pdot = |a: &[f64], b: &[f64]| -> f64 { a.par_iter().zip(b.par_iter()).map(|(x, y)| x * y).sum() };
     let bn = pdot(b, b).sqrt();
     if bn == 0.0 {
         x.iter_mut().for_each(|v| *v = 0.0);
         return CgStats { iterations: 0, residual: 0.0, converged: true };
     }
+    let ic = Ic0::new(a);
     let mut r = vec![0.0; n];
-    let mut tmp = vec![0.0; n];
-    apply(x, &mut r, &mut tmp);
+    a.mul(x, &mut r);
     r.par_iter_mut().zip(b.par_iter()).for_each(|(r, b)| *r = b - *r);
-    let mut z: Vec<f64> = r.iter().zip(&inv).map(|(r, d)| r * d).collect();
+    let mut z = vec![0.0; n];
+    ic.apply(&r, &mut z);
     let mut p = z.clone();
     let mut rz = pdot(&r, &z);
     let mut q = vec![0.0; n];
     let mut res = pdot(&r, &r).sqrt() / bn;
     let mut it = 0;
     while res > tol && it < max_iter {
-        apply(&p, &mut q, &mut tmp);
+        a.mul(&p, &mut q);
         let pq = pdot(&p, &q);
         if !(pq > 0.0) {
             break;
@@ -344,7 +451,7 @@ pub fn pcg(mats: &[&Csr], shift: f64, b: &[f64], x: &mut [f64], tol: f64, max_it
         let alpha = rz / pq;
         x.par_iter_mut().zip(p.par_iter()).for_each(|(x, p)| *x += alpha * p);
         r.par_iter_mut().zip(q.par_iter()).for_each(|(r, q)| *r -= alpha * q);
-        z.par_iter_mut().zip(r.par_iter().zip(inv.par_iter())).for_each(|(z, (r, d))| *z = r * d);
+        ic.apply(&r, &mut z);
         let rz2 = pdot(&r, &z);
         let beta = rz2 / rz;
         rz = rz2;
@@ -396,26 +503,44 @@ pub fn solve(
     let scale_diag = a_rough.diag().iter().cloned().fold(0.0, f64::max).max(1e-300);
     let shift = 1e-12 * scale_diag; // keeps A positive definite for nodes no data reaches
     let mut iters = Vec::new();
-    let mut last_res = 0.0;
-    for round in 0..p.rounds.max(1) {
+    let mut last_res;
+    // Inexact active-set iterations: while the set of violated inequality rows may still change,
+    // CG runs to a loose tolerance; once a round leaves the set unchanged, one final solve goes
+    // to `p.tol` from there. A warm start (saved φ and active set) then needs one loose and one
+    // tight solve, both from close to the answer.
+    let loose = p.tol.max(1e-4);
+    let has_ineq = data.ineq.iter().any(|&b| b);
+    let mut round = 0;
+    let mut settled = !has_ineq;
+    loop {
         let (a_base, b_base) = normal_system(n, &[&data], &|_, r| act[r] && !data.float[r]);
         let (a_float, b_float) = normal_system(n, &[&data], &|_, r| act[r] && data.float[r]);
         let b: Vec<f64> = b_base.iter().zip(&b_float).map(|(a, b)| a + b).collect();
-        let mats: Vec<&Csr> = if a_float.nnz() > 0 { vec![&a_rough, &a_base, &a_float] } else { vec![&a_rough, &a_base] };
-        let st = pcg(&mats, shift, &b, &mut x, p.tol, p.max_iter);
+        // seed §3: the base and float systems are merged into one system for CG.
+        let a = csr_sum(&[&a_rough, &a_base, &a_float], shift);
+        let last = settled || round + 1 >= p.rounds.max(1);
+        let tol = if last { p.tol } else { loose };
+        let st = pcg(&a, &b, &mut x, tol, p.max_iter);
         iters.push(st.iterations);
         last_res = st.residual;
         progress(round, st.iterations, st.residual);
         if !st.converged {
-            return Err(Error::NotConverged { iterations: st.iterations, residual: st.residual, tol: p.tol });
+            return Err(Error::NotConverged { iterations: st.iterations, residual: st.residual, tol });
         }
-        let new: Vec<bool> = (0..data.len()).map(|r| !data.ineq[r] || data.dot(r, &x) < data.rhs[r]).collect();
-        if new == act {
+        if last {
             break;
         }
-        if round + 1 < p.rounds.max(1) {
-            act = new;
+        let new: Vec<bool> = (0..data.len()).map(|r| !data.ineq[r] || data.dot(r, &x) < data.rhs[r]).collect();
+        if std::env::var_os("GEOFIT_DEBUG_ACTIVE").is_some() {
+            eprintln!("active-set round {round}: {} rows change", new.iter().zip(&act).filter(|(a, b)| a != b).count());
         }
+        let unchanged = new == act;
+        if unchanged && tol <= p.tol {
+            break;
+        }
+        settled = unchanged;
+        act = new;
+        round += 1;
     }
     if x.iter().any(|v| !v.is_finite()) {
         return Err(Error::BadInput("the solution contains non-finite values (degenerate mesh or constraints)".into()));

@@ -72,7 +72,7 @@ impl Default for BuildOptions {
             weights: Weights::default(),
             step: None,
             grad: None,
-            tol: 1e-8,
+            tol: 1e-6,
             max_iter: 20000,
             rounds: 4,
             refine_rounds: 1,

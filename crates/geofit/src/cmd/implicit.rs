@@ -107,11 +107,14 @@ pub struct BuildArgs {
     #[arg(long)]
     pub grad: Option<f64>,
     /// CG relative residual tolerance.
-    #[arg(long, default_value_t = 1e-8)]
+    #[arg(long, default_value_t = 1e-6)]
     pub tol: f64,
     /// CG iteration cap per solve.
     #[arg(long, default_value_t = 20000)]
     pub max_iter: usize,
+    /// Cap on active-set rounds of the inequality constraints (each round is one CG solve).
+    #[arg(long, default_value_t = 8)]
+    pub rounds: usize,
     /// Misfit-driven refinement rounds (interpolate, measure, refine, re-interpolate).
     #[arg(long, default_value_t = 1)]
     pub refine: usize,
@@ -370,6 +373,7 @@ fn build_model(b: &BuildArgs, config: &Config) -> Result<(Model, BuildReport, f6
         tol: b.tol,
         max_iter: b.max_iter,
         refine_rounds: b.refine,
+        rounds: b.rounds,
         misfit_tol: b.misfit_tol,
         ..Default::default()
     };
