@@ -24,6 +24,7 @@
 pub mod ad;
 pub mod equations;
 pub mod fits;
+pub mod popa3d;
 pub mod problem;
 pub mod solve;
 pub mod stats;

@@ -63,6 +63,8 @@ pub struct Options {
     pub unknown_sigmas: bool,
     /// Largest component for which the dense rank check / numeric null space is computed.
     pub dense_check_limit: usize,
+    /// Only compute the free-datum null space (for choosing a hard datum), do not iterate.
+    pub null_space_only: bool,
 }
 
 impl Default for Options {
@@ -78,6 +80,7 @@ impl Default for Options {
             statistics: true,
             unknown_sigmas: true,
             dense_check_limit: 2500,
+            null_space_only: false,
         }
     }
 }
@@ -137,6 +140,8 @@ pub struct Solution {
     pub datum_restrictions: usize,
     /// Number of independent components solved.
     pub components: usize,
+    /// Free datum: the null-space vectors restricted to the datum subset (one per defect).
+    pub null_space: Vec<Vec<(UnknownId, f64)>>,
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -430,8 +435,12 @@ pub fn adjust(problem: &Problem, opts: &Options) -> Result<Solution, AdjustError
     let mut obs = vec![ObsResult::default(); p.obs.len()];
     let mut sigma_x = if opts.unknown_sigmas && opts.statistics { Some(vec![0.0; nu]) } else { None };
     let (mut iterations, mut vtpv, mut rsum, mut red, mut datum_n) = (0usize, 0.0, 0.0, 0i64, 0usize);
+    let mut null_space = Vec::new();
     for (c, res) in comps.iter().zip(results) {
         let res = res?;
+        for row in &res.null {
+            null_space.push(row.iter().map(|&(k, g)| (UnknownId(c.unknowns[k]), g)).collect());
+        }
         iterations = iterations.max(res.iterations);
         vtpv += res.vtpv;
         red += res.redundancy;
@@ -489,10 +498,12 @@ pub fn adjust(problem: &Problem, opts: &Options) -> Result<Solution, AdjustError
         largest_suspect: largest.map(|(i, _)| ObsId(i)),
         datum_restrictions: datum_n,
         components: comps.len(),
+        null_space,
     })
 }
 
 struct CompResult {
+    null: Vec<Vec<(usize, f64)>>,
     x: Vec<f64>,
     obs: Vec<(usize, ObsResult)>,
     qxx_diag: Option<Vec<f64>>,
@@ -655,6 +666,10 @@ fn solve_component(ctx: &Ctx, comp: &Component, datum: Option<&[bool]>) -> Resul
                 return Err(AdjustError::ComponentTooLarge { unknowns: nloc, limit: opts.dense_check_limit, first: p.unknowns[comp.unknowns[0]].name.clone() });
             }
         }
+        if opts.null_space_only {
+            let xs = comp.unknowns.iter().map(|&u| x[u]).collect();
+            return Ok(CompResult { null: datum_rows, x: xs, obs: vec![], qxx_diag: None, iterations: 0, vtpv: 0.0, redundancy: 0, datum_rows: 0 });
+        }
         if it == opts.max_iterations {
             last = Some(lin);
             break;
@@ -746,7 +761,7 @@ fn solve_component(ctx: &Ctx, comp: &Component, datum: Option<&[bool]>) -> Resul
         qxx_diag = stats.qxx_diag;
     }
     let xs = comp.unknowns.iter().map(|&u| x[u]).collect();
-    Ok(CompResult { x: xs, obs: obs_out, qxx_diag, iterations, vtpv, redundancy, datum_rows: datum_rows.len() })
+    Ok(CompResult { null: vec![], x: xs, obs: obs_out, qxx_diag, iterations, vtpv, redundancy, datum_rows: datum_rows.len() })
 }
 
 /// The linearised system of one iteration.
@@ -1049,4 +1064,55 @@ fn solve_linear(ctx: &Ctx, comp: &Component, lin: &Linear, datum_rows: &[Vec<(us
         stats = Some(Stats { per_obs, qxx_diag });
     }
     Ok(LinSol { dx, v_new, stats })
+}
+
+/// Hard datum (spec §4.7.3): choose a minimal set of unknowns from `candidates` (in the given
+/// order, e.g. plane d's first, then normal parameters) whose fixing removes the datum defect. The
+/// defect's null space is computed numerically as for the free datum; an unknown is taken when its
+/// row of the null-space basis raises the rank of the rows taken so far.
+pub fn hard_datum_choice(problem: &Problem, candidates: &[UnknownId], opts: &Options) -> Result<Vec<UnknownId>, AdjustError> {
+    let mut o = opts.clone();
+    o.datum = Datum::Free { subset: candidates.to_vec() };
+    o.null_space_only = true;
+    let sol = adjust(problem, &o)?;
+    if sol.null_space.is_empty() {
+        return Ok(vec![]);
+    }
+    // Group null vectors by component (they share unknowns).
+    let mut chosen = Vec::new();
+    let mut remaining: Vec<Vec<(UnknownId, f64)>> = sol.null_space;
+    while !remaining.is_empty() {
+        // Vectors of one component: those sharing an unknown with the first.
+        let first: std::collections::HashSet<usize> = remaining[0].iter().map(|(u, _)| u.0).collect();
+        let (group, rest): (Vec<_>, Vec<_>) = remaining.into_iter().partition(|v| v.iter().any(|(u, _)| first.contains(&u.0)));
+        remaining = rest;
+        let d = group.len();
+        let maps: Vec<std::collections::HashMap<usize, f64>> = group.iter().map(|v| v.iter().map(|(u, g)| (u.0, *g)).collect()).collect();
+        let mut rows: Vec<DVector<f64>> = Vec::new();
+        for &c in candidates {
+            if rows.len() == d {
+                break;
+            }
+            let row = DVector::from_iterator(d, maps.iter().map(|m| m.get(&c.0).copied().unwrap_or(0.0)));
+            if row.amax() < 1e-9 {
+                continue;
+            }
+            let mut mat = DMatrix::<f64>::zeros(rows.len() + 1, d);
+            for (i, r) in rows.iter().chain(std::iter::once(&row)).enumerate() {
+                mat.set_row(i, &r.transpose());
+            }
+            let sv = mat.singular_values();
+            let smax = sv.iter().fold(0.0f64, |a, &b| a.max(b));
+            let smin = sv.iter().fold(f64::INFINITY, |a, &b| a.min(b));
+            if smin > 1e-6 * smax.max(1e-300) {
+                rows.push(row);
+                chosen.push(c);
+            }
+        }
+        if rows.len() < d {
+            let names = group.iter().flat_map(|v| v.iter().map(|(u, _)| problem.unknown_name(*u).to_string())).collect::<std::collections::BTreeSet<_>>().into_iter().collect();
+            return Err(AdjustError::Defect { defect: d - rows.len(), unknowns: names });
+        }
+    }
+    Ok(chosen)
 }

@@ -38,6 +38,10 @@ enum Command {
     // One line per subcommand; keep alphabetical. Each `cmd::<name>` module has `Args` and `run`.
     /// Implicit surfaces by DSI on adaptive tetrahedral meshes.
     Implicit(cmd::implicit::Args),
+    Heal(cmd::heal::Args),
+    Observe(cmd::observe::Args),
+    Popa3d2citygml(cmd::popa3d2citygml::Args),
+    Adjust(cmd::adjust::Args),
     Eval(cmd::eval::Args),
     Export(cmd::export::Args),
     Fit(cmd::fit::Args),
@@ -56,6 +60,10 @@ fn main() -> ExitCode {
     let config = Config { quiet: cli.quiet };
     let result = match cli.command {
         Command::Implicit(a) => cmd::implicit::run(a, &config),
+        Command::Heal(a) => cmd::heal::run(a, &config),
+        Command::Observe(a) => cmd::observe::run(a, &config),
+        Command::Popa3d2citygml(a) => cmd::popa3d2citygml::run(a, &config),
+        Command::Adjust(a) => cmd::adjust::run(a, &config),
         Command::Eval(a) => cmd::eval::run(a, &config),
         Command::Export(a) => cmd::export::run(a, &config),
         Command::Fit(a) => cmd::fit::run(a, &config),

@@ -18,6 +18,7 @@ pub mod geometry;
 pub mod obj;
 pub mod soup;
 pub mod topology;
+pub mod to_citygml;
 
 pub use counts::{Counts, SourceCounts, StageCounts};
 pub use soup::{Soup, SoupPolygon, SoupSolid};

@@ -1,5 +1,6 @@
 //! One module per subcommand (alphabetical).
 
+pub mod adjust;
 pub mod diff;
 pub mod eval;
 pub mod export;
@@ -12,3 +13,6 @@ pub mod rasterize;
 pub mod unwarp;
 pub mod validate;
 pub mod warp;
+pub mod popa3d2citygml;
+pub mod observe;
+pub mod heal;

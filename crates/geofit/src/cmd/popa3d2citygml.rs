@@ -1,0 +1,109 @@
+//! `geofit popa3d2citygml`: write an (adjusted) popa3d model back into the user's original CityGML
+//! file (spec §8.2 step 3). The algorithm lives in `normalize::to_citygml`.
+
+use clap::Args as ClapArgs;
+use serde::Serialize;
+
+use crate::config::{write_json_report, Config, Input, Output};
+use crate::error::{CliError, CmdResult, Exit};
+use normalize::to_citygml::{to_citygml, BackError, BackOptions, BackReport};
+
+const AFTER_HELP: &str = "\
+Example:
+  geofit citygml2popa3d b.gml | geofit adjust - | geofit popa3d2citygml - --template b.gml -o out.gml
+
+The template is the original CityGML file: everything that is not geometry is copied byte for
+byte. The provenance in the popa3d document (polygon gml:id, ring, vertex index of every node)
+says which coordinates each node maps to; new coordinates are plane intersections. Planes on one
+normal closer than --coplanar-tolerance become one plane; polygons that lost their area are removed
+with every reference to them; touching coplanar polygons of the same semantic type are merged and
+the openings of a surface left empty move to the surface keeping the merged polygon (--no-merge
+keeps every polygon). A template that does not match the provenance is an error naming the node
+and polygon.";
+
+#[derive(ClapArgs, Debug)]
+#[command(after_help = AFTER_HELP)]
+pub struct Args {
+    /// popa3d document, `-` for stdin.
+    pub input: String,
+    /// The original CityGML file the model was converted from.
+    #[arg(long)]
+    pub template: String,
+    /// Output CityGML (stdout when missing or `-`).
+    #[arg(short, long)]
+    pub output: Option<String>,
+    /// Planes on one normal closer than this become one plane (m).
+    #[arg(long, default_value_t = 1e-3)]
+    pub coplanar_tolerance: f64,
+    /// Vertices closer than this are one vertex (m).
+    #[arg(long, default_value_t = 1e-6)]
+    pub collapse_tolerance: f64,
+    /// Rings with a smaller area are degenerate and removed (m²).
+    #[arg(long, default_value_t = 1e-6)]
+    pub area_tolerance: f64,
+    /// Do not merge coplanar polygons.
+    #[arg(long)]
+    pub no_merge: bool,
+    /// Write a JSON report (removed, merged, vertex moves) to this path (`-` = stdout).
+    #[arg(long)]
+    pub report: Option<String>,
+}
+
+#[derive(Serialize)]
+struct Report<'a> {
+    template: String,
+    options: &'a BackOptions,
+    #[serde(flatten)]
+    result: &'a BackReport,
+}
+
+pub(crate) fn back_options(coplanar: f64, collapse: f64, area: f64, no_merge: bool) -> Result<BackOptions, CliError> {
+    for (n, v) in [("coplanar-tolerance", coplanar), ("collapse-tolerance", collapse), ("area-tolerance", area)] {
+        if !(v.is_finite() && v > 0.0) {
+            return Err(CliError::usage(format!("--{n} must be a positive number, got {v}")));
+        }
+    }
+    Ok(BackOptions { coplanar_tolerance: coplanar, collapse_tolerance: collapse, area_tolerance: area, merge: !no_merge })
+}
+
+pub(crate) fn back_error(template: &str, e: BackError) -> CliError {
+    match e {
+        BackError::Write(_) => CliError::internal(format!("{template}: {e}")),
+        _ => CliError::findings(format!("{template}: {e}")),
+    }
+}
+
+pub(crate) fn print_back(r: &BackReport) {
+    eprintln!(
+        "popa3d2citygml: {} polygons mapped, {} removed (no area), {} merge(s), {} surface(s) removed, {} opening(s) moved; vertex moves: largest {:.6} m, mean {:.6} m over {} vertices",
+        r.polygons_mapped,
+        r.removed_degenerate.len(),
+        r.merged.len(),
+        r.removed_surfaces.len(),
+        r.moved_openings.len(),
+        r.max_move,
+        r.mean_move,
+        r.vertices_written
+    );
+}
+
+pub fn run(args: Args, config: &Config) -> CmdResult {
+    let opts = back_options(args.coplanar_tolerance, args.collapse_tolerance, args.area_tolerance, args.no_merge)?;
+    let input = Input::from_arg(&args.input);
+    let name = input.display_name();
+    let bytes = input.read_all()?;
+    let model = popa3d_model::read(&bytes).map_err(|e| CliError::unreadable(format!("{name}: {e}")))?;
+    let tin = Input::from_arg(&args.template);
+    let tname = tin.display_name();
+    let tbytes = tin.read_all()?;
+    let city = citygml_io::parse(&tbytes).map_err(|e| CliError::unreadable(format!("{tname}: {e}")))?;
+    let (out, report) = to_citygml(&model, &tbytes, &city, &opts).map_err(|e| back_error(&tname, e))?;
+    if !config.quiet {
+        print_back(&report);
+    }
+    Output::from_arg(args.output.as_deref()).write_bytes(&out)?;
+    if let Some(p) = &args.report {
+        write_json_report(p, &Report { template: tname, options: &opts, result: &report })?;
+    }
+    Ok(Exit::Ok)
+}
