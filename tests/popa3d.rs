@@ -97,12 +97,14 @@ fn nrw_tiles_convert_and_list_every_rejection() {
             assert!(!rule.is_empty() && !el.is_empty());
             assert!(stderr.contains(&format!("rejected: {rule}: {el}")), "{t}: {rule} {el} not on stderr");
         }
+        // Nodes are plane intersections; none may move more than the planarity tolerance (0.1 m).
+        assert!(r["total"]["max_node_shift"].as_f64().unwrap_or(0.0) <= 0.1, "{t}: {}", r["total"]["max_node_shift"]);
         total += r["converted"].as_u64().unwrap() + rejected.len() as u64;
         ok += r["converted"].as_u64().unwrap();
         xsd_valid(&out);
     }
-    // Issue 3 asks for 95 %; the current normalizer reaches 173/200 (see the report in the issue).
-    assert!(ok as f64 >= 0.85 * total as f64, "{ok}/{total} converted");
+    // Issue 3: at least 95 % of the buildings of the NRW tiles convert (196 of 200 at the time of writing).
+    assert!(ok as f64 >= 0.95 * total as f64, "{ok}/{total} converted");
 }
 
 #[test]

@@ -31,6 +31,28 @@ pub struct Part {
     pub zero_params: Vec<ParamId>,
     /// Largest distance between a node recomputed from its planes and its source point (m).
     pub max_node_shift: f64,
+    /// Repairs made on the way (merged faces).
+    pub notices: Vec<crate::Notice>,
+}
+
+/// Nodes whose planes' unit normals have a smallest singular value below sin(1°) count as not
+/// determined (GA01, spec §7.4): their intersection moves by ≈ δd / sin(angle), metres for the
+/// millimetre noise of real LoD2 data. They are repaired by merging the nearly coplanar faces
+/// around them (spec §7.4: "delete that undefined edge, merge the faces").
+pub const ILL_CONDITIONED_DEG: f64 = 1.0;
+
+/// Smallest singular value of the stacked unit normals (0 for fewer than 3 planes).
+fn min_singular(vals: &[popa3d_model::geometry::PlaneValue]) -> f64 {
+    if vals.len() < 3 {
+        return 0.0;
+    }
+    let mut ata = Matrix3::zeros();
+    for v in vals {
+        let n = Vector3::from(v.n);
+        let u = n / n.norm().max(f64::MIN_POSITIVE);
+        ata += u * u.transpose();
+    }
+    ata.symmetric_eigenvalues().iter().cloned().fold(f64::INFINITY, f64::min).max(0.0).sqrt()
 }
 
 fn newell(pts: &[[f64; 3]]) -> Vector3<f64> {
@@ -220,14 +242,34 @@ fn build_depth(soup: &Soup, topo: &Topo, tol: &Tolerances, origin: [f64; 3], dep
                         popa3d_model::geometry::PlaneValue { n: [c.x, c.y, c.z], d: planes[p].1 }
                     })
                     .collect();
-                !node_planes[n].is_empty() && popa3d_model::geometry::normals_rank(&vals) < 3
+                !node_planes[n].is_empty() && min_singular(&vals) < ILL_CONDITIONED_DEG.to_radians().sin()
             })
             .collect();
         if !deficient.is_empty() {
-            let semantic: Vec<Option<String>> = topo.faces.iter().map(|f| soup.polygons[f.polygon].source.semantic.clone()).collect();
+            let cos_merge = ILL_CONDITIONED_DEG.to_radians().cos();
+            let mergeable = |f: usize, g: usize| {
+                topo.faces[f].back == topo.faces[g].back
+                    && topo.faces[f].front == topo.faces[g].front
+                    && fnormal[f].dot(&fnormal[g]).abs() >= cos_merge
+            };
+            let mut merged = Vec::new();
             let mut t2 = topo.clone();
-            if crate::topology::repair(&mut t2, &deficient, &fplane, &semantic) {
+            if crate::topology::repair(&mut t2, &deficient, &mergeable, &mut merged) {
                 let mut part = build_depth(soup, &t2, tol, origin, depth + 1)?;
+                for (a, b) in merged {
+                    let (pa, pb) = (&soup.polygons[a], &soup.polygons[b]);
+                    let sem = |p: &crate::soup::SoupPolygon| p.source.semantic.clone().unwrap_or_else(|| "no semantics".into());
+                    part.notices.push(crate::Notice {
+                        rule: "GA01-MERGE".into(),
+                        element: pb.locator.clone(),
+                        message: format!(
+                            "merged into face {} ({} / {}): the two are coplanar within {ILL_CONDITIONED_DEG}° and their common edge left a node without 3 independent planes (spec §7.4)",
+                            pa.locator,
+                            sem(pa),
+                            sem(pb)
+                        ),
+                    });
+                }
                 // Report the soup as it was read.
                 part.counts.stages[0] = StageCounts::new("points", topo.soup_nodes, topo.soup_edges, topo.soup_faces, 0, 0, 0);
                 return Ok(part);
@@ -328,6 +370,15 @@ fn build_depth(soup: &Soup, topo: &Topo, tol: &Tolerances, origin: [f64; 3], dep
             )
         })?;
         let d = ((p[0] - pts[n][0]).powi(2) + (p[1] - pts[n][1]).powi(2) + (p[2] - pts[n][2]).powi(2)).sqrt();
+        if d > tol.planarity {
+            let q = topo.points[n];
+            let loc = inc.node_faces(&m, id).first().and_then(|f| m.faces[f.idx()].source.as_ref()).map(|s| s.polygon.clone()).unwrap_or_else(|| soup.name.clone());
+            return Err(Rejection::new(
+                "GA01",
+                loc,
+                format!("the node at ({:.3} {:.3} {:.3}) recomputed from its planes lies {d:.3} m away (more than {} m): its planes are nearly dependent", q[0], q[1], q[2], tol.planarity),
+            ));
+        }
         max_shift = max_shift.max(d);
     }
 
@@ -350,7 +401,7 @@ fn build_depth(soup: &Soup, topo: &Topo, tol: &Tolerances, origin: [f64; 3], dep
         half_edges: m.half_edges.len(),
         max_node_shift: max_shift,
     };
-    Ok(Part { model: m, counts, zero_params, max_node_shift: max_shift })
+    Ok(Part { model: m, counts, zero_params, max_node_shift: max_shift, notices: Vec::new() })
 }
 
 /// Canonical direction of a normal (T 2.5): nx > 0; else ny > 0; else nz > 0.

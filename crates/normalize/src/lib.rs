@@ -106,6 +106,7 @@ pub fn normalize_into(model: &mut Popa3d, soup: &Soup, tol: &Tolerances) -> Resu
     })?;
     let mut part = geometry::build(soup, &topo, tol, model.origin)?;
     let counts = part.counts.clone();
+    notices.extend(part.notices.drain(..));
     geometry::append(model, &mut part);
     Ok(Normalized { counts, notices })
 }

@@ -385,10 +385,10 @@ pub fn rebuild_edges(t: &mut Topo) {
 /// cases of spec §7.4 / Fig. 6.3: an edge between two coplanar faces of the same semantic type and
 /// solids is deleted and the faces merged; a node left with only two neighbours on a straight line
 /// ("a face side split at a node with only 2 edges", TA01) is removed and its two edges merged.
-/// `deficient` are the nodes to repair, `fplane` the plane of each face, `semantic` the semantic
-/// type of each face. Returns whether anything changed. Removed nodes keep no popa3d node: their
+/// `deficient` are the nodes to repair; `mergeable(f, g)` says whether two faces may become one
+/// (nearly coplanar); merged pairs of source polygons are appended to `merged`. Returns whether anything changed. Removed nodes keep no popa3d node: their
 /// source vertices lie on the line of their neighbours.
-pub fn repair(t: &mut Topo, deficient: &[usize], fplane: &[usize], semantic: &[Option<String>]) -> bool {
+pub fn repair(t: &mut Topo, deficient: &[usize], mergeable: &dyn Fn(usize, usize) -> bool, merged: &mut Vec<(usize, usize)>) -> bool {
     let mut changed = false;
     let def: std::collections::HashSet<usize> = deficient.iter().cloned().collect();
     // 1. Merge coplanar faces across edges at deficient nodes.
@@ -418,7 +418,7 @@ pub fn repair(t: &mut Topo, deficient: &[usize], fplane: &[usize], semantic: &[O
             continue;
         }
         let (f, g) = (v[0], v[1]);
-        if f == g || fplane[f] != fplane[g] || semantic[f] != semantic[g] {
+        if f == g || !mergeable(f, g) {
             continue;
         }
         if t.faces[f].back != t.faces[g].back || t.faces[f].front != t.faces[g].front {
@@ -427,6 +427,7 @@ pub fn repair(t: &mut Topo, deficient: &[usize], fplane: &[usize], semantic: &[O
         let (rf, rg) = (find(&mut parent, f), find(&mut parent, g));
         if rf != rg {
             parent[rf.max(rg)] = rf.min(rg);
+            merged.push((t.faces[f].polygon, t.faces[g].polygon));
             changed = true;
         }
     }
