@@ -261,6 +261,10 @@ fn name_at(src: &[u8], start: usize) -> &[u8] {
     }
 }
 
+/// Deeper nesting is refused: the parser is recursive (a 2 MiB thread stack holds well over
+/// 256 levels) and real CityGML stays below ~40 (object → part → surface → opening → geometry).
+const MAX_DEPTH: usize = 256;
+
 /// The parser: a quick-xml slice reader over `src[range]` plus our own namespace scope.
 pub(crate) struct Parser<'a> {
     r: Reader<&'a [u8]>,
@@ -409,6 +413,9 @@ impl<'a> Parser<'a> {
             match ev {
                 Event::Start(e) => {
                     self.depth += 1;
+                    if self.depth > MAX_DEPTH {
+                        return Err(self.err(start, format!("elements nested deeper than {MAX_DEPTH} levels")));
+                    }
                     self.declare(&e, self.depth);
                     let ns = self.resolve(e.name().as_ref());
                     return Ok(Ev::Start(Tag { raw: e, start, ns }));
@@ -529,7 +536,11 @@ impl<'a> Parser<'a> {
                 }
                 Ev::Empty(t) => {
                     // `<bldg:lod2Solid xlink:href="#solid"/>`: a whole geometry by reference.
-                    if let (Some(lod), Some(href)) = (lod_of(t.local()), t.attr_string(b"href")) {
+                    let l = t.local();
+                    let surfacey = [&b"Solid"[..], b"Surface", b"Geometry", b"FootPrint", b"RoofEdge"]
+                        .iter()
+                        .any(|k| memchr::memmem::find(l, k).is_some());
+                    if let (Some(lod), true, Some(href)) = (lod_of(l), surfacey, t.attr_string(b"href")) {
                         let end = self.pos();
                         let ph = self.placeholder(&href, t.start, end, false);
                         obj.geometries.push(Geometry {

@@ -197,3 +197,13 @@ fn pos_rings_edit_each_pos_and_keep_markup() {
     assert!(ring_edits(r, &new[..3]).is_err());
     assert!(ring_edits(r, &[[f64::NAN, 0.0, 0.0]; 4]).is_err());
 }
+
+#[test]
+fn absurd_nesting_is_an_error_not_a_stack_overflow() {
+    let mut body = String::from("<core:cityObjectMember><bldg:Building><bldg:lod2MultiSurface>");
+    for _ in 0..100_000 {
+        body.push_str("<gml:MultiGeometry><gml:geometryMember>");
+    }
+    let e = parse(doc("2.0", &body).as_bytes()).expect_err("too deep");
+    assert!(e.message.contains("nested deeper"), "{}", e.message);
+}
