@@ -1,2 +1,214 @@
-//! End-to-end tests of the T-spline commands (`geofit fit`, `geofit eval`).
+//! End-to-end tests of the T-spline commands (`geofit fit`, `geofit eval`) against independent
+//! truth: scipy's FITPACK for tensor meshes, and a numpy/GDAL script that reads the original and
+//! the evaluated raster itself for the `--max-error` guarantee.
 mod common;
+
+use std::path::Path;
+use std::process::Command;
+
+fn script(name: &str) -> String {
+    common::repo_root().join("tests/scripts").join(name).display().to_string()
+}
+
+fn python_ok() -> bool {
+    common::tool("python3")
+        && Command::new("python3").args(["-c", "import numpy, scipy"]).status().map(|s| s.success()).unwrap_or(false)
+}
+
+fn bin() -> String {
+    env!("CARGO_BIN_EXE_geofit").to_string()
+}
+
+/// A T-mesh without T-junctions equals the tensor-product B-spline (scipy bisplev) to 1e-12.
+#[test]
+fn tensor_mesh_equals_bisplev() {
+    if !python_ok() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    for k in ["1", "3"] {
+        let out = Command::new("python3")
+            .args([&script("tspline_bisplev.py"), &bin(), dir.path().to_str().unwrap(), k])
+            .output()
+            .unwrap();
+        let msg = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+        assert!(out.status.success(), "degree {k}: {msg}");
+    }
+}
+
+/// Fit, evaluate on the input grid, and let the independent script check max |Δz| ≤ E over
+/// every valid cell.
+fn fit_and_check(fixture: &str, e: &str, degree: &str, dir: &Path) -> serde_json::Value {
+    let Some(input) = common::fixture(fixture) else { return serde_json::Value::Null };
+    let mesh = dir.join(format!("fit{degree}.tmesh"));
+    let report = dir.join(format!("fit{degree}.json"));
+    let out = common::run(
+        &["fit", input.to_str().unwrap(), "-o", mesh.to_str().unwrap(), "--max-error", e, "--degree", degree, "--report", report.to_str().unwrap()],
+        None,
+    );
+    let stderr = String::from_utf8_lossy(&out.stderr).to_string();
+    assert!(stderr.contains("iteration 0:"), "per-iteration progress on stderr: {stderr}");
+    let rep: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
+    let eval = dir.join(format!("eval{degree}.tif"));
+    let o2 = common::run(&["eval", mesh.to_str().unwrap(), "-o", eval.to_str().unwrap()], None);
+    assert!(o2.status.success(), "{}", String::from_utf8_lossy(&o2.stderr));
+    if out.status.code() == Some(0) {
+        assert_eq!(rep["stop"]["reason"], "tolerance_reached");
+        let chk = Command::new("python3").args([&script("tspline_maxerror.py"), input.to_str().unwrap(), eval.to_str().unwrap(), e]).output().unwrap();
+        assert!(
+            chk.status.success(),
+            "{fixture} degree {degree}: independent check failed: {}{}",
+            String::from_utf8_lossy(&chk.stdout),
+            String::from_utf8_lossy(&chk.stderr)
+        );
+    } else {
+        // Only allowed for cubic: reported with the reason and the error reached.
+        assert_eq!(degree, "3", "{stderr}");
+        assert!(stderr.contains("minimum cell size") || stderr.contains("stopped"), "{stderr}");
+    }
+    let rows = rep["iterations"].as_array().unwrap();
+    for key in ["control_points", "mean", "sigma", "median", "max", "rms", "over_tolerance", "seconds"] {
+        assert!(rows[0].get(key).is_some(), "report row lacks {key}");
+    }
+    rep
+}
+
+#[test]
+fn max_error_honoured_on_tut_bathy() {
+    if !python_ok() || !common::tool("gdal_translate") {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let r1 = fit_and_check("terrain/gmt_tut_bathy.nc", "10", "1", dir.path());
+    if r1.is_null() {
+        return;
+    }
+    let r3 = fit_and_check("terrain/gmt_tut_bathy.nc", "10", "3", dir.path());
+    eprintln!("tut_bathy E=10: degree 1 {} control points, degree 3 {} ({})", r1["control_points"], r3["control_points"], r3["stop"]);
+}
+
+#[test]
+fn max_error_honoured_on_kilauea() {
+    if !python_ok() || !common::tool("gdal_translate") {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let r1 = fit_and_check("terrain/gmt_Kilauea.utm.nc", "5", "1", dir.path());
+    if r1.is_null() {
+        return;
+    }
+    // far fewer control points than valid cells
+    assert!(r1["control_points"].as_f64().unwrap() < 0.1 * r1["valid_cells"].as_f64().unwrap());
+}
+
+/// Same input and options give byte-identical T-mesh files; CPU and OpenCL fits agree.
+#[test]
+fn fit_is_deterministic_and_device_independent() {
+    let Some(input) = common::fixture("terrain/gmt_guinea_bay.nc") else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let mut files = Vec::new();
+    for (i, dev) in ["cpu", "cpu", "opencl"].iter().enumerate() {
+        let out = dir.path().join(format!("g{i}.tmesh"));
+        let o = common::run(&["-q", "fit", input.to_str().unwrap(), "-o", out.to_str().unwrap(), "--max-error", "50", "--degree", "3", "--device", dev], None);
+        assert!(o.status.code() == Some(0) || o.status.code() == Some(1), "{}", String::from_utf8_lossy(&o.stderr));
+        files.push(std::fs::read(&out).unwrap());
+    }
+    assert_eq!(files[0], files[1], "two CPU runs differ");
+    // OpenCL only evaluates (knots, error checks); the solve is the same: the meshes agree in
+    // topology and the heights to rounding.
+    let a = String::from_utf8_lossy(&files[0]).to_string();
+    let b = String::from_utf8_lossy(&files[2]).to_string();
+    assert_eq!(a.lines().count(), b.lines().count());
+}
+
+#[test]
+fn eval_device_opencl_matches_cpu() {
+    let Some(input) = common::fixture("terrain/gmt_guinea_bay.nc") else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let mesh = dir.path().join("m.tmesh");
+    let o = common::run(&["-q", "fit", input.to_str().unwrap(), "-o", mesh.to_str().unwrap(), "--max-error", "100", "--degree", "3", "--device", "cpu"], None);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let mut outs = Vec::new();
+    for dev in ["cpu", "opencl"] {
+        let p = dir.path().join(format!("e-{dev}.asc"));
+        let o = common::run(&["eval", mesh.to_str().unwrap(), "-o", p.to_str().unwrap(), "--device", dev, "--no-mask"], None);
+        assert!(o.status.success(), "--device {dev}: {}", String::from_utf8_lossy(&o.stderr));
+        let text = std::fs::read_to_string(&p).unwrap();
+        let vals: Vec<f64> = text.lines().skip(6).flat_map(|l| l.split_whitespace().map(|v| v.parse::<f64>().unwrap()).collect::<Vec<_>>()).collect();
+        outs.push(vals);
+    }
+    assert_eq!(outs[0].len(), outs[1].len());
+    for (a, b) in outs[0].iter().zip(&outs[1]) {
+        assert!((a - b).abs() <= 1e-12 * a.abs().max(1.0), "{a} vs {b}");
+    }
+}
+
+#[test]
+fn bad_inputs_get_clear_messages() {
+    let dir = tempfile::tempdir().unwrap();
+    // --max-error must be positive
+    let asc = dir.path().join("r.asc");
+    std::fs::write(&asc, "ncols 3\nnrows 2\nxllcorner 0\nyllcorner 0\ncellsize 1\nNODATA_value -9999\n1 2 3\n4 5 6\n").unwrap();
+    let o = common::run(&["fit", asc.to_str().unwrap(), "--max-error", "0"], None);
+    assert_eq!(o.status.code(), Some(2), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--max-error"));
+    let o = common::run(&["fit", asc.to_str().unwrap(), "--max-error", "-1"], None);
+    assert_eq!(o.status.code(), Some(2));
+    let o = common::run(&["fit", asc.to_str().unwrap(), "--max-error", "1", "--degree", "2"], None);
+    assert_eq!(o.status.code(), Some(2));
+    // all nodata
+    let nod = dir.path().join("n.asc");
+    std::fs::write(&nod, "ncols 2\nnrows 2\nxllcorner 0\nyllcorner 0\ncellsize 1\nNODATA_value -9999\n-9999 -9999\n-9999 -9999\n").unwrap();
+    let o = common::run(&["fit", nod.to_str().unwrap(), "--max-error", "1"], None);
+    assert_eq!(o.status.code(), Some(1), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("no valid cell"));
+    // 1x1 raster and a constant raster fit
+    let one = dir.path().join("one.asc");
+    std::fs::write(&one, "ncols 1\nnrows 1\nxllcorner 0\nyllcorner 0\ncellsize 1\nNODATA_value -9999\n7.5\n").unwrap();
+    let m = dir.path().join("one.tmesh");
+    let o = common::run(&["-q", "fit", one.to_str().unwrap(), "--max-error", "0.1", "-o", m.to_str().unwrap()], None);
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    // control-point cap reached first: exit 1, error reached reported
+    let Some(k) = common::fixture("terrain/gmt_guinea_bay.nc") else { return };
+    let o = common::run(&["-q", "fit", k.to_str().unwrap(), "--max-error", "1", "--max-points", "100", "-o", m.to_str().unwrap()], None);
+    assert_eq!(o.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("control-point cap 100") && err.contains("max error"), "{err}");
+    // integer data below its precision: a warning
+    let o = common::run(&["fit", k.to_str().unwrap(), "--max-error", "0.1", "--max-points", "50", "-o", m.to_str().unwrap()], None);
+    assert!(String::from_utf8_lossy(&o.stderr).contains("precision"));
+    // corrupt T-mesh
+    let bad = dir.path().join("bad.tmesh");
+    std::fs::write(&bad, "<tmesh xmlns=\"urn:geofit:tmesh:1\" degree=\"3\">\n<georef x0=\"0\" y0=\"0\" dx=\"1\" dy=\"1\"/>\n<points count=\"1\">0 0 0</points></tmesh>").unwrap();
+    let o = common::run(&["eval", bad.to_str().unwrap(), "-o", dir.path().join("x.tif").to_str().unwrap()], None);
+    assert_eq!(o.status.code(), Some(3));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("bad.tmesh") && err.contains("line 3"), "{err}");
+    // not XML at all
+    std::fs::write(&bad, "\u{0}\u{1}garbage").unwrap();
+    let o = common::run(&["eval", bad.to_str().unwrap()], None);
+    assert_eq!(o.status.code(), Some(3));
+}
+
+/// `--device auto` without any OpenCL platform falls back to the CPU with one notice.
+#[test]
+fn device_auto_falls_back_without_platform() {
+    let Some(input) = common::fixture("terrain/gmt_guinea_bay.nc") else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let m = dir.path().join("m.tmesh");
+    let o = common::geofit()
+        .args(["fit", input.to_str().unwrap(), "--max-error", "200", "-o", m.to_str().unwrap(), "--device", "auto"])
+        .env("OCL_ICD_VENDORS", dir.path()) // an empty vendor directory: no platform
+        .output()
+        .unwrap();
+    assert!(o.status.code() == Some(0) || o.status.code() == Some(1));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(err.matches("no OpenCL platform").count(), 1, "{err}");
+    // forced OpenCL fails instead
+    let o = common::geofit()
+        .args(["fit", input.to_str().unwrap(), "--max-error", "200", "-o", m.to_str().unwrap(), "--device", "opencl"])
+        .env("OCL_ICD_VENDORS", dir.path())
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(4), "{}", String::from_utf8_lossy(&o.stderr));
+}

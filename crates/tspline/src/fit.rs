@@ -357,8 +357,9 @@ pub fn fit_lsq(mesh: &TMesh, pb: &PbSpline, samples: &Samples) -> Result<Vec<f64
     let mut a = pattern(pb, &extra);
     let w = samples.width;
     let rows: Vec<usize> = (0..samples.height).collect();
-    let nthreads = rayon::current_num_threads().max(1);
-    let chunk = rows.len().div_ceil(nthreads).max(1);
+    // A fixed number of row blocks (not the thread count) keeps the summation order, and so
+    // the output bytes, independent of the machine.
+    let chunk = rows.len().div_ceil(4).max(1);
     let parts: Vec<(Vec<f64>, Vec<f64>, Vec<f64>)> = rows
         .par_chunks(chunk)
         .map(|js| {
@@ -430,6 +431,12 @@ pub fn fit_lsq(mesh: &TMesh, pb: &PbSpline, samples: &Samples) -> Result<Vec<f64
     Ok(cg(&a, &rhs, &prior, 1e-13, 20 * n + 2000))
 }
 
+/// Dot product with a fixed summation order (deterministic under rayon).
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    let parts: Vec<f64> = a.par_chunks(8192).zip(b.par_chunks(8192)).map(|(x, y)| x.iter().zip(y).map(|(p, q)| p * q).sum::<f64>()).collect();
+    parts.iter().sum()
+}
+
 /// Jacobi-preconditioned conjugate gradients.
 fn cg(a: &Csr, b: &[f64], x0: &[f64], tol: f64, max_iter: usize) -> Vec<f64> {
     let n = b.len();
@@ -438,18 +445,18 @@ fn cg(a: &Csr, b: &[f64], x0: &[f64], tol: f64, max_iter: usize) -> Vec<f64> {
     let mut r = vec![0.0; n];
     a.mul(&x, &mut r);
     r.par_iter_mut().zip(b).for_each(|(ri, bi)| *ri = bi - *ri);
-    let bnorm = b.iter().map(|v| v * v).sum::<f64>().sqrt().max(1e-300);
+    let bnorm = dot(b, b).sqrt().max(1e-300);
     let mut z: Vec<f64> = r.iter().zip(&dinv).map(|(a, d)| a * d).collect();
     let mut p = z.clone();
-    let mut rz: f64 = r.iter().zip(&z).map(|(a, b)| a * b).sum();
+    let mut rz: f64 = dot(&r, &z);
     let mut ap = vec![0.0; n];
     for _ in 0..max_iter {
-        let rnorm = r.iter().map(|v| v * v).sum::<f64>().sqrt();
+        let rnorm = dot(&r, &r).sqrt();
         if rnorm <= tol * bnorm {
             break;
         }
         a.mul(&p, &mut ap);
-        let pap: f64 = p.par_iter().zip(&ap).map(|(a, b)| a * b).sum();
+        let pap: f64 = dot(&p, &ap);
         if pap <= 0.0 {
             break;
         }
@@ -457,7 +464,7 @@ fn cg(a: &Csr, b: &[f64], x0: &[f64], tol: f64, max_iter: usize) -> Vec<f64> {
         x.par_iter_mut().zip(&p).for_each(|(xi, pi)| *xi += alpha * pi);
         r.par_iter_mut().zip(&ap).for_each(|(ri, api)| *ri -= alpha * api);
         z.par_iter_mut().zip(&r).zip(&dinv).for_each(|((zi, ri), d)| *zi = ri * d);
-        let rz_new: f64 = r.par_iter().zip(&z).map(|(a, b)| a * b).sum();
+        let rz_new: f64 = dot(&r, &z);
         let beta = rz_new / rz;
         rz = rz_new;
         p.par_iter_mut().zip(&z).for_each(|(pi, zi)| *pi = zi + beta * *pi);
