@@ -62,6 +62,8 @@ pub struct BackReport {
     pub max_move: f64,
     pub mean_move: f64,
     pub vertices_written: usize,
+    /// Template vertices without a popa3d node (merged by the normalization's snap).
+    pub vertices_dropped: usize,
 }
 
 /// Why the model cannot be written back into the template.
@@ -226,22 +228,57 @@ pub fn to_citygml(model: &Popa3d, template: &[u8], city: &CityModel, opts: &Back
             }
         }
     }
-    // 2. Node positions.
-    let inc = Incidence::new(&m);
-    let mut pos: Vec<P3> = Vec::with_capacity(m.nodes.len());
-    for i in 0..m.nodes.len() {
-        let p = m.node_position(&inc, NodeId::from(i)).map_err(|e| BackError::Geometry { element: format!("node {i}"), message: e.to_string() })?;
-        if p.iter().any(|v| !v.is_finite()) {
-            return Err(BackError::Geometry { element: format!("node {i}"), message: "position is not finite".into() });
-        }
-        pos.push([p[0] + m.origin[0], p[1] + m.origin[1], p[2] + m.origin[2]]);
-    }
-    // Template polygons.
+    // Template polygons (needed first: the original vertices anchor ill-conditioned nodes).
     let mut polys: HashMap<String, PolyInfo> = HashMap::new();
     let mut refs: HashMap<String, Vec<std::ops::Range<usize>>> = HashMap::new();
     let mut doc_order: Vec<String> = Vec::new();
     for o in &city.objects {
         collect_polys(o, None, &mut polys, &mut refs, &mut doc_order);
+    }
+    // 2. Node positions: the plane intersection (spec T 2.3/T 2.4). When the adjustment made a
+    //    node's planes (nearly) linearly dependent — e.g. two faces meeting at a slight kink became
+    //    parallel, spec §7.4 GA01/GA02 "can fail after adjustment" — the intersection is a line or
+    //    plane, and the node takes the point of it nearest to its original vertex (truncated
+    //    pseudo-inverse anchored at the source position, singular values below 1e-4 dropped).
+    let inc = Incidence::new(&m);
+    let mut pos: Vec<P3> = Vec::with_capacity(m.nodes.len());
+    for i in 0..m.nodes.len() {
+        let node = NodeId::from(i);
+        let p0: P3 = m.nodes[i]
+            .sources
+            .iter()
+            .find_map(|s| match s {
+                VertexSource::CityGml { polygon, ring, index } => polys
+                    .get(polygon)
+                    .and_then(|pi| ring_of(pi.poly, *ring))
+                    .and_then(|r| r.points.get(*index as usize))
+                    .map(|q| [q[0] - m.origin[0], q[1] - m.origin[1], q[2] - m.origin[2]]),
+                _ => None,
+            })
+            .ok_or_else(|| BackError::Provenance { element: format!("node {i}"), message: "none of its source vertices is in the template".into() })?;
+        let planes = inc.node_planes(&m, node);
+        let mut ata = nalgebra::Matrix3::<f64>::zeros();
+        let mut atr = nalgebra::Vector3::<f64>::zeros();
+        let x0 = nalgebra::Vector3::new(p0[0], p0[1], p0[2]);
+        for q in &planes {
+            let pv = m.plane_value(*q);
+            let n = nalgebra::Vector3::new(pv.n[0], pv.n[1], pv.n[2]);
+            ata += n * n.transpose();
+            atr += n * (pv.d - n.dot(&x0));
+        }
+        let e = ata.symmetric_eigen();
+        let lmax = e.eigenvalues.iter().fold(0.0f64, |a, &b| a.max(b));
+        let mut p = x0;
+        for k in 0..3 {
+            if e.eigenvalues[k] > 1e-4 * lmax && lmax > 0.0 {
+                let v = e.eigenvectors.column(k);
+                p += v * (v.dot(&atr) / e.eigenvalues[k]);
+            }
+        }
+        if p.iter().any(|v| !v.is_finite()) {
+            return Err(BackError::Geometry { element: format!("node {i}"), message: "position is not finite".into() });
+        }
+        pos.push([p[0] + m.origin[0], p[1] + m.origin[1], p[2] + m.origin[2]]);
     }
     // Provenance → (polygon, ring, index) → node.
     let mut vmap: HashMap<(String, u32, u32), NodeId> = HashMap::new();
@@ -266,7 +303,8 @@ pub fn to_citygml(model: &Popa3d, template: &[u8], city: &CityModel, opts: &Back
             }
         }
     }
-    let mapped: Vec<String> = doc_order.iter().filter(|id| vmap.contains_key(&((*id).clone(), 0, 0))).cloned().collect();
+    let mapped_set: HashSet<&String> = vmap.keys().map(|k| &k.0).collect();
+    let mapped: Vec<String> = doc_order.iter().filter(|id| mapped_set.contains(id)).cloned().collect();
     let mut report = BackReport { polygons_mapped: mapped.len(), ..Default::default() };
     // New rings per mapped polygon.
     let mut new_rings: HashMap<String, Vec<Option<Vec<P3>>>> = HashMap::new();
@@ -278,10 +316,12 @@ pub fn to_citygml(model: &Popa3d, template: &[u8], city: &CityModel, opts: &Back
             let n = ring_len(r);
             let mut pts = Vec::with_capacity(n);
             for k in 0..n {
-                let node = vmap.get(&(id.clone(), ri as u32, k as u32)).ok_or_else(|| BackError::Provenance {
-                    element: format!("polygon `{id}`"),
-                    message: format!("ring {ri} vertex {k} has no popa3d node (the template has more vertices than the model)"),
-                })?;
+                // A vertex without node was merged into its neighbour by normalization (snap):
+                // it is written once, as the neighbour.
+                let Some(node) = vmap.get(&(id.clone(), ri as u32, k as u32)) else {
+                    report.vertices_dropped += 1;
+                    continue;
+                };
                 let q = pos[node.idx()];
                 let d = dist(q, r.points[k]);
                 moves += d;

@@ -43,10 +43,11 @@ pub struct Args {
     #[arg(long, default_value_t = 0.1)]
     pub planarity: f64,
     /// ε: parallel planes of the same semantic type closer than this become coplanar (m).
-    #[arg(long, default_value_t = 0.05)]
+    #[arg(long, default_value_t = 0.01)]
     pub epsilon: f64,
-    /// Parallelism / orthogonality conditions within this angle (degrees).
-    #[arg(long, default_value_t = 1.0)]
+    /// Parallelism / orthogonality conditions within this angle (degrees). Small by default:
+    /// healing should make faces planar with the least change, not square the building.
+    #[arg(long, default_value_t = 0.05)]
     pub angle: f64,
     /// Buildings whose vertices would move further than this are left unchanged (m).
     #[arg(long, default_value_t = 0.05)]
