@@ -350,8 +350,24 @@ fn build_depth(soup: &Soup, topo: &Topo, tol: &Tolerances, origin: [f64; 3], dep
         m.add_half_edge(HalfEdge { edge: EdgeId::from(e), sign: if s > 0 { Sign::Plus } else { Sign::Minus }, face: FaceId::from(f) });
     }
 
-    // GA01 and the distance of every recomputed node from its source point.
+    // TA04/TA07: a face boundary that runs along one edge twice (a slit or spike in the source
+    // ring) or does not chain into simple cycles cannot be a popa3d face.
     let inc = Incidence::new(&m);
+    for f in 0..m.faces.len() {
+        let mut es: Vec<EdgeId> = inc.face_half_edges[f].iter().map(|h| m.half_edges[h.idx()].edge).collect();
+        es.sort();
+        let n = es.len();
+        es.dedup();
+        if es.len() != n || inc.face_cycles(&m, FaceId::from(f)).is_none() {
+            let loc = m.faces[f].source.as_ref().map(|s| s.polygon.clone()).unwrap_or_else(|| soup.name.clone());
+            return Err(Rejection::new(
+                "TA04",
+                loc,
+                "the polygon's boundary runs along the same edge twice or touches itself (a slit or spike): its half-edges do not form simple cycles",
+            ));
+        }
+    }
+    // GA01 and the distance of every recomputed node from its source point.
     let mut max_shift: f64 = 0.0;
     for n in 0..m.nodes.len() {
         let id = NodeId::from(n);

@@ -169,3 +169,53 @@ fn degenerate_and_non_planar_faces_are_rejected() {
     let e = normalize_into(&mut Popa3d::default(), &soup, &Tolerances::default()).unwrap_err();
     assert_eq!(e.rule, "GA-PLANAR");
 }
+
+#[test]
+fn validation_layers_pass_on_normalized_models_and_catch_breakage() {
+    use popa3d_model::validate::validate;
+    // A normalized row of rooms with sketch priors validates (Euler–Poincaré with 1 shell, no rings).
+    let soup = row_of_rooms(3);
+    let mut m = Popa3d::new([0.0; 3]);
+    normalize_into(&mut m, &soup, &Tolerances::default()).unwrap();
+    let r = Ranges { faces: 0..m.faces.len(), planes: 0..m.planes.len(), normals: 0..m.normals.len(), parameters: 0..m.parameters.len() };
+    conditions::sketch_priors(&mut m, &r, &conditions::SketchOptions::default());
+    // Priors alone do not fix the datum: AA02 counts 6 + 2 + 3 + 3 = 14 equations for 8 + 9 unknowns.
+    let v = validate(&m);
+    assert_eq!(v.iter().map(|x| x.rule.as_str()).collect::<Vec<_>>(), vec!["AA02"], "{v:?}");
+    // With a soft datum it is complete.
+    conditions::semantic(&mut m, &r, &conditions::ConditionOptions::default());
+    assert!(validate(&m).is_empty(), "{:?}", validate(&m));
+    // Break the topology: drop a half-edge → TA03/TA05/TA06/TA07 and the layer stops there.
+    let mut b = m.clone();
+    b.half_edges.pop();
+    let v = validate(&b);
+    assert!(v.iter().any(|x| x.rule == "TA03") && v.iter().all(|x| x.rule.starts_with("TA")), "{v:?}");
+    // A σ of 0 is a model-layer violation.
+    let mut c = m.clone();
+    c.observations.push(Observation::new(
+        ObsKind::DistanceFaceFace { a: FaceId(0), b: FaceId(1), l: Measured::new(1.0, 0.0) },
+        ObsOrigin::Measured,
+    ));
+    assert_eq!(validate(&c)[0].rule, "MA12");
+}
+
+#[test]
+fn euler_poincare_with_inner_rings_table_6_3() {
+    use popa3d_model::validate::topology_axioms;
+    // A cube whose top face carries a smaller box (its footprint is an inner ring of the top face,
+    // the box's bottom is not a face): Table 6.3 a) shape, v − e + f = 2(s − h) + r.
+    let mut soup = cuboid(0.0, [4.0, 4.0, 2.0], [0.0; 3]);
+    let top = soup.polygons.iter_mut().find(|p| p.locator == "c-top").unwrap();
+    top.rings.push(vec![[1.0, 1.0, 2.0], [1.0, 3.0, 2.0], [3.0, 3.0, 2.0], [3.0, 1.0, 2.0]]);
+    top.vertex_sources.push((0..4).map(|i| VertexSource::CityGml { polygon: "c-top".into(), ring: 1, index: i }).collect());
+    let b = |i: usize| [1.0 + (i & 1) as f64 * 2.0, 1.0 + ((i >> 1) & 1) as f64 * 2.0, 2.0 + ((i >> 2) & 1) as f64];
+    let mut bump = box_faces(&b, 0, "b-");
+    bump.remove(0); // no bottom
+    soup.polygons.extend(bump);
+    let mut m = Popa3d::new([0.0; 3]);
+    normalize_into(&mut m, &soup, &Tolerances::default()).unwrap();
+    assert_eq!((m.nodes.len(), m.edges.len(), m.faces.len()), (16, 24, 11));
+    // 16 − 24 + 11 = 3 = 2(1 − 0) + 1 inner ring.
+    let inc = Incidence::new(&m);
+    assert!(topology_axioms(&m, &inc).is_empty(), "{:?}", topology_axioms(&m, &inc));
+}

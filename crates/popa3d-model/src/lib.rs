@@ -23,6 +23,7 @@ pub mod ids;
 pub mod model;
 pub mod observation;
 pub mod topology;
+pub mod validate;
 pub mod xml;
 
 pub use geometry::GeometryError;
