@@ -255,7 +255,14 @@ pub fn to_citygml(model: &Popa3d, template: &[u8], city: &CityModel, opts: &Back
                     .map(|q| [q[0] - m.origin[0], q[1] - m.origin[1], q[2] - m.origin[2]]),
                 _ => None,
             })
-            .ok_or_else(|| BackError::Provenance { element: format!("node {i}"), message: "none of its source vertices is in the template".into() })?;
+            .ok_or_else(|| BackError::Provenance {
+                element: format!("node {i}"),
+                message: match m.nodes[i].sources.first() {
+                    Some(VertexSource::CityGml { polygon, ring, index }) => format!("its source vertex (polygon `{polygon}` ring {ring} vertex {index}) is not in the template"),
+                    Some(VertexSource::Obj { vertex }) => format!("comes from OBJ vertex {vertex}, not from CityGML"),
+                    None => "has no source vertex".into(),
+                },
+            })?;
         let planes = inc.node_planes(&m, node);
         let mut ata = nalgebra::Matrix3::<f64>::zeros();
         let mut atr = nalgebra::Vector3::<f64>::zeros();
