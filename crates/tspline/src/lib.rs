@@ -37,3 +37,8 @@ pub enum TsplineError {
     #[error("{0}")]
     Io(#[from] std::io::Error),
 }
+
+/// Threads the CPU path uses (rayon's pool; `RAYON_NUM_THREADS=1` gives the single-thread path).
+pub fn worker_threads() -> usize {
+    rayon::current_num_threads()
+}

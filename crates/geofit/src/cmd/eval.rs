@@ -44,6 +44,9 @@ pub struct Args {
     /// Where the evaluation runs.
     #[arg(long, value_enum, default_value_t = Device::Auto)]
     pub device: Device,
+    /// Print the evaluation throughput (points/s, flops per point) on stderr.
+    #[arg(long)]
+    pub timing: bool,
 }
 
 pub fn run(args: Args, config: &Config) -> CmdResult {
@@ -118,13 +121,31 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         Some(o) => o.build_pbspline(&file.mesh).map_err(|e| tspline_err(&args.mesh, e))?,
         None => PbSpline::build(&file.mesh),
     };
+    let t0 = std::time::Instant::now();
     let z = match &ocl {
         Some(o) => {
             let sp = o.upload(&pb).map_err(|e| tspline_err(&args.mesh, e))?;
             o.eval_points(&sp, &st).map_err(|e| tspline_err(&args.mesh, e))?
         }
-        None => pb.eval_z(&st, true),
+        None => pb.eval_z(&st, tspline::worker_threads() > 1),
     };
+    if args.timing {
+        let secs = t0.elapsed().as_secs_f64();
+        let dev = match &ocl {
+            Some(o) => format!("opencl {}", o.device_name()),
+            None => format!("cpu, {} thread(s)", tspline::worker_threads()),
+        };
+        eprintln!(
+            "geofit: timing: {} points in {:.3} s = {:.2} M points/s, {:.0} flops/point ({}; {} control points, degree {})",
+            st.len(),
+            secs,
+            st.len() as f64 / secs / 1e6,
+            pb.flops_estimate(&st),
+            dev,
+            pb.point_ids.len(),
+            pb.degree.k()
+        );
+    }
     for (q, v) in z.into_iter().enumerate() {
         let keep = v.is_finite()
             && (args.no_mask || stored_mask.as_ref().map(|m| m[q]).unwrap_or(true))
