@@ -284,7 +284,9 @@ pub fn csg(a: &Model, b: &Model, op: CsgOp) -> (Surface, TetMesh, Vec<f64>) {
     }
     let dims = [0, 1, 2].map(|k| (((hi[k] - lo[k]) / cube).ceil() as usize).max(1));
     let mut r = Refiner::new(lo, dims, cube);
-    let target = r.level_of_cube_fraction(cell);
+    // One level finer than the inputs: the min/max creases are cut by linear pieces, so the
+    // elements along them must be small.
+    let target = r.level_of_cube_fraction(cell) + 3;
     let mut samples: Vec<V3> = iso_surface(&a.mesh, &a.phi, 0.0, None).positions;
     samples.extend(iso_surface(&b.mesh, &b.phi, 0.0, None).positions.iter().map(|p| [p[0] + off[0], p[1] + off[1], p[2] + off[2]]));
     r.add_points(&samples, target);

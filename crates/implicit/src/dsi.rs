@@ -508,7 +508,7 @@ pub fn solve(
     // CG runs to a loose tolerance; once a round leaves the set unchanged, one final solve goes
     // to `p.tol` from there. A warm start (saved φ and active set) then needs one loose and one
     // tight solve, both from close to the answer.
-    let loose = p.tol.max(1e-4);
+    let loose = (p.tol * 10.0).max(1e-5);
     let has_ineq = data.ineq.iter().any(|&b| b);
     let mut round = 0;
     let mut settled = !has_ineq;

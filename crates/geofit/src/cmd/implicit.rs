@@ -287,7 +287,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
 fn lib_err(name: &str, e: implicit::Error) -> CliError {
     match e {
         implicit::Error::Parse { .. } => CliError::unreadable(e.to_string()),
-        implicit::Error::Model(m) => CliError::unreadable(format!("{name}: {m}")),
+        implicit::Error::Model(m) => CliError::unreadable(format!("{name}: not a readable model file: {m}")),
         implicit::Error::NotConverged { .. } => CliError::findings(format!("{name}: {e}")),
         _ => CliError::findings(format!("{name}: {e}")),
     }
