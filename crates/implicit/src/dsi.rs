@@ -300,6 +300,17 @@ pub struct CgStats {
     pub converged: bool,
 }
 
+/// Dot product with a fixed summation order (fixed-size chunks summed in parallel, then in
+/// order), so identical input gives bit-identical CG iterates and outputs on any thread count.
+fn det_dot(a: &[f64], b: &[f64]) -> f64 {
+    let parts: Vec<f64> = a
+        .par_chunks(4096)
+        .zip(b.par_chunks(4096))
+        .map(|(x, y)| x.iter().zip(y).map(|(p, q)| p * q).sum::<f64>())
+        .collect();
+    parts.iter().sum()
+}
+
 /// Sum of symmetric CSR matrices plus `shift`·I (A = A_B + A_F merged, seed §3).
 pub fn csr_sum(mats: &[&Csr], shift: f64) -> Csr {
     let n = mats[0].n;
@@ -425,7 +436,7 @@ impl Ic0 {
 /// Stops when ‖r‖ ≤ tol·‖b‖.
 pub fn pcg(a: &Csr, b: &[f64], x: &mut [f64], tol: f64, max_iter: usize) -> CgStats {
     let n = b.len();
-    let pdot = |a: &[f64], b: &[f64]| -> f64 { a.par_iter().zip(b.par_iter()).map(|(x, y)| x * y).sum() };
+    let pdot = det_dot;
     let bn = pdot(b, b).sqrt();
     if bn == 0.0 {
         x.iter_mut().for_each(|v| *v = 0.0);
