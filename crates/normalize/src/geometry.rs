@@ -296,8 +296,14 @@ fn build_depth(soup: &Soup, topo: &Topo, tol: &Tolerances, origin: [f64; 3], dep
         src.dedup();
         m.add_node(Node { sources: src });
     }
-    for &(a, b) in &topo.edges {
+    for (i, &(a, b)) in topo.edges.iter().enumerate() {
         m.add_edge(Edge { start: NodeId::from(a), end: NodeId::from(b) });
+        if let Some(v) = topo.edge_sources.get(&(a.min(b), a.max(b))) {
+            let mut v = v.clone();
+            v.sort();
+            v.dedup();
+            m.edge_vertices.push(EdgeVertices { edge: EdgeId::from(i), sources: v });
+        }
     }
     // Parameters: bases and unpaired normals first (3 each), partners reference their base.
     let mut nparams: Vec<Option<[(ParamId, Sign); 3]>> = vec![None; cnormal.len()];
@@ -455,6 +461,7 @@ pub fn append(model: &mut Popa3d, part: &mut Part) {
     model.solids.extend(p.solids.iter().skip(1).cloned());
     model.nodes.extend(p.nodes.iter().cloned());
     model.edges.extend(p.edges.iter().map(|e| Edge { start: NodeId::from(n0 + e.start.idx()), end: NodeId::from(n0 + e.end.idx()) }));
+    model.edge_vertices.extend(p.edge_vertices.iter().map(|x| EdgeVertices { edge: EdgeId::from(e0 + x.edge.idx()), sources: x.sources.clone() }));
     model.half_edges.extend(p.half_edges.iter().map(|h| HalfEdge {
         edge: EdgeId::from(e0 + h.edge.idx()),
         sign: h.sign,

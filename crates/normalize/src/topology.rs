@@ -33,6 +33,9 @@ pub struct Topo {
     pub soup_edges: usize,
     pub soup_faces: usize,
     pub soup_points: usize,
+    /// Source vertices lying on an edge between its end nodes (collinear nodes removed by
+    /// [`repair`]), keyed by the edge's node pair (smaller index first).
+    pub edge_sources: HashMap<(usize, usize), Vec<VertexSource>>,
 }
 
 /// Grid hash for snapping points within `tol`.
@@ -506,6 +509,46 @@ pub fn repair(t: &mut Topo, deficient: &[usize], mergeable: &dyn Fn(usize, usize
     let removable: std::collections::HashSet<usize> =
         deficient.iter().cloned().filter(|n| nb.get(n).is_some_and(|s| s.len() == 2)).collect();
     if !removable.is_empty() {
+        // Carry the removed nodes' source vertices (and those already on the edges they split) to
+        // the edge between the kept neighbours.
+        let mut done: std::collections::HashSet<(usize, usize)> = std::collections::HashSet::new();
+        let mut moved: Vec<((usize, usize), Vec<VertexSource>)> = Vec::new();
+        for f in &t.faces {
+            for r in &f.rings {
+                let k = r.len();
+                for i in 0..k {
+                    if removable.contains(&r[i]) || !removable.contains(&r[(i + 1) % k]) {
+                        continue;
+                    }
+                    let p = r[i];
+                    let mut chain = vec![p];
+                    let mut j = (i + 1) % k;
+                    while removable.contains(&r[j]) && chain.len() <= k {
+                        chain.push(r[j]);
+                        j = (j + 1) % k;
+                    }
+                    chain.push(r[j]);
+                    let q = r[j];
+                    let key = (p.min(q), p.max(q));
+                    if !done.insert(key) {
+                        continue;
+                    }
+                    let mut src = Vec::new();
+                    for w in chain.windows(2) {
+                        if let Some(v) = t.edge_sources.remove(&(w[0].min(w[1]), w[0].max(w[1]))) {
+                            src.extend(v);
+                        }
+                    }
+                    for n in &chain[1..chain.len() - 1] {
+                        src.extend(t.node_sources[*n].iter().cloned());
+                    }
+                    moved.push((key, src));
+                }
+            }
+        }
+        for (k, v) in moved {
+            t.edge_sources.entry(k).or_default().extend(v);
+        }
         for f in t.faces.iter_mut() {
             for r in f.rings.iter_mut() {
                 let before = r.len();
@@ -537,6 +580,11 @@ pub fn repair(t: &mut Topo, deficient: &[usize], mergeable: &dyn Fn(usize, usize
         }
         t.points = points;
         t.node_sources = sources;
+        t.edge_sources = std::mem::take(&mut t.edge_sources)
+            .into_iter()
+            .filter(|((a, b), _)| map[*a] != usize::MAX && map[*b] != usize::MAX)
+            .map(|((a, b), v)| ((map[a].min(map[b]), map[a].max(map[b])), v))
+            .collect();
         rebuild_edges(t);
     }
     changed

@@ -17,6 +17,10 @@ pub struct Popa3d {
     pub source: Option<SourceDocument>,
     pub nodes: Vec<Node>,
     pub edges: Vec<Edge>,
+    /// Source vertices that lie on an edge between its end nodes: collinear vertices that
+    /// normalization removed because they were no plane intersection (GA01 repair, spec §7.4). The
+    /// way back to CityGML puts them on the edge's line. Sorted by edge.
+    pub edge_vertices: Vec<EdgeVertices>,
     pub half_edges: Vec<HalfEdge>,
     pub faces: Vec<Face>,
     pub solids: Vec<Solid>,
@@ -60,6 +64,13 @@ pub enum VertexSource {
 pub struct Edge {
     pub start: NodeId,
     pub end: NodeId,
+}
+
+/// Source vertices lying on one edge (see [`Popa3d::edge_vertices`]).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct EdgeVertices {
+    pub edge: EdgeId,
+    pub sources: Vec<VertexSource>,
 }
 
 /// One use of an edge by a face: `sign` Plus means the face's boundary runs start→end.

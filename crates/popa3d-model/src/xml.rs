@@ -107,14 +107,7 @@ pub fn write<W: Write + ?Sized>(m: &Popa3d, w: &mut W) -> Result<(), XmlError> {
             }
             let _ = write!(o, "    <node id=\"{i}\">");
             for s in &n.sources {
-                match s {
-                    VertexSource::CityGml { polygon, ring, index } => {
-                        let _ = write!(o, "<src polygon=\"{}\" ring=\"{ring}\" index=\"{index}\"/>", esc(polygon));
-                    }
-                    VertexSource::Obj { vertex } => {
-                        let _ = write!(o, "<src vertex=\"{vertex}\"/>");
-                    }
-                }
+                write_src(o, s);
             }
             o.push_str("</node>\n");
         }
@@ -126,6 +119,17 @@ pub fn write<W: Write + ?Sized>(m: &Popa3d, w: &mut W) -> Result<(), XmlError> {
         }
         Ok(())
     })?;
+    if !m.edge_vertices.is_empty() {
+        o.push_str("  <edgevertices>\n");
+        for ev in &m.edge_vertices {
+            let _ = write!(o, "    <on edge=\"{}\">", ev.edge.0);
+            for s in &ev.sources {
+                write_src(&mut o, s);
+            }
+            o.push_str("</on>\n");
+        }
+        o.push_str("  </edgevertices>\n");
+    }
     section(&mut o, "halfedges", m.half_edges.len(), |o| {
         for (i, h) in m.half_edges.iter().enumerate() {
             let _ = writeln!(
@@ -224,6 +228,18 @@ pub fn write<W: Write + ?Sized>(m: &Popa3d, w: &mut W) -> Result<(), XmlError> {
     o.push_str("</popa3d>\n");
     w.write_all(o.as_bytes())?;
     Ok(())
+}
+
+fn write_src(o: &mut String, s: &VertexSource) {
+    use std::fmt::Write as _;
+    match s {
+        VertexSource::CityGml { polygon, ring, index } => {
+            let _ = write!(o, "<src polygon=\"{}\" ring=\"{ring}\" index=\"{index}\"/>", esc(polygon));
+        }
+        VertexSource::Obj { vertex } => {
+            let _ = write!(o, "<src vertex=\"{vertex}\"/>");
+        }
+    }
 }
 
 fn section(
@@ -521,6 +537,8 @@ pub fn read(bytes: &[u8]) -> Result<Popa3d, XmlError> {
     let mut obs: Table<Observation> = Table::new("observation");
     let mut stack: Vec<String> = Vec::new();
     let mut cur_node: Option<(El, Vec<VertexSource>)> = None;
+    let mut cur_on: Option<(El, EdgeId, Vec<VertexSource>)> = None;
+    let mut edge_vertices: Vec<(El, EdgeId, Vec<VertexSource>)> = Vec::new();
     let mut saw_root = false;
     let mut saw_origin = false;
 
@@ -576,12 +594,23 @@ pub fn read(bytes: &[u8]) -> Result<Popa3d, XmlError> {
                         cur_node = Some((el, Vec::new()));
                     }
                 }
-                (Some("node"), "src") => {
-                    let src = if el.opt("vertex").is_some() {
-                        VertexSource::Obj { vertex: el.u32("vertex")? }
+                (Some("popa3d"), "edgevertices") => {}
+                (Some("edgevertices"), "on") => {
+                    let e = EdgeId(el.u32("edge")?);
+                    if is_empty {
+                        edge_vertices.push((el, e, Vec::new()));
                     } else {
-                        VertexSource::CityGml { polygon: el.req("polygon")?.to_string(), ring: el.u32("ring")?, index: el.u32("index")? }
-                    };
+                        cur_on = Some((el, e, Vec::new()));
+                    }
+                }
+                (Some("on"), "src") => {
+                    let src = parse_src(&el)?;
+                    if let Some((_, _, v)) = cur_on.as_mut() {
+                        v.push(src);
+                    }
+                }
+                (Some("node"), "src") => {
+                    let src = parse_src(&el)?;
                     if let Some((_, v)) = cur_node.as_mut() {
                         v.push(src);
                     }
@@ -662,6 +691,11 @@ pub fn read(bytes: &[u8]) -> Result<Popa3d, XmlError> {
         match ev {
             Event::End(_) => {
                 if let Some(name) = stack.pop() {
+                    if name == "on" {
+                        if let Some(x) = cur_on.take() {
+                            edge_vertices.push(x);
+                        }
+                    }
                     if name == "node" {
                         if let Some((el, v)) = cur_node.take() {
                             nodes.push(&el, Node { sources: v })?;
@@ -691,6 +725,12 @@ pub fn read(bytes: &[u8]) -> Result<Popa3d, XmlError> {
     m.nodes = v;
     let (v, epos) = edges.finish()?;
     m.edges = v;
+    for (el, e, sources) in edge_vertices {
+        if e.idx() >= m.edges.len() {
+            return Err(el.err(format!("references {e}, which does not exist")));
+        }
+        m.edge_vertices.push(EdgeVertices { edge: e, sources });
+    }
     let (v, hpos) = hes.finish()?;
     m.half_edges = v;
     let (v, fpos) = faces.finish()?;
@@ -709,6 +749,14 @@ pub fn read(bytes: &[u8]) -> Result<Popa3d, XmlError> {
     m.observations = v;
     check_references(&m, &epos, &hpos, &fpos, &ppos, &npos, &spos, &opos)?;
     Ok(m)
+}
+
+fn parse_src(el: &El) -> Result<VertexSource, XmlError> {
+    Ok(if el.opt("vertex").is_some() {
+        VertexSource::Obj { vertex: el.u32("vertex")? }
+    } else {
+        VertexSource::CityGml { polygon: el.req("polygon")?.to_string(), ring: el.u32("ring")?, index: el.u32("index")? }
+    })
 }
 
 fn el_name(s: &BytesStart) -> String {
