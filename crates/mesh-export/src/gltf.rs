@@ -12,6 +12,11 @@
 //!   of the written `f32` values (required by the spec); normals are normalised; indices are
 //!   `UNSIGNED_INT`; only materials that are used are written (no "unused object" notes).
 //!
+//! Known reader limitation: MeshLab / pymeshlab (seen with 2025.7) mis-read `LINES` primitives
+//! as triangles and may crash on them; the files are valid (Khronos validator, `gltf` crate,
+//! three.js). Scenes meant for MeshLab should keep line sets out or use OBJ, whose `l` records
+//! MeshLab and FreeCAD skip.
+//!
 //! [`MeshNode`]: crate::MeshNode
 //! [`TriangleMesh`]: crate::TriangleMesh
 //! [`LineSet`]: crate::LineSet
