@@ -212,3 +212,21 @@ fn device_auto_falls_back_without_platform() {
         .unwrap();
     assert_eq!(o.status.code(), Some(4), "{}", String::from_utf8_lossy(&o.stderr));
 }
+
+/// A fitted T-mesh (with its data mask) validates against `xsd/tmesh.xsd`.
+#[test]
+fn fitted_tmesh_validates_against_the_schema() {
+    let Some(input) = common::fixture("terrain/gmt_Kilauea.utm.nc") else { return };
+    if !common::tool("xmllint") {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let m = dir.path().join("k.tmesh");
+    let o = common::run(&["-q", "fit", input.to_str().unwrap(), "--max-error", "100", "--degree", "3", "-o", m.to_str().unwrap()], None);
+    assert!(o.status.code() == Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = std::fs::read_to_string(&m).unwrap();
+    assert!(text.contains("<mask ") && text.contains("<crs>"));
+    let xsd = common::repo_root().join("xsd/tmesh.xsd");
+    let v = Command::new("xmllint").args(["--noout", "--schema", xsd.to_str().unwrap(), m.to_str().unwrap()]).output().unwrap();
+    assert!(v.status.success(), "{}", String::from_utf8_lossy(&v.stderr));
+}
