@@ -414,3 +414,46 @@ fn every_fixture_exports_to_a_valid_glb() {
         }
     }
 }
+
+/// CityGML 3.0, LoD3 openings and the OGC XLink cases (roof overhangs outside the solid, a wall
+/// shared by two top-level buildings through an OrientableSurface, polygons in a nested
+/// installation): each polygon exactly once, triangle count and area as the GML script says.
+#[test]
+fn citygml3_and_xlink_cases_against_truth() {
+    let cases: &[(&str, u8)] = &[
+        ("citygml/v3/FZK-Haus-LoD2-KIT-IAI-KHH-B36-V1__v3.gml", 2),
+        ("citygml/v3/FZK-Haus-LoD3-KIT-IAI-KHH-B36-V1__v3.gml", 3),
+        ("citygml/v3/lod2_buildings_v3.gml", 2),
+        ("citygml/ogc-xlink/2_SimpleBuilding_Roof_Overhangs/CityGML_2.gml", 2),
+        ("citygml/ogc-xlink/3_Building_With_Nested_Features/CityGML_3.gml", 2),
+        ("citygml/ogc-xlink/4_Cross-Top-Level-XLink/CityGML_2.gml", 2),
+        ("citygml/ogc-xlink/4_Cross-Top-Level-XLink/CityGML_3.gml", 2),
+        ("citygml/ogc-building/CityGMLv2/Building_and_garage_LOD2-EPSG25832.gml", 2),
+        ("citygml/v2/b1_lod2_cs_w_sem.gml", 2),
+    ];
+    let dir = common::tempdir();
+    for (i, (fx, lod)) in cases.iter().enumerate() {
+        let Some(gml) = common::fixture(fx) else { continue };
+        let t = truth(&gml, *lod);
+        let obj = dir.path().join(format!("{i}.obj"));
+        let report = dir.path().join(format!("{i}.json"));
+        let lods = lod.to_string();
+        export(&[
+            "export",
+            gml.to_str().unwrap(),
+            "--lod",
+            &lods,
+            "--planar",
+            "-o",
+            obj.to_str().unwrap(),
+            "--report",
+            report.to_str().unwrap(),
+        ]);
+        let r: Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
+        assert_eq!(r["polygons"], t["polygons"], "{fx}: polygons");
+        let (tris, area, _) = tobj_stats(&obj);
+        assert_eq!(tris as u64, t["triangles"].as_u64().unwrap(), "{fx}: triangles");
+        let ta = t["area"].as_f64().unwrap();
+        assert!(rel(area, ta) < 1e-6, "{fx}: area {area} vs {ta}");
+    }
+}
