@@ -216,7 +216,7 @@ fn device_auto_falls_back_without_platform() {
 /// A fitted T-mesh (with its data mask) validates against `xsd/tmesh.xsd`.
 #[test]
 fn fitted_tmesh_validates_against_the_schema() {
-    let Some(input) = common::fixture("terrain/gmt_Kilauea.utm.nc") else { return };
+    let Some(input) = common::fixture("terrain/gmt_guinea_bay.nc") else { return };
     if !common::tool("xmllint") {
         return;
     }
@@ -229,4 +229,30 @@ fn fitted_tmesh_validates_against_the_schema() {
     let xsd = common::repo_root().join("xsd/tmesh.xsd");
     let v = Command::new("xmllint").args(["--noout", "--schema", xsd.to_str().unwrap(), m.to_str().unwrap()]).output().unwrap();
     assert!(v.status.success(), "{}", String::from_utf8_lossy(&v.stderr));
+}
+
+/// `geofit surface` writes glb that the Khronos validator accepts with 0 errors, and OBJ+MTL
+/// with the expected triangle count (two per grid quad inside the mask).
+#[test]
+fn surface_export_validates() {
+    let Some(input) = common::fixture("terrain/gmt_guinea_bay.nc") else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let m = dir.path().join("g.tmesh");
+    let o = common::run(&["-q", "fit", input.to_str().unwrap(), "--max-error", "100", "-o", m.to_str().unwrap()], None);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let glb = dir.path().join("g.glb");
+    let o = common::run(&["surface", m.to_str().unwrap(), "-o", glb.to_str().unwrap(), "--reference", input.to_str().unwrap()], None);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let obj = dir.path().join("g.obj");
+    let o = common::run(&["surface", m.to_str().unwrap(), "-o", obj.to_str().unwrap(), "--step", "1"], None);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = std::fs::read_to_string(&obj).unwrap();
+    // guinea_bay: 61x61 cells all valid, step 1 → 60x60 quads → 7200 triangles
+    assert_eq!(text.lines().filter(|l| l.starts_with("f ")).count(), 7200);
+    assert!(dir.path().join("g.mtl").exists());
+    if common::tool("node") {
+        let v = Command::new("node").args([script("gltf_validator.js").as_str(), glb.to_str().unwrap()]).output().unwrap();
+        let rep = String::from_utf8_lossy(&v.stdout);
+        assert!(v.status.success() && rep.contains("\"numErrors\": 0"), "{rep}{}", String::from_utf8_lossy(&v.stderr));
+    }
 }

@@ -10,6 +10,7 @@ pub mod citygml2popa3d;
 pub mod info;
 pub mod obj2popa3d;
 pub mod rasterize;
+pub mod surface;
 pub mod unwarp;
 pub mod validate;
 pub mod warp;
