@@ -339,3 +339,56 @@ fn find(hay: &[u8], from: usize, needle: &[u8]) -> Option<usize> {
 pub fn wrapper_for(version: &str) -> String {
     format!("citygml-{version}.xsd")
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const DOC: &str = r#"<?xml version="1.0" encoding="UTF-8"?>
+<core:CityModel xmlns:core="http://www.opengis.net/citygml/2.0"
+    xmlns:bldg="http://www.opengis.net/citygml/building/2.0" xmlns:gml="http://www.opengis.net/gml">
+  <core:cityObjectMember>
+    <bldg:Building gml:id="B1"/>
+  </core:cityObjectMember>
+</core:CityModel>
+"#;
+
+    #[test]
+    fn version_from_root_namespaces() {
+        assert_eq!(sniff_version(DOC.as_bytes()), Some("2.0"));
+        let v3 = "\u{feff}<?xml version=\"1.0\"?><!-- c --><CityModel xmlns=\"http://www.opengis.net/citygml/3.0\"/>";
+        assert_eq!(sniff_version(v3.as_bytes()), Some("3.0"));
+        assert_eq!(sniff_version(b"<x xmlns=\"urn:other\"/>"), None);
+        assert_eq!(sniff_version(b""), None);
+    }
+
+    #[test]
+    fn column_of_the_blamed_start_tag() {
+        let starts = line_starts(DOC.as_bytes());
+        assert_eq!(element_column(DOC.as_bytes(), &starts, 5, "Building"), Some(5));
+        assert_eq!(element_column(DOC.as_bytes(), &starts, 5, "Nothing"), None);
+    }
+
+    /// Against the offline bundle beside the checkout, when it is there (the e2e tests compare
+    /// with xmllint on every fixture).
+    #[test]
+    fn validates_in_process() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/xsd");
+        if !dir.join("citygml-2.0.xsd").is_file() {
+            eprintln!("SKIP: {} not found", dir.display());
+            return;
+        }
+        let schema = Schema::load(&dir.join("citygml-2.0.xsd")).unwrap();
+        assert!(schema.validate(DOC.as_bytes(), "ok.gml").unwrap().is_empty());
+        // an xs:ID must not start with a digit
+        let bad = DOC.replace("gml:id=\"B1\"", "gml:id=\"1B\"");
+        let f = schema.validate(bad.as_bytes(), "bad.gml").unwrap();
+        assert!(!f.is_empty());
+        assert_eq!((f[0].kind, f[0].line, f[0].column), (XsdErrorKind::Invalid, 5, 5), "{f:?}");
+        // not well-formed: a libxml2 parser error with its own column
+        let f = schema.validate(&DOC.as_bytes()[..DOC.len() - 20], "cut.gml").unwrap();
+        assert_eq!(f[0].kind, XsdErrorKind::NotWellFormed);
+        assert!(f[0].line >= 6 && f[0].column >= 1, "{f:?}");
+        assert!(Schema::load(&dir.join("no-such.xsd")).is_err());
+    }
+}
