@@ -9,6 +9,7 @@ use crate::polygon::PolygonInput;
 use crate::shell::{check_shell, contact_eps, ShellMesh};
 use crate::tritri::contact;
 use crate::{Issue, Options};
+use rstar::{primitives::GeomWithData, primitives::Rectangle, RTree, AABB};
 
 fn solid_issue(code: ErrorCode, shell: usize, detail: String) -> Issue {
     Issue { code, polygon: None, ring: None, shell: Some(shell), detail, value: None }
@@ -74,10 +75,28 @@ pub fn check_solid(shells: &[Vec<PolygonInput>], opts: &Options) -> Vec<Issue> {
     let extent = pts[0].iter().map(|p| p.norm()).fold(0.0, f64::max);
     let (eps, touch) = contact_eps(opts, extent);
     let tri = |s: usize, t: &[u32; 3]| [pts[s][t[0] as usize], pts[s][t[1] as usize], pts[s][t[2] as usize]];
+    let boxed = |s: usize| -> RTree<GeomWithData<Rectangle<[f64; 3]>, usize>> {
+        let items = meshes[s]
+            .triangles
+            .iter()
+            .enumerate()
+            .map(|(k, t)| {
+                let p = tri(s, t);
+                let lo = [0, 1, 2].map(|i| p.iter().map(|q| q[i]).fold(f64::INFINITY, f64::min) - touch);
+                let hi = [0, 1, 2].map(|i| p.iter().map(|q| q[i]).fold(f64::NEG_INFINITY, f64::max) + touch);
+                GeomWithData::new(Rectangle::from_corners(lo, hi), k)
+            })
+            .collect();
+        RTree::bulk_load(items)
+    };
+    let trees: Vec<_> = (0..meshes.len()).map(boxed).collect();
     'pairs: for a in 0..meshes.len() {
         for b in a + 1..meshes.len() {
-            for ta in &meshes[a].triangles {
-                for tb in &meshes[b].triangles {
+            for ia in trees[a].iter() {
+                let ta = &meshes[a].triangles[ia.data];
+                let env = AABB::from_corners(ia.geom().lower(), ia.geom().upper());
+                for ib in trees[b].locate_in_envelope_intersecting(&env) {
+                    let tb = &meshes[b].triangles[ib.data];
                     let c = contact(&tri(a, ta), &tri(b, tb), eps);
                     let spread = c.iter().flat_map(|p| c.iter().map(move |q| (p - q).norm())).fold(0.0, f64::max);
                     if !c.is_empty() && spread > touch {
