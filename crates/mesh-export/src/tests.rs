@@ -226,7 +226,7 @@ fn obj_reads_back_with_tobj() {
     let mut area = 0.0f64;
     for m in &models {
         let p = &m.mesh.positions;
-        if m.mesh.face_arities.iter().any(|&a| a == 2) {
+        if m.mesh.face_arities.contains(&2) {
             continue; // the line set
         }
         assert!(m.mesh.face_arities.is_empty() || m.mesh.face_arities.iter().all(|&a| a == 3));

@@ -132,7 +132,7 @@ pub fn triangulate_polygon(
         .iter()
         .map(|p| norm(sub(*p, ext[0])))
         .fold(0.0, f64::max);
-    if !(len > 0.0) || len <= 1e-12 * scale * scale {
+    if len.is_nan() || len <= 1e-12 * scale * scale {
         return Err(TriangulateError::Degenerate);
     }
     let n = [nv[0] / len, nv[1] / len, nv[2] / len];
