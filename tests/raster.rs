@@ -171,6 +171,8 @@ fn laz_ground_class_rasterizes() {
     let (lo, hi) = r.min_max().unwrap();
     // weighted means of ground points stay inside their z range (README: 789..830 m, rounded)
     assert!(lo >= 788.9 && hi <= 830.0, "{lo}..{hi}");
+    // the LAS 1.2 GeoTIFF-key CRS travels into the raster as WKT
+    assert!(r.crs.as_deref().is_some_and(|w| w.starts_with("PROJCS") || w.starts_with("PROJCRS")), "{:?}", r.crs);
     assert!(r.valid_count() > 1000);
     let water = common::run(&["-q", "rasterize", laz.to_str().unwrap(), "--class", "9", "-o", tmp.path().join("w.tif").to_str().unwrap(), "--cell", "2", "--report", "-"], None);
     assert_eq!(common::code(&water), 0, "{}", stderr(&water));

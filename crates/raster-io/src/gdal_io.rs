@@ -87,6 +87,17 @@ fn gdal_msg(e: &GdalError) -> String {
     }
 }
 
+/// Routes GDAL's warnings (e.g. netCDF "dimension is not a Longitude/X dimension") to `sink`
+/// instead of GDAL's default stderr printer, so a CLI can show them as its own notices (or
+/// not, under `--quiet`). Errors still reach the Rust error values.
+pub fn route_gdal_warnings<F: Fn(&str) + Send + Sync + 'static>(sink: F) {
+    gdal::config::set_error_handler(move |class, _no, msg| {
+        if class == gdal::errors::CplErrType::Warning {
+            sink(msg.trim());
+        }
+    });
+}
+
 /// Reads band 1 of a raster file (see the module docs for what counts as nodata).
 pub fn read_raster(path: &Path) -> Result<Raster, RasterError> {
     read_raster_band(path, 1)

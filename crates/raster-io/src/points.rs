@@ -197,7 +197,8 @@ pub fn read_las(path: &Path, class: Option<u8>) -> Result<PointCloud, PointsErro
         .header()
         .get_wkt_crs_bytes()
         .map(|b| String::from_utf8_lossy(b).trim_end_matches('\0').trim().to_string())
-        .filter(|s| !s.is_empty());
+        .filter(|s| !s.is_empty())
+        .or_else(|| geotiff_crs_wkt(reader.header()));
     let total = reader.header().number_of_points();
     let mut points = Vec::new();
     let mut read = 0u64;
@@ -235,6 +236,17 @@ pub fn read_las(path: &Path, class: Option<u8>) -> Result<PointCloud, PointsErro
         return Err(PointsError::Empty { name, message });
     }
     Ok(PointCloud { points, crs })
+}
+
+/// The CRS of LAS 1.0–1.3 files (GeoTIFF key VLRs): the projected or geographic EPSG code,
+/// turned into WKT by GDAL/PROJ. `None` for user-defined (32767) or unknown codes.
+fn geotiff_crs_wkt(header: &las::Header) -> Option<String> {
+    let keys = header.get_geotiff_crs().ok()??;
+    let code = keys.get_projected_crs_geo_key_value().or_else(|| keys.get_geodetic_crs_geo_key_value())?;
+    if code == 0 || code >= 32767 {
+        return None;
+    }
+    gdal::spatial_ref::SpatialRef::from_epsg(code as u32).ok()?.to_wkt().ok()
 }
 
 /// Reads a point file by extension: LAS/LAZ (with the class filter) or XYZ text.

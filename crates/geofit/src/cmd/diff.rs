@@ -11,7 +11,7 @@ use clap::Args as ClapArgs;
 use raster_io::Raster;
 use raster_proc::diff::{class_map_rgba, compare_with_map, histogram_rgba, DiffOptions, DiffReport, DEFAULT_CLASS_BOUNDS};
 
-use super::rasterize::{proc_err, read_raster_arg};
+use super::rasterize::{gdal_notices, proc_err, read_raster_arg};
 use crate::config::{write_json_report, Config, Output};
 use crate::error::{CliError, CmdResult, Exit};
 
@@ -101,7 +101,8 @@ fn print_text(w: &mut dyn Write, r: &DiffReport) -> std::io::Result<()> {
     Ok(())
 }
 
-pub fn run(args: Args, _config: &Config) -> CmdResult {
+pub fn run(args: Args, config: &Config) -> CmdResult {
+    gdal_notices(config);
     let opts = DiffOptions { tolerance: args.tolerance, class_bounds: args.classes.clone() };
     opts.validate().map_err(|e| CliError::usage(e.to_string()))?;
     if args.a == "-" && args.b == "-" {

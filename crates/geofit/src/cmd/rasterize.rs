@@ -113,6 +113,17 @@ pub fn proc_err(what: &str, e: ProcError) -> CliError {
     }
 }
 
+/// Shows GDAL's warnings as geofit notices (one line each, silent under `--quiet`) instead of
+/// GDAL's own "Warning 1: ..." lines.
+pub fn gdal_notices(config: &Config) {
+    let quiet = config.quiet;
+    raster_io::gdal_io::route_gdal_warnings(move |m| {
+        if !quiet {
+            eprintln!("geofit: GDAL: {m}");
+        }
+    });
+}
+
 /// Reads a raster from a path argument (GDAL needs a path; stdin is spooled to a temp file).
 pub fn read_raster_arg(arg: &str) -> Result<(Raster, String), CliError> {
     let input = Input::from_arg(arg);
@@ -156,6 +167,7 @@ pub fn read_cloud(arg: &str, class: Option<u8>) -> Result<PointCloud, CliError> 
 }
 
 pub fn run(args: Args, config: &Config) -> CmdResult {
+    gdal_notices(config);
     if !(args.cell.is_finite() && args.cell > 0.0) {
         return Err(CliError::usage(format!("--cell {} must be a positive number", args.cell)));
     }

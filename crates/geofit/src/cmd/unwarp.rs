@@ -7,7 +7,7 @@ use clap::Args as ClapArgs;
 
 use raster_proc::warp::{field_of, unwarp_raster};
 
-use super::rasterize::{proc_err, read_raster_arg, write_raster_arg};
+use super::rasterize::{gdal_notices, proc_err, read_raster_arg, write_raster_arg};
 use crate::config::Config;
 use crate::error::{CmdResult, Exit};
 
@@ -31,6 +31,7 @@ pub struct Args {
 }
 
 pub fn run(args: Args, config: &Config) -> CmdResult {
+    gdal_notices(config);
     let (warped, name) = read_raster_arg(&args.input)?;
     let field = field_of(&warped).map_err(|e| proc_err(&name, e))?;
     let out = unwarp_raster(&warped, &field).map_err(|e| proc_err(&name, e))?;

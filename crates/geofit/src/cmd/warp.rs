@@ -11,7 +11,7 @@ use raster_proc::pca::Mass;
 use raster_proc::splat::SplatKernel;
 use raster_proc::warp::{warp_raster, WarpParams, WarpStats};
 
-use super::rasterize::{proc_err, read_raster_arg, write_raster_arg};
+use super::rasterize::{gdal_notices, proc_err, read_raster_arg, write_raster_arg};
 use crate::config::{write_json_report, Config};
 use crate::error::{CliError, CmdResult, Exit};
 
@@ -81,6 +81,7 @@ struct Report<'a> {
 }
 
 pub fn run(args: Args, config: &Config) -> CmdResult {
+    gdal_notices(config);
     if args.neighbourhood != 4 && args.neighbourhood != 8 {
         return Err(CliError::usage(format!("--neighbourhood {} must be 4 or 8", args.neighbourhood)));
     }
