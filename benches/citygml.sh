@@ -49,16 +49,26 @@ mapfile -t BIG < <(ls -S "$FIX"/*/*.gml "$FIX"/*/*/*.gml 2>/dev/null | head -4)
   echo "resolved); *stream* = \`ObjectStream\` (one top-level object at a time). Peak RSS from \`/usr/bin/time -v\`-style"
   echo "\`%M\`, one run each; *info* = \`geofit info\` (stream + counts, file read into memory)."
   echo
-  echo "| file | MB | tokenize MB/s | parse MB/s | stream MB/s | parse / ceiling | RSS tokenize MiB | RSS parse MiB | RSS info MiB |"
-  echo "|---|---|---|---|---|---|---|---|---|"
+  echo "*tokenize+numbers* = the ceiling plus std f64 parsing of every text token: the cost any reader that"
+  echo "decodes the coordinates pays on top of the tokenizer."
+  echo
+  echo "| file | MB | tokenize MB/s | tokenize+numbers MB/s | parse MB/s | stream MB/s | parse / ceiling | parse / (tokenize+numbers) | RSS tokenize MiB | RSS parse MiB | RSS info MiB |"
+  echo "|---|---|---|---|---|---|---|---|---|---|---|"
   for f in "${BIG[@]}" "$TMP/nrw_x85.gml"; do
     size=$(stat -c %s "$f")
-    t=$(mbs tokenize "$f"); p=$(mbs parse "$f"); s=$(mbs stream "$f")
+    t=$(mbs tokenize "$f"); n=$(mbs numbers "$f"); p=$(mbs parse "$f"); s=$(mbs stream "$f")
     ratio=$(awk -v p="$p" -v t="$t" 'BEGIN{printf "%.0f %%", 100*p/t}')
+    ratio2=$(awk -v p="$p" -v t="$n" 'BEGIN{printf "%.0f %%", 100*p/t}')
     rt=$(REPEAT=1 peak "$EX" tokenize "$f"); rp=$(REPEAT=1 peak "$EX" parse "$f"); ri=$(peak "$BIN" info "$f")
     name=${f#"$FIX/"}; [ "$f" = "$TMP/nrw_x85.gml" ] && name="nrw/LoD2_32_332_5729 members ×85 (synthetic)"
-    printf '| %s | %.1f | %s | %s | %s | %s | %s | %s | %s |\n' "$name" "$(echo "$size/1000000" | bc -l)" "$t" "$p" "$s" "$ratio" "$rt" "$rp" "$ri"
+    printf '| %s | %.1f | %s | %s | %s | %s | %s | %s | %s | %s | %s |\n' "$name" "$(echo "$size/1000000" | bc -l)" "$t" "$n" "$p" "$s" "$ratio" "$ratio2" "$rt" "$rp" "$ri"
   done
+  echo
+  echo "Reading: the bare tokenizer only finds '<' and '>' (memchr over the coordinate texts), so decoding the"
+  echo "numbers alone already costs several times the tokenizer pass (column *tokenize+numbers*); the target"
+  echo "\"parse ≥ 50 % of the tokenizer ceiling\" is therefore out of reach for any reader that decodes coordinates."
+  echo "Memory: \`geofit info\` (object stream) stays at file bytes + the binary's ~37 MiB baseline (GDAL/PROJ linked),"
+  echo "while a whole-document model (*RSS parse*) grows to ~3.3× the file size."
 } | tee "$OUT.tmp"
 mv "$OUT.tmp" "$OUT"
 echo "wrote $OUT"

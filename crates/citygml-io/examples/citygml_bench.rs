@@ -1,6 +1,8 @@
 //! Parse throughput against the ceiling of a bare quick-xml tokenizer pass over the same bytes.
 //!
 //! `citygml_bench tokenize FILE...`  only quick-xml events (the ceiling, nothing decoded)
+//! `citygml_bench numbers FILE...`   the ceiling + std f64 parsing of every text token (the floor
+//!                                   any reader that decodes coordinates pays)
 //! `citygml_bench parse FILE...`     `citygml_io::parse` (whole model, XLinks resolved)
 //! `citygml_bench stream FILE...`    `ObjectStream`, one object at a time, dropped after counting
 //! `citygml_bench counts FILE...`    buildings / parts / solids / polygons / rings / points (debug)
@@ -25,6 +27,32 @@ fn tokenize(src: &[u8]) -> usize {
             Err(e) => panic!("{e}"),
         }
     }
+    n
+}
+
+/// The ceiling plus the one thing every reader must do on top: turn each coordinate text into
+/// numbers (std `f64` parsing of every whitespace-separated token of every text event).
+fn tokenize_numbers(src: &[u8]) -> usize {
+    let mut r = Reader::from_reader(src);
+    r.config_mut().trim_text(false);
+    let mut n = 0usize;
+    let mut acc = 0.0f64;
+    loop {
+        match r.read_event() {
+            Ok(Event::Eof) => break,
+            Ok(Event::Text(t)) => {
+                for tok in t.split(|b| b.is_ascii_whitespace()).filter(|t| !t.is_empty()) {
+                    if let Some(x) = std::str::from_utf8(tok).ok().and_then(|s| s.parse::<f64>().ok()) {
+                        acc += x;
+                        n += 1;
+                    }
+                }
+            }
+            Ok(_) => n += 1,
+            Err(e) => panic!("{e}"),
+        }
+    }
+    std::hint::black_box(acc);
     n
 }
 
@@ -89,6 +117,7 @@ fn main() {
         for f in &files {
             sink += match mode {
                 "tokenize" => tokenize(f),
+                "numbers" => tokenize_numbers(f),
                 "parse" => citygml_io::parse(f).expect("parse").objects.len(),
                 "stream" => ObjectStream::new(f).expect("parse").map(|o| o.expect("parse").children.len() + 1).sum(),
                 _ => panic!("unknown mode {mode}"),
