@@ -100,6 +100,10 @@ rasterize_row "generated 1 M points, 2 km square" "$TMP/big.xyz" 1
 {
 echo
 echo "gdal_grid's time includes reading the CSV through OGR; ours includes parsing the text and writing the GeoTIFF."
+echo "TIN: spade bulk-loaded Delaunay, then every triangle is scan-converted over the cell centres in its"
+echo "bounding box (O(points log points + cells)); gdal_grid locates each cell in a qhull triangulation."
+echo "Gauss: one pass over the points, (2r+1)² cells each; both outputs are identical to gdal_grid's model"
+echo "where checked (tests/raster.rs: tin_matches_gdal_grid_linear)."
 echo
 echo "## Warp and unwarp (rotation + landmark warp + Gauss splat + dilation fill; default spacing 20 cells)"
 echo
