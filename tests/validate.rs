@@ -364,3 +364,14 @@ fn without_schemas_it_says_how_to_get_them_and_checks_geometry() {
     assert_eq!(r["xsd"]["checked"], false);
     assert_eq!(codes(&r), BTreeSet::from([103]));
 }
+
+#[test]
+fn identical_input_gives_identical_output() {
+    let Some(f) = common::fixture("citygml/nrw/LoD2_32_338_5724_1_NW.gml") else { return };
+    let run = || common::run(&["-q", "validate", "--json", "--no-xsd", f.to_str().unwrap()], None).stdout;
+    let a = run();
+    assert!(!a.is_empty());
+    for _ in 0..3 {
+        assert_eq!(run(), a, "findings are sorted and do not depend on thread scheduling");
+    }
+}
