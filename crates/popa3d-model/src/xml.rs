@@ -890,3 +890,49 @@ pub fn observation_refs(k: &ObsKind) -> Vec<Ref> {
 /// Positions of elements by id, kept for messages (unused outside the reader for now).
 #[allow(dead_code)]
 type Positions = HashMap<u32, (usize, usize)>;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn doc(body: &str) -> String {
+        format!("<?xml version=\"1.0\"?>\n<popa3d xmlns=\"{NAMESPACE}\" version=\"1\">\n  <origin x=\"0\" y=\"0\" z=\"0\"/>\n{body}</popa3d>\n")
+    }
+
+    fn err(s: &str) -> String {
+        read(s.as_bytes()).unwrap_err().to_string()
+    }
+
+    #[test]
+    fn malformed_documents_get_line_and_column() {
+        let e = err(&doc("  <nodes><node id=\"0\"/><node id=\"1\"/></nodes>\n  <edges>\n    <edge id=\"0\" start=\"0\"/>\n  </edges>\n"));
+        assert_eq!(e, "6:5: <edge>: missing attribute `end`");
+        let e = err(&doc("  <nodes><node id=\"0\"/></nodes>\n  <edges>\n    <edge id=\"0\" start=\"0\" end=\"7\"/>\n  </edges>\n"));
+        assert!(e.starts_with("6:5: MA02: edge 0 references node 7"), "{e}");
+        let e = err(&doc("  <nodes><node id=\"0\"/><node id=\"0\"/></nodes>\n"));
+        assert!(e.contains("MA01: duplicate node id 0"), "{e}");
+        let e = err(&doc("  <parameters><parameter id=\"0\" value=\"NaN\"/></parameters>\n"));
+        assert!(e.starts_with("4:15: <parameter>: attribute `value`=\"NaN\" is not a finite number"), "{e}");
+        let e = err(&doc("  <nodes><node id=\"0\"></nodes>\n"));
+        assert!(e.starts_with("4:") && e.contains("malformed XML"), "{e}");
+        let e = err("<city/>");
+        assert!(e.contains("root element must be <popa3d>"), "{e}");
+    }
+
+    #[test]
+    fn doubles_round_trip_bit_identical() {
+        let mut m = Popa3d::new([345678.123456789, 5712345.000000001, -0.0]);
+        for v in [0.1, 1.0 / 3.0, f64::MIN_POSITIVE, 0.70710678118654857, -1.0, 5e-324, 1e300] {
+            m.add_parameter(Parameter { value: v });
+        }
+        let a = write_to_vec(&m).unwrap();
+        let b = read(&a).unwrap();
+        for (x, y) in m.parameters.iter().zip(&b.parameters) {
+            assert_eq!(x.value.to_bits(), y.value.to_bits());
+        }
+        assert_eq!(m.origin.map(f64::to_bits), b.origin.map(f64::to_bits));
+        assert_eq!(write_to_vec(&b).unwrap(), a);
+        m.parameters[0].value = f64::NAN;
+        assert!(write_to_vec(&m).unwrap_err().to_string().contains("parameter 0"));
+    }
+}
