@@ -69,4 +69,18 @@ echo "|---|---:|---:|"
 echo "| warm (saved φ + active set) | $(field "$TMP/w.json" cg_iterations_total) | $(printf %.2f "$(field "$TMP/w.json" seconds)") |"
 echo "| cold (φ = 0) | $(field "$TMP/c2.json" cg_iterations_total) | $(printf %.2f "$(field "$TMP/c2.json" seconds)") |"
 } | tee -a "$RES"
+cat >> "$RES" <<'NOTES'
+
+Notes
+- Misfit is |φ(p) − v| in the data's value units (horizons 0/60/250/330) at all 21,023 value
+  points, evaluated by each tool's own interpolation on its own mesh.
+- "unknowns" = mesh nodes (geofit: after fault cuts; LoopStructural: `interpolator.nx`).
+- geofit's default roughness weight ϖ_r = 5 is the minimum of the noisy-sphere U-curve
+  (tests/implicit.rs `roughness_sweep_traces_u_shape`); Claudius' picks are far less noisy
+  relative to the mesh, so a smaller ϖ_r (more weight on the data, seed §2.2) fits them better.
+- geofit seconds include reading the CSV, meshing, one misfit-driven refinement round and all
+  active-set rounds; LoopStructural seconds are `create_and_add_foliation` + `model.update()` only.
+- The warm/cold rows count every CG iteration of the inexact active-set loop; the tight final
+  solve from a loose (10·tol) iterate costs about the same in both, which bounds the gain.
+NOTES
 echo "wrote $RES"

@@ -255,39 +255,72 @@ impl Csr {
 }
 
 /// `A = Σ A_c A_cᵗ` and `b = Σ b_c A_c` (seed eq. 11) over the rows that `select` keeps.
+/// Row-by-row sparse product AᵀA (Gustavson) over the transposed rows: no sort of triplets,
+/// rows in parallel, each summed in a fixed order (bit-identical results).
 pub fn normal_system(n: usize, rows: &[&Rows], select: &dyn Fn(usize, usize) -> bool) -> (Csr, Vec<f64>) {
-    let mut trip: Vec<(u64, f64)> = Vec::new();
-    let mut b = vec![0.0; n];
-    for (s, rs) in rows.iter().enumerate() {
-        for r in 0..rs.len() {
-            if !select(s, r) {
-                continue;
-            }
-            let (i, v) = rs.row(r);
-            for (a, &ia) in i.iter().enumerate() {
-                b[ia as usize] += rs.rhs[r] * v[a];
-                for (c, &ic) in i.iter().enumerate() {
-                    trip.push((((ia as u64) << 32) | ic as u64, v[a] * v[c]));
+    // Selected rows as (set, row) in a fixed order.
+    let sel: Vec<(usize, usize)> =
+        rows.iter().enumerate().flat_map(|(s, rs)| (0..rs.len()).filter(move |&r| select(s, r)).map(move |r| (s, r))).collect();
+    // Transpose: for each unknown, the selected rows touching it with the coefficient.
+    let mut cnt = vec![0usize; n + 1];
+    for &(s, r) in &sel {
+        for &i in rows[s].row(r).0 {
+            cnt[i as usize + 1] += 1;
+        }
+    }
+    for i in 0..n {
+        cnt[i + 1] += cnt[i];
+    }
+    let mut fill = cnt.clone();
+    let mut t_row = vec![0u32; cnt[n]];
+    let mut t_val = vec![0.0f64; cnt[n]];
+    for (k, &(s, r)) in sel.iter().enumerate() {
+        let (ii, vv) = rows[s].row(r);
+        for (&i, &v) in ii.iter().zip(vv) {
+            t_row[fill[i as usize]] = k as u32;
+            t_val[fill[i as usize]] = v;
+            fill[i as usize] += 1;
+        }
+    }
+    let per: Vec<(Vec<(u32, f64)>, f64)> = (0..n)
+        .into_par_iter()
+        .map_init(
+            || (vec![0.0f64; n], vec![false; n], Vec::<u32>::new()),
+            |(acc, seen, touched), i| {
+                let mut bi = 0.0;
+                for k in cnt[i]..cnt[i + 1] {
+                    let (s, r) = sel[t_row[k] as usize];
+                    let a = t_val[k];
+                    bi += rows[s].rhs[r] * a;
+                    let (jj, vv) = rows[s].row(r);
+                    for (&j, &v) in jj.iter().zip(vv) {
+                        if !seen[j as usize] {
+                            seen[j as usize] = true;
+                            touched.push(j);
+                        }
+                        acc[j as usize] += a * v;
+                    }
                 }
-            }
-        }
-    }
-    trip.par_sort_by_key(|t| t.0); // stable: identical sums for identical input
+                touched.sort_unstable();
+                let out: Vec<(u32, f64)> = touched.iter().map(|&j| (j, acc[j as usize])).collect();
+                for &j in touched.iter() {
+                    acc[j as usize] = 0.0;
+                    seen[j as usize] = false;
+                }
+                touched.clear();
+                (out, bi)
+            },
+        )
+        .collect();
     let mut m = Csr { n, ptr: vec![0; n + 1], idx: Vec::new(), val: Vec::new() };
-    let mut k = 0;
-    while k < trip.len() {
-        let key = trip[k].0;
-        let mut s = 0.0;
-        while k < trip.len() && trip[k].0 == key {
-            s += trip[k].1;
-            k += 1;
+    let mut b = vec![0.0; n];
+    for (i, (row, bi)) in per.into_iter().enumerate() {
+        for (j, v) in row {
+            m.idx.push(j);
+            m.val.push(v);
         }
-        m.idx.push((key & 0xffff_ffff) as u32);
-        m.val.push(s);
-        m.ptr[(key >> 32) as usize + 1] += 1;
-    }
-    for r in 0..n {
-        m.ptr[r + 1] += m.ptr[r];
+        m.ptr[i + 1] = m.idx.len();
+        b[i] = bi;
     }
     (m, b)
 }

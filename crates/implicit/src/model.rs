@@ -242,23 +242,19 @@ pub fn build(
         )));
     }
     let glo = [0, 1, 2].map(|k| -(dims[k] as f64) * cube * 0.5);
+    // Without a value column every point lies on φ = 0 (one surface); with one, a row with a
+    // normal but no value (LoopStructural style) only orients φ.
+    let any_value_column = pts.iter().any(|p| p.value.is_some());
     let mut cs: Vec<Constraint> = pts
         .iter()
         .map(|p| Constraint {
             pos: local(p.pos),
-            value: Some(p.value.unwrap_or(0.0)).filter(|_| p.value.is_some() || p.normal.is_none() || true),
+            value: if any_value_column { p.value } else { Some(0.0) },
             normal: p.normal,
             side: 0.0,
             float: false,
         })
         .collect();
-    // A row with a normal but no value (LoopStructural style) only orients φ.
-    let any_value_column = pts.iter().any(|p| p.value.is_some());
-    if any_value_column {
-        for (c, p) in cs.iter_mut().zip(&pts) {
-            c.value = p.value;
-        }
-    }
     cs.extend(sides.iter().map(|s| Constraint { pos: local(s.pos), value: None, normal: None, side: s.side, float: false }));
     let grad = opt.grad.unwrap_or_else(|| dsi::gradient_scale(&cs));
     let params = Params {
@@ -274,6 +270,20 @@ pub fn build(
         .map(|f| Fault { name: f.name.clone(), tris: f.tris.iter().map(|t| t.map(local)).collect() })
         .collect();
 
+    // Guard memory before refining: the finest cells the samples touch bound the mesh size.
+    {
+        let mut keys: Vec<(i64, i64, i64)> =
+            lp.iter().map(|p| ((p[0] / cell).floor() as i64, (p[1] / cell).floor() as i64, (p[2] / cell).floor() as i64)).collect();
+        keys.sort_unstable();
+        keys.dedup();
+        if keys.len() > opt.max_vertices {
+            return Err(Error::BadInput(format!(
+                "--cell {cell} puts the points into {} finest cells (cap {}); use a larger --cell",
+                keys.len(),
+                opt.max_vertices
+            )));
+        }
+    }
     progress(Event::Stage("meshing"));
     let mut refiner = Refiner::new(glo, dims, cube);
     let target = refiner.level_of_cube_fraction(cell);
