@@ -50,6 +50,55 @@ pub fn basis(kn: &[f64], k: usize, u: f64, left: bool) -> f64 {
     n[0]
 }
 
+/// Polynomial pieces of one basis function (see [`PbSpline::poly`]): sampled at x = 0, ⅓, ⅔, 1
+/// of every non-empty span with the Cox–de Boor form and interpolated (exact up to rounding:
+/// each piece is a polynomial of degree ≤ 3).
+pub fn basis_pieces(kn: &[f64], k: usize) -> [f64; 20] {
+    let mut out = [0.0; 20];
+    for j in 0..=k {
+        let (a, b) = (kn[j], kn[j + 1]);
+        if b <= a {
+            continue;
+        }
+        let h = b - a;
+        let xs = [0.0, 1.0 / 3.0, 2.0 / 3.0, 1.0];
+        let v: Vec<f64> = (0..4).map(|m| basis(kn, k, if m == 3 { b } else { a + xs[m] * h }, m == 3)).collect();
+        // Newton divided differences on the nodes, then expand to monomials.
+        let mut d = [v[0], v[1], v[2], v[3]];
+        for lvl in 1..4 {
+            for i in (lvl..4).rev() {
+                d[i] = (d[i] - d[i - 1]) / (xs[i] - xs[i - lvl]);
+            }
+        }
+        // p(x) = d0 + d1 x + d2 x(x−x1) + d3 x(x−x1)(x−x2)
+        let (x1, x2) = (xs[1], xs[2]);
+        let c0 = d[0];
+        let c1 = d[1] - d[2] * x1 + d[3] * x1 * x2;
+        let c2 = d[2] - d[3] * (x1 + x2);
+        let c3 = d[3];
+        out[5 * j..5 * j + 5].copy_from_slice(&[1.0 / h, c0, c1, c2, c3]);
+    }
+    out
+}
+
+/// One basis function from its polynomial pieces (same span rule as [`basis`]).
+#[inline]
+pub fn basis_poly(kn: &[f64], pc: &[f64], k: usize, u: f64, left: bool) -> f64 {
+    if u < kn[0] || u > kn[k + 1] {
+        return 0.0;
+    }
+    for j in 0..=k {
+        let (a, b) = (kn[j], kn[j + 1]);
+        let inside = if left { a < u && u <= b } else { a <= u && u < b };
+        if inside {
+            let c = &pc[5 * j..5 * j + 5];
+            let x = (u - a) * c[0];
+            return ((c[4] * x + c[3]) * x + c[2]) * x + c[1];
+        }
+    }
+    0.0
+}
+
 /// The PB-spline form of a T-mesh plus the bucket grids, flat and device-ready.
 #[derive(Debug, Clone)]
 pub struct PbSpline {
@@ -58,6 +107,9 @@ pub struct PbSpline {
     pub point_ids: Vec<u32>,
     /// Per point: σ (5) then τ (5); K=1 uses the first 3 of each.
     pub knots: Vec<[f64; 10]>,
+    /// Per point: the basis as polynomial pieces, for fast evaluation: for σ then τ, for each of
+    /// the K+1 spans: 1/width and the monomial coefficients c0..c3 in x = (u − a)/width.
+    pub poly: Vec<[f64; 40]>,
     /// Per point: x, y, z, w.
     pub geom: Vec<[f64; 4]>,
     /// Leaf cell rectangles (s_min, t_min, s_max, t_max).
@@ -148,6 +200,15 @@ impl PbSpline {
             })
             .collect();
         let geom = point_ids.iter().map(|&i| mesh.points[i as usize]).map(|p| [p.x, p.y, p.z, p.w]).collect();
+        let poly = knots
+            .par_iter()
+            .map(|kn| {
+                let mut a = [0.0; 40];
+                a[..20].copy_from_slice(&basis_pieces(&kn[0..5], k));
+                a[20..].copy_from_slice(&basis_pieces(&kn[5..10], k));
+                a
+            })
+            .collect();
         let cells: Vec<[f64; 4]> =
             mesh.cells.iter().filter(|c| c.is_leaf()).map(|c| [c.rect.s_min, c.rect.t_min, c.rect.s_max, c.rect.t_max]).collect();
         let b = mesh.bounds();
@@ -169,7 +230,7 @@ impl PbSpline {
             cells.iter().enumerate().map(|(i, c)| (i as u32, grid.index_range(c[0], c[2], true), grid.index_range(c[1], c[3], false))),
             ns,
         );
-        PbSpline { degree: mesh.degree, point_ids, knots, geom, cells, grid, pt_start, pt_items, cell_start, cell_items }
+        PbSpline { degree: mesh.degree, point_ids, knots, poly, geom, cells, grid, pt_start, pt_items, cell_start, cell_items }
     }
 
     #[inline]
@@ -231,11 +292,12 @@ impl PbSpline {
             if s < kn[0] || s > kn[k + 1] || t < kn[5] || t > kn[5 + k + 1] {
                 continue;
             }
-            let bs = basis(&kn[0..5], k, s, ls);
+            let pc = &self.poly[pi as usize];
+            let bs = basis_poly(&kn[0..5], &pc[..20], k, s, ls);
             if bs == 0.0 {
                 continue;
             }
-            let bt = basis(&kn[5..10], k, t, lt);
+            let bt = basis_poly(&kn[5..10], &pc[20..], k, t, lt);
             if bt == 0.0 {
                 continue;
             }
@@ -265,8 +327,9 @@ impl PbSpline {
             if s < kn[0] || s > kn[k + 1] || t < kn[5] || t > kn[5 + k + 1] {
                 continue;
             }
-            let bs = basis(&kn[0..5], k, s, ls);
-            let bt = basis(&kn[5..10], k, t, lt);
+            let pc = &self.poly[pi as usize];
+            let bs = basis_poly(&kn[0..5], &pc[..20], k, s, ls);
+            let bt = basis_poly(&kn[5..10], &pc[20..], k, t, lt);
             let g = &self.geom[pi as usize];
             let wn = g[3] * bs * bt;
             x += wn * g[0];
@@ -288,7 +351,8 @@ impl PbSpline {
         let mut den = 0.0;
         for &pi in &self.pt_items[self.pt_start[b] as usize..self.pt_start[b + 1] as usize] {
             let kn = &self.knots[pi as usize];
-            den += self.geom[pi as usize][3] * basis(&kn[0..5], k, s, ls) * basis(&kn[5..10], k, t, lt);
+            let pc = &self.poly[pi as usize];
+            den += self.geom[pi as usize][3] * basis_poly(&kn[0..5], &pc[..20], k, s, ls) * basis_poly(&kn[5..10], &pc[20..], k, t, lt);
         }
         den
     }
@@ -321,7 +385,8 @@ impl PbSpline {
     pub fn flops_estimate(&self, st: &[[f64; 2]]) -> f64 {
         let k = self.degree.k() as f64;
         // One basis function: (K+1) indicator tests + Σ_{r=1..K} (K+1−r) · 8 flops.
-        let basis_flops = (1..=self.degree.k()).map(|r| (self.degree.k() + 1 - r) as f64 * 8.0).sum::<f64>() + k + 1.0;
+        // polynomial pieces: span search (≤ K+1 double compares), (u − a)·(1/h), Horner (2K flops)
+        let basis_flops = 2.0 * (k + 1.0) + 2.0 + 2.0 * k;
         let mut cand = 0usize;
         let mut hit = 0usize;
         for p in st.iter().take(10000) {
@@ -361,6 +426,29 @@ mod tests {
     fn lcg(seed: &mut u64) -> f64 {
         *seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
         (*seed >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    #[test]
+    fn polynomial_pieces_equal_cox_de_boor() {
+        let mut seed = 1u64;
+        for kn in [[0., 1., 2., 3., 4.], [0., 0., 0., 1., 2.], [0., 0., 1., 2., 2.], [1., 3., 3.5, 8., 9.], [2., 2., 2., 2.5, 2.5]] {
+            for k in [1usize, 3] {
+                let pc = basis_pieces(&kn, k);
+                for _ in 0..500 {
+                    let u = kn[0] - 0.5 + (kn[k + 1] - kn[0] + 1.0) * lcg(&mut seed);
+                    for left in [false, true] {
+                        let a = basis(&kn, k, u, left);
+                        let b = basis_poly(&kn, &pc, k, u, left);
+                        assert!((a - b).abs() < 1e-14, "{kn:?} k={k} u={u}: {a} vs {b}");
+                    }
+                }
+                for &u in &kn[..k + 2] {
+                    for left in [false, true] {
+                        assert!((basis(&kn, k, u, left) - basis_poly(&kn, &pc, k, u, left)).abs() < 1e-14);
+                    }
+                }
+            }
+        }
     }
 
     #[test]

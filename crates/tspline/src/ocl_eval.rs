@@ -32,6 +32,7 @@ pub struct OclEvaluator {
 /// Device buffers of one compiled PB-spline.
 pub struct OclSpline {
     knots: Buffer<f64>,
+    poly: Buffer<f64>,
     geom: Buffer<f64>,
     cells: Buffer<f64>,
     pstart: Buffer<u32>,
@@ -129,11 +130,13 @@ impl OclEvaluator {
     /// Uploads a compiled PB-spline.
     pub fn upload(&self, pb: &PbSpline) -> Result<OclSpline, TsplineError> {
         let knots: Vec<f64> = pb.knots.iter().flatten().copied().collect();
+        let poly: Vec<f64> = pb.poly.iter().flatten().copied().collect();
         let geom: Vec<f64> = pb.geom.iter().flatten().copied().collect();
         let cells: Vec<f64> = pb.cells.iter().flatten().copied().collect();
         let g = pb.grid;
         Ok(OclSpline {
             knots: self.buf(&knots)?,
+            poly: self.buf(&poly)?,
             geom: self.buf(&geom)?,
             cells: self.buf(&cells)?,
             pstart: self.buf(&pb.pt_start)?,
@@ -168,7 +171,7 @@ impl OclEvaluator {
         let stb = self.buf(&flat)?;
         let out = self.out_buf(n)?;
         let mut kb = self.kernel("eval_points", sp, n)?;
-        kb.arg(&sp.knots).arg(&sp.geom).arg(&sp.cells).arg(&sp.pstart).arg(&sp.pitems).arg(&sp.cstart).arg(&sp.citems);
+        kb.arg(&sp.knots).arg(&sp.poly).arg(&sp.geom).arg(&sp.cells).arg(&sp.pstart).arg(&sp.pitems).arg(&sp.cstart).arg(&sp.citems);
         kb.arg(&stb).arg(&out).arg(n as u32);
         let k = kb.build().map_err(err)?;
         unsafe { k.enq().map_err(err)? };
@@ -185,7 +188,7 @@ impl OclEvaluator {
         }
         let out = self.out_buf(n)?;
         let mut kb = self.kernel("eval_grid", sp, n)?;
-        kb.arg(&sp.knots).arg(&sp.geom).arg(&sp.cells).arg(&sp.pstart).arg(&sp.pitems).arg(&sp.cstart).arg(&sp.citems);
+        kb.arg(&sp.knots).arg(&sp.poly).arg(&sp.geom).arg(&sp.cells).arg(&sp.pstart).arg(&sp.pitems).arg(&sp.cstart).arg(&sp.citems);
         kb.arg(g.s0).arg(g.t0).arg(g.ds).arg(g.dt).arg(g.ns as u32).arg(g.nt as u32).arg(&out);
         let k = kb.build().map_err(err)?;
         unsafe { k.enq().map_err(err)? };
@@ -202,7 +205,7 @@ impl OclEvaluator {
         let rb = self.buf(refz)?;
         let out = self.out_buf(n)?;
         let mut kb = self.kernel("drag_vectors", sp, n)?;
-        kb.arg(&sp.knots).arg(&sp.geom).arg(&sp.cells).arg(&sp.pstart).arg(&sp.pitems).arg(&sp.cstart).arg(&sp.citems);
+        kb.arg(&sp.knots).arg(&sp.poly).arg(&sp.geom).arg(&sp.cells).arg(&sp.pstart).arg(&sp.pitems).arg(&sp.cstart).arg(&sp.citems);
         kb.arg(&pb).arg(&rb).arg(&out).arg(n as u32);
         let k = kb.build().map_err(err)?;
         unsafe { k.enq().map_err(err)? };

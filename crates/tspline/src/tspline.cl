@@ -45,6 +45,21 @@ inline double basis(__global const double* kn, uint k, double u, int left) {
     return n[0];
 }
 
+// The same basis from its polynomial pieces: per span 1/width, c0..c3 in x = (u - a)/width.
+inline double basis_poly(__global const double* kn, __global const double* pc, uint k, double u, int left) {
+    if (u < kn[0] || u > kn[k + 1]) return 0.0;
+    for (uint j = 0; j <= k; j++) {
+        double a = kn[j], b = kn[j + 1];
+        int inside = left ? (a < u && u <= b) : (a <= u && u < b);
+        if (inside) {
+            __global const double* c = pc + 5 * j;
+            double x = (u - a) * c[0];
+            return ((c[4] * x + c[3]) * x + c[2]) * x + c[1];
+        }
+    }
+    return 0.0;
+}
+
 // Domain test with the A1 border rule (see PbSpline::locate): returns 0 outside; may move
 // (s, t) inwards for cubic borders and sets the left-limit flags for linear upper borders.
 inline int locate(const grid_t g, __global const double* cells, __global const uint* cstart,
@@ -73,7 +88,7 @@ inline int locate(const grid_t g, __global const double* cells, __global const u
     return 1;
 }
 
-inline double surface_z(const grid_t g, __global const double* knots, __global const double* geom,
+inline double surface_z(const grid_t g, __global const double* knots, __global const double* poly, __global const double* geom,
                         __global const double* cells, __global const uint* pstart, __global const uint* pitems,
                         __global const uint* cstart, __global const uint* citems, double s, double t) {
     int ls = 0, lt = 0;
@@ -85,8 +100,9 @@ inline double surface_z(const grid_t g, __global const double* knots, __global c
         uint pi = pitems[q];
         __global const double* kn = knots + 10 * (size_t)pi;
         if (s < kn[0] || s > kn[k + 1] || t < kn[5] || t > kn[5 + k + 1]) continue;
-        double bs = basis(kn, k, s, ls);
-        double bt = basis(kn + 5, k, t, lt);
+        __global const double* pc = poly + 40 * (size_t)pi;
+        double bs = basis_poly(kn, pc, k, s, ls);
+        double bt = basis_poly(kn + 5, pc + 20, k, t, lt);
         __global const double* gm = geom + 4 * (size_t)pi;
         double wn = gm[3] * bs * bt;
         z += wn * gm[2];
@@ -97,18 +113,18 @@ inline double surface_z(const grid_t g, __global const double* knots, __global c
 }
 
 // Surface heights at arbitrary parameter points st[2i], st[2i+1].
-__kernel void eval_points(GRID_ARGS, __global const double* knots, __global const double* geom,
+__kernel void eval_points(GRID_ARGS, __global const double* knots, __global const double* poly, __global const double* geom,
                           __global const double* cells, __global const uint* pstart, __global const uint* pitems,
                           __global const uint* cstart, __global const uint* citems,
                           __global const double* st, __global double* out, const uint n) {
     size_t i = get_global_id(0);
     if (i >= n) return;
     MAKE_GRID;
-    out[i] = surface_z(g, knots, geom, cells, pstart, pitems, cstart, citems, st[2 * i], st[2 * i + 1]);
+    out[i] = surface_z(g, knots, poly, geom, cells, pstart, pitems, cstart, citems, st[2 * i], st[2 * i + 1]);
 }
 
 // Surface heights on a regular grid (i, j) -> (s0 + i ds, t0 + j dt), row-major in j.
-__kernel void eval_grid(GRID_ARGS, __global const double* knots, __global const double* geom,
+__kernel void eval_grid(GRID_ARGS, __global const double* knots, __global const double* poly, __global const double* geom,
                         __global const double* cells, __global const uint* pstart, __global const uint* pitems,
                         __global const uint* cstart, __global const uint* citems,
                         const double s0, const double t0, const double ds, const double dt,
@@ -117,19 +133,19 @@ __kernel void eval_grid(GRID_ARGS, __global const double* knots, __global const 
     if (idx >= (size_t)ns * nt) return;
     MAKE_GRID;
     uint i = idx % ns, j = idx / ns;
-    out[idx] = surface_z(g, knots, geom, cells, pstart, pitems, cstart, citems, s0 + (double)i * ds, t0 + (double)j * dt);
+    out[idx] = surface_z(g, knots, poly, geom, cells, pstart, pitems, cstart, citems, s0 + (double)i * ds, t0 + (double)j * dt);
 }
 
 // Dragging vectors (spec §4.6, A11: compared at the control point's parameter pair):
 // delta_i = ref(s_i, t_i) - t(s_i, t_i); NaN where either is undefined.
-__kernel void drag_vectors(GRID_ARGS, __global const double* knots, __global const double* geom,
+__kernel void drag_vectors(GRID_ARGS, __global const double* knots, __global const double* poly, __global const double* geom,
                            __global const double* cells, __global const uint* pstart, __global const uint* pitems,
                            __global const uint* cstart, __global const uint* citems,
                            __global const double* params, __global const double* refz, __global double* delta, const uint n) {
     size_t i = get_global_id(0);
     if (i >= n) return;
     MAKE_GRID;
-    double z = surface_z(g, knots, geom, cells, pstart, pitems, cstart, citems, params[2 * i], params[2 * i + 1]);
+    double z = surface_z(g, knots, poly, geom, cells, pstart, pitems, cstart, citems, params[2 * i], params[2 * i + 1]);
     delta[i] = refz[i] - z;
 }
 
