@@ -8,6 +8,13 @@
 //! - [`format`]: the T-mesh file format (`xsd/tmesh.xsd`).
 //! - [`fit`]: adaptive approximation (Alg. 3) with sparse least squares or dragging.
 //!
+//! Where the spec's ambiguities are decided (doc comments there): A1, A2, A15 in [`eval`];
+//! A7–A12, A17, A19 in [`fit`]; A13, A14, A22 in [`mesh`]; A16 (formats: GDAL rasters in, the
+//! documented `.tmesh` out) in [`format`]; A18 in `benches/tspline.sh`; A20 in the Table 5.2
+//! test of [`rtree_pages`]; A21 below. A3–A6 (PCA mass, warp details, splat footprint,
+//! dilation weights) belong to the warp in `raster-proc`; `fit::dilation_fill` follows A6's
+//! wave-front reading with equal weights over valued 8-neighbours.
+//!
 //! Parameterization (A21): parameter units are raster cells. s = column index, t = row index
 //! counted from the bottom row, so raster cell centres sit at integer (s, t) and the sample
 //! spacing is 1. The affine map to world coordinates is stored with the mesh ([`format::Georef`]).

@@ -9,6 +9,11 @@
 //!   opposite sides carry a hanging vertex (rule 2: the two vertices could be joined). The two
 //!   checks alternate until neither fires ([`TMesh::repair`]). Rule 3 is satisfied by
 //!   construction: new edge points are mid-points of straight edges.
+//!   Analysis-suitability: these rules keep linear meshes analysis-suitable in the cases we test,
+//!   but a lone 4-split in a cubic mesh is not (the T-junction edge extensions meet at the
+//!   centre) and Σ N ≠ 1 there (see the counter-example test in `eval.rs`). We therefore always
+//!   evaluate the rational form (spec §3.2 "always normalise"); the fit's regulariser keeps the
+//!   least-squares system definite if blending functions become dependent.
 //! - **A14** rays stop at the domain boundary: a ray that would have to cross a gap of a
 //!   non-convex or disconnected (merged) domain ends there and is padded like a border ray.
 //! - **A22** degrees 1 and 3 only, no zero knot intervals (all cells have positive extent).
