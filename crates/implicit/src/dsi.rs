@@ -147,8 +147,9 @@ pub fn data_rows(mesh: &TetMesh, loc: &Locator, cs: &[Constraint], p: &Params) -
     let mut rows = Rows::new();
     let outside = |i: usize, q: V3| {
         Error::BadInput(format!(
-            "constraint #{i} at ({:.3}, {:.3}, {:.3}) (model frame) lies outside the model's mesh",
-            q[0], q[1], q[2]
+            "constraint #{i} (or its normal step) lies outside the model's mesh, {:.3} from the frame centre; \
+             the domain is fixed when the model is interpolated",
+            norm(q)
         ))
     };
     let (d, g) = (p.step, p.grad);

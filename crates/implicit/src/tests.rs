@@ -65,3 +65,74 @@ fn noisy_sphere_within_sigma() {
     assert!(s.is_closed());
     let _ = (Locator::new(&m.mesh), CsgOp::Union);
 }
+
+#[test]
+fn model_file_roundtrip_and_corruption() {
+    let pts = generate::sphere(600, [10.0, 20.0, 30.0], 1.0, 0.0, 0.0, 3);
+    let (m, _) = build(&pts, &[], &[], &BuildOptions::default(), &mut |_| {}).unwrap();
+    let b = m.to_bytes();
+    let back = crate::model::Model::from_bytes(&b).unwrap();
+    assert_eq!(back, m);
+    assert_eq!(back.to_bytes(), b, "byte-identical rewrite");
+    for cut in [0, 10, 16, 100, b.len() - 1] {
+        assert!(crate::model::Model::from_bytes(&b[..cut]).is_err());
+    }
+    // φ vanishes on the (noise-free) sphere and has the normal's sign off it.
+    let loc = m.locator();
+    let on = m.eval_world(&loc, [11.0, 20.0, 30.0]).unwrap();
+    let out = m.eval_world(&loc, [11.3, 20.0, 30.0]).unwrap();
+    let inn = m.eval_world(&loc, [10.7, 20.0, 30.0]).unwrap();
+    assert!(on.abs() < 0.02 && out > 0.1 && inn < -0.1, "{on} {out} {inn}");
+}
+
+#[test]
+fn fault_cut_duplicates_vertices_only_across_the_fault() {
+    use crate::fault::{cut, Fault};
+    let mut r = Refiner::new([-1.0, -1.0, -1.0], [2, 2, 2], 1.0);
+    r.add_points(&[[0.1, 0.1, 0.1]], 3);
+    r.refine();
+    let m = r.mesh();
+    // A plane x = 0.05 through the whole box; and a small patch that ends inside.
+    let big = Fault { name: "big".into(), tris: vec![[[0.05, -5.0, -5.0], [0.05, 5.0, -5.0], [0.05, 0.0, 5.0]]] };
+    let (c, dv) = cut(&m, &[big]).unwrap();
+    assert!(c.verts.len() > m.verts.len(), "vertices on the fault must be duplicated");
+    assert_eq!(dv.len(), c.verts.len());
+    // The cut mesh splits into two parts: no interior face joins a tet with centroid x < 0.05
+    // to one with x > 0.05.
+    for f in c.interior_faces() {
+        let cx = |t: u32| c.corners(t as usize).iter().map(|p| p[0]).sum::<f64>() / 4.0;
+        assert_eq!(cx(f.tets[0]) < 0.05, cx(f.tets[1]) < 0.05);
+    }
+    let far = Fault { name: "far".into(), tris: vec![[[50.0, 50.0, 50.0], [51.0, 50.0, 50.0], [50.0, 51.0, 50.0]]] };
+    assert!(matches!(cut(&m, &[far]), Err(crate::Error::FaultOutsideDomain(_))));
+}
+
+#[test]
+fn ic0_pcg_solves_a_small_spd_system() {
+    use crate::dsi::{pcg, Csr};
+    // 1-D Laplacian + identity, n = 50: compare with the exact solution of a known x.
+    let n = 50;
+    let mut a = Csr { n, ptr: vec![0], idx: vec![], val: vec![] };
+    for i in 0..n {
+        if i > 0 {
+            a.idx.push(i as u32 - 1);
+            a.val.push(-1.0);
+        }
+        a.idx.push(i as u32);
+        a.val.push(3.0);
+        if i + 1 < n {
+            a.idx.push(i as u32 + 1);
+            a.val.push(-1.0);
+        }
+        a.ptr.push(a.idx.len());
+    }
+    let xt: Vec<f64> = (0..n).map(|i| (i as f64 * 0.3).sin()).collect();
+    let mut b = vec![0.0; n];
+    a.mul(&xt, &mut b);
+    let mut x = vec![0.0; n];
+    let st = pcg(&a, &b, &mut x, 1e-12, 200);
+    assert!(st.converged);
+    for (p, q) in x.iter().zip(&xt) {
+        assert!((p - q).abs() < 1e-9);
+    }
+}
