@@ -52,7 +52,7 @@ pub fn principal_axes(r: &Raster, mass: Mass) -> Result<PrincipalAxes, ProcError
             }
         }
     }
-    if !(m00 > 0.0) {
+    if m00.is_nan() || m00 <= 0.0 {
         return Err(ProcError::Input(match mass {
             Mass::Unit => "no valid cell: nothing to orient".into(),
             Mass::Depth => "no cell below datum (z < 0): depth mass is zero; use unit mass".into(),
