@@ -43,9 +43,9 @@ impl Envelope {
         self.min[0] > self.max[0]
     }
     pub fn add_point(&mut self, p: &Point3) {
-        for i in 0..3 {
-            self.min[i] = self.min[i].min(p[i]);
-            self.max[i] = self.max[i].max(p[i]);
+        for (i, v) in p.iter().enumerate() {
+            self.min[i] = self.min[i].min(*v);
+            self.max[i] = self.max[i].max(*v);
         }
     }
     pub fn merge(&mut self, o: &Envelope) {

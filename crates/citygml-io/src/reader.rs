@@ -130,6 +130,9 @@ pub(crate) enum Ev<'a> {
     Eof,
 }
 
+/// The thematic surface (type, gml:id) that owns a polygon.
+pub(crate) type Owner = (SurfaceType, Option<String>);
+
 /// Where an id'd surface element is defined, with the semantics of the thematic surface that
 /// owns it (so a polygon reached by XLink gets the type of its owner, not of the referrer).
 #[derive(Debug, Clone)]
@@ -1407,7 +1410,7 @@ pub(crate) fn build_index(
     let mut p = Parser::new(src, lines.clone(), range, Vec::new());
     let mut map = HashMap::new();
     // (start, id if surface element, thematic semantic if thematic surface)
-    let mut stack: Vec<(usize, Option<String>, Option<(SurfaceType, Option<String>)>)> = Vec::new();
+    let mut stack: Vec<(usize, Option<String>, Option<Owner>)> = Vec::new();
     loop {
         match p.next()? {
             Ev::Start(t) => {
@@ -1423,11 +1426,9 @@ pub(crate) fn build_index(
                 stack.push((t.start, id, sem));
             }
             Ev::End { end } => {
-                if let Some((start, id, _)) = stack.pop() {
-                    if let Some(id) = id {
-                        let semantic = stack.iter().rev().find_map(|s| s.2.clone());
-                        map.insert(id, IdEntry { bytes: start..end, semantic });
-                    }
+                if let Some((start, Some(id), _)) = stack.pop() {
+                    let semantic = stack.iter().rev().find_map(|s| s.2.clone());
+                    map.insert(id, IdEntry { bytes: start..end, semantic });
                 }
             }
             Ev::Eof => break,
