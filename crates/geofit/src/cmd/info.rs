@@ -17,9 +17,21 @@ Example:
   file:        LoD2_32_324_5729_1_NW.gml
   version:     CityGML 1.0
   crs:         urn:adv:crs:ETRS89_UTM32*DE_DHHN2016_NH*GCG2016
-  envelope:    324882.468 5729890.812 89.57 .. 324897.916 5729904.797 101.046
+  envelope:    324259.661 5729140.133 17.854 .. 324277.942 5729161.128 22.505
+  declared:    324000 5729000 17.854 .. 325000 5730000 22.505
   objects:     1 top-level, 10 in all
-  ...
+  feature types:
+    Building                            1
+    GroundSurface                       1
+    RoofSurface                         2
+    WallSurface                         6
+  levels of detail:            geometries polygons
+    lod2                               10        9
+  solids:      1
+  polygons:    9
+  rings:       9 (0 interior)
+  points:      43
+  xlinks:      9 resolved, 0 unresolved
   $ geofit info --json - < city.gml | jq .polygons
 
 Counts are of definitions: a polygon referenced by xlink:href (the faces of an NRW lod2Solid)
