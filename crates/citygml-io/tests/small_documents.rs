@@ -207,3 +207,40 @@ fn absurd_nesting_is_an_error_not_a_stack_overflow() {
     let e = parse(doc("2.0", &body).as_bytes()).expect_err("too deep");
     assert!(e.message.contains("nested deeper"), "{}", e.message);
 }
+
+/// Random byte edits of a valid document: every result is Ok or a ReadError, never a panic, and
+/// an error position always lies inside the input.
+#[test]
+fn mutated_documents_never_panic() {
+    let body = format!(
+        r##"<core:cityObjectMember><bldg:Building gml:id="b"><bldg:boundedBy><bldg:WallSurface gml:id="w"><bldg:lod2MultiSurface><gml:MultiSurface><gml:surfaceMember><gml:Polygon gml:id="p"><gml:exterior><gml:LinearRing><gml:posList srsDimension="3">{SQUARE}</gml:posList></gml:LinearRing></gml:exterior><gml:interior><gml:LinearRing><gml:pos>0.1 0.1 0</gml:pos><gml:pos>0.2 0.1 0</gml:pos><gml:pos>0.2 0.2 0</gml:pos><gml:pos>0.1 0.1 0</gml:pos></gml:LinearRing></gml:interior></gml:Polygon></gml:surfaceMember></gml:MultiSurface></bldg:lod2MultiSurface></bldg:WallSurface></bldg:boundedBy>
+<bldg:lod2Solid><gml:Solid><gml:exterior><gml:CompositeSurface><gml:surfaceMember xlink:href="#p"/><gml:surfaceMember><gml:OrientableSurface orientation="-"><gml:baseSurface xlink:href="#p"/></gml:OrientableSurface></gml:surfaceMember></gml:CompositeSurface></gml:exterior></gml:Solid></bldg:lod2Solid></bldg:Building></core:cityObjectMember>"##
+    );
+    let src = doc("2.0", &body).into_bytes();
+    assert_eq!(parse(&src).unwrap().all_polygons().len(), 1);
+    let mut x: u64 = 0x2545F4914F6CDD1D;
+    let mut rnd = move || {
+        x ^= x << 13;
+        x ^= x >> 7;
+        x ^= x << 17;
+        x
+    };
+    let alphabet = b"<>/\"=:# -.0123456789abcxmlnsgml\n\x00\xff";
+    for _ in 0..4000 {
+        let mut m = src.clone();
+        for _ in 0..1 + rnd() % 4 {
+            let i = (rnd() as usize) % m.len();
+            match rnd() % 3 {
+                0 => m[i] = alphabet[(rnd() as usize) % alphabet.len()],
+                1 => {
+                    m.remove(i);
+                }
+                _ => m.insert(i, alphabet[(rnd() as usize) % alphabet.len()]),
+            }
+        }
+        if let Err(e) = parse(&m) {
+            assert!(e.byte <= m.len() && e.line >= 1 && e.column >= 1, "{e:?}");
+        }
+        let _ = ObjectStream::new(&m).map(|s| s.count());
+    }
+}
