@@ -9,17 +9,20 @@
 //!   <points count="9">s t x y z w   (one control point per line)</points>
 //!   <cells count="4">i0 i1 i2 i3     (corner indices: (s_min,t_max) (s_max,t_max) (s_min,t_min) (s_max,t_min))</cells>
 //!   <mask width="857" height="793" encoding="rle">runs</mask>          (optional)
-//!   <warp x0=".." y0=".." dx=".." dy=".." nx=".." ny="..">u v ...</warp> (optional)
+//!   <warp encoding="json">{...}</warp>                                 (optional)
 //! </tmesh>
 //! ```
 //!
+//! - Control points' x, y are in parameter units like s, t (direct fits: x = s, y = t).
 //! - World coordinates of parameter (s, t): x = x0 + s·dx, y = y0 + t·dy (A21: s, t in raster
 //!   cells, t counted from the bottom row; x0, y0 is the centre of the bottom-left raster cell).
 //! - Numbers are written in Rust's shortest round-trip form, so write → read is exact.
 //! - Mask: cell (i, j) is parameter (s = i, t = j), stored row by row from t = 0, as run lengths
 //!   of alternating 0 (no data) and 1 (data), starting with a (possibly empty) run of 0.
-//! - Warp: the forward displacement sampled on a grid in original world coordinates: node (i, j)
-//!   at (x0 + i·dx, y0 + j·dy) maps to (x + u, y + v) in the fitted space; pairs "u v" row by row.
+//! - Warp (indirect reduction): the piecewise-linear displacement field of `geofit warp` as its
+//!   JSON record (XML-escaped). The mesh's parameters and georeference live in the warped frame;
+//!   control points' x, y are mapped back to the original frame (spec §2.3.7); evaluation on an
+//!   original grid maps each cell forward through the field first.
 
 use std::io::Write;
 
@@ -85,26 +88,16 @@ impl DataMask {
     }
 }
 
-/// Forward displacement field of an indirect reduction (see module doc).
-#[derive(Debug, Clone, PartialEq)]
-pub struct WarpField {
-    pub x0: f64,
-    pub y0: f64,
-    pub dx: f64,
-    pub dy: f64,
-    pub nx: usize,
-    pub ny: usize,
-    /// (u, v) per node, row-major from j = 0.
-    pub uv: Vec<[f64; 2]>,
-}
-
 /// Everything a `.tmesh` file holds.
 #[derive(Debug, Clone)]
 pub struct TMeshFile {
     pub mesh: TMesh,
     pub georef: Georef,
     pub mask: Option<DataMask>,
-    pub warp: Option<WarpField>,
+    /// Indirect reduction: the displacement field as the JSON record of `raster-proc`'s
+    /// `WarpField` (landmarks in the source and target frames, triangles, source grid), kept
+    /// verbatim so this crate does not depend on the warp code.
+    pub warp: Option<String>,
 }
 
 fn esc(s: &str) -> String {
@@ -138,12 +131,8 @@ pub fn write(f: &TMeshFile, w: &mut dyn Write) -> std::io::Result<()> {
         }
         writeln!(w, "</mask>")?;
     }
-    if let Some(wf) = &f.warp {
-        writeln!(w, r#"  <warp x0="{:?}" y0="{:?}" dx="{:?}" dy="{:?}" nx="{}" ny="{}">"#, wf.x0, wf.y0, wf.dx, wf.dy, wf.nx, wf.ny)?;
-        for uv in &wf.uv {
-            writeln!(w, "{:?} {:?}", uv[0], uv[1])?;
-        }
-        writeln!(w, "  </warp>")?;
+    if let Some(json) = &f.warp {
+        writeln!(w, r#"  <warp encoding="json">{}</warp>"#, esc(json))?;
     }
     writeln!(w, "</tmesh>")?;
     Ok(())
@@ -167,7 +156,7 @@ pub fn read(data: &[u8]) -> Result<TMeshFile, TsplineError> {
     let mut points: Option<(usize, Vec<ControlPoint>)> = None;
     let mut cells: Option<(usize, Vec<[PointId; 4]>)> = None;
     let mut mask: Option<DataMask> = None;
-    let mut warp: Option<WarpField> = None;
+    let mut warp: Option<String> = None;
     let mut pending_attrs: Vec<(String, String)> = Vec::new();
     let mut text = String::new();
     let mut text_pos = 0usize;
@@ -225,15 +214,10 @@ pub fn read(data: &[u8]) -> Result<TMeshFile, TsplineError> {
                         mask = Some(DataMask { width: uint("width")?, height: uint("height")?, bits: Vec::new() });
                     }
                     (1, "warp") => {
-                        warp = Some(WarpField {
-                            x0: num("x0")?,
-                            y0: num("y0")?,
-                            dx: num("dx")?,
-                            dy: num("dy")?,
-                            nx: uint("nx")?,
-                            ny: uint("ny")?,
-                            uv: Vec::new(),
-                        })
+                        if get("encoding").as_deref() != Some("json") {
+                            return Err(ferr(pos, "<warp> encoding must be \"json\"".into()));
+                        }
+                        warp = Some(String::new());
                     }
                     (d, other) => return Err(ferr(pos, format!("unexpected element <{other}> at depth {d}"))),
                 }
@@ -305,12 +289,7 @@ pub fn read(data: &[u8]) -> Result<TMeshFile, TsplineError> {
                         }
                     }
                     "warp" => {
-                        let wf = warp.as_mut().unwrap();
-                        let nums = parse_f64s(&text).map_err(|m| ferr(tp, format!("<warp>: {m}")))?;
-                        if nums.len() != wf.nx * wf.ny * 2 {
-                            return Err(ferr(tp, format!("<warp> holds {} numbers, expected {}", nums.len(), wf.nx * wf.ny * 2)));
-                        }
-                        wf.uv = nums.chunks_exact(2).map(|c| [c[0], c[1]]).collect();
+                        *warp.as_mut().unwrap() = text.clone();
                     }
                     _ => {}
                 }
@@ -362,7 +341,7 @@ mod tests {
             mesh: m.clone(),
             georef: Georef { x0: 500015.0, y0: 2150015.5, dx: 30.0, dy: 30.0, crs: "PROJCS[\"WGS 84 / UTM <5N>\"] & co".into() },
             mask: Some(DataMask { width: 5, height: 3, bits: (0..15).map(|i| i % 4 != 0).collect() }),
-            warp: Some(WarpField { x0: 1.0, y0: 2.0, dx: 0.5, dy: 0.25, nx: 2, ny: 2, uv: vec![[0.1, -0.2], [1.0 / 3.0, 0.0], [0.0, 0.0], [5e-17, 2.0]] }),
+            warp: Some(r#"{"version":1,"rotation":0.5,"src":[[1.0,2.0]],"note":"<a & b>"}"#.into()),
         };
         let mut buf = Vec::new();
         write(&file, &mut buf).unwrap();

@@ -52,6 +52,24 @@ pub struct Args {
 pub fn run(args: Args, config: &Config) -> CmdResult {
     let file = read_tmesh_arg(&args.mesh)?;
     let g = &file.georef;
+    // Indirect meshes: output cells are mapped forward through the stored field (spec §2.3.3)
+    // and the default grid is the original raster's, masked by its footprint.
+    let field = match &file.warp {
+        Some(json) => Some(
+            raster_proc::warp::WarpField::from_json(json).map_err(|e| CliError::unreadable(format!("{}: <warp>: {e}", args.mesh)))?,
+        ),
+        None => None,
+    };
+    let mapper = field.as_ref().map(|f| f.mapper());
+    let to_param = |x: f64, y: f64| -> (f64, f64) {
+        match &mapper {
+            Some(m) => {
+                let q = m.forward([x, y]);
+                g.param(q[0], q[1])
+            }
+            None => g.param(x, y),
+        }
+    };
     let crs = if g.crs.is_empty() { None } else { Some(g.crs.clone()) };
     // Output grid and the parameter pair of each output cell.
     let (mut out, st, stored_mask): (Raster, Vec<[f64; 2]>, Option<Vec<bool>>) = if let Some(like) = &args.like {
@@ -64,12 +82,24 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         for row in 0..r.height {
             for col in 0..r.width {
                 let (x, y) = r.cell_centre(col, row);
-                let (s, t) = g.param(x, y);
+                let (s, t) = to_param(x, y);
                 st.push([s, t]);
             }
         }
         let out = Raster::new_empty(r.width, r.height, gt, r.crs.clone().or(crs));
         (out, st, None)
+    } else if let Some(src) = field.as_ref().and_then(|f| f.source.as_ref()) {
+        let out = Raster::new_empty(src.width, src.height, src.geotransform, src.crs.clone().or(crs));
+        let mut st = Vec::with_capacity(src.width * src.height);
+        for row in 0..src.height {
+            for col in 0..src.width {
+                let (x, y) = out.cell_centre(col, row);
+                let (s, t) = to_param(x, y);
+                st.push([s, t]);
+            }
+        }
+        let mask = src.mask().map_err(|e| CliError::unreadable(format!("{}: <warp> source grid: {e}", args.mesh)))?;
+        (out, st, Some(mask))
     } else {
         let (w, h, s0, t0) = match &file.mask {
             Some(m) => (m.width, m.height, 0.0, 0.0),

@@ -176,13 +176,22 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     if !(args.overhang >= 0.0 && args.overhang <= 4.0) {
         return Err(CliError::usage(format!("--overhang must be within 0..4, got {}", args.overhang)));
     }
-    if args.indirect {
-        return Err(CliError::usage(
-            "--indirect is not available yet: run `geofit warp` first and fit its output directly (the warp field is then not stored in the T-mesh)",
-        ));
-    }
     let t_start = std::time::Instant::now();
     let (raster, name) = read_raster_arg(&args.input)?;
+    // Indirect reduction (spec §1, §2.3): fit the warped, filled raster; a raster written by
+    // `geofit warp` is used as it is, any other one is warped here with the default parameters.
+    let (raster, field) = if args.indirect {
+        match raster_proc::warp::field_of(&raster) {
+            Ok(f) => (raster, Some(f)),
+            Err(_) => {
+                let (w, f, _) = raster_proc::warp::warp_raster(&raster, &raster_proc::warp::WarpParams::default())
+                    .map_err(|e| super::rasterize::proc_err(&name, e))?;
+                (w, Some(f))
+            }
+        }
+    } else {
+        (raster, None)
+    };
     let (samples, georef, mask) = samples_from_raster(&raster, &name)?;
     let valid = samples.valid_count();
     if valid == 0 {
@@ -249,7 +258,24 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     if exit != Exit::Ok {
         eprintln!("geofit: {name}: {line}");
     }
-    let file = TMeshFile { mesh: result.mesh, georef, mask: Some(mask), warp: None };
+    let mut mesh = result.mesh;
+    let (mask, warp) = match &field {
+        Some(f) => {
+            // Map every control point's geometry back through the inverted field (spec §2.3.7);
+            // parameters and z stay. The original footprint travels in the field's source grid.
+            let mapper = f.mapper();
+            for p in &mut mesh.points {
+                let (xw, yw) = georef.world(p.s, p.t);
+                let q = mapper.inverse([xw, yw]);
+                let (ps, pt) = georef.param(q[0], q[1]);
+                p.x = ps;
+                p.y = pt;
+            }
+            (None, Some(f.to_json()))
+        }
+        None => (Some(mask), None),
+    };
+    let file = TMeshFile { mesh, georef, mask, warp };
     Output::from_arg(args.output.as_deref())
         .write_with(|w| tspline::format::write(&file, w).map_err(CliError::io_out))?;
     if let Some(path) = &args.report {
