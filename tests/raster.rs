@@ -256,6 +256,10 @@ fn warp_then_unwarp_restores_grid_and_values() {
     assert_eq!(truth["only_in_b"], 0);
     assert!(f(&truth["rms"]) < 0.25, "RMS after warp+unwarp {}", truth["rms"]);
 
+    // the field needs GeoTIFF metadata: other output formats are refused before any work
+    let o = common::run(&["warp", src.to_str().unwrap(), "-o", d.join("w.asc").to_str().unwrap()], None);
+    assert_eq!(common::code(&o), 2);
+    assert!(stderr(&o).contains("needs a GeoTIFF output"), "{}", stderr(&o));
     // unwarp needs the field: a plain raster is refused with a clear message
     let o = common::run(&["unwarp", src.to_str().unwrap(), "-o", d.join("x.tif").to_str().unwrap()], None);
     assert_eq!(common::code(&o), 3);

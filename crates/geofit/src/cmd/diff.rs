@@ -86,7 +86,8 @@ fn print_text(w: &mut dyn Write, r: &DiffReport) -> std::io::Result<()> {
         "|dz| mean       {:.4}   sigma {:.4}   median {:.4}   max {:.4}   RMS {:.4}",
         r.mean_abs, r.std_abs, r.median_abs, r.max_abs, r.rms
     )?;
-    writeln!(w, "signed mean     {:.4}", r.mean_signed)?;
+    // `+ 0.0` turns a rounding −0.0 into 0.0 for display
+    writeln!(w, "signed mean     {:.4}", r.mean_signed + 0.0)?;
     if let Some([c, row]) = r.max_at {
         writeln!(w, "max at cell     col {c} row {row}")?;
     }

@@ -39,7 +39,7 @@ pub enum MassArg {
 pub struct Args {
     /// Input raster (anything GDAL reads; `-` = stdin).
     pub input: String,
-    /// Output raster (.tif keeps the field in its metadata; `-` or missing = GeoTIFF on stdout).
+    /// Output GeoTIFF (.tif; it keeps the field in its metadata; `-` or missing = stdout).
     #[arg(short, long)]
     pub output: Option<String>,
     /// Landmark spacing (default 20 cells).
@@ -92,6 +92,14 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
             }
         }
     }
+    if let Some(p) = args.output.as_deref() {
+        let ext = std::path::Path::new(p).extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
+        // Only GeoTIFF keeps a long metadata string intact (netCDF rewrites it as a number
+        // list, ESRI ASCII grids have no metadata).
+        if !matches!(ext.as_deref(), Some("tif" | "tiff")) {
+            return Err(CliError::usage(format!("{p}: the warp field needs a GeoTIFF output (.tif)")));
+        }
+    }
     let (raster, name) = read_raster_arg(&args.input)?;
     let params = WarpParams {
         rotate: !args.no_rotate,
@@ -116,12 +124,6 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         "target {} x {} cells: {} splatted, {} filled by dilation ({} passes)",
         stats.target_width, stats.target_height, stats.cells_splatted, stats.cells_filled, stats.dilation_passes
     ));
-    if let Some(p) = args.output.as_deref() {
-        let ext = std::path::Path::new(p).extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
-        if matches!(ext.as_deref(), Some("asc")) {
-            return Err(CliError::usage("an ESRI ASCII grid cannot hold the warp field; write .tif (or .nc)"));
-        }
-    }
     write_raster_arg(&warped, args.output.as_deref())?;
     if let Some(path) = &args.report {
         write_json_report(path, &Report { input: &name, stats })?;
