@@ -256,3 +256,45 @@ fn surface_export_validates() {
         assert!(v.status.success() && rep.contains("\"numErrors\": 0"), "{rep}{}", String::from_utf8_lossy(&v.stderr));
     }
 }
+
+/// `--indirect`: the raster is warped (raster-proc), fitted in the warped frame, the field is
+/// stored in the T-mesh, and `geofit eval` returns the surface on the ORIGINAL grid and footprint.
+#[test]
+fn indirect_fit_round_trips_to_the_original_grid() {
+    let dir = tempfile::tempdir().unwrap();
+    let asc = dir.path().join("chan.asc");
+    let (w, h) = (90usize, 60usize);
+    let mut text = format!("ncols {w}\nnrows {h}\nxllcorner 1000\nyllcorner 2000\ncellsize 2\nNODATA_value -9999\n");
+    let a = 30f64.to_radians();
+    let mut valid = 0;
+    for r in 0..h {
+        let row: Vec<String> = (0..w)
+            .map(|c| {
+                let (x, y) = (c as f64 - 45.0, (h - 1 - r) as f64 - 30.0);
+                let v = -x * a.sin() + y * a.cos();
+                if v.abs() > 18.0 {
+                    return "-9999".to_string();
+                }
+                valid += 1;
+                format!("{:.3}", -10.0 - 6.0 * (-(v / 8.0).powi(2)).exp() + 0.3 * (x * a.cos() / 5.0).sin())
+            })
+            .collect();
+        text.push_str(&row.join(" "));
+        text.push('\n');
+    }
+    std::fs::write(&asc, text).unwrap();
+    let m = dir.path().join("i.tmesh");
+    let o = common::run(&["-q", "fit", asc.to_str().unwrap(), "--indirect", "--max-error", "0.5", "--degree", "1", "-o", m.to_str().unwrap()], None);
+    assert!(o.status.code() == Some(0) || o.status.code() == Some(1), "{}", String::from_utf8_lossy(&o.stderr));
+    let mesh = std::fs::read_to_string(&m).unwrap();
+    assert!(mesh.contains("<warp encoding=\"json\">"));
+    let out = dir.path().join("i.asc");
+    let o = common::run(&["eval", m.to_str().unwrap(), "-o", out.to_str().unwrap()], None);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let t = std::fs::read_to_string(&out).unwrap();
+    assert!(t.starts_with(&format!("ncols        {w}")) || t.contains(&format!("ncols {w}")) || t.lines().next().unwrap().ends_with(&w.to_string()), "{}", &t[..80]);
+    let vals: Vec<f64> = t.lines().skip(6).flat_map(|l| l.split_whitespace().map(|v| v.parse::<f64>().unwrap()).collect::<Vec<_>>()).collect();
+    assert_eq!(vals.len(), w * h);
+    let got = vals.iter().filter(|&&v| v != -9999.0 && v > -1e30).count();
+    assert!(got as f64 >= 0.95 * valid as f64 && got <= valid, "{got} of {valid} footprint cells evaluated");
+}
