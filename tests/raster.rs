@@ -256,6 +256,39 @@ fn warp_then_unwarp_restores_grid_and_values() {
     assert_eq!(truth["only_in_b"], 0);
     assert!(f(&truth["rms"]) < 0.25, "RMS after warp+unwarp {}", truth["rms"]);
 
+    // points: original → warped → original within 1e-6 of a cell (cell = 1 m here)
+    let mut pts = String::new();
+    let mut seed = 99u64;
+    let mut orig = Vec::new();
+    for _ in 0..5000 {
+        let mut next = || {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let (x, y) = (500000.0 - 20.0 + 280.0 * next(), 5700000.0 - 20.0 + 220.0 * next());
+        pts.push_str(&format!("{x:?} {y:?} 1.5\n"));
+        orig.push((x, y));
+    }
+    let p0 = d.join("p0.xyz");
+    let p1 = d.join("p1.xyz");
+    let p2 = d.join("p2.xyz");
+    std::fs::write(&p0, pts).unwrap();
+    ok(&["-q", "unwarp", warped.to_str().unwrap(), "--points", p0.to_str().unwrap(), "--forward", "-o", p1.to_str().unwrap()]);
+    ok(&["-q", "unwarp", warped.to_str().unwrap(), "--points", p1.to_str().unwrap(), "-o", p2.to_str().unwrap()]);
+    let read = |p: &Path| -> Vec<(f64, f64, f64)> {
+        std::fs::read_to_string(p).unwrap().lines().map(|l| {
+            let v: Vec<f64> = l.split_whitespace().map(|t| t.parse().unwrap()).collect();
+            (v[0], v[1], v[2])
+        }).collect()
+    };
+    let (fwd, back) = (read(&p1), read(&p2));
+    assert_eq!(back.len(), 5000);
+    let moved = orig.iter().zip(&fwd).filter(|(o, f)| (o.0 - f.0).hypot(o.1 - f.1) > 1.0).count();
+    assert!(moved > 2500, "the warp moves points ({moved} of 5000 by more than a cell)");
+    let worst = orig.iter().zip(&back).map(|(o, b)| (o.0 - b.0).hypot(o.1 - b.1)).fold(0.0, f64::max);
+    assert!(worst < 1e-6, "round trip error {worst} cells");
+    assert!(back.iter().all(|b| b.2 == 1.5));
+
     // the field needs GeoTIFF metadata: other output formats are refused before any work
     let o = common::run(&["warp", src.to_str().unwrap(), "-o", d.join("w.asc").to_str().unwrap()], None);
     assert_eq!(common::code(&o), 2);
