@@ -3,8 +3,6 @@
 //! inverse mapping): each original cell of the stored footprint takes the bilinear value at
 //! its forward image.
 
-use std::io::Write;
-
 use clap::Args as ClapArgs;
 
 use raster_proc::warp::{field_of, unwarp_raster};
