@@ -23,13 +23,13 @@ for f in "$SHARED"/fixtures/citygml/nrw/*.gml; do
   best=999; rss=0
   for i in 1 2 3; do
     /usr/bin/time -f "%e %M" -o "$OUT/t" "$BIN" -q citygml2popa3d "$f" -o "$OUT/o.popa3d" --report "$OUT/r.json" 2>/dev/null || true
-    read -r t m < "$OUT/t"
+    read -r t m < <(tail -n 1 "$OUT/t")
     best=$(python3 -c "print(min($best, $t))"); rss=$m
   done
   pbest=999
   for i in 1 2 3; do
     /usr/bin/time -f "%e" -o "$OUT/p" "$BIN" -q info "$f" >/dev/null 2>&1 || true
-    pbest=$(python3 -c "print(min($pbest, $(cat "$OUT/p")))")
+    pbest=$(python3 -c "print(min($pbest, $(tail -n 1 "$OUT/p")))")
   done
   read -r conv rej <<<"$(python3 -c "import json;r=json.load(open('$OUT/r.json'));print(r['converted'], len(r['rejected']))")"
   n=$((conv + rej))
