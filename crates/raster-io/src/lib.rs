@@ -3,6 +3,28 @@
 //! geotransform, CRS WKT), and scattered points from XYZ/CSV text and LAS/LAZ into
 //! [`PointCloud`]. Reading and writing only; processing (splatting, TIN, warping) lives in
 //! `raster-proc`.
+//!
+//! Typical use by the fitting and evaluation code:
+//! ```no_run
+//! use raster_io::{read_raster, write_raster, MissingCorners, Raster, WriteOptions};
+//! let r = read_raster(std::path::Path::new("bathy.nc")).unwrap();
+//! // reference value at a cell centre (exact) and at any world point (bilinear, spec §2.1)
+//! let (x, y) = r.cell_centre(10, 20);
+//! let z = r.sample(x + 0.3, y - 0.2, MissingCorners::Strict);
+//! // an evaluated surface on the same grid, masked by the data footprint (spec §2.2)
+//! let mut out = Raster::new_empty(r.width, r.height, r.geotransform, r.crs.clone());
+//! for row in 0..r.height {
+//!     for col in 0..r.width {
+//!         if r.valid[r.index(col, row)] {
+//!             out.set(col, row, -10.0);
+//!         }
+//!     }
+//! }
+//! write_raster(&out, std::path::Path::new("surface.tif"), &WriteOptions::default()).unwrap();
+//! # let _ = z;
+//! ```
+//! For the indirect reduction, `raster_proc::warp::WarpField` (serde) is the displacement
+//! field; `field.mapper().inverse([x, y])` maps a control point back (spec §2.3.7).
 
 pub mod error;
 pub mod gdal_io;
