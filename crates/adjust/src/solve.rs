@@ -226,7 +226,36 @@ struct Row {
     b: Vec<(usize, f64)>,
 }
 
+/// Values of one component over the global index space: the problem's values, overlaid by the
+/// component's own updates (no per-component copy of the whole problem).
+struct Overlay<'a> {
+    base: &'a [f64],
+    map: std::collections::HashMap<usize, f64>,
+}
+
+impl<'a> Overlay<'a> {
+    fn new(base: &'a [f64]) -> Self {
+        Overlay { base, map: Default::default() }
+    }
+}
+
+impl std::ops::Index<usize> for Overlay<'_> {
+    type Output = f64;
+    fn index(&self, i: usize) -> &f64 {
+        self.map.get(&i).unwrap_or(&self.base[i])
+    }
+}
+
+impl std::ops::IndexMut<usize> for Overlay<'_> {
+    fn index_mut(&mut self, i: usize) -> &mut f64 {
+        let b = self.base[i];
+        self.map.entry(i).or_insert(b)
+    }
+}
+
 struct Ctx<'a> {
+    x0: Vec<f64>,
+    l0: Vec<f64>,
     p: &'a Problem,
     nets: Vec<Net>,
     rnets: Vec<Net>,
@@ -236,7 +265,7 @@ struct Ctx<'a> {
 
 impl<'a> Ctx<'a> {
     /// Evaluate one condition at (x, l + v). `local` maps global unknown → component column.
-    fn eval_row(&self, net: &Net, eqi: usize, restriction: bool, x: &[f64], lv: &[f64], local: &dyn Fn(usize) -> Option<usize>, block_obs: &[usize]) -> Result<Row, AdjustError> {
+    fn eval_row(&self, net: &Net, eqi: usize, restriction: bool, x: &Overlay, lv: &Overlay, local: &dyn Fn(usize) -> Option<usize>, block_obs: &[usize]) -> Result<Row, AdjustError> {
         let def = if restriction { &self.p.restrictions[eqi] } else { &self.p.conditions[eqi] };
         let vars: Vec<f64> = net.unk.iter().map(|&u| x[u]).chain(net.obs.iter().map(|&o| lv[o])).collect();
         let mut g = vec![0.0; vars.len()];
@@ -412,7 +441,7 @@ pub fn adjust(problem: &Problem, opts: &Options) -> Result<Solution, AdjustError
         }
     }
 
-    let ctx = Ctx { p, nets, rnets, blocks, opts };
+    let ctx = Ctx { x0: p.unknowns.iter().map(|u| u.value).collect(), l0: p.obs.iter().map(|o| o.value).collect(), p, nets, rnets, blocks, opts };
     let datum_subset: Option<Vec<bool>> = match &opts.datum {
         Datum::Determined => None,
         Datum::Free { subset } => {
@@ -606,14 +635,14 @@ fn solve_component(ctx: &Ctx, comp: &Component, datum: Option<&[bool]>) -> Resul
     let local = |u: usize| local_map.get(&u).copied();
 
     // Current state: global x (for evaluation) and l + v per observation of this component.
-    let mut x: Vec<f64> = p.unknowns.iter().map(|u| u.value).collect();
+    let mut x = Overlay::new(&ctx.x0);
     let mut v: std::collections::HashMap<usize, f64> = Default::default();
     for &bi in &comp.blocks {
         for &o in &ctx.blocks[bi].obs {
             v.insert(o, 0.0);
         }
     }
-    let mut lv: Vec<f64> = p.obs.iter().map(|o| o.value).collect();
+    let mut lv = Overlay::new(&ctx.l0);
 
     let mut datum_rows: Vec<Vec<(usize, f64)>> = Vec::new();
     let mut prev_step = f64::INFINITY;
@@ -800,8 +829,8 @@ fn row_weight(diag: &[f64], row: &[(usize, f64)]) -> f64 {
 fn assemble(
     ctx: &Ctx,
     comp: &Component,
-    x: &[f64],
-    lv: &[f64],
+    x: &Overlay,
+    lv: &Overlay,
     v: &std::collections::HashMap<usize, f64>,
     local: &dyn Fn(usize) -> Option<usize>,
 ) -> Result<Linear, AdjustError> {
