@@ -336,6 +336,23 @@ mod tests {
         }
     }
 
+    /// The dragging kernel gives the CPU twin's dragging result (spec §4.6, T29).
+    #[test]
+    fn opencl_dragging_matches_cpu() {
+        use crate::fit::{fit_drag, Backend, Samples};
+        let ocl = OclEvaluator::new().expect("OpenCL (PoCL) must be available for this test");
+        let m = refined(Degree::Cubic);
+        let pb = PbSpline::build(&m);
+        let (w, h) = (96usize, 80usize);
+        let z = (0..w * h).map(|q| ((q % w) as f64 * 0.2).sin() * 5.0 + (q / w) as f64 * 0.1).collect();
+        let samples = Samples { width: w, height: h, z };
+        let a = fit_drag(&pb, &samples, 25, 0.0, &Backend::Cpu).unwrap();
+        let b = fit_drag(&pb, &samples, 25, 0.0, &Backend::OpenCl(&ocl)).unwrap();
+        for (x, y) in a.iter().zip(&b) {
+            assert!((x - y).abs() <= 1e-9 * x.abs().max(1.0), "{x} vs {y}");
+        }
+    }
+
     /// A kernel that fails to build is an error (the CLI then falls back with a notice).
     #[test]
     fn broken_kernel_is_an_error_not_a_panic() {
