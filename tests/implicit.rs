@@ -359,3 +359,31 @@ fn bad_input_gives_clear_messages() {
     std::fs::write(&bogus, b"hello").unwrap();
     expect_fail(&["-q", "implicit", "iso", &bogus, "-o", &out], None, 3, "not a readable model file");
 }
+
+/// Without normals, explicit side points orient φ (seed §2.1: inequality constraints from side
+/// points): one point inside (φ < 0) and the eight box corners outside (φ > 0).
+#[test]
+fn side_points_replace_normals() {
+    let d = common::tempdir();
+    let pts = gen(d.path(), "sphere", &["--n", "3000", "--noise", "0.01"]);
+    let bare = p(d.path(), "bare.xyz");
+    let text: String = std::fs::read_to_string(&pts)
+        .unwrap()
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').take(3).collect::<Vec<_>>().join(" ") + "\n")
+        .collect();
+    std::fs::write(&bare, text).unwrap();
+    let sides = p(d.path(), "sides.txt");
+    let mut s = String::from("0 0 0 -1\n");
+    for c in 0..8 {
+        let f = |b: usize| if c >> b & 1 == 1 { 1.4 } else { -1.4 };
+        s.push_str(&format!("{} {} {} 1\n", f(0), f(1), f(2)));
+    }
+    std::fs::write(&sides, s).unwrap();
+    let obj = p(d.path(), "s.obj");
+    geofit_ok(&["-q", "implicit", &bare, "--side-points", &sides, "-o", &obj]);
+    let e = mean_distance(&obj, &sphere_dist);
+    eprintln!("side points only: mean distance {e:.4}");
+    assert!(e < 0.02, "mean distance {e}");
+}
