@@ -60,6 +60,6 @@ for spec in "gmt_tut_bathy.nc 10" "gmt_tut_bathy.nc 50" "gmt_Kilauea.utm.nc 5" "
 done
 echo
 echo "T-mesh binary bytes = 48 per control point (s t x y z w as f64) + 16 per cell (4 x u32);"
-echo "TIN bytes = 24 per vertex + 12 per triangle. Kilauea's nodata cells are filled with the mean"
-echo "for the TIN (delatin needs a full grid); the T-spline fit leaves them out."
+echo "TIN bytes = 24 per vertex + 12 per triangle. Kilauea's nodata cells are filled with the nearest"
+echo "valid value for the TIN (delatin needs a full grid); the T-spline fit leaves them out."
 } | tee "$RES"
