@@ -185,8 +185,9 @@ fn build_depth(soup: &Soup, topo: &Topo, tol: &Tolerances, origin: [f64; 3], dep
                         let mut v = Vector3::zeros();
                         v[i] = rot.0;
                         v[j] = rot.1;
-                        // The partner's value is now exactly determined by the base (sign kept via planes).
-                        cnormal[m] = if c >= 0.0 { v } else { v };
+                        // The partner's value is now exactly the base rotated by 90°; if the drawn
+                        // normal pointed the other way, its planes take the sign (fsign below).
+                        cnormal[m] = v;
                         break 'search;
                     }
                 }

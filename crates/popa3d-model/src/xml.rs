@@ -9,7 +9,6 @@ use crate::ids::*;
 use crate::model::*;
 use crate::observation::*;
 use quick_xml::events::{BytesStart, Event};
-use std::collections::HashMap;
 use std::io::Write;
 use thiserror::Error;
 
@@ -886,10 +885,6 @@ pub fn observation_refs(k: &ObsKind) -> Vec<Ref> {
         ParameterFix { unknown, .. } | ParameterObs { unknown, .. } => vec![unk(unknown)],
     }
 }
-
-/// Positions of elements by id, kept for messages (unused outside the reader for now).
-#[allow(dead_code)]
-type Positions = HashMap<u32, (usize, usize)>;
 
 #[cfg(test)]
 mod tests {
