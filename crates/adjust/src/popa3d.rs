@@ -37,12 +37,14 @@ pub struct ModelOptions {
     pub soft_sigma_d: f64,
     /// σ of added soft-datum identity observations of normal parameters.
     pub soft_sigma_param: f64,
+    /// Recompute every set-up's starting values by the grid search (spec §4.4, P11).
+    pub polar_start: bool,
     pub engine: Options,
 }
 
 impl Default for ModelOptions {
     fn default() -> Self {
-        ModelOptions { datum: DatumChoice::Free, soft_sigma_d: 1.0, soft_sigma_param: 0.01, engine: Options::default() }
+        ModelOptions { datum: DatumChoice::Free, soft_sigma_d: 1.0, soft_sigma_param: 0.01, polar_start: false, engine: Options::default() }
     }
 }
 
@@ -377,9 +379,13 @@ pub fn map_model(m: &Popa3d) -> Result<Mapped, ModelError> {
 
 /// Starting values of every set-up by the spec's grid search (§4.4, P11) over its face pointings
 /// (edge/node pointings contribute all their planes), with the planes' current values held fixed.
-pub fn polar_starting_values(m: &mut Popa3d) {
+/// With `all == false` only set-ups whose quaternion is not a unit quaternion are searched.
+pub fn polar_starting_values(m: &mut Popa3d, all: bool) {
     let inc = Incidence::new(m);
     for si in 0..m.setups.len() {
+        if !all && (m.setups[si].q.iter().map(|v| v * v).sum::<f64>() - 1.0).abs() <= 1e-6 {
+            continue;
+        }
         let mut pts = Vec::new();
         for ob in &m.observations {
             let (setup, planes, hz, v, s) = match &ob.kind {
@@ -424,6 +430,11 @@ pub fn polar_starting_values(m: &mut Popa3d) {
 
 /// Adjust a model in place: write the estimated unknowns back and return the report.
 pub fn adjust_model(m: &mut Popa3d, opts: &ModelOptions) -> Result<Report, ModelError> {
+    // Set-ups without a valid rotation yet (a fresh sketch, or a set-up just added by `observe`)
+    // get the spec's grid-search starting values (P11); the others start from the last solution.
+    if m.setups.iter().any(|s| (s.q.iter().map(|v| v * v).sum::<f64>() - 1.0).abs() > 1e-6) || opts.polar_start {
+        polar_starting_values(m, opts.polar_start);
+    }
     let mut mapped = map_model(m)?;
     let misclosures = mapped.problem.misclosures();
     let mut eng = opts.engine.clone();

@@ -72,6 +72,10 @@ pub struct Args {
     /// Exit 1 when the global test fails or an observation is rejected.
     #[arg(long)]
     pub strict: bool,
+    /// Recompute the starting values of every total-station set-up by the grid search over
+    /// 0..399 gon (done automatically for set-ups without a unit quaternion).
+    #[arg(long)]
+    pub polar_start: bool,
 }
 
 pub(crate) fn model_options(a: &Args) -> Result<ModelOptions, CliError> {
@@ -91,6 +95,7 @@ pub(crate) fn model_options(a: &Args) -> Result<ModelOptions, CliError> {
     };
     mo.soft_sigma_d = a.soft_sigma_d;
     mo.soft_sigma_param = a.soft_sigma_param;
+    mo.polar_start = a.polar_start;
     mo.engine.tolerance = a.tolerance;
     mo.engine.max_iterations = a.max_iterations;
     mo.engine.alpha = a.alpha;
@@ -144,7 +149,7 @@ pub(crate) fn print_report(r: &Report, rows: usize) {
         ),
         _ => eprintln!("no redundancy: σ̂0 and the global test are undefined"),
     }
-    eprintln!("{:<28} {:>6} {:>14} {:>14} {:>8}", "type", "count", "max |w| before", "max |v|", "mean EV");
+    eprintln!("{:<28} {:>6} {:>14} {:>14} {:>8}", "type", "count", "max misclosure", "max |v|", "mean EV");
     for (k, t) in &r.per_type {
         eprintln!("{:<28} {:>6} {:>14.3e} {:>14.3e} {:>7.1}%", k, t.count, t.max_misclosure_before, t.max_abs_residual, 100.0 * t.mean_redundancy);
     }
