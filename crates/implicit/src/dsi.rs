@@ -469,6 +469,20 @@ impl Ic0 {
 /// (Hestenes & Stiefel 1952, seed ref. [HS52]) with an IC(0) preconditioner.
 /// Stops when ‖r‖ ≤ tol·‖b‖.
 pub fn pcg(a: &Csr, b: &[f64], x: &mut [f64], tol: f64, max_iter: usize) -> CgStats {
+    pcg_checked(a, b, x, tol, max_iter, None)
+}
+
+/// [`pcg`] with a checkpoint: when ‖r‖ ≤ `loose`·‖b‖ first holds, `go_on(x)` decides whether to
+/// keep iterating to `tol` within the same Krylov sequence (true) or to stop there (false).
+/// Continuing instead of restarting keeps CG's superlinear phase.
+pub fn pcg_checked(
+    a: &Csr,
+    b: &[f64],
+    x: &mut [f64],
+    tol: f64,
+    max_iter: usize,
+    mut check: Option<(f64, &mut dyn FnMut(&[f64]) -> bool)>,
+) -> CgStats {
     let n = b.len();
     let pdot = det_dot;
     let bn = pdot(b, b).sqrt();
@@ -487,7 +501,19 @@ pub fn pcg(a: &Csr, b: &[f64], x: &mut [f64], tol: f64, max_iter: usize) -> CgSt
     let mut q = vec![0.0; n];
     let mut res = pdot(&r, &r).sqrt() / bn;
     let mut it = 0;
-    while res > tol && it < max_iter {
+    loop {
+        if let Some((loose, go_on)) = check.as_mut() {
+            if res <= *loose {
+                let cont = go_on(x);
+                check = None;
+                if !cont {
+                    return CgStats { iterations: it, residual: res, converged: true };
+                }
+            }
+        }
+        if res <= tol || it >= max_iter {
+            break;
+        }
         a.mul(&p, &mut q);
         let pq = pdot(&p, &q);
         if !(pq > 0.0) {
@@ -553,7 +579,7 @@ pub fn solve(
     // CG runs to a loose tolerance; once a round leaves the set unchanged, one final solve goes
     // to `p.tol` from there. A warm start (saved φ and active set) then needs one loose and one
     // tight solve, both from close to the answer.
-    let loose = (p.tol * 10.0).max(1e-5);
+    let loose = (p.tol * 100.0).max(1e-4);
     let has_ineq = data.ineq.iter().any(|&b| b);
     let mut round = 0;
     let mut settled = !has_ineq;
@@ -564,27 +590,48 @@ pub fn solve(
         // seed §3: the base and float systems are merged into one system for CG.
         let a = csr_sum(&[&a_rough, &a_base, &a_float], shift);
         let last = settled || round + 1 >= p.rounds.max(1);
-        let tol = if last { p.tol } else { loose };
-        let st = pcg(&a, &b, &mut x, tol, p.max_iter);
+        // Not the last round: stop at the loose tolerance unless the active set is already
+        // unchanged there, in which case the same CG run goes on to `p.tol` and we are done.
+        let mut next: Option<Vec<bool>> = None;
+        let mut done = last;
+        let st = if last {
+            pcg(&a, &b, &mut x, p.tol, p.max_iter)
+        } else {
+            let mut go_on = |xx: &[f64]| {
+                let new: Vec<bool> = (0..data.len()).map(|r| !data.ineq[r] || data.dot(r, xx) < data.rhs[r]).collect();
+                let same = new == act;
+                if std::env::var_os("GEOFIT_DEBUG_ACTIVE").is_some() {
+                    eprintln!("active-set round {round}: {} rows change", new.iter().zip(&act).filter(|(a, b)| a != b).count());
+                }
+                next = Some(new);
+                same
+            };
+            let st = pcg_checked(&a, &b, &mut x, p.tol, p.max_iter, Some((loose, &mut go_on)));
+            if next.as_ref() == Some(&act) {
+                done = true;
+            }
+            st
+        };
         iters.push(st.iterations);
         last_res = st.residual;
         progress(round, st.iterations, st.residual);
         if !st.converged {
+            let tol = if done { p.tol } else { loose };
             return Err(Error::NotConverged { iterations: st.iterations, residual: st.residual, tol });
         }
-        if last {
+        if done {
             break;
         }
-        let new: Vec<bool> = (0..data.len()).map(|r| !data.ineq[r] || data.dot(r, &x) < data.rhs[r]).collect();
-        if std::env::var_os("GEOFIT_DEBUG_ACTIVE").is_some() {
-            eprintln!("active-set round {round}: {} rows change", new.iter().zip(&act).filter(|(a, b)| a != b).count());
+        match next {
+            Some(new) => act = new,
+            None => {
+                // Converged to the loose tolerance before the first check (start already close):
+                // decide from the current iterate.
+                let new: Vec<bool> = (0..data.len()).map(|r| !data.ineq[r] || data.dot(r, &x) < data.rhs[r]).collect();
+                settled = new == act;
+                act = new;
+            }
         }
-        let unchanged = new == act;
-        if unchanged && tol <= p.tol {
-            break;
-        }
-        settled = unchanged;
-        act = new;
         round += 1;
     }
     if x.iter().any(|v| !v.is_finite()) {
