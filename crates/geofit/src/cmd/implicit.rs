@@ -160,7 +160,8 @@ pub struct UpdateArgs {
     /// Points to add as float constraints (same formats as POINTS).
     #[arg(long, value_name = "FILE")]
     pub add: Option<String>,
-    /// Move constraint I to X,Y,Z (world coordinates); repeatable. `I` as listed by `--list`.
+    /// Move constraint I to X,Y,Z (world coordinates); repeatable. I = 0-based index of the point
+    /// among the input data rows (duplicates merged), then side points, then added points.
     #[arg(long = "move", value_name = "I,X,Y,Z")]
     pub moves: Vec<String>,
     /// Start CG from zero instead of the saved solution (for comparison).
