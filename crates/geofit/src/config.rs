@@ -139,6 +139,12 @@ where
         w.flush().map_err(CliError::io_out)?;
     }
     tmp.as_file().sync_all().map_err(CliError::io_out)?;
+    // tempfile creates 0600 files; an output is an ordinary file others may read.
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        std::fs::set_permissions(tmp.path(), std::fs::Permissions::from_mode(0o644)).map_err(CliError::io_out)?;
+    }
     tmp.persist(path)
         .map_err(|e| CliError::output(format!("cannot write {}: {}", path.display(), e.error)))?;
     Ok(())
