@@ -17,6 +17,7 @@
 
 use rayon::prelude::*;
 
+use crate::extraction::Extraction;
 use crate::knots::{self, LocalKnots};
 use crate::mesh::{Degree, TMesh};
 
@@ -357,8 +358,21 @@ impl PbSpline {
         den
     }
 
-    /// Heights at many parameter points, in parallel (rayon) or on one thread.
+    /// Whether dense evaluation of `n` points goes through the element extraction: building it
+    /// costs about as much as evaluating a few points per element, so small batches (the
+    /// fit's per-control-point evaluations) stay on the PB-spline path.
+    #[inline]
+    pub fn use_extraction(&self, n: usize) -> bool {
+        n >= 4 * self.cells.len().max(1)
+    }
+
+    /// Heights at many parameter points, in parallel (rayon) or on one thread. Large batches go
+    /// through the per-element polynomial extraction ([`Extraction`], rebuilt from the current
+    /// `geom` on every call), equal to [`PbSpline::point`] to rounding (tested to 1e-12).
     pub fn eval_z(&self, st: &[[f64; 2]], parallel: bool) -> Vec<f64> {
+        if self.use_extraction(st.len()) {
+            return Extraction::new(self, parallel).eval_z(self, st, parallel);
+        }
         if parallel {
             st.par_iter().with_min_len(4096).map(|p| self.point(p[0], p[1])[2]).collect()
         } else {
@@ -368,6 +382,26 @@ impl PbSpline {
 
     /// Heights on a regular grid: point (i, j) at (s0 + i·ds, t0 + j·dt), row-major in j.
     pub fn eval_grid(&self, g: &GridSpec, parallel: bool) -> Vec<f64> {
+        let n = g.ns * g.nt;
+        if self.use_extraction(n) {
+            let ex = Extraction::new(self, parallel);
+            let mut out = vec![0.0; n];
+            let row = |(j, o): (usize, &mut [f64])| {
+                let t = g.t0 + j as f64 * g.dt;
+                let mut hint = 0;
+                for (i, z) in o.iter_mut().enumerate() {
+                    *z = ex.z(self, g.s0 + i as f64 * g.ds, t, &mut hint);
+                }
+            };
+            if g.ns > 0 {
+                if parallel {
+                    out.par_chunks_mut(g.ns).enumerate().for_each(row);
+                } else {
+                    out.chunks_mut(g.ns).enumerate().for_each(row);
+                }
+            }
+            return out;
+        }
         let f = |idx: usize| {
             let i = idx % g.ns;
             let j = idx / g.ns;
@@ -380,16 +414,39 @@ impl PbSpline {
         }
     }
 
-    /// Floating-point operations per evaluated point, counted from the average number of
-    /// candidates and non-zero basis functions at the given sample (for the benchmark).
+    /// Floating-point operations per evaluated point of [`PbSpline::eval_z`] on `st`, counted
+    /// on a sample of it (for the benchmark; compares count as one flop each, as before).
+    ///
+    /// Element path (cubic): 4 compares of the element test per candidate, 2 subtractions + 2
+    /// multiplications for (u, v), 2 bicubic Horner forms (4 rows × 6 + 6 = 30 each), 1
+    /// division, 1 compare (den = 0): 66 + 4 × candidates; degree 1: 2 × (2·2 + 2) = 12 → 18 +
+    /// 4 × candidates. The sample is every ⌈n/10⁴⌉-th point (not the first rows of a grid,
+    /// which would over-weight its lower border). Points on the reference path cost [`PbSpline::flops_reference`].
     pub fn flops_estimate(&self, st: &[[f64; 2]]) -> f64 {
+        if !self.use_extraction(st.len()) {
+            return self.flops_reference(st);
+        }
+        let ex = Extraction::new(self, true);
+        let (fast, tests) = ex.path_stats(st);
+        let k = self.degree.k();
+        let horner = if k == 3 { 30.0 } else { 6.0 };
+        let elem = 4.0 + 2.0 * horner + 2.0;
+        // reference points: restricted to the sample's slow ones would need their list; the
+        // mean over the sample is a fair upper bound for them.
+        tests * 4.0 + fast * elem + (1.0 - fast) * self.flops_reference(st)
+    }
+
+    /// Flops per point of the PB-spline path ([`PbSpline::point`]), from the average number of
+    /// candidates and non-zero basis functions at the given sample.
+    pub fn flops_reference(&self, st: &[[f64; 2]]) -> f64 {
         let k = self.degree.k() as f64;
         // One basis function: (K+1) indicator tests + Σ_{r=1..K} (K+1−r) · 8 flops.
         // polynomial pieces: span search (≤ K+1 double compares), (u − a)·(1/h), Horner (2K flops)
         let basis_flops = 2.0 * (k + 1.0) + 2.0 + 2.0 * k;
         let mut cand = 0usize;
         let mut hit = 0usize;
-        for p in st.iter().take(10000) {
+        let step = st.len().div_ceil(10000).max(1);
+        for p in st.iter().step_by(step) {
             let b = self.bucket(p[0], p[1]);
             let items = &self.pt_items[self.pt_start[b] as usize..self.pt_start[b + 1] as usize];
             cand += items.len();
@@ -401,7 +458,7 @@ impl PbSpline {
                 })
                 .count();
         }
-        let n = st.len().min(10000).max(1) as f64;
+        let n = st.len().div_ceil(step).max(1) as f64;
         // 4 compares per candidate; per hit 2 basis evaluations + 2 mul + 4 fma (8 flops) ; final 3 divisions.
         (cand as f64 * 4.0 + hit as f64 * (2.0 * basis_flops + 10.0)) / n + 3.0
     }

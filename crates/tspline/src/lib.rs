@@ -20,6 +20,7 @@
 //! spacing is 1. The affine map to world coordinates is stored with the mesh ([`format::Georef`]).
 
 pub mod eval;
+pub mod extraction;
 pub mod fit;
 pub mod format;
 pub mod knots;
