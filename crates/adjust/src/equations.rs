@@ -40,6 +40,26 @@ fn plane<D: Scalar>(x: &[D], k: usize) -> (V3<D>, D) {
     ([x[o], x[o + 1], x[o + 2]], x[o + 3])
 }
 
+/// The first `N` planes of a slot array, in slot order.
+fn planes<D: Scalar, const N: usize>(x: &[D]) -> [(V3<D>, D); N] {
+    std::array::from_fn(|k| plane(x, k))
+}
+
+/// Declares one equation type of Table B.1: a unit struct, its report name and its residual
+/// `f(x, l)` over the unknown slots `x` and the observations `l` (generic over the AD scalar `D`).
+macro_rules! equation {
+    ($(#[$doc:meta])* $name:ident, $kind:literal, |$x:ident, $l:ident| $body:block) => {
+        $(#[$doc])*
+        pub struct $name;
+        impl Equation for $name {
+            fn kind(&self) -> &str {
+                $kind
+            }
+            fn eval<D: Scalar>(&self, $x: &[D], $l: &[D]) -> D $body
+        }
+    };
+}
+
 /// Solve [r0; r1; r2]·p = rhs by Cramer's rule (rows are the listed vectors).
 fn solve3<D: Scalar>(r0: &V3<D>, r1: &V3<D>, r2: &V3<D>, rhs: &V3<D>) -> V3<D> {
     // p = (rhs0 (r1×r2) + rhs1 (r2×r0) + rhs2 (r0×r1)) / det
@@ -82,173 +102,107 @@ fn frozen_abs<D: Scalar>(e: D, observed: D) -> D {
     }
 }
 
-/// DistanceFaceFace: slots [plane i, plane j], obs [l]. l + v = |d_j − s·d_i| with s = sign⟨n_i, n_j⟩.
-pub struct DistanceFaceFace;
-impl Equation for DistanceFaceFace {
-    fn kind(&self) -> &str {
-        "DistanceFaceFace"
-    }
-    fn eval<D: Scalar>(&self, x: &[D], l: &[D]) -> D {
-        let (ni, di) = plane(x, 0);
-        let (nj, dj) = plane(x, 1);
+equation! {
+    /// DistanceFaceFace: slots [plane i, plane j], obs [l]. l + v = |d_j − s·d_i| with s = sign⟨n_i, n_j⟩.
+    DistanceFaceFace, "DistanceFaceFace", |x, l| {
+        let [(ni, di), (nj, dj)] = planes(x);
         let s = if dot(&ni, &nj).re() >= 0.0 { 1.0 } else { -1.0 };
         frozen_abs(dj - di * s, l[0]) - l[0]
     }
 }
 
-/// DistanceFaceEdge: slots [face i, edge plane j, edge plane k], obs [l]. l + v = |d_i − ⟨n_i, p_jk⟩|.
-pub struct DistanceFaceEdge;
-impl Equation for DistanceFaceEdge {
-    fn kind(&self) -> &str {
-        "DistanceFaceEdge"
-    }
-    fn eval<D: Scalar>(&self, x: &[D], l: &[D]) -> D {
-        let (ni, di) = plane(x, 0);
-        let (nj, dj) = plane(x, 1);
-        let (nk, dk) = plane(x, 2);
+equation! {
+    /// DistanceFaceEdge: slots [face i, edge plane j, edge plane k], obs [l]. l + v = |d_i − ⟨n_i, p_jk⟩|.
+    DistanceFaceEdge, "DistanceFaceEdge", |x, l| {
+        let [(ni, di), (nj, dj), (nk, dk)] = planes(x);
         let p = edge_point(&nj, dj, &nk, dk);
         frozen_abs(di - dot(&ni, &p), l[0]) - l[0]
     }
 }
 
-/// DistanceFaceNode: slots [face i, node planes j, k, l], obs [l]. l + v = |d_i − ⟨n_i, p_jkl⟩|.
-pub struct DistanceFaceNode;
-impl Equation for DistanceFaceNode {
-    fn kind(&self) -> &str {
-        "DistanceFaceNode"
-    }
-    fn eval<D: Scalar>(&self, x: &[D], l: &[D]) -> D {
-        let (ni, di) = plane(x, 0);
-        let (n1, d1) = plane(x, 1);
-        let (n2, d2) = plane(x, 2);
-        let (n3, d3) = plane(x, 3);
+equation! {
+    /// DistanceFaceNode: slots [face i, node planes j, k, l], obs [l]. l + v = |d_i − ⟨n_i, p_jkl⟩|.
+    DistanceFaceNode, "DistanceFaceNode", |x, l| {
+        let [(ni, di), (n1, d1), (n2, d2), (n3, d3)] = planes(x);
         let p = node_point(&n1, d1, &n2, d2, &n3, d3);
         frozen_abs(di - dot(&ni, &p), l[0]) - l[0]
     }
 }
 
-/// DistanceEdgeEdge: slots [i, j, k, l], obs [l]. l + v = ‖p_ij − p_kl‖ (T 3.23 corrected).
-pub struct DistanceEdgeEdge;
-impl Equation for DistanceEdgeEdge {
-    fn kind(&self) -> &str {
-        "DistanceEdgeEdge"
-    }
-    fn eval<D: Scalar>(&self, x: &[D], l: &[D]) -> D {
-        let (n1, d1) = plane(x, 0);
-        let (n2, d2) = plane(x, 1);
-        let (n3, d3) = plane(x, 2);
-        let (n4, d4) = plane(x, 3);
+equation! {
+    /// DistanceEdgeEdge: slots [i, j, k, l], obs [l]. l + v = ‖p_ij − p_kl‖ (T 3.23 corrected).
+    DistanceEdgeEdge, "DistanceEdgeEdge", |x, l| {
+        let [(n1, d1), (n2, d2), (n3, d3), (n4, d4)] = planes(x);
         let a = edge_point(&n1, d1, &n2, d2);
         let b = edge_point(&n3, d3, &n4, d4);
         norm(&sub(&a, &b)) - l[0]
     }
 }
 
-/// DistanceEdgeNode: slots [edge i, j, node k, l, m], obs [l]. l + v = ‖p_ij(p_klm) − p_klm‖.
-pub struct DistanceEdgeNode;
-impl Equation for DistanceEdgeNode {
-    fn kind(&self) -> &str {
-        "DistanceEdgeNode"
-    }
-    fn eval<D: Scalar>(&self, x: &[D], l: &[D]) -> D {
-        let (n1, d1) = plane(x, 0);
-        let (n2, d2) = plane(x, 1);
-        let (n3, d3) = plane(x, 2);
-        let (n4, d4) = plane(x, 3);
-        let (n5, d5) = plane(x, 4);
+equation! {
+    /// DistanceEdgeNode: slots [edge i, j, node k, l, m], obs [l]. l + v = ‖p_ij(p_klm) − p_klm‖.
+    DistanceEdgeNode, "DistanceEdgeNode", |x, l| {
+        let [(n1, d1), (n2, d2), (n3, d3), (n4, d4), (n5, d5)] = planes(x);
         let q = node_point(&n3, d3, &n4, d4, &n5, d5);
         let f = edge_foot(&n1, d1, &n2, d2, &q);
         norm(&sub(&f, &q)) - l[0]
     }
 }
 
-/// DistanceNodeNode: slots [i, j, k, l, m, n], obs [l]. l + v = ‖p_ijk − p_lmn‖.
-pub struct DistanceNodeNode;
-impl Equation for DistanceNodeNode {
-    fn kind(&self) -> &str {
-        "DistanceNodeNode"
-    }
-    fn eval<D: Scalar>(&self, x: &[D], l: &[D]) -> D {
-        let (n1, d1) = plane(x, 0);
-        let (n2, d2) = plane(x, 1);
-        let (n3, d3) = plane(x, 2);
-        let (n4, d4) = plane(x, 3);
-        let (n5, d5) = plane(x, 4);
-        let (n6, d6) = plane(x, 5);
+equation! {
+    /// DistanceNodeNode: slots [i, j, k, l, m, n], obs [l]. l + v = ‖p_ijk − p_lmn‖.
+    DistanceNodeNode, "DistanceNodeNode", |x, l| {
+        let [(n1, d1), (n2, d2), (n3, d3), (n4, d4), (n5, d5), (n6, d6)] = planes(x);
         let a = node_point(&n1, d1, &n2, d2, &n3, d3);
         let b = node_point(&n4, d4, &n5, d5, &n6, d6);
         norm(&sub(&a, &b)) - l[0]
     }
 }
 
-/// Angle constraint face–face: slots [n_i(3), n_j(3)], obs [l = cosine]. l + v = ⟨n_i, n_j⟩ (signed, spec §4.5 proposal).
-pub struct ConstraintFaceFace;
-impl Equation for ConstraintFaceFace {
-    fn kind(&self) -> &str {
-        "ConstraintFaceFace"
-    }
-    fn eval<D: Scalar>(&self, x: &[D], l: &[D]) -> D {
+equation! {
+    /// Angle constraint face–face: slots [n_i(3), n_j(3)], obs [l = cosine]. l + v = ⟨n_i, n_j⟩ (signed, spec §4.5 proposal).
+    ConstraintFaceFace, "ConstraintFaceFace", |x, l| {
         let a = [x[0], x[1], x[2]];
         let b = [x[3], x[4], x[5]];
         dot(&a, &b) - l[0]
     }
 }
 
-/// Angle constraint face–edge: slots [n_i, n_j, n_k] (3 each). l + v = ⟨n_i, n_j×n_k/‖n_j×n_k‖⟩ (T 3.49 normalised).
-pub struct ConstraintFaceEdge;
-impl Equation for ConstraintFaceEdge {
-    fn kind(&self) -> &str {
-        "ConstraintFaceEdge"
-    }
-    fn eval<D: Scalar>(&self, x: &[D], l: &[D]) -> D {
+equation! {
+    /// Angle constraint face–edge: slots [n_i, n_j, n_k] (3 each). l + v = ⟨n_i, n_j×n_k/‖n_j×n_k‖⟩ (T 3.49 normalised).
+    ConstraintFaceEdge, "ConstraintFaceEdge", |x, l| {
         let a = [x[0], x[1], x[2]];
         let c = cross(&[x[3], x[4], x[5]], &[x[6], x[7], x[8]]);
         dot(&a, &c) / norm(&c) - l[0]
     }
 }
 
-/// Angle constraint edge–edge: slots [n_i, n_j, n_k, n_l]. l + v = ⟨ĉ_ij, ĉ_kl⟩ with normalised cross products (T 3.50).
-pub struct ConstraintEdgeEdge;
-impl Equation for ConstraintEdgeEdge {
-    fn kind(&self) -> &str {
-        "ConstraintEdgeEdge"
-    }
-    fn eval<D: Scalar>(&self, x: &[D], l: &[D]) -> D {
+equation! {
+    /// Angle constraint edge–edge: slots [n_i, n_j, n_k, n_l]. l + v = ⟨ĉ_ij, ĉ_kl⟩ with normalised cross products (T 3.50).
+    ConstraintEdgeEdge, "ConstraintEdgeEdge", |x, l| {
         let c1 = cross(&[x[0], x[1], x[2]], &[x[3], x[4], x[5]]);
         let c2 = cross(&[x[6], x[7], x[8]], &[x[9], x[10], x[11]]);
         dot(&c1, &c2) / (norm(&c1) * norm(&c2)) - l[0]
     }
 }
 
-/// RelativeDistancePlanePlane (sketch prior, spec §4.6): slots [d_i, d_j]. l + v = d_j − d_i.
-pub struct RelativeDistancePlanePlane;
-impl Equation for RelativeDistancePlanePlane {
-    fn kind(&self) -> &str {
-        "RelativeDistancePlanePlane"
-    }
-    fn eval<D: Scalar>(&self, x: &[D], l: &[D]) -> D {
+equation! {
+    /// RelativeDistancePlanePlane (sketch prior, spec §4.6): slots [d_i, d_j]. l + v = d_j − d_i.
+    RelativeDistancePlanePlane, "RelativeDistancePlanePlane", |x, l| {
         x[1] - x[0] - l[0]
     }
 }
 
-/// RelativeAngleNormalNormal (sketch prior): slots [n_i, n_j]. l + v = ⟨n_i, n_j⟩.
-pub struct RelativeAngleNormalNormal;
-impl Equation for RelativeAngleNormalNormal {
-    fn kind(&self) -> &str {
-        "RelativeAngleNormalNormal"
-    }
-    fn eval<D: Scalar>(&self, x: &[D], l: &[D]) -> D {
+equation! {
+    /// RelativeAngleNormalNormal (sketch prior): slots [n_i, n_j]. l + v = ⟨n_i, n_j⟩.
+    RelativeAngleNormalNormal, "RelativeAngleNormalNormal", |x, l| {
         dot(&[x[0], x[1], x[2]], &[x[3], x[4], x[5]]) - l[0]
     }
 }
 
-/// NormNV as pseudo-observation (T 3.5): slots [n], obs [l = 1]. l + v = ‖n‖.
-pub struct NormNvObs;
-impl Equation for NormNvObs {
-    fn kind(&self) -> &str {
-        "NormNV"
-    }
-    fn eval<D: Scalar>(&self, x: &[D], l: &[D]) -> D {
+equation! {
+    /// NormNV as pseudo-observation (T 3.5): slots [n], obs [l = 1]. l + v = ‖n‖.
+    NormNvObs, "NormNV", |x, l| {
         norm(&[x[0], x[1], x[2]]) - l[0]
     }
 }
@@ -256,24 +210,16 @@ impl Equation for NormNvObs {
 /// NormNV as restriction (T 3.6): ‖n‖ − 1 = 0.
 pub use crate::fits::UnitNorm3 as NormNvRestriction;
 
-/// NormQ restriction (T 3.14): q0² + q1² + q2² + q3² − 1 = 0.
-pub struct NormQ;
-impl Equation for NormQ {
-    fn kind(&self) -> &str {
-        "NormQ"
-    }
-    fn eval<D: Scalar>(&self, x: &[D], _l: &[D]) -> D {
+equation! {
+    /// NormQ restriction (T 3.14): q0² + q1² + q2² + q3² − 1 = 0.
+    NormQ, "NormQ", |x, _l| {
         x[0] * x[0] + x[1] * x[1] + x[2] * x[2] + x[3] * x[3] - 1.0
     }
 }
 
-/// Levelling restriction (T 3.37): one quaternion component = 0 (used for q1 and q2).
-pub struct Levelled;
-impl Equation for Levelled {
-    fn kind(&self) -> &str {
-        "Levelled"
-    }
-    fn eval<D: Scalar>(&self, x: &[D], _l: &[D]) -> D {
+equation! {
+    /// Levelling restriction (T 3.37): one quaternion component = 0 (used for q1 and q2).
+    Levelled, "Levelled", |x, _l| {
         x[0]
     }
 }
