@@ -3,6 +3,7 @@
 
 use clap::{Args as ClapArgs, ValueEnum};
 
+use crate::cmd::args::require_positive;
 use crate::config::{write_json_report, Config, Input, Output};
 use crate::error::{CliError, CmdResult, Exit};
 use adjust::popa3d::{adjust_model, DatumChoice, ModelError, ModelOptions, ObsReport, Report};
@@ -79,11 +80,7 @@ pub struct Args {
 }
 
 pub(crate) fn model_options(a: &Args) -> Result<ModelOptions, CliError> {
-    for (n, v) in [("soft-sigma-d", a.soft_sigma_d), ("soft-sigma-param", a.soft_sigma_param), ("tolerance", a.tolerance)] {
-        if !(v.is_finite() && v > 0.0) {
-            return Err(CliError::usage(format!("--{n} must be a positive number, got {v}")));
-        }
-    }
+    require_positive(&[("soft-sigma-d", a.soft_sigma_d), ("soft-sigma-param", a.soft_sigma_param), ("tolerance", a.tolerance)])?;
     if !(a.alpha > 0.0 && a.alpha < 1.0) {
         return Err(CliError::usage(format!("--alpha must lie in (0, 1), got {}", a.alpha)));
     }

@@ -4,6 +4,7 @@
 use clap::Args as ClapArgs;
 use serde::Serialize;
 
+use crate::cmd::args::{require_positive, NormalizeArgs};
 use crate::config::{write_json_report, Config, Input, Output};
 use crate::error::{CliError, CmdResult, Exit};
 use normalize::conditions::{self, ConditionCounts, ConditionOptions, Ranges};
@@ -45,21 +46,8 @@ pub struct Args {
     /// Highest LoD to read (the best solid ≤ this LoD is used).
     #[arg(long, default_value_t = 4)]
     pub lod: u8,
-    /// Snap tolerance: points closer than this are one node (m).
-    #[arg(long, default_value_t = 0.001)]
-    pub snap: f64,
-    /// Reject faces whose vertices lie further than this from their best-fitting plane (m).
-    #[arg(long, default_value_t = 0.1)]
-    pub planarity: f64,
-    /// Merge normals within this angle into one normal object (degrees).
-    #[arg(long, default_value_t = 0.01)]
-    pub normal_angle: f64,
-    /// Merge planes on one normal whose distances differ by less than this (m).
-    #[arg(long, default_value_t = 0.001)]
-    pub plane_distance: f64,
-    /// Share parameters between orthogonal normals ((a,b,c) and (−b,a,c)); snaps near-zero components.
-    #[arg(long)]
-    pub share_orthogonal: bool,
+    #[command(flatten)]
+    pub normalize: NormalizeArgs,
     /// Generate parallelism conditions for normals within this angle of parallel (degrees).
     #[arg(long, default_value_t = 2.0)]
     pub parallel_angle: f64,
@@ -112,20 +100,9 @@ struct Report {
     buildings: Vec<BuildingReport>,
 }
 
-fn positive(name: &str, v: f64) -> Result<(), CliError> {
-    if v.is_finite() && v > 0.0 {
-        Ok(())
-    } else {
-        Err(CliError::usage(format!("--{name} must be a positive number, got {v}")))
-    }
-}
-
 pub fn run(args: Args, config: &Config) -> CmdResult {
-    for (n, v) in [
-        ("snap", args.snap),
-        ("planarity", args.planarity),
-        ("normal-angle", args.normal_angle),
-        ("plane-distance", args.plane_distance),
+    let tol = args.normalize.tolerances()?;
+    require_positive(&[
         ("parallel-angle", args.parallel_angle),
         ("orthogonal-angle", args.orthogonal_angle),
         ("epsilon", args.epsilon),
@@ -133,23 +110,14 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         ("sigma-distance", args.sigma_distance),
         ("sigma-identity-d", args.sigma_identity_d),
         ("sigma-identity-param", args.sigma_identity_param),
-    ] {
-        positive(n, v)?;
-    }
+    ])?;
     if let Some(s) = args.sigma_norm {
-        positive("sigma-norm", s)?;
+        require_positive(&[("sigma-norm", s)])?;
     }
     let input = Input::from_arg(&args.input);
     let name = input.display_name();
     let bytes = input.read_all()?;
     let city = citygml_io::parse(&bytes).map_err(|e| CliError::unreadable(format!("{name}: {e}")))?;
-    let tol = Tolerances {
-        snap: args.snap,
-        planarity: args.planarity,
-        normal_angle_deg: args.normal_angle,
-        plane_distance: args.plane_distance,
-        share_orthogonal: args.share_orthogonal,
-    };
     let copt = ConditionOptions {
         parallel_deg: args.parallel_angle,
         orthogonal_deg: args.orthogonal_angle,

@@ -4,6 +4,7 @@
 use clap::Args as ClapArgs;
 use serde::Serialize;
 
+use crate::cmd::args::{require_non_negative, require_positive};
 use crate::config::{write_json_report, Config, Input, Output};
 use crate::error::{CliError, CmdResult, Exit};
 use adjust::popa3d::{adjust_model, DatumChoice, ModelOptions};
@@ -103,16 +104,8 @@ fn model_opts() -> ModelOptions {
 }
 
 pub fn run(args: Args, config: &Config) -> CmdResult {
-    for (n, v) in [("snap", args.snap), ("planarity", args.planarity), ("max-move", args.max_move)] {
-        if !(v.is_finite() && v > 0.0) {
-            return Err(CliError::usage(format!("--{n} must be a positive number, got {v}")));
-        }
-    }
-    for (n, v) in [("epsilon", args.epsilon), ("angle", args.angle)] {
-        if !(v.is_finite() && v >= 0.0) {
-            return Err(CliError::usage(format!("--{n} must be a number ≥ 0, got {v}")));
-        }
-    }
+    require_positive(&[("snap", args.snap), ("planarity", args.planarity), ("max-move", args.max_move)])?;
+    require_non_negative(&[("epsilon", args.epsilon), ("angle", args.angle)])?;
     let input = Input::from_arg(&args.input);
     let name = input.display_name();
     let bytes = input.read_all()?;

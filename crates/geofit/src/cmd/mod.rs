@@ -1,4 +1,6 @@
-//! One module per subcommand (alphabetical).
+//! One module per subcommand (alphabetical), plus `args`: option groups and checks they share.
+
+pub mod args;
 
 pub mod adjust;
 pub mod diff;

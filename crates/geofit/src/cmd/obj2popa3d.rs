@@ -4,10 +4,11 @@
 use clap::Args as ClapArgs;
 use serde::Serialize;
 
+use crate::cmd::args::{require_positive, NormalizeArgs};
 use crate::config::{write_json_report, Config, Input, Output};
 use crate::error::{CliError, CmdResult, Exit};
 use normalize::conditions::{self, Ranges, SketchOptions};
-use normalize::{Counts, Notice, Tolerances};
+use normalize::{Counts, Notice};
 use popa3d_model::{Popa3d, SourceDocument};
 
 const AFTER_HELP: &str = "\
@@ -41,21 +42,8 @@ pub struct Args {
     /// CSV of measured distances to attach.
     #[arg(long, visible_alias = "add")]
     pub distances: Option<String>,
-    /// Snap tolerance: points closer than this are one node (m).
-    #[arg(long, default_value_t = 0.001)]
-    pub snap: f64,
-    /// Reject faces whose vertices lie further than this from their best-fitting plane (m).
-    #[arg(long, default_value_t = 0.1)]
-    pub planarity: f64,
-    /// Merge normals within this angle into one normal object (degrees).
-    #[arg(long, default_value_t = 0.01)]
-    pub normal_angle: f64,
-    /// Merge planes on one normal whose distances differ by less than this (m).
-    #[arg(long, default_value_t = 0.001)]
-    pub plane_distance: f64,
-    /// Share parameters between orthogonal normals.
-    #[arg(long)]
-    pub share_orthogonal: bool,
+    #[command(flatten)]
+    pub normalize: NormalizeArgs,
     /// σ of the sketch plane differences (m).
     #[arg(long, default_value_t = 0.1)]
     pub sigma_plane_difference: f64,
@@ -86,31 +74,17 @@ struct Report {
 }
 
 pub fn run(args: Args, config: &Config) -> CmdResult {
-    for (n, v) in [
-        ("snap", args.snap),
-        ("planarity", args.planarity),
-        ("normal-angle", args.normal_angle),
-        ("plane-distance", args.plane_distance),
+    let tol = args.normalize.tolerances()?;
+    require_positive(&[
         ("sigma-plane-difference", args.sigma_plane_difference),
         ("sigma-relative-angle", args.sigma_relative_angle),
         ("sigma-norm", args.sigma_norm),
         ("sigma-induced", args.sigma_induced),
-    ] {
-        if !(v.is_finite() && v > 0.0) {
-            return Err(CliError::usage(format!("--{n} must be a positive number, got {v}")));
-        }
-    }
+    ])?;
     let input = Input::from_arg(&args.input);
     let name = input.display_name();
     let bytes = input.read_all()?;
     let soup = normalize::obj::read_sketch(&bytes, &name).map_err(|e| CliError::unreadable(e.to_string()))?;
-    let tol = Tolerances {
-        snap: args.snap,
-        planarity: args.planarity,
-        normal_angle_deg: args.normal_angle,
-        plane_distance: args.plane_distance,
-        share_orthogonal: args.share_orthogonal,
-    };
     // Sketches are drawn in local coordinates; keep the origin at 0 unless they are far from it.
     let mut origin = [0.0f64; 3];
     let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);

@@ -4,6 +4,7 @@
 use clap::Args as ClapArgs;
 use serde::Serialize;
 
+use crate::cmd::args::require_positive;
 use crate::config::{write_json_report, Config, Input, Output};
 use crate::error::{CliError, CmdResult, Exit};
 use normalize::to_citygml::{to_citygml, BackError, BackOptions, BackReport};
@@ -58,11 +59,7 @@ struct Report<'a> {
 }
 
 pub(crate) fn back_options(coplanar: f64, collapse: f64, area: f64, no_merge: bool) -> Result<BackOptions, CliError> {
-    for (n, v) in [("coplanar-tolerance", coplanar), ("collapse-tolerance", collapse), ("area-tolerance", area)] {
-        if !(v.is_finite() && v > 0.0) {
-            return Err(CliError::usage(format!("--{n} must be a positive number, got {v}")));
-        }
-    }
+    require_positive(&[("coplanar-tolerance", coplanar), ("collapse-tolerance", collapse), ("area-tolerance", area)])?;
     Ok(BackOptions { coplanar_tolerance: coplanar, collapse_tolerance: collapse, area_tolerance: area, merge: !no_merge })
 }
 

@@ -2,7 +2,6 @@
 //! by height or by error against a reference raster, and the T-mesh cell edges as a separate
 //! line node. (Named `surface` because `geofit export` is the CityGML exporter.)
 
-use std::io::Write;
 use std::path::Path;
 
 use clap::Args as ClapArgs;
