@@ -119,121 +119,42 @@ fn bipoly<const N: usize>(c: &[f64], u: f64, v: f64) -> f64 {
     acc
 }
 
-fn sorted_unique(mut v: Vec<f64>) -> Vec<f64> {
-    v.sort_by(|a, b| a.total_cmp(b));
-    v.dedup();
-    v
-}
-
 impl Extraction {
     /// Extracts the element polynomials of `pb` with its current geometry (rebuild after
     /// changing `pb.geom`). `parallel`: over leaf cells with rayon.
     pub fn new(pb: &PbSpline, parallel: bool) -> Extraction {
         let k = pb.degree.k();
-        let n1 = k + 1;
-        let nc = n1 * n1;
-        let stride = 8 + 2 * nc;
-        let per_cell = |ci: usize| -> (Vec<f64>, Vec<u32>) {
-            let c = pb.cells[ci];
-            let (s0, t0, s1, t1) = (c[0], c[1], c[2], c[3]);
-            // Blending functions whose support meets the cell's interior.
-            let (i0, i1) = pb.grid.index_range(s0, s1, true);
-            let (j0, j1) = pb.grid.index_range(t0, t1, false);
-            let mut cand = Vec::with_capacity(32);
-            for bj in j0..=j1 {
-                for bi in i0..=i1 {
-                    let b = (bj * pb.grid.ns + bi) as usize;
-                    for &p in &pb.pt_items[pb.pt_start[b] as usize..pb.pt_start[b + 1] as usize] {
-                        let kn = &pb.knots[p as usize];
-                        if kn[0] < s1 && kn[k + 1] > s0 && kn[5] < t1 && kn[5 + k + 1] > t0 {
-                            cand.push(p);
-                        }
-                    }
-                }
-            }
-            cand.sort_unstable();
-            cand.dedup();
-            // Element breaks: the cell's edges and every knot strictly inside.
-            let mut sb = vec![s0, s1];
-            let mut tb = vec![t0, t1];
-            for &p in &cand {
-                let kn = &pb.knots[p as usize];
-                sb.extend(kn[..k + 2].iter().copied().filter(|&x| s0 < x && x < s1));
-                tb.extend(kn[5..5 + k + 2].iter().copied().filter(|&x| t0 < x && x < t1));
-            }
-            let (sb, tb) = (sorted_unique(sb), sorted_unique(tb));
-            let left_open = !edge_covered(pb, s0, t0, t1, true);
-            let bottom_open = !edge_covered(pb, t0, s0, s1, false);
-            let mut left_seg = vec![left_open; tb.len() - 1];
-            let mut bottom_seg = vec![bottom_open; sb.len() - 1];
-            // A partly covered edge: decide per element segment.
-            if left_open {
-                for (q, w) in tb.windows(2).enumerate() {
-                    left_seg[q] = !edge_covered(pb, s0, w[0], w[1], true);
-                }
-            }
-            if bottom_open {
-                for (q, w) in sb.windows(2).enumerate() {
-                    bottom_seg[q] = !edge_covered(pb, t0, w[0], w[1], false);
-                }
-            }
-            let ne = (sb.len() - 1) * (tb.len() - 1);
-            let mut data = vec![0.0; ne * stride];
-            let mut flags = vec![0u32; ne];
-            let mut e = 0;
-            for (jt, tw) in tb.windows(2).enumerate() {
-                for (is, sw) in sb.windows(2).enumerate() {
-                    let (a, b, c_, d) = (sw[0], sw[1], tw[0], tw[1]);
-                    let r = &mut data[e * stride..(e + 1) * stride];
-                    r[..8].copy_from_slice(&[a, c_, b, d, 1.0 / (b - a), 1.0 / (d - c_), 0.0, 0.0]);
-                    let mut f = 0;
-                    if is == 0 && left_seg[jt] {
-                        f |= LEFT_BORDER;
-                    }
-                    if jt == 0 && bottom_seg[is] {
-                        f |= BOTTOM_BORDER;
-                    }
-                    flags[e] = f;
-                    let (head, blocks) = r.split_at_mut(8);
-                    let (zw, ww) = blocks.split_at_mut(nc);
-                    for &p in &cand {
-                        let kn = &pb.knots[p as usize];
-                        if !(kn[0] < b && kn[k + 1] > a && kn[5] < d && kn[5 + k + 1] > c_) {
-                            continue;
-                        }
-                        let pc = &pb.poly[p as usize];
-                        let (mut fs, mut ft) = ([0.0; 4], [0.0; 4]);
-                        if !factor(&kn[0..5], &pc[..20], k, a, b, &mut fs) || !factor(&kn[5..10], &pc[20..], k, c_, d, &mut ft) {
-                            continue;
-                        }
-                        let g = pb.geom[p as usize];
-                        let (w, wz) = (g[3], g[3] * g[2]);
-                        for j in 0..n1 {
-                            for i in 0..n1 {
-                                let prod = fs[i] * ft[j];
-                                zw[j * n1 + i] += wz * prod;
-                                ww[j * n1 + i] += w * prod;
-                            }
-                        }
-                    }
-                    head[6] = DEN_TAU * ww.iter().map(|x| x.abs()).sum::<f64>();
-                    e += 1;
-                }
+        let stride = 8 + 2 * (k + 1) * (k + 1);
+        // Chunks of cells with reused scratch buffers: one output allocation per chunk.
+        const CHUNK: usize = 1024;
+        let nchunks = pb.cells.len().div_ceil(CHUNK);
+        // First pt-grid bucket of every support: a candidate is taken from the first bucket
+        // its support shares with the cell only, so no sort/dedup is needed.
+        let first = |kn: &[f64; 10]| [pb.grid.index_range(kn[0], kn[0], true).0, pb.grid.index_range(kn[5], kn[5], false).0];
+        let first: Vec<[u32; 2]> =
+            if parallel { pb.knots.par_iter().map(first).collect() } else { pb.knots.iter().map(first).collect() };
+        let run = |q: usize| {
+            let mut sc = Scratch { first: &first, ..Scratch::default() };
+            let (mut data, mut flags) = (Vec::new(), Vec::new());
+            for ci in q * CHUNK..((q + 1) * CHUNK).min(pb.cells.len()) {
+                extract_cell(pb, ci, &mut sc, &mut data, &mut flags);
             }
             (data, flags)
         };
-        let parts: Vec<(Vec<f64>, Vec<u32>)> = if parallel {
-            (0..pb.cells.len()).into_par_iter().with_min_len(64).map(per_cell).collect()
-        } else {
-            (0..pb.cells.len()).map(per_cell).collect()
-        };
+        let parts: Vec<(Vec<f64>, Vec<u32>)> =
+            if parallel { (0..nchunks).into_par_iter().map(run).collect() } else { (0..nchunks).map(run).collect() };
         let ne: usize = parts.iter().map(|p| p.1.len()).sum();
-        let mut data = Vec::with_capacity(ne * stride);
-        let mut flags = Vec::with_capacity(ne);
-        for (d, f) in parts {
-            data.extend_from_slice(&d);
-            flags.extend_from_slice(&f);
-        }
+        let (data, flags) = if parts.len() == 1 {
+            parts.into_iter().next().unwrap_or_default()
+        } else {
+            let mut data = Vec::with_capacity(ne * stride);
+            let mut flags = Vec::with_capacity(ne);
+            for (d, f) in parts {
+                data.extend_from_slice(&d);
+                flags.extend_from_slice(&f);
+            }
+            (data, flags)
+        };
         // Bucket grid over the same box, about one bucket per element.
         let g0 = pb.grid;
         let (w, h) = (g0.ds * g0.ns as f64, g0.dt * g0.nt as f64);
@@ -349,37 +270,42 @@ impl Extraction {
         out
     }
 
-    /// Fraction of `st` (every ⌈n/10⁴⌉-th point) that takes the element path, and the mean
-    /// number of element candidates tested per point (for [`PbSpline::flops_estimate`]). The
-    /// hint is tested as in [`Extraction::z`] along the sample, so for a strided sample of a
-    /// dense grid this over-counts the bucket searches a little.
+    /// Fraction of `st` that takes the element path, and the mean number of element
+    /// rectangles tested per point (for [`PbSpline::flops_estimate`]), on 10 runs of 1000
+    /// consecutive points spread over `st` (consecutive, so the element hint works as in
+    /// [`Extraction::eval_z`]).
     pub fn path_stats(&self, st: &[[f64; 2]]) -> (f64, f64) {
         if st.is_empty() {
             return (1.0, 1.0);
         }
-        let step = st.len().div_ceil(10000).max(1);
-        let n = st.len().div_ceil(step);
-        let (mut fast, mut tests) = (0usize, 0usize);
-        let mut hint = 0;
-        for q in st.iter().step_by(step) {
-            let (s, t) = (q[0], q[1]);
-            tests += 1;
-            let found = match self.find(s, t, hint) {
-                Some(e) if e == hint => Some(e),
-                other => {
+        let (mut fast, mut tests, mut n) = (0usize, 0usize, 0usize);
+        for q in 0..10 {
+            let a = q * st.len() / 10;
+            let mut hint = usize::MAX;
+            for p in &st[a..(a + 1000).min(st.len())] {
+                let (s, t) = (p[0], p[1]);
+                n += 1;
+                tests += 1;
+                let hit = hint < self.flags.len() && {
+                    let r = &self.data[hint * self.stride..hint * self.stride + 4];
+                    r[0] <= s && s < r[2] && r[1] <= t && t < r[3]
+                };
+                let found = if hit {
+                    Some(hint)
+                } else {
                     let (i, _) = self.grid.index_range(s, s, true);
                     let (j, _) = self.grid.index_range(t, t, false);
                     let b = (j * self.grid.ns + i) as usize;
                     tests += (self.start[b + 1] - self.start[b]) as usize;
-                    other
-                }
-            };
-            if let Some(e) = found {
-                hint = e;
-                let r = &self.data[e * self.stride..];
-                let f = self.flags[e];
-                if !(f != 0 && ((f & LEFT_BORDER != 0 && s == r[0]) || (f & BOTTOM_BORDER != 0 && t == r[1]))) {
-                    fast += 1;
+                    self.find(s, t, usize::MAX)
+                };
+                if let Some(e) = found {
+                    hint = e;
+                    let r = &self.data[e * self.stride..];
+                    let f = self.flags[e];
+                    if !(f != 0 && ((f & LEFT_BORDER != 0 && s == r[0]) || (f & BOTTOM_BORDER != 0 && t == r[1]))) {
+                        fast += 1;
+                    }
                 }
             }
         }
@@ -387,17 +313,140 @@ impl Extraction {
     }
 }
 
+#[derive(Default)]
+struct Scratch<'a> {
+    first: &'a [[u32; 2]],
+    cand: Vec<u32>,
+    sb: Vec<f64>,
+    tb: Vec<f64>,
+    ids: Vec<u32>,
+    left: Vec<bool>,
+    bottom: Vec<bool>,
+}
+
+/// Appends the elements of leaf cell `ci` (records and flags, see [`Extraction::data`]).
+fn extract_cell(pb: &PbSpline, ci: usize, sc: &mut Scratch<'_>, data: &mut Vec<f64>, flags: &mut Vec<u32>) {
+    let k = pb.degree.k();
+    let n1 = k + 1;
+    let nc = n1 * n1;
+    let stride = 8 + 2 * nc;
+    let c = pb.cells[ci];
+    let (s0, t0, s1, t1) = (c[0], c[1], c[2], c[3]);
+    // Blending functions whose support meets the cell's interior.
+    let (i0, i1) = pb.grid.index_range(s0, s1, true);
+    let (j0, j1) = pb.grid.index_range(t0, t1, false);
+    let cand = &mut sc.cand;
+    cand.clear();
+    for bj in j0..=j1 {
+        for bi in i0..=i1 {
+            let b = (bj * pb.grid.ns + bi) as usize;
+            for &p in &pb.pt_items[pb.pt_start[b] as usize..pb.pt_start[b + 1] as usize] {
+                let f = sc.first[p as usize];
+                if bi != i0.max(f[0]) || bj != j0.max(f[1]) {
+                    continue;
+                }
+                let kn = &pb.knots[p as usize];
+                if kn[0] < s1 && kn[k + 1] > s0 && kn[5] < t1 && kn[5 + k + 1] > t0 {
+                    cand.push(p);
+                }
+            }
+        }
+    }
+    // Element breaks: the cell's edges and every knot strictly inside.
+    let (sb, tb) = (&mut sc.sb, &mut sc.tb);
+    sb.clear();
+    tb.clear();
+    sb.extend([s0, s1]);
+    tb.extend([t0, t1]);
+    for &p in cand.iter() {
+        let kn = &pb.knots[p as usize];
+        for &x in &kn[..k + 2] {
+            if s0 < x && x < s1 && !sb.contains(&x) {
+                sb.push(x);
+            }
+        }
+        for &x in &kn[5..5 + k + 2] {
+            if t0 < x && x < t1 && !tb.contains(&x) {
+                tb.push(x);
+            }
+        }
+    }
+    if sb.len() > 2 {
+        sb.sort_by(|a, b| a.total_cmp(b));
+    }
+    if tb.len() > 2 {
+        tb.sort_by(|a, b| a.total_cmp(b));
+    }
+    let left_open = !edge_covered(pb, s0, t0, t1, true, &mut sc.ids);
+    let bottom_open = !edge_covered(pb, t0, s0, s1, false, &mut sc.ids);
+    sc.left.clear();
+    sc.left.resize(tb.len() - 1, left_open);
+    sc.bottom.clear();
+    sc.bottom.resize(sb.len() - 1, bottom_open);
+    // A partly covered edge: decide per element segment.
+    if left_open && tb.len() > 2 {
+        for q in 0..tb.len() - 1 {
+            sc.left[q] = !edge_covered(pb, s0, tb[q], tb[q + 1], true, &mut sc.ids);
+        }
+    }
+    if bottom_open && sb.len() > 2 {
+        for q in 0..sb.len() - 1 {
+            sc.bottom[q] = !edge_covered(pb, t0, sb[q], sb[q + 1], false, &mut sc.ids);
+        }
+    }
+    for jt in 0..tb.len() - 1 {
+        for is in 0..sb.len() - 1 {
+            let (a, b, c_, d) = (sb[is], sb[is + 1], tb[jt], tb[jt + 1]);
+            let base = data.len();
+            data.resize(base + stride, 0.0);
+            let r = &mut data[base..];
+            r[..6].copy_from_slice(&[a, c_, b, d, 1.0 / (b - a), 1.0 / (d - c_)]);
+            let mut f = 0;
+            if is == 0 && sc.left[jt] {
+                f |= LEFT_BORDER;
+            }
+            if jt == 0 && sc.bottom[is] {
+                f |= BOTTOM_BORDER;
+            }
+            flags.push(f);
+            let (head, blocks) = r.split_at_mut(8);
+            let (zw, ww) = blocks.split_at_mut(nc);
+            for &p in cand.iter() {
+                let kn = &pb.knots[p as usize];
+                if !(kn[0] < b && kn[k + 1] > a && kn[5] < d && kn[5 + k + 1] > c_) {
+                    continue;
+                }
+                let pc = &pb.poly[p as usize];
+                let (mut fs, mut ft) = ([0.0; 4], [0.0; 4]);
+                if !factor(&kn[0..5], &pc[..20], k, a, b, &mut fs) || !factor(&kn[5..10], &pc[20..], k, c_, d, &mut ft) {
+                    continue;
+                }
+                let g = pb.geom[p as usize];
+                let (w, wz) = (g[3], g[3] * g[2]);
+                for j in 0..n1 {
+                    for i in 0..n1 {
+                        let prod = fs[i] * ft[j];
+                        zw[j * n1 + i] += wz * prod;
+                        ww[j * n1 + i] += w * prod;
+                    }
+                }
+            }
+            head[6] = DEN_TAU * ww.iter().map(|x| x.abs()).sum::<f64>();
+        }
+    }
+}
+
 /// Whether the segment {at} × [lo, hi] (horizontal = false: [lo, hi] × {at}) is covered by leaf
 /// cells lying on its lower side (cells ending at `at`). Exact sums of overlaps (the cell
 /// coordinates are dyadic in practice); an inexact sum reads "not covered", which only sends
 /// points to the reference path.
-fn edge_covered(pb: &PbSpline, at: f64, lo: f64, hi: f64, vertical_edge: bool) -> bool {
+fn edge_covered(pb: &PbSpline, at: f64, lo: f64, hi: f64, vertical_edge: bool, ids: &mut Vec<u32>) -> bool {
     let (ir, jr) = if vertical_edge {
         (pb.grid.index_range(at, at, true), pb.grid.index_range(lo, hi, false))
     } else {
         (pb.grid.index_range(lo, hi, true), pb.grid.index_range(at, at, false))
     };
-    let mut ids = Vec::new();
+    ids.clear();
     for bj in jr.0..=jr.1 {
         for bi in ir.0..=ir.1 {
             let b = (bj * pb.grid.ns + bi) as usize;
@@ -413,7 +462,7 @@ fn edge_covered(pb: &PbSpline, at: f64, lo: f64, hi: f64, vertical_edge: bool) -
     ids.sort_unstable();
     ids.dedup();
     let mut sum = 0.0;
-    for ci in ids {
+    for &ci in ids.iter() {
         let c = &pb.cells[ci as usize];
         let (plo, phi) = if vertical_edge { (c[1], c[3]) } else { (c[0], c[2]) };
         sum += phi.min(hi) - plo.max(lo);
@@ -560,3 +609,88 @@ mod tests {
         }
     }
 }
+
+/// Throughput probe on the benchmark's mesh shape (`benches/tspline_mesh.py`: 315² cubic cells
+/// of size 10, one band split): `cargo test -p tspline --release -- --ignored --nocapture
+/// throughput`. The published figures come from `benches/tspline.sh` (the CLI).
+#[cfg(test)]
+mod probe {
+    use super::*;
+    use crate::mesh::{Degree, Rect, TMesh};
+    use std::time::Instant;
+
+    #[test]
+    #[ignore]
+    fn throughput() {
+        let n = 315;
+        let mut m = TMesh::grid(Degree::Cubic, 0.0, 0.0, 10.0, n, n);
+        let mut g = |s: f64, t: f64| (s, t, 20.0 * (s * 0.013).sin() * (t * 0.011).cos() + 0.01 * s);
+        let band = (n / 2) as f64 * 10.0;
+        for c in m.leaves_in(Rect::new(0.5, band + 0.5, n as f64 * 10.0 - 0.5, band + 9.5)) {
+            m.split(c, &mut g);
+        }
+        for p in &mut m.points {
+            p.z = 20.0 * (p.s * 0.013).sin() * (p.t * 0.011).cos() + 0.01 * p.s;
+        }
+        let pb = PbSpline::build(&m);
+        let side = n * 10 + 1;
+        let st: Vec<[f64; 2]> = (0..side * side).map(|q| [(q % side) as f64, (side - 1 - q / side) as f64]).collect();
+        let t = Instant::now();
+        let ex = Extraction::new(&pb, true);
+        let tex = t.elapsed().as_secs_f64();
+        eprintln!("{} cells, {} elements, {} control points; extraction {:.3} s (rayon)", pb.cells.len(), ex.len(), pb.point_ids.len(), tex);
+        let pool1 = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
+        // On-CPU time of this thread (/proc/thread-self/schedstat, ns): robust to a loaded machine.
+        let cpu = || -> f64 {
+            std::fs::read_to_string("/proc/thread-self/schedstat")
+                .ok()
+                .and_then(|s| s.split_whitespace().next().and_then(|v| v.parse::<f64>().ok()))
+                .unwrap_or(f64::NAN)
+                * 1e-9
+        };
+        let (t, c) = (Instant::now(), cpu());
+        let ex1 = Extraction::new(&pb, false);
+        eprintln!("extraction on 1 thread {:.3} s wall, {:.3} s cpu", t.elapsed().as_secs_f64(), cpu() - c);
+        let (t, c) = (Instant::now(), cpu());
+        let z1 = ex1.eval_z(&pb, &st, false);
+        eprintln!(
+            "evaluation only, 1 thread: {:.2} M points/s wall, {:.2} per cpu-second",
+            st.len() as f64 / t.elapsed().as_secs_f64() / 1e6,
+            st.len() as f64 / (cpu() - c) / 1e6
+        );
+        let (t, c) = (Instant::now(), cpu());
+        let _ = st.iter().step_by(7).map(|p| pb.point(p[0], p[1])[2]).sum::<f64>();
+        eprintln!("reference, 1 thread: {:.2} M points/s per cpu-second (wall {:.2})", st.len() as f64 / 7.0 / (cpu() - c) / 1e6, st.len() as f64 / 7.0 / t.elapsed().as_secs_f64() / 1e6);
+        let t = Instant::now();
+        let z2 = ex1.eval_z(&pb, &st, true);
+        eprintln!("evaluation only, rayon: {:.2} M points/s", st.len() as f64 / t.elapsed().as_secs_f64() / 1e6);
+        assert_eq!(z1.len(), z2.len());
+        let mut res = Vec::new();
+        for (name, par) in [("1 thread", false), ("rayon", true)] {
+            let t = Instant::now();
+            let a = if par { pb.eval_z(&st, true) } else { pool1.install(|| pb.eval_z(&st, false)) };
+            let te = t.elapsed().as_secs_f64();
+            let sub: Vec<[f64; 2]> = st.iter().step_by(7).copied().collect();
+            let t = Instant::now();
+            let b: Vec<f64> = if par {
+                sub.par_iter().map(|p| pb.point(p[0], p[1])[2]).collect()
+            } else {
+                sub.iter().map(|p| pb.point(p[0], p[1])[2]).collect()
+            };
+            let tr = t.elapsed().as_secs_f64();
+            eprintln!(
+                "{name}: extraction path {:.2} M points/s (incl. extraction), reference {:.2} M points/s",
+                st.len() as f64 / te / 1e6,
+                sub.len() as f64 / tr / 1e6
+            );
+            res.push((a, b));
+        }
+        eprintln!("flops/point: extraction {:.0}, reference {:.0}", pb.flops_estimate(&st), pb.flops_reference(&st));
+        for (a, b) in &res {
+            for (x, y) in a.iter().step_by(7).zip(b) {
+                assert!((x.is_nan() && y.is_nan()) || (x - y).abs() <= 1e-12 * x.abs().max(1.0));
+            }
+        }
+    }
+}
+
