@@ -11,18 +11,7 @@ import sys
 
 import numpy as np
 
-
-def read_asc_values(path):
-    """ESRI ASCII grid values with numpy alone (GDAL's AAIGrid reader rounds to Float32)."""
-    with open(path) as f:
-        lines = f.read().split("\n")
-    k = 0
-    while lines[k].split() and lines[k].split()[0].lower() in (
-            "ncols", "nrows", "xllcorner", "yllcorner", "xllcenter", "yllcenter", "cellsize", "nodata_value", "dx", "dy"):
-        k += 1
-    return np.array([float(v) for line in lines[k:] for v in line.split()], dtype=np.float64)
-
-
+from asc_grid import read_asc_values
 
 def load(path):
     env = dict(os.environ, GDAL_PAM_ENABLED="NO")
