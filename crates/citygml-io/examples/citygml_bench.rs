@@ -1,9 +1,12 @@
 //! Parse throughput against the ceiling of a bare quick-xml tokenizer pass over the same bytes.
 //!
 //! `citygml_bench tokenize FILE...`  only quick-xml events (the ceiling, nothing decoded)
-//! `citygml_bench numbers FILE...`   the ceiling + std f64 parsing of every text token (the floor
-//!                                   any reader that decodes coordinates pays)
-//! `citygml_bench parse FILE...`     `citygml_io::parse` (whole model, XLinks resolved)
+//! `citygml_bench numbers FILE...`   the ceiling + fast-float2 parsing of every text token (the
+//!                                   floor any reader that decodes coordinates pays)
+//! `citygml_bench numbers-std FILE...` the same with std `str::parse::<f64>`
+//! `citygml_bench parse FILE...`     `citygml_io::parse` (whole model, XLinks resolved; the model
+//!                                   is dropped after the clock stops)
+//! `citygml_bench parse+drop FILE...` the same with the model's drop timed too
 //! `citygml_bench stream FILE...`    `ObjectStream`, one object at a time, dropped after counting
 //! `citygml_bench counts FILE...`    buildings / parts / solids / polygons / rings / points (debug)
 //!
@@ -31,7 +34,32 @@ fn tokenize(src: &[u8]) -> usize {
 }
 
 /// The ceiling plus the one thing every reader must do on top: turn each coordinate text into
-/// numbers (std `f64` parsing of every whitespace-separated token of every text event).
+/// numbers (every whitespace-separated token of every text event through `fast-float2`, the
+/// parser `citygml_io` uses; `numbers-std` uses `str::parse::<f64>`).
+fn tokenize_numbers_fast(src: &[u8]) -> usize {
+    let mut r = Reader::from_reader(src);
+    r.config_mut().trim_text(false);
+    let mut n = 0usize;
+    let mut acc = 0.0f64;
+    loop {
+        match r.read_event() {
+            Ok(Event::Eof) => break,
+            Ok(Event::Text(t)) => {
+                for tok in t.split(|b| b.is_ascii_whitespace()).filter(|t| !t.is_empty()) {
+                    if let Ok(x) = fast_float2::parse::<f64, _>(tok) {
+                        acc += x;
+                        n += 1;
+                    }
+                }
+            }
+            Ok(_) => n += 1,
+            Err(e) => panic!("{e}"),
+        }
+    }
+    std::hint::black_box(acc);
+    n
+}
+
 fn tokenize_numbers(src: &[u8]) -> usize {
     let mut r = Reader::from_reader(src);
     r.config_mut().trim_text(false);
@@ -114,17 +142,27 @@ fn main() {
     for _ in 0..repeat {
         let t = Instant::now();
         let mut sink = 0usize;
+        // `parse`: the models are dropped after the clock stops (building them is the parse;
+        // freeing them is the caller's business, and the tokenizer builds nothing to free).
+        let mut models = Vec::new();
         for f in &files {
             sink += match mode {
                 "tokenize" => tokenize(f),
-                "numbers" => tokenize_numbers(f),
-                "parse" => citygml_io::parse(f).expect("parse").objects.len(),
+                "none" => f.len(), // baseline for instruction counts (valgrind): start-up and file reading
+                "numbers" => tokenize_numbers_fast(f),
+                "numbers-std" => tokenize_numbers(f),
+                "parse" => {
+                    models.push(citygml_io::parse(f).expect("parse"));
+                    models.last().unwrap().objects.len()
+                }
+                "parse+drop" => citygml_io::parse(f).expect("parse").objects.len(),
                 "stream" => ObjectStream::new(f).expect("parse").map(|o| o.expect("parse").children.len() + 1).sum(),
                 _ => panic!("unknown mode {mode}"),
             };
         }
         std::hint::black_box(sink);
         best = best.min(t.elapsed().as_secs_f64());
+        drop(models);
     }
     println!("{mode} {:.1} MB/s {bytes} bytes {:.4} s", bytes as f64 / best / 1e6, best);
 }

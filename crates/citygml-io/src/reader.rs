@@ -10,7 +10,6 @@ use std::collections::HashMap;
 use std::ops::Range;
 use std::sync::Arc;
 
-use quick_xml::events::attributes::Attribute;
 use quick_xml::events::{BytesStart, Event};
 use quick_xml::name::PrefixDeclaration;
 use quick_xml::Reader;
@@ -113,20 +112,95 @@ impl Tag<'_> {
 }
 
 fn attr_raw<'t>(e: &'t BytesStart<'_>, local: &[u8]) -> Option<Cow<'t, [u8]>> {
-    for a in e.attributes().with_checks(false).flatten() {
-        let a: Attribute<'t> = a;
-        if a.key.local_name().as_ref() == local {
-            return Some(a.value);
+    find_attr(e.attributes_raw(), local).map(Cow::Borrowed)
+}
+
+/// The raw value of the attribute whose local name is `local` (any prefix), scanning the raw
+/// attribute bytes of a start tag directly (no attribute iterator, no allocation). Like
+/// quick-xml's iterator without checks, it gives up on the first malformed attribute.
+fn find_attr<'t>(raw: &'t [u8], local: &[u8]) -> Option<&'t [u8]> {
+    let n = raw.len();
+    let mut i = 0usize;
+    loop {
+        while i < n && raw[i].is_ascii_whitespace() {
+            i += 1;
+        }
+        if i >= n {
+            return None;
+        }
+        let ks = i;
+        while i < n && raw[i] != b'=' && !raw[i].is_ascii_whitespace() {
+            i += 1;
+        }
+        let key = &raw[ks..i];
+        while i < n && raw[i].is_ascii_whitespace() {
+            i += 1;
+        }
+        if i >= n || raw[i] != b'=' {
+            return None;
+        }
+        i += 1;
+        while i < n && raw[i].is_ascii_whitespace() {
+            i += 1;
+        }
+        let q = *raw.get(i)?;
+        if q != b'"' && q != b'\'' {
+            return None;
+        }
+        let vs = i + 1;
+        let ve = vs + memchr::memchr(q, &raw[vs..])?;
+        i = ve + 1;
+        let lname = match memchr::memchr(b':', key) {
+            Some(c) => &key[c + 1..],
+            None => key,
+        };
+        if lname == local {
+            return Some(&raw[vs..ve]);
         }
     }
-    None
 }
+
+/// FxHash (rustc's hasher): the maps here are keyed by short gml:ids from the document
+/// itself, where SipHash's DoS resistance buys nothing and costs a visible share of the parse.
+#[derive(Default, Clone, Copy)]
+pub(crate) struct FxHasher(u64);
+
+impl std::hash::Hasher for FxHasher {
+    #[inline]
+    fn write(&mut self, bytes: &[u8]) {
+        const K: u64 = 0xf1357aea2e62a9c5;
+        let mut h = self.0;
+        let mut c = bytes.chunks_exact(8);
+        for w in &mut c {
+            h = (h.rotate_left(5) ^ u64::from_le_bytes(w.try_into().unwrap())).wrapping_mul(K);
+        }
+        let r = c.remainder();
+        if !r.is_empty() {
+            let mut b = [0u8; 8];
+            b[..r.len()].copy_from_slice(r);
+            h = (h.rotate_left(5) ^ u64::from_le_bytes(b)).wrapping_mul(K);
+        }
+        self.0 = h;
+    }
+    #[inline]
+    fn write_u8(&mut self, i: u8) {
+        self.0 = (self.0.rotate_left(5) ^ i as u64).wrapping_mul(0xf1357aea2e62a9c5);
+    }
+    #[inline]
+    fn finish(&self) -> u64 {
+        self.0.rotate_left(26)
+    }
+}
+
+pub(crate) type FxMap<K, V> = HashMap<K, V, std::hash::BuildHasherDefault<FxHasher>>;
 
 pub(crate) enum Ev<'a> {
     Start(Tag<'a>),
     Empty(Tag<'a>),
     End { end: usize },
-    Text { nonblank: bool, at: usize },
+    /// Character data at `at`, `len` bytes; `nonblank` is `Some(true)` for CDATA and entity
+    /// references, `None` for plain text (see [`Parser::is_blank`]).
+    Text { nonblank: Option<bool>, at: usize, len: usize },
     Eof,
 }
 
@@ -188,10 +262,8 @@ fn is_surface_like(local: &[u8]) -> bool {
 /// surfaces, openings, relief components, ...). Any other CityGML element inside an object is
 /// looked through for geometry (properties, ADE wrappers).
 fn is_nested_object(local: &[u8]) -> bool {
-    if let Ok(s) = std::str::from_utf8(local) {
-        if SurfaceType::from_local_name(s).is_some() {
-            return true;
-        }
+    if surface_type(local).is_some() {
+        return true;
     }
     matches!(
         local,
@@ -234,6 +306,14 @@ fn is_nested_object(local: &[u8]) -> bool {
             | b"WaterGroundSurface"
             | b"WaterClosureSurface"
     )
+}
+
+/// `SurfaceType::from_local_name` on bytes (no UTF-8 check: the names are ASCII).
+fn surface_type(local: &[u8]) -> Option<SurfaceType> {
+    if !local.ends_with(b"Surface") && local != b"Window" && local != b"Door" {
+        return None;
+    }
+    std::str::from_utf8(local).ok().and_then(SurfaceType::from_local_name)
 }
 
 /// CityGML elements whose content is never the object's own geometry.
@@ -283,10 +363,18 @@ pub(crate) struct Parser<'a> {
     /// First srsName seen (the document CRS when the root has no boundedBy).
     pub first_srs: Option<String>,
     /// Id'd aggregate surfaces (CompositeSurface, OrientableSurface, ...) of the current object.
-    pub local_ids: HashMap<String, IdEntry>,
+    pub local_ids: FxMap<String, IdEntry>,
     /// Number of XLink placeholders created in the current object.
     pub placeholders: usize,
+    /// End of the parsed range, and the offset of the next `xmlns` in it at or after the
+    /// current tag (usize::MAX: none left): namespace declarations are looked for only in tags
+    /// that contain one, not in every tag's attributes.
+    limit: usize,
+    next_xmlns: usize,
 }
+
+static XMLNS: std::sync::LazyLock<memchr::memmem::Finder<'static>> =
+    std::sync::LazyLock::new(|| memchr::memmem::Finder::new(b"xmlns"));
 
 impl<'a> Parser<'a> {
     pub fn new(src: &'a [u8], lines: Arc<LineIndex>, range: Range<usize>, bindings: Vec<Binding>) -> Parser<'a> {
@@ -306,8 +394,10 @@ impl<'a> Parser<'a> {
             cur_sem: None,
             dim_hint: None,
             first_srs: None,
-            local_ids: HashMap::new(),
+            local_ids: FxMap::default(),
             placeholders: 0,
+            limit: range.end,
+            next_xmlns: 0,
         }
     }
 
@@ -364,7 +454,15 @@ impl<'a> Parser<'a> {
         )
     }
 
-    fn declare(&mut self, e: &BytesStart<'_>, depth: usize) {
+    fn declare(&mut self, e: &BytesStart<'_>, depth: usize, start: usize) {
+        let end = self.pos();
+        if self.next_xmlns < start {
+            self.next_xmlns = XMLNS.find(&self.src[start..self.limit]).map_or(usize::MAX, |i| start + i);
+        }
+        if self.next_xmlns >= end {
+            return;
+        }
+        self.next_xmlns = XMLNS.find(&self.src[end..self.limit]).map_or(usize::MAX, |i| end + i);
         let raw = e.attributes_raw();
         if !memchr::memchr_iter(b'x', raw).any(|i| raw[i..].starts_with(b"xmlns")) {
             return;
@@ -419,12 +517,12 @@ impl<'a> Parser<'a> {
                     if self.depth > MAX_DEPTH {
                         return Err(self.err(start, format!("elements nested deeper than {MAX_DEPTH} levels")));
                     }
-                    self.declare(&e, self.depth);
+                    self.declare(&e, self.depth, start);
                     let ns = self.resolve(e.name().as_ref());
                     return Ok(Ev::Start(Tag { raw: e, start, ns }));
                 }
                 Event::Empty(e) => {
-                    self.declare(&e, self.depth + 1);
+                    self.declare(&e, self.depth + 1, start);
                     let ns = self.resolve(e.name().as_ref());
                     self.pop_bindings();
                     return Ok(Ev::Empty(Tag { raw: e, start, ns }));
@@ -435,14 +533,22 @@ impl<'a> Parser<'a> {
                     return Ok(Ev::End { end: self.pos() });
                 }
                 Event::Text(t) => {
-                    let nonblank = t.iter().any(|b| !b.is_ascii_whitespace());
-                    return Ok(Ev::Text { nonblank, at: start });
+                    // Whether the text is blank is asked only outside objects (stream.rs): it is
+                    // not computed for every indentation run inside them.
+                    return Ok(Ev::Text { nonblank: None, at: start, len: t.len() });
                 }
-                Event::CData(_) | Event::GeneralRef(_) => return Ok(Ev::Text { nonblank: true, at: start }),
+                Event::CData(_) | Event::GeneralRef(_) => {
+                    return Ok(Ev::Text { nonblank: Some(true), at: start, len: 0 })
+                }
                 Event::Eof => return Ok(Ev::Eof),
                 Event::Decl(_) | Event::PI(_) | Event::Comment(_) | Event::DocType(_) => continue,
             }
         }
+    }
+
+    /// Whether a text event (see [`Ev::Text`]) has anything but whitespace.
+    pub fn nonblank(&self, nonblank: Option<bool>, at: usize, len: usize) -> bool {
+        nonblank.unwrap_or_else(|| self.src[at..at + len].iter().any(|b| !b.is_ascii_whitespace()))
     }
 
     /// Skips the content of a started element; returns the offset after its end tag.
@@ -540,12 +646,15 @@ impl<'a> Parser<'a> {
                 Ev::Empty(t) => {
                     // `<bldg:lod2Solid xlink:href="#solid"/>`: a whole geometry by reference.
                     let l = t.local();
-                    let surfacey = [&b"Solid"[..], b"Surface", b"Geometry", b"FootPrint", b"RoofEdge"]
-                        .iter()
-                        .any(|k| memchr::memmem::find(l, k).is_some());
-                    if let (Some(lod), true, Some(href)) = (lod_of(l), surfacey, t.attr_string(b"href")) {
+                    let surfacey = |l: &[u8]| {
+                        [&b"Solid"[..], b"Surface", b"Geometry", b"FootPrint", b"RoofEdge"]
+                            .iter()
+                            .any(|k| memchr::memmem::find(l, k).is_some())
+                    };
+                    let lod = lod_of(l).filter(|_| surfacey(l));
+                    if let (Some(lod), Some(href)) = (lod, lod.and_then(|_| t.attr_string(b"href"))) {
                         let end = self.pos();
-                        let ph = self.placeholder(&href, t.start, end, false);
+                        let ph = self.placeholder(href, t.start, end, false);
                         obj.geometries.push(Geometry {
                             id: None,
                             lod: Some(lod),
@@ -711,7 +820,7 @@ impl<'a> Parser<'a> {
                 }
                 Ev::Empty(c) => {
                     if let Some(href) = c.attr_string(b"href") {
-                        let ph = self.placeholder(&href, c.start, self.pos(), false);
+                        let ph = self.placeholder(href, c.start, self.pos(), false);
                         let shell = Shell { id: None, polygons: vec![ph] };
                         if c.is_gml(b"exterior") {
                             exterior = shell;
@@ -734,7 +843,7 @@ impl<'a> Parser<'a> {
     fn collect_prop(&mut self, p: Tag<'a>, reversed: bool, out: &mut Vec<Polygon>) -> Result<Option<String>, ReadError> {
         if let Some(href) = p.attr_string(b"href") {
             self.skip(&p)?;
-            let ph = self.placeholder(&href, p.start, self.pos(), reversed);
+            let ph = self.placeholder(href, p.start, self.pos(), reversed);
             out.push(ph);
             return Ok(None);
         }
@@ -789,7 +898,7 @@ impl<'a> Parser<'a> {
                 }
                 Ev::Empty(c) => {
                     if let Some(href) = c.attr_string(b"href") {
-                        let ph = self.placeholder(&href, c.start, self.pos(), rev);
+                        let ph = self.placeholder(href, c.start, self.pos(), rev);
                         out.push(ph);
                     }
                 }
@@ -805,10 +914,10 @@ impl<'a> Parser<'a> {
         }
     }
 
-    fn placeholder(&mut self, href: &str, start: usize, end: usize, reversed: bool) -> Polygon {
+    fn placeholder(&mut self, href: String, start: usize, end: usize, reversed: bool) -> Polygon {
         self.placeholders += 1;
         Polygon {
-            id: Some(href.to_string()),
+            id: Some(href),
             exterior: empty_ring(),
             interiors: Vec::new(),
             semantic: None,
@@ -1019,29 +1128,37 @@ impl<'a> Parser<'a> {
         Ok(Ring { id, points, srs_dimension: dim, encoding, text_span, pos_spans, span: self.span(t.start, end) })
     }
 
-    /// A posList straight into points (no intermediate Vec<f64>): returns the complete
-    /// positions and the number of values read (a count that is not a multiple of `d` is the
-    /// caller's error to report).
+    /// A posList straight into points (no intermediate Vec<f64>, no token slices: each number
+    /// is parsed in place from the buffer): returns the complete positions and the number of
+    /// values read (a count that is not a multiple of `d` is the caller's error to report).
     fn pos_list(&self, r: Range<usize>, d: u8) -> Result<(Vec<Point3>, usize), ReadError> {
-        let mut pts = Vec::with_capacity((r.end - r.start) / (8 * d as usize) + 1);
+        let s = &self.src[r.clone()];
+        // A coordinate and its separator take at least ~8 bytes in real files; reserving that
+        // many points over-allocates a little but never reallocates for the common case.
+        let mut pts = Vec::with_capacity(s.len() / (8 * d as usize) + 1);
         let mut cur = [0.0f64; 3];
         let mut k = 0usize;
         let mut n = 0usize;
-        for (at, tok) in tokens(&self.src[r.clone()], r.start) {
-            let x = match parse_f64(tok) {
-                Some(x) if x.is_finite() => x,
-                Some(_) => return Err(self.err(at, format!("gml:posList: non-finite coordinate '{}'", lossy(tok)))),
-                None => {
-                    if tok.contains(&b'<') {
-                        return Err(self.err(at, "gml:posList: unexpected markup inside the coordinate text"));
-                    }
-                    return Err(self.err(at, format!("gml:posList: '{}' is not a number", lossy(tok))));
+        let mut i = 0usize;
+        let d = d as usize;
+        loop {
+            while i < s.len() && is_ws(s[i]) {
+                i += 1;
+            }
+            if i >= s.len() {
+                break;
+            }
+            let x = match number_at(s, i) {
+                Ok((x, len)) => {
+                    i += len;
+                    x
                 }
+                Err(bad) => return Err(self.number_err(r.start + i, bad, "gml:posList")),
             };
             cur[k] = x;
             k += 1;
             n += 1;
-            if k == d as usize {
+            if k == d {
                 if d == 2 {
                     cur[2] = 0.0;
                 }
@@ -1052,22 +1169,36 @@ impl<'a> Parser<'a> {
         Ok((pts, n))
     }
 
+    fn number_err(&self, at: usize, bad: NumErr<'_>, what: &str) -> ReadError {
+        match bad {
+            NumErr::NonFinite(tok) => self.err(at, format!("{what}: non-finite coordinate '{}'", lossy(tok))),
+            NumErr::NotANumber(tok) if tok.contains(&b'<') => {
+                self.err(at, format!("{what}: unexpected markup inside the coordinate text"))
+            }
+            NumErr::NotANumber(tok) => self.err(at, format!("{what}: '{}' is not a number", lossy(tok))),
+        }
+    }
+
     /// Whitespace-separated numbers of `src[r]`; a bad token is an error at its own position.
     fn numbers(&self, r: Range<usize>, what: &str) -> Result<Vec<f64>, ReadError> {
-        let mut v = Vec::with_capacity((r.end - r.start) / 8);
-        for (at, tok) in tokens(&self.src[r.clone()], r.start) {
-            match parse_f64(tok) {
-                Some(x) if x.is_finite() => v.push(x),
-                Some(_) => return Err(self.err(at, format!("{what}: non-finite coordinate '{}'", lossy(tok)))),
-                None => {
-                    if tok.contains(&b'<') {
-                        return Err(self.err(at, format!("{what}: unexpected markup inside the coordinate text")));
-                    }
-                    return Err(self.err(at, format!("{what}: '{}' is not a number", lossy(tok))));
+        let s = &self.src[r.clone()];
+        let mut v = Vec::with_capacity(3);
+        let mut i = 0usize;
+        loop {
+            while i < s.len() && is_ws(s[i]) {
+                i += 1;
+            }
+            if i >= s.len() {
+                return Ok(v);
+            }
+            match number_at(s, i) {
+                Ok((x, len)) => {
+                    v.push(x);
+                    i += len;
                 }
+                Err(bad) => return Err(self.number_err(r.start + i, bad, what)),
             }
         }
-        Ok(v)
     }
 
     /// `gml:coordinates`: tuples separated by whitespace, values by `cs`.
@@ -1139,46 +1270,41 @@ fn lossy(b: &[u8]) -> String {
     }
 }
 
-/// Decimal text → f64. Coordinates are short plain decimals (`385421.123`), so the common case
-/// takes Clinger's fast path: an integer mantissa below 2^53 divided by an exact power of ten
-/// (≤ 10^22) is one correctly rounded IEEE operation, i.e. the same value std's parser gives.
-/// Everything else (exponents, long mantissas, inf/nan spellings) goes to `str::parse`.
-pub(crate) fn parse_f64(tok: &[u8]) -> Option<f64> {
-    const POW10: [f64; 23] = [
-        1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15, 1e16, 1e17, 1e18,
-        1e19, 1e20, 1e21, 1e22,
-    ];
-    let (neg, digits) = match tok.first() {
-        Some(b'-') => (true, &tok[1..]),
-        Some(b'+') => (false, &tok[1..]),
-        _ => (false, tok),
-    };
-    let mut mant: u64 = 0;
-    let mut ndig = 0usize;
-    let mut frac = 0usize;
-    let mut seen_dot = false;
-    let mut ok = !digits.is_empty();
-    for &c in digits {
-        match c {
-            b'0'..=b'9' => {
-                mant = mant.wrapping_mul(10).wrapping_add((c - b'0') as u64);
-                ndig += 1;
-                if seen_dot {
-                    frac += 1;
-                }
+/// XML whitespace (what separates the values of a coordinate list).
+#[inline]
+fn is_ws(b: u8) -> bool {
+    matches!(b, b' ' | b'\n' | b'\t' | b'\r' | b'\x0c')
+}
+
+pub(crate) enum NumErr<'s> {
+    NotANumber(&'s [u8]),
+    NonFinite(&'s [u8]),
+}
+
+/// The finite number that starts at `s[i]` (not whitespace) and runs to the next whitespace or
+/// the end, and its length in bytes. Parsed in place by Eisel–Lemire (`fast-float2`: correctly
+/// rounded, the same value as `str::parse::<f64>`); no token slice is scanned twice.
+#[inline]
+fn number_at(s: &[u8], i: usize) -> Result<(f64, usize), NumErr<'_>> {
+    let rest = &s[i..];
+    if let Ok((x, len)) = fast_float2::parse_partial::<f64, _>(rest) {
+        if len > 0 && (len == rest.len() || is_ws(rest[len])) {
+            if x.is_finite() {
+                return Ok((x, len));
             }
-            b'.' if !seen_dot => seen_dot = true,
-            _ => {
-                ok = false;
-                break;
-            }
+            return Err(NumErr::NonFinite(&rest[..len]));
         }
     }
-    if ok && ndig > 0 && ndig <= 15 && frac <= 22 {
-        let v = mant as f64 / POW10[frac];
-        return Some(if neg { -v } else { v });
+    let end = rest.iter().position(|b| is_ws(*b)).unwrap_or(rest.len());
+    Err(NumErr::NotANumber(&rest[..end]))
+}
+
+/// Decimal text → f64 (correctly rounded, like `str::parse::<f64>`, without the UTF-8 check).
+pub(crate) fn parse_f64(tok: &[u8]) -> Option<f64> {
+    match fast_float2::parse_partial::<f64, _>(tok) {
+        Ok((x, len)) if len == tok.len() && len > 0 => Some(x),
+        _ => None,
     }
-    std::str::from_utf8(tok).ok()?.parse::<f64>().ok()
 }
 
 /// Whitespace-separated tokens with their absolute byte offsets.
@@ -1289,7 +1415,7 @@ impl Reparse<'_, '_> {
 /// and returned.
 pub(crate) fn resolve_object(
     obj: &mut CityObject,
-    local_ids: &HashMap<String, IdEntry>,
+    local_ids: &FxMap<String, IdEntry>,
     reparse: &Reparse<'_, '_>,
     global: &mut dyn GlobalIds,
 ) -> Result<Vec<XLinkRef>, ReadError> {
@@ -1297,7 +1423,7 @@ pub(crate) fn resolve_object(
     // Phase 1 (shared borrow): what each placeholder becomes, in visiting order.
     let mut replacements: Vec<Option<Vec<Polygon>>> = Vec::new();
     {
-        let mut by_id: HashMap<&str, &Polygon> = HashMap::new();
+        let mut by_id: FxMap<&str, &Polygon> = FxMap::default();
         let mut phs: Vec<&Polygon> = Vec::new();
         visit_polys(obj, &mut |p| {
             if is_placeholder(p) {
@@ -1323,7 +1449,8 @@ pub(crate) fn resolve_object(
         if !v.iter().any(is_placeholder) {
             return;
         }
-        let old = std::mem::take(v);
+        let cap = v.len();
+        let old = std::mem::replace(v, Vec::with_capacity(cap));
         for p in old {
             if is_placeholder(&p) {
                 if let Some(Some(r)) = it.next() {
@@ -1339,8 +1466,8 @@ pub(crate) fn resolve_object(
 
 fn resolve_one(
     ph: &Polygon,
-    by_id: &HashMap<&str, &Polygon>,
-    local_ids: &HashMap<String, IdEntry>,
+    by_id: &FxMap<&str, &Polygon>,
+    local_ids: &FxMap<String, IdEntry>,
     reparse: &Reparse<'_, '_>,
     global: &mut dyn GlobalIds,
     depth: usize,
@@ -1386,11 +1513,30 @@ pub(crate) fn finish_envelopes(obj: &mut CityObject) {
         finish_envelopes(c);
         env.merge(&c.envelope);
     }
-    for g in &obj.geometries {
-        for p in g.polygons() {
+    let mut add_shell = |polys: &[Polygon]| {
+        for p in polys {
             for r in std::iter::once(&p.exterior).chain(p.interiors.iter()) {
                 for q in &r.points {
                     env.add_point(q);
+                }
+            }
+        }
+    };
+    for g in &obj.geometries {
+        match &g.kind {
+            GeometryKind::Surfaces(v) => add_shell(v),
+            GeometryKind::Solid { exterior, interior } => {
+                add_shell(&exterior.polygons);
+                for s in interior {
+                    add_shell(&s.polygons);
+                }
+            }
+            GeometryKind::Solids(v) => {
+                for (e, i) in v {
+                    add_shell(&e.polygons);
+                    for s in i {
+                        add_shell(&s.polygons);
+                    }
                 }
             }
         }
@@ -1406,9 +1552,9 @@ pub(crate) fn build_index(
     src: &[u8],
     lines: &Arc<LineIndex>,
     range: Range<usize>,
-) -> Result<HashMap<String, IdEntry>, ReadError> {
+) -> Result<FxMap<String, IdEntry>, ReadError> {
     let mut p = Parser::new(src, lines.clone(), range, Vec::new());
-    let mut map = HashMap::new();
+    let mut map = FxMap::default();
     // (start, id if surface element, thematic semantic if thematic surface)
     let mut stack: Vec<(usize, Option<String>, Option<Owner>)> = Vec::new();
     loop {
@@ -1417,10 +1563,7 @@ pub(crate) fn build_index(
                 let l = t.local();
                 let id = if t.ns == Ns::Gml && is_surface_like(l) { t.attr_string(b"id") } else { None };
                 let sem = match t.ns {
-                    Ns::CityGml(..) => std::str::from_utf8(l)
-                        .ok()
-                        .and_then(SurfaceType::from_local_name)
-                        .map(|s| (s, t.attr_string(b"id"))),
+                    Ns::CityGml(..) => surface_type(l).map(|s| (s, t.attr_string(b"id"))),
                     _ => None,
                 };
                 stack.push((t.start, id, sem));

@@ -5,13 +5,14 @@
 //! id'd surface of the document (id → byte span + owner semantics), after which such targets
 //! are re-parsed from their bytes (see `ogc-xlink/4_Cross-Top-Level-XLink`).
 
-use std::collections::HashMap;
 use std::sync::Arc;
 
 use crate::error::ReadError;
 use crate::lines::LineIndex;
 use crate::model::*;
-use crate::reader::{build_index, finish_envelopes, resolve_object, Binding, Ev, GlobalIds, IdEntry, Ns, Parser, Reparse};
+use crate::reader::{
+    build_index, finish_envelopes, resolve_object, Binding, Ev, FxMap, GlobalIds, IdEntry, Ns, Parser, Reparse,
+};
 
 const BOM: &[u8] = b"\xEF\xBB\xBF";
 
@@ -28,12 +29,12 @@ pub struct ObjectStream<'a> {
     declared_srs: Option<String>,
     in_member: bool,
     done: bool,
-    index: Option<HashMap<String, IdEntry>>,
+    index: Option<FxMap<String, IdEntry>>,
     unresolved: Vec<XLinkRef>,
 }
 
 struct LazyIndex<'s, 'a> {
-    index: &'s mut Option<HashMap<String, IdEntry>>,
+    index: &'s mut Option<FxMap<String, IdEntry>>,
     src: &'a [u8],
     lines: &'s Arc<LineIndex>,
     body: std::ops::Range<usize>,
@@ -63,7 +64,7 @@ impl<'a> ObjectStream<'a> {
             match p.next()? {
                 Ev::Start(t) => break (t, false),
                 Ev::Empty(t) => break (t, true),
-                Ev::Text { nonblank: true, at } => {
+                Ev::Text { nonblank, at, len } if p.nonblank(nonblank, at, len) => {
                     return Err(p.err(at, "not an XML document: text or binary data before the root element"))
                 }
                 Ev::Text { .. } => {}
@@ -176,8 +177,11 @@ impl<'a> ObjectStream<'a> {
                         loop {
                             match self.p.next()? {
                                 Ev::Eof => break,
-                                Ev::Text { nonblank: false, .. } => {}
-                                Ev::Text { at, .. } => return Err(self.p.err(at, "content after the root element")),
+                                Ev::Text { nonblank, at, len } => {
+                                    if self.p.nonblank(nonblank, at, len) {
+                                        return Err(self.p.err(at, "content after the root element"));
+                                    }
+                                }
                                 Ev::Start(t) | Ev::Empty(t) => {
                                     return Err(self.p.err(t.start, "a second root element after </CityModel>"))
                                 }
