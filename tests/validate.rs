@@ -375,3 +375,142 @@ fn identical_input_gives_identical_output() {
         assert_eq!(run(), a, "findings are sorted and do not depend on thread scheduling");
     }
 }
+
+// ---------------------------------------------------------------------------------------------
+// Solid and CompositeSolid codes (404, 501–503) on documents the test writes: the geometry is
+// built so that its defect is known by construction (a cavity whose rim lies in the roof cuts a
+// pocket out of the interior; cubes overlapping by 1 cm, repeated, or apart).
+
+type Pt = [f64; 3];
+
+fn cube_faces(o: Pt, s: f64) -> Vec<Vec<Pt>> {
+    let p = |x: f64, y: f64, z: f64| [o[0] + x * s, o[1] + y * s, o[2] + z * s];
+    vec![
+        vec![p(0., 0., 0.), p(0., 1., 0.), p(1., 1., 0.), p(1., 0., 0.)],
+        vec![p(0., 0., 1.), p(1., 0., 1.), p(1., 1., 1.), p(0., 1., 1.)],
+        vec![p(0., 0., 0.), p(1., 0., 0.), p(1., 0., 1.), p(0., 0., 1.)],
+        vec![p(1., 0., 0.), p(1., 1., 0.), p(1., 1., 1.), p(1., 0., 1.)],
+        vec![p(1., 1., 0.), p(0., 1., 0.), p(0., 1., 1.), p(1., 1., 1.)],
+        vec![p(0., 1., 0.), p(0., 0., 0.), p(0., 0., 1.), p(0., 1., 1.)],
+    ]
+}
+
+/// Cavity between two downward pyramids on the square rim [lo, hi]² at height `top` (apexes
+/// `deep` and `shallow` below it), faces pointing into the cup solid (as a cavity's must).
+fn cup_faces(lo: f64, hi: f64, top: f64, deep: f64, shallow: f64) -> Vec<Vec<Pt>> {
+    let c = (lo + hi) / 2.0;
+    let rim = [[lo, lo, top], [hi, lo, top], [hi, hi, top], [lo, hi, top]];
+    let mut faces = Vec::new();
+    for i in 0..4 {
+        let (a, b) = (rim[i], rim[(i + 1) % 4]);
+        faces.push(vec![b, [c, c, top - deep], a]);
+        faces.push(vec![[c, c, top - shallow], b, a]);
+    }
+    faces
+}
+
+fn shell_xml(faces: &[Vec<Pt>], id: &str) -> String {
+    let mut s = String::from("<gml:CompositeSurface>\n");
+    for (k, f) in faces.iter().enumerate() {
+        let mut pts: Vec<String> = f.iter().map(|p| format!("{} {} {}", p[0], p[1], p[2])).collect();
+        pts.push(pts[0].clone());
+        s += &format!(
+            "<gml:surfaceMember><gml:Polygon gml:id=\"{id}_{k}\"><gml:exterior><gml:LinearRing><gml:posList srsDimension=\"3\">{}</gml:posList></gml:LinearRing></gml:exterior></gml:Polygon></gml:surfaceMember>\n",
+            pts.join(" ")
+        );
+    }
+    s + "</gml:CompositeSurface>\n"
+}
+
+fn solid_xml(shells: &[Vec<Vec<Pt>>], id: &str) -> String {
+    let mut s = format!("<gml:Solid gml:id=\"{id}\">\n<gml:exterior>{}</gml:exterior>\n", shell_xml(&shells[0], &format!("{id}_e")));
+    for (k, sh) in shells[1..].iter().enumerate() {
+        s += &format!("<gml:interior>{}</gml:interior>\n", shell_xml(sh, &format!("{id}_i{k}")));
+    }
+    s + "</gml:Solid>\n"
+}
+
+fn building_doc(geometry: &str) -> String {
+    format!(
+        r#"<?xml version="1.0" encoding="UTF-8"?>
+<core:CityModel xmlns:core="http://www.opengis.net/citygml/2.0" xmlns:bldg="http://www.opengis.net/citygml/building/2.0" xmlns:gml="http://www.opengis.net/gml">
+<core:cityObjectMember>
+<bldg:Building gml:id="B1">
+<bldg:lod2Solid>
+{geometry}</bldg:lod2Solid>
+</bldg:Building>
+</core:cityObjectMember>
+</core:CityModel>
+"#
+    )
+}
+
+fn composite_xml(solids: &[Vec<Vec<Pt>>]) -> String {
+    let mut s = String::from("<gml:CompositeSolid gml:id=\"CS1\">\n");
+    for (k, sol) in solids.iter().enumerate() {
+        s += &format!("<gml:solidMember>{}</gml:solidMember>\n", solid_xml(&[sol.clone()], &format!("S{}", k + 1)));
+    }
+    s + "</gml:CompositeSolid>\n"
+}
+
+fn generated_codes(dir: &Path, name: &str, doc: &str) -> (i32, BTreeSet<u64>, Value) {
+    let p = write(dir, name, doc);
+    let (code, r) = validate_json(&["--no-xsd", p.to_str().unwrap()]);
+    let c = codes(&r);
+    (code, c, r)
+}
+
+#[test]
+fn solid_interior_disconnected_404_on_generated_solids() {
+    let dir = common::tempdir();
+    let d = dir.path();
+    let ext = cube_faces([0., 0., 0.], 4.);
+    // the cup's rim lies in the roof (z = 4): the contact is a closed loop
+    let doc = building_doc(&solid_xml(&[ext.clone(), cup_faces(1., 3., 4., 3., 1.)], "SOL"));
+    let (code, c, r) = generated_codes(d, "cup404.gml", &doc);
+    assert_eq!((code, c), (1, BTreeSet::from([404])), "{}", r["geometry"]["findings"]);
+    let f = &r["geometry"]["findings"][0];
+    assert_eq!(f["primitive"], "SOL");
+    let line = doc[..doc.find("<gml:Solid").unwrap()].matches('\n').count() + 1;
+    assert_eq!(f["line"].as_u64(), Some(line as u64), "the finding points at the gml:Solid");
+    // the same cup 0.5 m lower touches nothing: valid
+    let doc = building_doc(&solid_xml(&[ext.clone(), cup_faces(1., 3., 3.5, 3., 1.)], "SOL"));
+    let (code, c, r) = generated_codes(d, "cup_ok.gml", &doc);
+    assert_eq!((code, c), (0, BTreeSet::new()), "{}", r["geometry"]["findings"]);
+    // a cube cavity sharing part of the roof: 401, not 404
+    let flush: Vec<Vec<Pt>> = cube_faces([1.5, 1.5, 3.], 1.).into_iter().map(|f| f.into_iter().rev().collect()).collect();
+    let doc = building_doc(&solid_xml(&[ext, flush], "SOL"));
+    let (_, c, r) = generated_codes(d, "flush401.gml", &doc);
+    assert_eq!(c, BTreeSet::from([401]), "{}", r["geometry"]["findings"]);
+}
+
+#[test]
+fn composite_solid_codes_501_502_503_on_generated_solids() {
+    let dir = common::tempdir();
+    let d = dir.path();
+    let a = cube_faces([0., 0., 0.], 1.);
+    let cases: [(&str, Vec<Vec<Vec<Pt>>>, Option<u64>); 5] = [
+        ("adjacent", vec![a.clone(), cube_faces([1., 0., 0.], 1.)], None),
+        ("overlap", vec![a.clone(), cube_faces([0.99, 0., 0.], 1.)], Some(501)),
+        ("duplicate", vec![a.clone(), cube_faces([1., 0., 0.], 1.), a.clone()], Some(502)),
+        ("apart", vec![a.clone(), cube_faces([1., 0., 0.], 1.), cube_faces([3., 0., 0.], 1.)], Some(503)),
+        ("edge_only", vec![a.clone(), cube_faces([1., 1., 0.], 1.)], Some(503)),
+    ];
+    for (name, solids, want) in cases {
+        let doc = building_doc(&composite_xml(&solids));
+        let (code, c, r) = generated_codes(d, &format!("{name}.gml"), &doc);
+        let want: BTreeSet<u64> = want.into_iter().collect();
+        assert_eq!(c, want, "{name}: {}", r["geometry"]["findings"]);
+        assert_eq!(code, if want.is_empty() { 0 } else { 1 }, "{name}");
+        if !want.is_empty() {
+            assert_eq!(r["geometry"]["findings"][0]["primitive"], "CS1", "{name}");
+        }
+    }
+    // the same solids as a MultiSolid: nothing is prescribed between its members
+    let doc = building_doc(
+        &composite_xml(&[a.clone(), cube_faces([0.99, 0., 0.], 1.)])
+            .replace("CompositeSolid", "MultiSolid"),
+    );
+    let (code, c, r) = generated_codes(d, "multisolid.gml", &doc);
+    assert_eq!((code, c), (0, BTreeSet::new()), "{}", r["geometry"]["findings"]);
+}

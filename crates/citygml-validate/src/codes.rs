@@ -29,12 +29,15 @@ pub enum ErrorCode {
     InnerShellOutside,
     SolidInteriorDisconnected,
     WrongOrientationShell,
+    IntersectionSolids,
+    DuplicatedSolids,
+    DisconnectedSolids,
     InvalidInputFile,
     EmptyPrimitive,
 }
 
 impl ErrorCode {
-    pub const ALL: [ErrorCode; 25] = [
+    pub const ALL: [ErrorCode; 28] = [
         ErrorCode::TooFewPoints,
         ErrorCode::ConsecutivePointsSame,
         ErrorCode::RingNotClosed,
@@ -58,6 +61,9 @@ impl ErrorCode {
         ErrorCode::InnerShellOutside,
         ErrorCode::SolidInteriorDisconnected,
         ErrorCode::WrongOrientationShell,
+        ErrorCode::IntersectionSolids,
+        ErrorCode::DuplicatedSolids,
+        ErrorCode::DisconnectedSolids,
         ErrorCode::InvalidInputFile,
         ErrorCode::EmptyPrimitive,
     ];
@@ -89,6 +95,9 @@ impl ErrorCode {
             InnerShellOutside => 403,
             SolidInteriorDisconnected => 404,
             WrongOrientationShell => 405,
+            IntersectionSolids => 501,
+            DuplicatedSolids => 502,
+            DisconnectedSolids => 503,
             InvalidInputFile => 901,
             EmptyPrimitive => 902,
         }
@@ -121,6 +130,9 @@ impl ErrorCode {
             InnerShellOutside => "INNER_SHELL_OUTSIDE",
             SolidInteriorDisconnected => "SOLID_INTERIOR_DISCONNECTED",
             WrongOrientationShell => "WRONG_ORIENTATION_SHELL",
+            IntersectionSolids => "INTERSECTION_SOLIDS",
+            DuplicatedSolids => "DUPLICATED_SOLIDS",
+            DisconnectedSolids => "DISCONNECTED_SOLIDS",
             InvalidInputFile => "INVALID_INPUT_FILE",
             EmptyPrimitive => "EMPTY_PRIMITIVE",
         }

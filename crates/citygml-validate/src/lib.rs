@@ -61,7 +61,7 @@ pub fn check_surfaces(polys: &[PolygonInput], opts: &Options) -> Vec<Issue> {
     polygon::check_polygons(polys, &mut snap, opts).0
 }
 
-pub use solid::check_solid;
+pub use solid::{check_composite_solid, check_solid};
 
 #[cfg(test)]
 mod tests;

@@ -2,7 +2,7 @@
 //! (feature gml:id, primitive gml:id, line:column).
 
 use crate::polygon::PolygonInput;
-use crate::{check_solid, check_surfaces, Issue, Options};
+use crate::{check_composite_solid, check_solid, check_surfaces, Issue, Options};
 use citygml_io::{CityModel, CityObject, Geometry, GeometryKind, Polygon, Shell};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -97,6 +97,22 @@ fn check_geometry(obj: &CityObject, geom: &Geometry, opts: &Options) -> Vec<Find
             let inp: Vec<Vec<PolygonInput>> = shells.iter().map(|s| to_inputs(s)).collect();
             for is in check_solid(&inp, opts) {
                 out.push(locate(obj, geom, &shells, is));
+            }
+        }
+        GeometryKind::Solids(solids) if geom.gml_type == "CompositeSolid" => {
+            // the solids of a CompositeSolid must also fit together (501–503)
+            let shells: Vec<Vec<Vec<&Polygon>>> = solids
+                .iter()
+                .map(|(ext, ints)| std::iter::once(ext).chain(ints.iter()).map(shell_polys).collect())
+                .collect();
+            let inp: Vec<Vec<Vec<PolygonInput>>> = shells.iter().map(|s| s.iter().map(|p| to_inputs(p)).collect()).collect();
+            for (k, is) in check_composite_solid(&inp, opts) {
+                let between = is.shell.is_none();
+                let mut f = locate(obj, geom, &shells[k], is);
+                if !between && solids.len() > 1 {
+                    f.detail = format!("solid {}: {}", k + 1, f.detail);
+                }
+                out.push(f);
             }
         }
         GeometryKind::Solids(solids) => {

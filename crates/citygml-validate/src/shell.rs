@@ -55,12 +55,12 @@ fn fmt_abs(p: &V3) -> String {
     format!("({}, {}, {})", r(p.x), r(p.y), r(p.z))
 }
 
-struct Dsu(Vec<usize>);
+pub(crate) struct Dsu(Vec<usize>);
 impl Dsu {
-    fn new(n: usize) -> Self {
+    pub(crate) fn new(n: usize) -> Self {
         Dsu((0..n).collect())
     }
-    fn find(&mut self, x: usize) -> usize {
+    pub(crate) fn find(&mut self, x: usize) -> usize {
         let mut x = x;
         while self.0[x] != x {
             self.0[x] = self.0[self.0[x]];
@@ -68,7 +68,7 @@ impl Dsu {
         }
         x
     }
-    fn union(&mut self, a: usize, b: usize) -> bool {
+    pub(crate) fn union(&mut self, a: usize, b: usize) -> bool {
         let (ra, rb) = (self.find(a), self.find(b));
         if ra == rb {
             return false;

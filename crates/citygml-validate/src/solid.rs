@@ -1,7 +1,21 @@
-//! Solid level (401–405): each shell must be valid on its own; then the exterior shell must face
-//! outwards and interior shells (cavities) inwards (405), interior shells must not be duplicates
-//! (402), cross other shells (401) or lie outside the exterior (403).
-//! 404 SOLID_INTERIOR_DISCONNECTED (shells touching so that the interior splits) is not detected.
+//! Solid level (401–405) and CompositeSolid level (501–503).
+//!
+//! Solid: each shell must be valid on its own; then the exterior shell must face outwards and
+//! interior shells (cavities) inwards (405), interior shells must not be duplicates (402), must
+//! not cross another shell or share (part of) a face with it (401), must not lie outside the
+//! exterior (403), and where shells touch along lines the contact must not close a loop that
+//! cuts the interior of the solid in two (404, the 3D twin of 205).
+//!
+//! Shells may touch at points and along lines (as rings may in 2D). For genus-0 shells, the
+//! union of the shells separates space into one region more than expected exactly when their
+//! line contacts form a cycle (Alexander duality: the complement has 1 + b2 regions, and by
+//! Mayer–Vietoris b2 grows by the first Betti number of the contact graph), so 404 is decided
+//! on the contact graph: vertices merged at the contact tolerance, segments split where they
+//! meet, cycles counted as E − V + C.
+//!
+//! CompositeSolid ([`check_composite_solid`]): each solid valid on its own, then no two solids
+//! identical (502), no two with intersecting interiors (501: surfaces crossing, or one solid's
+//! faces inside the other), and all of them connected through shared (parts of) faces (503).
 
 use crate::codes::ErrorCode;
 use crate::geom::V3;
@@ -17,6 +31,12 @@ fn solid_issue(code: ErrorCode, shell: usize, detail: String) -> Issue {
 
 /// Checks a solid given as its shells (index 0 = exterior, then cavities).
 pub fn check_solid(shells: &[Vec<PolygonInput>], opts: &Options) -> Vec<Issue> {
+    solid_meshes(shells, opts).0
+}
+
+/// The checks of [`check_solid`]; also returns the shells' meshes (common frame: the exterior
+/// shell's origin) when the solid is valid.
+fn solid_meshes(shells: &[Vec<PolygonInput>], opts: &Options) -> (Vec<Issue>, Vec<ShellMesh>) {
     let mut issues = Vec::new();
     let mut meshes: Vec<ShellMesh> = Vec::new();
     for (si, polys) in shells.iter().enumerate() {
@@ -30,7 +50,7 @@ pub fn check_solid(shells: &[Vec<PolygonInput>], opts: &Options) -> Vec<Issue> {
         }
     }
     if !issues.is_empty() {
-        return issues;
+        return (issues, Vec::new());
     }
     for (si, m) in meshes.iter().enumerate() {
         let vol = m.signed_volume();
@@ -48,19 +68,24 @@ pub fn check_solid(shells: &[Vec<PolygonInput>], opts: &Options) -> Vec<Issue> {
             ));
         }
     }
-    if !issues.is_empty() || meshes.len() < 2 {
-        return issues;
+    if !issues.is_empty() {
+        return (issues, Vec::new());
     }
     // common frame: the exterior shell's origin
     let o = meshes[0].origin;
-    let pts: Vec<Vec<V3>> = meshes.iter().map(|m| m.points.iter().map(|p| p + m.origin - o).collect()).collect();
+    for m in meshes.iter_mut() {
+        let d = m.origin - o;
+        for p in m.points.iter_mut() {
+            *p += d;
+        }
+        m.origin = o;
+    }
+    if meshes.len() < 2 {
+        return (issues, meshes);
+    }
+    let pts: Vec<&[V3]> = meshes.iter().map(|m| m.points.as_slice()).collect();
     // 402: two shells with the same vertices
-    let key = |ps: &Vec<V3>| {
-        let mut k: Vec<[i64; 3]> = ps.iter().map(|p| [p.x, p.y, p.z].map(|c| (c / opts.snap_tol.max(1e-9)).round() as i64)).collect();
-        k.sort_unstable();
-        k
-    };
-    let keys: Vec<_> = pts.iter().map(key).collect();
+    let keys: Vec<_> = pts.iter().map(|p| vertex_key(p, opts)).collect();
     for a in 0..meshes.len() {
         for b in a + 1..meshes.len() {
             if keys[a] == keys[b] {
@@ -69,59 +94,307 @@ pub fn check_solid(shells: &[Vec<PolygonInput>], opts: &Options) -> Vec<Issue> {
         }
     }
     if !issues.is_empty() {
-        return issues;
+        return (issues, Vec::new());
     }
-    // 401: shells may touch at a point, but not cross or share an edge/face piece
+    // 401: shells may touch at points and along lines, but not cross or share a face piece
     let extent = pts[0].iter().map(|p| p.norm()).fold(0.0, f64::max);
     let (eps, touch) = contact_eps(opts, extent);
-    let tri = |s: usize, t: &[u32; 3]| [pts[s][t[0] as usize], pts[s][t[1] as usize], pts[s][t[2] as usize]];
-    let boxed = |s: usize| -> RTree<GeomWithData<Rectangle<[f64; 3]>, usize>> {
-        let items = meshes[s]
-            .triangles
-            .iter()
-            .enumerate()
-            .map(|(k, t)| {
-                let p = tri(s, t);
-                let lo = [0, 1, 2].map(|i| p.iter().map(|q| q[i]).fold(f64::INFINITY, f64::min) - touch);
-                let hi = [0, 1, 2].map(|i| p.iter().map(|q| q[i]).fold(f64::NEG_INFINITY, f64::max) + touch);
-                GeomWithData::new(Rectangle::from_corners(lo, hi), k)
-            })
-            .collect();
-        RTree::bulk_load(items)
-    };
-    let trees: Vec<_> = (0..meshes.len()).map(boxed).collect();
-    'pairs: for a in 0..meshes.len() {
+    let trees: Vec<_> = meshes.iter().map(|m| tri_tree(m, touch)).collect();
+    let mut lines: Vec<(V3, V3)> = Vec::new();
+    for a in 0..meshes.len() {
         for b in a + 1..meshes.len() {
-            for ia in trees[a].iter() {
-                let ta = &meshes[a].triangles[ia.data];
-                let env = AABB::from_corners(ia.geom().lower(), ia.geom().upper());
-                for ib in trees[b].locate_in_envelope_intersecting(&env) {
-                    let tb = &meshes[b].triangles[ib.data];
-                    let c = contact(&tri(a, ta), &tri(b, tb), eps);
-                    let spread = c.iter().flat_map(|p| c.iter().map(move |q| (p - q).norm())).fold(0.0, f64::max);
-                    if !c.is_empty() && spread > touch {
-                        issues.push(solid_issue(
-                            ErrorCode::IntersectionShells,
-                            b,
-                            format!("shells {} and {} intersect near {}", a + 1, b + 1, fmt(&(c[0] + o))),
-                        ));
-                        continue 'pairs;
-                    }
-                }
+            let m = meet(&meshes[a], &trees[a], &meshes[b], &trees[b], eps, touch);
+            if let Some(p) = m.crossing.or(m.shared_at) {
+                let how = if m.crossing.is_some() { "intersect" } else { "share part of a face" };
+                issues.push(solid_issue(
+                    ErrorCode::IntersectionShells,
+                    b,
+                    format!("shells {} and {} {how} near {}", a + 1, b + 1, fmt(&(p + o))),
+                ));
             }
+            lines.extend(m.lines);
         }
     }
     if !issues.is_empty() {
-        return issues;
+        return (issues, Vec::new());
     }
-    // 403: a cavity must lie inside the exterior shell (generalised winding number of its vertices)
+    // 403 / 401: where a cavity lies (generalised winding number of its face centroids): all
+    // outside the exterior is 403; partly outside, or inside another cavity, is 401 (a shell
+    // crossing another along one of its own edges is not seen by the triangle pairs alone).
     for s in 1..meshes.len() {
-        let outside = pts[s].iter().any(|p| winding_number(&pts[0], &meshes[0].triangles, p).abs() < 0.5);
-        if outside {
+        let cs = samples(&meshes[s], touch);
+        let outside = cs.iter().filter(|p| winding_number(pts[0], &meshes[0].triangles, p).abs() < 0.5).count();
+        if outside == cs.len() {
             issues.push(solid_issue(ErrorCode::InnerShellOutside, s, format!("interior shell {} is not inside the exterior shell", s)));
+        } else if outside > 0 {
+            issues.push(solid_issue(
+                ErrorCode::IntersectionShells,
+                s,
+                format!("interior shell {} is partly outside the exterior shell (they cross)", s),
+            ));
+        } else if let Some(t) = (1..meshes.len())
+            .filter(|&t| t != s)
+            .find(|&t| cs.iter().any(|p| winding_number(pts[t], &meshes[t].triangles, p).abs() > 0.5))
+        {
+            issues.push(solid_issue(
+                ErrorCode::IntersectionShells,
+                s,
+                format!("interior shells {} and {} intersect (one reaches inside the other)", t, s),
+            ));
         }
     }
-    issues
+    if !issues.is_empty() {
+        return (issues, Vec::new());
+    }
+    // 404: line contacts that close a loop cut a pocket out of the interior
+    let cycles = contact_cycles(&lines, touch);
+    if cycles > 0 {
+        let at = lines.first().map(|l| fmt(&(l.0 + o))).unwrap_or_default();
+        issues.push(solid_issue(
+            ErrorCode::SolidInteriorDisconnected,
+            0,
+            format!(
+                "the shells touch along {cycles} closed loop{} (near {at}): the interior of the solid is cut in pieces",
+                if cycles == 1 { "" } else { "s" }
+            ),
+        ));
+        return (issues, Vec::new());
+    }
+    (issues, meshes)
+}
+
+/// Checks a CompositeSolid given as its solids (each: exterior shell, then cavities). Returns
+/// the issues with the index of the solid they belong to (for 50x: the second solid involved).
+pub fn check_composite_solid(solids: &[Vec<Vec<PolygonInput>>], opts: &Options) -> Vec<(usize, Issue)> {
+    let mut out = Vec::new();
+    let mut exts: Vec<ShellMesh> = Vec::new();
+    for (k, shells) in solids.iter().enumerate() {
+        let (is, mut meshes) = solid_meshes(shells, opts);
+        out.extend(is.into_iter().map(|i| (k, i)));
+        if !meshes.is_empty() {
+            exts.push(meshes.swap_remove(0));
+        }
+    }
+    if !out.is_empty() || exts.len() < 2 {
+        return out;
+    }
+    let o = exts[0].origin;
+    for m in exts.iter_mut() {
+        let d = m.origin - o;
+        for p in m.points.iter_mut() {
+            *p += d;
+        }
+        m.origin = o;
+    }
+    let issue = |code, detail: String| Issue { code, polygon: None, ring: None, shell: None, detail, value: None };
+    // 502: two identical solids
+    let keys: Vec<_> = exts.iter().map(|m| vertex_key(&m.points, opts)).collect();
+    for a in 0..exts.len() {
+        for b in a + 1..exts.len() {
+            if keys[a] == keys[b] {
+                out.push((b, issue(ErrorCode::DuplicatedSolids, format!("solids {} and {} are identical", a + 1, b + 1))));
+            }
+        }
+    }
+    if !out.is_empty() {
+        return out;
+    }
+    let extent = exts[0].points.iter().map(|p| p.norm()).fold(0.0, f64::max);
+    let (eps, touch) = contact_eps(opts, extent);
+    let trees: Vec<_> = exts.iter().map(|m| tri_tree(m, touch)).collect();
+    let cents: Vec<Vec<V3>> = exts.iter().map(|m| samples(m, touch)).collect();
+    let mut adjacent = crate::shell::Dsu::new(exts.len());
+    for a in 0..exts.len() {
+        for b in a + 1..exts.len() {
+            let m = meet(&exts[a], &trees[a], &exts[b], &trees[b], eps, touch);
+            // 501: crossing surfaces, or a point just inside one solid that is inside the other
+            let inside = |x: usize, y: usize| cents[x].iter().find(|p| winding_number(&exts[y].points, &exts[y].triangles, p).abs() > 0.5).copied();
+            if let Some(p) = m.crossing.or_else(|| inside(b, a)).or_else(|| inside(a, b)) {
+                out.push((
+                    b,
+                    issue(ErrorCode::IntersectionSolids, format!("the interiors of solids {} and {} intersect near {}", a + 1, b + 1, fmt(&(p + o)))),
+                ));
+            } else if m.shared_at.is_some() {
+                adjacent.union(a, b);
+            }
+        }
+    }
+    if !out.is_empty() {
+        return out;
+    }
+    // 503: every solid reachable from the first through shared faces
+    let root = adjacent.find(0);
+    for k in 1..exts.len() {
+        if adjacent.find(k) != root {
+            out.push((
+                k,
+                issue(ErrorCode::DisconnectedSolids, format!("solid {} shares no face with the other solids of the CompositeSolid", k + 1)),
+            ));
+        }
+    }
+    out
+}
+
+fn vertex_key(ps: &[V3], opts: &Options) -> Vec<[i64; 3]> {
+    let mut k: Vec<[i64; 3]> = ps.iter().map(|p| [p.x, p.y, p.z].map(|c| (c / opts.snap_tol.max(1e-9)).round() as i64)).collect();
+    k.sort_unstable();
+    k.dedup();
+    k
+}
+
+fn tri(m: &ShellMesh, t: &[u32; 3]) -> [V3; 3] {
+    [m.points[t[0] as usize], m.points[t[1] as usize], m.points[t[2] as usize]]
+}
+
+/// One point per triangle, just inside the volume the shell bounds: the centroid moved
+/// 10 × `touch` against the triangle's normal (with the normal for a cavity, whose faces point
+/// into its void). Off the surface, so the winding number of such a point with respect to
+/// another shell is 0 or ±1 even where the two shells share a face (on a surface it is not
+/// well defined).
+fn samples(m: &ShellMesh, touch: f64) -> Vec<V3> {
+    let sign = if m.signed_volume() >= 0.0 { 1.0 } else { -1.0 };
+    m.triangles
+        .iter()
+        .filter_map(|t| {
+            let p = tri(m, t);
+            let n = (p[1] - p[0]).cross(&(p[2] - p[0]));
+            let ln = n.norm();
+            (ln > 0.0).then(|| (p[0] + p[1] + p[2]) / 3.0 - n * (sign * 10.0 * touch / ln))
+        })
+        .collect()
+}
+
+type TriTree = RTree<GeomWithData<Rectangle<[f64; 3]>, usize>>;
+
+fn tri_tree(m: &ShellMesh, touch: f64) -> TriTree {
+    let items = m
+        .triangles
+        .iter()
+        .enumerate()
+        .map(|(k, t)| {
+            let p = tri(m, t);
+            let lo = [0, 1, 2].map(|i| p.iter().map(|q| q[i]).fold(f64::INFINITY, f64::min) - touch);
+            let hi = [0, 1, 2].map(|i| p.iter().map(|q| q[i]).fold(f64::NEG_INFINITY, f64::max) + touch);
+            GeomWithData::new(Rectangle::from_corners(lo, hi), k)
+        })
+        .collect();
+    RTree::bulk_load(items)
+}
+
+/// How the surfaces of two closed meshes meet.
+#[derive(Default)]
+struct Meeting {
+    /// A point where they cross (a triangle of each passes through the other).
+    crossing: Option<V3>,
+    /// A point of a face piece they share (coplanar overlap with an area).
+    shared_at: Option<V3>,
+    /// Segments along which they touch.
+    lines: Vec<(V3, V3)>,
+}
+
+fn meet(ma: &ShellMesh, ta: &TriTree, mb: &ShellMesh, tb: &TriTree, eps: f64, touch: f64) -> Meeting {
+    let mut m = Meeting::default();
+    for ia in ta.iter() {
+        let a = tri(ma, &ma.triangles[ia.data]);
+        let env = AABB::from_corners(ia.geom().lower(), ia.geom().upper());
+        for ib in tb.locate_in_envelope_intersecting(&env) {
+            let b = tri(mb, &mb.triangles[ib.data]);
+            let c = contact(&a, &b, eps);
+            if c.is_empty() {
+                continue;
+            }
+            let (mut p, mut q, mut spread) = (c[0], c[0], 0.0);
+            for x in &c {
+                for y in &c {
+                    let d = (x - y).norm();
+                    if d > spread {
+                        (p, q, spread) = (*x, *y, d);
+                    }
+                }
+            }
+            if spread <= touch {
+                continue; // touching at a point
+            }
+            if c.len() >= 3 {
+                let area: f64 = (1..c.len() - 1).map(|i| (c[i] - c[0]).cross(&(c[i + 1] - c[0])).norm() / 2.0).sum();
+                if area > touch * spread {
+                    m.shared_at.get_or_insert((p + q) / 2.0);
+                    continue;
+                }
+            }
+            if straddles(&a, &b, eps) && straddles(&b, &a, eps) {
+                m.crossing.get_or_insert((p + q) / 2.0);
+            } else {
+                m.lines.push((p, q));
+            }
+        }
+    }
+    m
+}
+
+/// Whether triangle `t` has vertices strictly on both sides of the plane of `other`.
+fn straddles(t: &[V3; 3], other: &[V3; 3], eps: f64) -> bool {
+    let n = (other[1] - other[0]).cross(&(other[2] - other[0]));
+    let ln = n.norm();
+    if ln == 0.0 {
+        return false;
+    }
+    let d = t.map(|p| n.dot(&(p - other[0])) / ln);
+    d.iter().any(|&x| x > eps) && d.iter().any(|&x| x < -eps)
+}
+
+/// First Betti number (independent cycles) of the graph made by the contact segments: end
+/// points merged within `tol`, each segment split at the vertices lying on it, repeated
+/// pieces counted once.
+fn contact_cycles(lines: &[(V3, V3)], tol: f64) -> usize {
+    let mut verts: Vec<V3> = Vec::new();
+    let id = |p: V3, verts: &mut Vec<V3>| -> usize {
+        match verts.iter().position(|v| (v - p).norm() <= tol) {
+            Some(i) => i,
+            None => {
+                verts.push(p);
+                verts.len() - 1
+            }
+        }
+    };
+    let ends: Vec<(usize, usize)> = lines.iter().map(|(p, q)| (id(*p, &mut verts), id(*q, &mut verts))).collect();
+    let mut edges: Vec<(usize, usize)> = Vec::new();
+    for &(i, j) in &ends {
+        if i == j {
+            continue;
+        }
+        let (p, q) = (verts[i], verts[j]);
+        let d = q - p;
+        let len2 = d.norm_squared();
+        // vertices on the segment, ordered along it
+        let mut on: Vec<(f64, usize)> = vec![(0.0, i), (1.0, j)];
+        for (k, v) in verts.iter().enumerate() {
+            if k == i || k == j {
+                continue;
+            }
+            let t = (v - p).dot(&d) / len2;
+            if t > 0.0 && t < 1.0 && (p + d * t - v).norm() <= tol {
+                on.push((t, k));
+            }
+        }
+        on.sort_by(|a, b| a.0.total_cmp(&b.0));
+        for w in on.windows(2) {
+            let (x, y) = (w[0].1.min(w[1].1), w[0].1.max(w[1].1));
+            if x != y {
+                edges.push((x, y));
+            }
+        }
+    }
+    edges.sort_unstable();
+    edges.dedup();
+    let mut dsu = crate::shell::Dsu::new(verts.len());
+    let mut cycles = 0;
+    for &(a, b) in &edges {
+        if !dsu.union(a, b) {
+            cycles += 1;
+        }
+    }
+    cycles
 }
 
 fn fmt(p: &V3) -> String {

@@ -2,7 +2,7 @@
 
 use crate::codes::ErrorCode;
 use crate::polygon::PolygonInput;
-use crate::{check_solid, check_surfaces, Options};
+use crate::{check_composite_solid, check_solid, check_surfaces, Options};
 
 type P = [f64; 3];
 
@@ -45,7 +45,7 @@ fn solid_codes(faces: &[Vec<P>], opts: &Options) -> Vec<u16> {
 fn codes_and_names_are_val3dity_s() {
     assert_eq!(ErrorCode::from_code(307).unwrap().name(), "POLYGON_WRONG_ORIENTATION");
     assert_eq!(ErrorCode::from_code(405).unwrap().name(), "WRONG_ORIENTATION_SHELL");
-    assert_eq!(ErrorCode::ALL.len(), 25);
+    assert_eq!(ErrorCode::ALL.len(), 28);
 }
 
 #[test]
@@ -191,4 +191,91 @@ fn cavity_checks() {
     // the same cavity twice: 402
     let c: Vec<u16> = check_solid(&[inp(&ext), inp(&cav), inp(&cav)], &o).iter().map(|i| i.code.code()).collect();
     assert_eq!(c, vec![402]);
+}
+
+fn scaled(s: &[Vec<P>], k: f64, d: P) -> Vec<Vec<P>> {
+    s.iter().map(|f| f.iter().map(|p| [p[0] * k + d[0], p[1] * k + d[1], p[2] * k + d[2]]).collect()).collect()
+}
+
+fn reversed(s: &[Vec<P>]) -> Vec<Vec<P>> {
+    s.iter().map(|f| f.iter().rev().copied().collect()).collect()
+}
+
+/// A cavity shaped like a cup: two downward pyramids on the same square rim `[lo, hi]²` at
+/// height `top`, apexes at `top - deep` and `top - shallow`: the solid between them, faces
+/// pointing into it (a cavity faces inwards).
+fn cup(lo: f64, hi: f64, top: f64, deep: f64, shallow: f64) -> Vec<Vec<P>> {
+    let c = (lo + hi) / 2.0;
+    let rim = [[lo, lo, top], [hi, lo, top], [hi, hi, top], [lo, hi, top]];
+    let (outer, inner) = ([c, c, top - deep], [c, c, top - shallow]);
+    let mut faces = Vec::new();
+    for i in 0..4 {
+        let (a, b) = (rim[i], rim[(i + 1) % 4]);
+        // outward normals of the cup solid: the outer pyramid's sides face down/out, the inner
+        // ones up/in; reversed below for a cavity
+        faces.push(poly(&[a, outer, b]));
+        faces.push(poly(&[a, b, inner]));
+    }
+    reversed(&faces)
+}
+
+#[test]
+fn interior_disconnected_404() {
+    let o = Options::default();
+    let ext = scaled(&cube(), 4., [0., 0., 0.]);
+    // a cup-shaped cavity whose rim lies in the roof: the rim touches the exterior along a
+    // closed loop, and the pocket between the cup and the roof is cut off from the rest
+    let touching = cup(1., 3., 4., 3., 1.);
+    let c: Vec<u16> = check_solid(&[inp(&ext), inp(&touching)], &o).iter().map(|i| i.code.code()).collect();
+    assert_eq!(c, vec![404]);
+    // the same cup 0.5 m lower: no contact, a valid cavity
+    let lower = cup(1., 3., 3.5, 3., 1.);
+    assert!(check_solid(&[inp(&ext), inp(&lower)], &o).is_empty());
+    // a wedge (triangular prism) cavity whose ridge touches the roof along one segment: an
+    // open contact, valid
+    let (a0, b0, c0) = ([1.5, 1.5, 3.], [1.5, 2.5, 3.], [1.5, 2., 4.]);
+    let (a1, b1, c1) = ([2.5, 1.5, 3.], [2.5, 2.5, 3.], [2.5, 2., 4.]);
+    let wedge = reversed(&[
+        poly(&[a0, c0, b0]),
+        poly(&[a1, b1, c1]),
+        poly(&[a0, b0, b1, a1]),
+        poly(&[b0, c0, c1, b1]),
+        poly(&[c0, a0, a1, c1]),
+    ]);
+    let c: Vec<u16> = check_solid(&[inp(&ext), inp(&wedge)], &o).iter().map(|i| i.code.code()).collect();
+    assert_eq!(c, Vec::<u16>::new(), "a line contact is allowed");
+    // the wedge pushed 1 cm through the roof: 401
+    let through: Vec<Vec<P>> = wedge.iter().map(|f| f.iter().map(|p| [p[0], p[1], p[2] + 0.01]).collect()).collect();
+    let c: Vec<u16> = check_solid(&[inp(&ext), inp(&through)], &o).iter().map(|i| i.code.code()).collect();
+    assert_eq!(c, vec![401]);
+    // a cavity sharing part of the roof: 401
+    let flush = reversed(&scaled(&cube(), 1., [1.5, 1.5, 3.]));
+    let c: Vec<u16> = check_solid(&[inp(&ext), inp(&flush)], &o).iter().map(|i| i.code.code()).collect();
+    assert_eq!(c, vec![401]);
+}
+
+#[test]
+fn composite_solid_50x() {
+    let o = Options::default();
+    let codes = |solids: &[Vec<Vec<P>>]| -> Vec<u16> {
+        let inps: Vec<Vec<Vec<PolygonInput>>> = solids.iter().map(|s| vec![inp(s)]).collect();
+        check_composite_solid(&inps, &o).iter().map(|(_, i)| i.code.code()).collect()
+    };
+    let a = cube();
+    // two cubes sharing a face: valid
+    assert_eq!(codes(&[a.clone(), scaled(&a, 1., [1., 0., 0.])]), Vec::<u16>::new());
+    // sharing only part of a face (offset by half in y): still connected, valid
+    assert_eq!(codes(&[a.clone(), scaled(&a, 1., [1., 0.5, 0.])]), Vec::<u16>::new());
+    // 501: overlapping by 1 cm
+    assert_eq!(codes(&[a.clone(), scaled(&a, 1., [0.99, 0., 0.])]), vec![501]);
+    // 501: one inside the other (no surface crossing at all)
+    assert_eq!(codes(&[scaled(&a, 4., [0., 0., 0.]), scaled(&a, 1., [1., 1., 1.])]), vec![501]);
+    // 502: the same cube twice
+    assert_eq!(codes(&[a.clone(), a.clone()]), vec![502]);
+    // 503: a third cube apart, and one touching only along an edge
+    assert_eq!(codes(&[a.clone(), scaled(&a, 1., [1., 0., 0.]), scaled(&a, 1., [5., 0., 0.])]), vec![503]);
+    assert_eq!(codes(&[a.clone(), scaled(&a, 1., [1., 1., 0.])]), vec![503]);
+    // a member that is itself invalid is reported at its own level, nothing between solids
+    let c = codes(&[a.clone(), scaled(&a, 1., [1., 0., 0.])[1..].to_vec()]);
+    assert_eq!(c, vec![302]);
 }

@@ -25,11 +25,14 @@ Example:
   $ geofit validate --json --no-xsd --planarity-tol 0.05 - < tile.gml | jq '.geometry.findings[].code'
 
 Geometric checks run level by level like val3dity — ring (101–104), polygon (201–208), shell
-(301–307), solid (401–405) — and a primitive whose lower level fails is not checked further.
+(301–307), solid (401–405), CompositeSolid (501–503) — and a primitive whose lower level fails
+is not checked further.
 Ring and polygon checks work in the polygon's least-squares plane. Codes and names are val3dity's
 current ones (legacy QIE 105 → 104, 304 → 303, 308 → 405). Solids (gml:Solid, each solid of a
-CompositeSolid/MultiSolid) get all levels; MultiSurface/CompositeSurface get ring and polygon checks.
-Vertices closer than --snap-tol are merged per shell. Not detected: 404, and 5xx (between solids).
+CompositeSolid/MultiSolid) get all levels; the solids of a CompositeSolid must not be identical
+(502) or overlap (501) and must be connected by shared faces (503); MultiSolid members are
+independent. Shells may touch along lines unless the contact closes a loop (404). MultiSurface /
+CompositeSurface get ring and polygon checks. Vertices closer than --snap-tol are merged per shell.
 
 Schemas: --schemas DIR, else $GEOFIT_SCHEMAS, else ../shared/xsd beside the checkout (searched
 from the working directory upwards and from the source tree geofit was built from). DIR holds
