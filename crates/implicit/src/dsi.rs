@@ -39,9 +39,51 @@ impl Default for Weights {
     }
 }
 
-/// Default ϖ_r: the minimum of the U-shaped error curve of the noisy sphere and plane sweeps
-/// (tests/implicit.rs `roughness_sweep_traces_u_shape`).
+/// Fallback ϖ_r where the noise cannot be estimated (no horizon with enough value points for a
+/// local fit, see [`crate::noise`]): the value [`auto_roughness`] gives the noisy unit sphere of
+/// tests/implicit.rs `roughness_sweep_traces_u_shape` (σ = 0.03 at cell 0.158).
 pub const DEFAULT_ROUGHNESS: f64 = 5.0;
+
+/// τ: the roughness residual the true surface is expected to leave per face, in units of g·h
+/// (g: gradient scale, h: finest cell), i.e. how much a surface bends across one cell.
+pub const ROUGHNESS_TAU: f64 = 0.04;
+
+/// Default roughness weight from the data: ϖ_r = √((σ̂/h)² + (τ/2)²) / τ.
+///
+/// WHY (seed §2.2 and eq. 9): eq. 9 normalises every row to ‖A_c‖ = 1 and then weights it by ϖ_c,
+/// so ϖ_c² is the relative weight of one constraint against the others. Read as weighted least
+/// squares (the maximum-likelihood reading of eq. 8), a row's weight is the inverse standard
+/// deviation of its residual, and only the ratio ϖ_r/ϖ_v matters:
+/// - a normalised value row `(φ(p) − v)/‖λ(p)‖` has residual ≈ g·σ (σ: the points' noise across
+///   the surface in distance units, g: the gradient scale) — the data's own noise;
+/// - a normalised roughness row (jump of ∂φ/∂n across a face, divided by its coefficient norm
+///   ∝ 1/h) has residual ≈ g·h·τ for the true surface, τ being how far the gradient turns across
+///   one cell (τ ∝ h·κ for curvature κ).
+///
+/// So ϖ_r/ϖ_v = σ/(τ·h): the weight depends on the noise measured in cells, not on the value
+/// units (g cancels: Claudius' 0–330 horizons or a unit sphere's distance field give the same
+/// weight for the same geometry) nor on the coordinate units (σ and h scale together). A fixed
+/// ϖ_r is right only for one noise-to-cell ratio: ϖ_r = 5 suits the noisy sphere (σ/h ≈ 0.2) but
+/// over-smooths Claudius' seismic picks (σ̂ ≈ 1.6 m at h ≈ 198 m, σ/h ≈ 0.008) — their mean
+/// misfit was 3.9 at ϖ_r = 5 and 0.8 here.
+///
+/// σ̂ comes from the data alone ([`crate::noise::estimate`]: leave-one-out residuals of local
+/// quadric fits, no solve). The floor τ/2 for σ/h stands for the P1 elements' own error (a piecewise
+/// linear field cannot follow a bending surface closer than a fraction of τ·h) and keeps noise-free
+/// data from driving ϖ_r to 0, which would leave φ in data gaps to the conditioning of CG; ϖ_r is
+/// therefore at least 0.5. τ = 0.04 is the one calibrated number: it puts the default at the
+/// minimum of the sphere's U-shaped error curve at σ = 0.03 (tests/implicit.rs
+/// `roughness_sweep_traces_u_shape`), and the same τ then lands near the minima at σ = 0.01 and
+/// σ = 0.06 too (`auto_roughness_tracks_the_noise`). Capped at 50 (CG conditioning).
+pub fn auto_roughness(sigma: Option<f64>, cell: f64) -> f64 {
+    match sigma {
+        Some(s) if s.is_finite() && s >= 0.0 && cell > 0.0 => {
+            let nu = s / cell;
+            ((nu * nu + 0.25 * ROUGHNESS_TAU * ROUGHNESS_TAU).sqrt() / ROUGHNESS_TAU).min(50.0)
+        }
+        _ => DEFAULT_ROUGHNESS,
+    }
+}
 
 /// Solver and constraint parameters stored with a model.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -83,6 +125,11 @@ pub struct Rows {
     pub float: Vec<bool>,
     /// The constraint a row came from (u32::MAX: roughness).
     pub owner: Vec<u32>,
+    /// The factor ϖ_c/‖A_c‖ the row was scaled by (seed eq. 9), to recover A_cᵗφ − b_c in the
+    /// constraint's own units.
+    pub scale: Vec<f64>,
+    /// Value rows (φ(p) ≃ v), as opposed to normal / side / roughness rows.
+    pub is_value: Vec<bool>,
 }
 
 impl Rows {
@@ -90,6 +137,10 @@ impl Rows {
         Rows { ptr: vec![0], ..Default::default() }
     }
     fn push(&mut self, coefs: &[(u32, f64)], rhs: f64, weight: f64, ineq: bool, float: bool, owner: u32) {
+        self.push_kind(coefs, rhs, weight, ineq, float, owner, false)
+    }
+    #[allow(clippy::too_many_arguments)]
+    fn push_kind(&mut self, coefs: &[(u32, f64)], rhs: f64, weight: f64, ineq: bool, float: bool, owner: u32, is_value: bool) {
         // Merge duplicate columns (e.g. both offset points in the same tetrahedron).
         let mut c: Vec<(u32, f64)> = Vec::with_capacity(coefs.len());
         for &(i, v) in coefs {
@@ -113,6 +164,8 @@ impl Rows {
         self.ineq.push(ineq);
         self.float.push(float);
         self.owner.push(owner);
+        self.scale.push(s);
+        self.is_value.push(is_value);
     }
     pub fn len(&self) -> usize {
         self.rhs.len()
@@ -153,17 +206,37 @@ pub fn data_rows(mesh: &TetMesh, loc: &Locator, cs: &[Constraint], p: &Params) -
         ))
     };
     let (d, g) = (p.step, p.grad);
-    for (i, c) in cs.iter().enumerate() {
+    // Point location is the costly part: done in parallel, rows appended in constraint order.
+    type Located = (Option<[(u32, f64); 4]>, Option<([(u32, f64); 4], [(u32, f64); 4])>);
+    let located: Vec<Result<Located, Error>> = cs
+        .par_iter()
+        .enumerate()
+        .map(|(i, c)| {
+            let at = if c.value.is_some() || c.side != 0.0 {
+                Some(point_row(mesh, loc, c.pos).ok_or_else(|| outside(i, c.pos))?)
+            } else {
+                None
+            };
+            let steps = match c.normal {
+                Some(n) => {
+                    let pp = add(c.pos, scale(n, d));
+                    let pm = sub(c.pos, scale(n, d));
+                    let rp = point_row(mesh, loc, pp).ok_or_else(|| outside(i, pp))?;
+                    let rm = point_row(mesh, loc, pm).ok_or_else(|| outside(i, pm))?;
+                    Some((rp, rm))
+                }
+                None => None,
+            };
+            Ok((at, steps))
+        })
+        .collect();
+    for (i, (c, l)) in cs.iter().zip(located).enumerate() {
+        let (at, steps) = l?;
         let o = i as u32;
-        if let Some(v) = c.value {
-            let r = point_row(mesh, loc, c.pos).ok_or_else(|| outside(i, c.pos))?;
-            rows.push(&r, v, p.weights.value, false, c.float, o);
+        if let (Some(v), Some(r)) = (c.value, at) {
+            rows.push_kind(&r, v, p.weights.value, false, c.float, o, true);
         }
-        if let Some(n) = c.normal {
-            let pp = add(c.pos, scale(n, d));
-            let pm = sub(c.pos, scale(n, d));
-            let rp = point_row(mesh, loc, pp).ok_or_else(|| outside(i, pp))?;
-            let rm = point_row(mesh, loc, pm).ok_or_else(|| outside(i, pm))?;
+        if let Some((rp, rm)) = steps {
             match c.value {
                 Some(v) => {
                     rows.push(&rp, v + d * g, p.weights.normal, true, c.float, o);
@@ -177,8 +250,7 @@ pub fn data_rows(mesh: &TetMesh, loc: &Locator, cs: &[Constraint], p: &Params) -
                 }
             }
         }
-        if c.side != 0.0 {
-            let r = point_row(mesh, loc, c.pos).ok_or_else(|| outside(i, c.pos))?;
+        if let (true, Some(r)) = (c.side != 0.0, at) {
             let sr: Vec<(u32, f64)> = r.iter().map(|&(j, w)| (j, c.side * w)).collect();
             rows.push(&sr, d * g, p.weights.normal, true, c.float, o);
         }
@@ -533,6 +605,34 @@ pub fn pcg_checked(
     CgStats { iterations: it, residual: res, converged: res <= tol }
 }
 
+/// Hysteresis of the active set, as a fraction of the margin δ·g the inequality rows ask for.
+pub const ACTIVE_HYSTERESIS: f64 = 1e-3;
+
+/// The active set after an iterate `x`: equality rows always; an inequality row A·φ ≥ b turns
+/// active when violated by more than ε = [`ACTIVE_HYSTERESIS`]·δ·g and inactive when satisfied by
+/// more than ε, and otherwise keeps its state. Without the band, rows sitting on their bound
+/// (|A·φ − b| at the level of the CG residual) flip back and forth between rounds and force
+/// extra rounds that change φ by less than ε.
+pub fn next_active(data: &Rows, x: &[f64], act: &[bool], p: &Params) -> Vec<bool> {
+    let band = ACTIVE_HYSTERESIS * p.step * p.grad;
+    (0..data.len())
+        .map(|r| {
+            if !data.ineq[r] {
+                return true;
+            }
+            // Margin in the constraint's own units (φ), undoing the eq. 9 scale.
+            let m = (data.dot(r, x) - data.rhs[r]) / data.scale[r];
+            if m < -band {
+                true
+            } else if m > band {
+                false
+            } else {
+                act.get(r).copied().unwrap_or(m < 0.0)
+            }
+        })
+        .collect()
+}
+
 /// Result of [`solve`].
 #[derive(Debug, Clone, Default)]
 pub struct Solution {
@@ -544,6 +644,9 @@ pub struct Solution {
     pub residual: f64,
     pub unknowns: usize,
     pub rows: usize,
+    /// (constraint index, |φ(p) − v|) at every value constraint, in constraint order: from the
+    /// value rows themselves, so no second point location.
+    pub value_misfit: Vec<(u32, f64)>,
 }
 
 /// Solves the DSI system: base rows (`float == false`, plus roughness) form A_B, float rows A_F
@@ -578,7 +681,9 @@ pub fn solve(
     // Inexact active-set iterations: while the set of violated inequality rows may still change,
     // CG runs to a loose tolerance; once a round leaves the set unchanged, one final solve goes
     // to `p.tol` from there. A warm start (saved φ and active set) then needs one loose and one
-    // tight solve, both from close to the answer.
+    // tight solve, both from close to the answer. (Going straight to `p.tol` on a warm start was
+    // measured worse: the saved set was fixed at a loose iterate, so the converged φ still flips a
+    // few rows and the restart costs more than the loose phase.)
     let loose = (p.tol * 100.0).max(1e-4);
     let has_ineq = data.ineq.iter().any(|&b| b);
     let mut round = 0;
@@ -598,7 +703,7 @@ pub fn solve(
             pcg(&a, &b, &mut x, p.tol, p.max_iter)
         } else {
             let mut go_on = |xx: &[f64]| {
-                let new: Vec<bool> = (0..data.len()).map(|r| !data.ineq[r] || data.dot(r, xx) < data.rhs[r]).collect();
+                let new = next_active(&data, xx, &act, p);
                 let same = new == act;
                 if std::env::var_os("GEOFIT_DEBUG_ACTIVE").is_some() {
                     eprintln!("active-set round {round}: {} rows change", new.iter().zip(&act).filter(|(a, b)| a != b).count());
@@ -627,7 +732,7 @@ pub fn solve(
             None => {
                 // Converged to the loose tolerance before the first check (start already close):
                 // decide from the current iterate.
-                let new: Vec<bool> = (0..data.len()).map(|r| !data.ineq[r] || data.dot(r, &x) < data.rhs[r]).collect();
+                let new = next_active(&data, &x, &act, p);
                 settled = new == act;
                 act = new;
             }
@@ -637,7 +742,19 @@ pub fn solve(
     if x.iter().any(|v| !v.is_finite()) {
         return Err(Error::BadInput("the solution contains non-finite values (degenerate mesh or constraints)".into()));
     }
-    Ok(Solution { phi: x, active: act, iterations: iters, residual: last_res, unknowns: n, rows: data.len() + rough.len() })
+    let value_misfit: Vec<(u32, f64)> = (0..data.len())
+        .filter(|&r| data.is_value[r] && data.scale[r] > 0.0)
+        .map(|r| (data.owner[r], ((data.dot(r, &x) - data.rhs[r]) / data.scale[r]).abs()))
+        .collect();
+    Ok(Solution {
+        phi: x,
+        active: act,
+        iterations: iters,
+        residual: last_res,
+        unknowns: n,
+        rows: data.len() + rough.len(),
+        value_misfit,
+    })
 }
 
 /// Expected gradient magnitude g: the slope of the least-squares linear fit of the values

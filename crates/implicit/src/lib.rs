@@ -12,6 +12,7 @@ pub mod fault;
 pub mod generate;
 pub mod geom;
 pub mod mesh;
+pub mod noise;
 pub mod model;
 pub mod points;
 pub mod vtk;

@@ -45,6 +45,9 @@ pub struct Model {
 pub struct BuildOptions {
     /// Finest cell size; None chooses it from the point density.
     pub cell: Option<f64>,
+    /// Roughness weight from the data's noise ([`dsi::auto_roughness`]) instead of
+    /// `weights.rough`.
+    pub auto_rough: bool,
     /// Coarse cubes along the longest side of the domain.
     pub coarse: usize,
     pub weights: Weights,
@@ -68,6 +71,7 @@ impl Default for BuildOptions {
     fn default() -> Self {
         BuildOptions {
             cell: None,
+            auto_rough: true,
             coarse: 8,
             weights: Weights::default(),
             step: None,
@@ -95,6 +99,10 @@ pub struct BuildReport {
     pub misfit_mean: f64,
     pub misfit_max: f64,
     pub grad: f64,
+    /// Estimated noise of the value points across their surface (distance units).
+    pub noise_sigma: Option<f64>,
+    /// The roughness weight ϖ_r used.
+    pub w_rough: f64,
 }
 
 /// Progress events from the library (the CLI forwards them to its progress lines).
@@ -257,8 +265,18 @@ pub fn build(
         .collect();
     cs.extend(sides.iter().map(|s| Constraint { pos: local(s.pos), value: None, normal: None, side: s.side, float: false }));
     let grad = opt.grad.unwrap_or_else(|| dsi::gradient_scale(&cs));
+    let noise_sigma = if opt.auto_rough {
+        let vp: Vec<(V3, f64)> = cs.iter().filter_map(|c| c.value.map(|v| (c.pos, v))).collect();
+        crate::noise::estimate(&vp)
+    } else {
+        None
+    };
+    let mut weights = opt.weights;
+    if opt.auto_rough {
+        weights.rough = dsi::auto_roughness(noise_sigma, cell);
+    }
     let params = Params {
-        weights: opt.weights,
+        weights,
         step,
         grad,
         tol: opt.tol,
@@ -302,7 +320,15 @@ pub fn build(
     refiner.refine();
 
     let misfit_tol = opt.misfit_tol.unwrap_or(0.5 * cell);
-    let mut report = BuildReport { points: pts.len(), duplicates_merged: merged, cell, grad, ..Default::default() };
+    let mut report = BuildReport {
+        points: pts.len(),
+        duplicates_merged: merged,
+        cell,
+        grad,
+        noise_sigma,
+        w_rough: weights.rough,
+        ..Default::default()
+    };
     let mut prev: Option<(Vec<f64>, Vec<u32>)> = None;
     let mut round = 0;
     loop {
@@ -339,19 +365,15 @@ pub fn build(
             progress(Event::Cg { round: r, iterations: it, residual: res })
         })?;
         report.cg_iterations.extend(&sol.iterations);
-        let mis = dsi::value_misfits(&mesh, &loc, &cs, &sol.phi);
+        let mis: Vec<f64> = sol.value_misfit.iter().map(|&(_, e)| e).collect();
         let (mean, max) = stats(&mis);
         report.misfit_mean = mean;
         report.misfit_max = max;
         report.vertices = mesh.verts.len();
         report.tetrahedra = mesh.tets.len();
         report.refinement_rounds = round;
-        let bad: Vec<V3> = cs
-            .iter()
-            .filter_map(|c| c.value.map(|v| (c.pos, v)))
-            .filter(|(p, v)| dsi::eval(&mesh, &loc, &sol.phi, *p).map(|f| (f - v).abs() / grad > misfit_tol).unwrap_or(false))
-            .map(|(p, _)| p)
-            .collect();
+        let bad: Vec<V3> =
+            sol.value_misfit.iter().filter(|&&(_, e)| e / grad > misfit_tol).map(|&(c, _)| cs[c as usize].pos).collect();
         if round >= opt.refine_rounds || bad.is_empty() {
             let model = Model {
                 origin,
@@ -427,9 +449,20 @@ impl Model {
             });
         }
         let loc = self.locator();
-        let nrows = dsi::data_rows(&self.mesh, &loc, &self.constraints, &self.params)?.len();
+        let rows = dsi::data_rows(&self.mesh, &loc, &self.constraints, &self.params)?;
+        // The saved active set holds for the rows that did not change; the rows of moved and
+        // added constraints are new rows, so their state comes from the saved φ at their new
+        // positions (violated there → active), as any active-set round would decide it.
+        let n_old = self.constraints.len() - added.len();
+        let moved: std::collections::BTreeSet<u32> = moves.iter().map(|&(i, _)| i as u32).collect();
         let mut active = self.active.clone();
-        active.resize(nrows, true);
+        active.resize(rows.len(), true);
+        for r in 0..rows.len() {
+            let o = rows.owner[r];
+            if rows.ineq[r] && (moved.contains(&o) || o as usize >= n_old) && rows.scale[r] > 0.0 {
+                active[r] = rows.dot(r, &self.phi) < rows.rhs[r];
+            }
+        }
         progress(Event::Stage("re-interpolating"));
         let sol = if cold {
             dsi::solve(&self.mesh, &loc, &self.constraints, &self.params, None, None, &mut |r, it, res| {

@@ -97,9 +97,11 @@ pub struct BuildArgs {
     /// Relative weight ϖ of the normal / side inequality constraints.
     #[arg(long, default_value_t = 1.0)]
     pub w_normal: f64,
-    /// Relative weight ϖ_r of the roughness constraints: higher = smoother (seed §2.2).
-    #[arg(long, default_value_t = DEFAULT_ROUGHNESS)]
-    pub w_rough: f64,
+    /// Relative weight ϖ_r of the roughness constraints: higher = smoother (seed §2.2). Default:
+    /// from the points' noise σ̂ (local quadric fits) and the finest cell h,
+    /// ϖ_r = √((σ̂/h)² + 0.02²)/0.04 (5 for a unit sphere with σ = 0.03; see implicit::dsi::auto_roughness).
+    #[arg(long)]
+    pub w_rough: Option<f64>,
     /// Step δ along and against each normal (default: the finest cell size).
     #[arg(long)]
     pub step: Option<f64>,
@@ -334,6 +336,10 @@ struct Report {
     misfit_mean: f64,
     misfit_max: f64,
     gradient_scale: f64,
+    /// Estimated noise of the value points across their surface (distance units; null: not estimated).
+    noise_sigma: Option<f64>,
+    /// Roughness weight ϖ_r used (from the noise unless --w-rough was given).
+    w_rough: f64,
     seconds: f64,
 }
 
@@ -360,7 +366,7 @@ fn build_model(b: &BuildArgs, config: &Config) -> Result<(Model, BuildReport, f6
         let input = Input::from_arg(f);
         faults.push(fault::read_fault_obj(&input.read_all()?, f, [0.0; 3]).map_err(|e| lib_err(f, e))?);
     }
-    for (w, n) in [(b.w_value, "--w-value"), (b.w_normal, "--w-normal"), (b.w_rough, "--w-rough"), (b.tol, "--tol")] {
+    for (w, n) in [(b.w_value, "--w-value"), (b.w_normal, "--w-normal"), (b.w_rough.unwrap_or(DEFAULT_ROUGHNESS), "--w-rough"), (b.tol, "--tol")] {
         if !(w >= 0.0 && w.is_finite()) {
             return Err(CliError::usage(format!("{n} must be a finite non-negative number, got {w}")));
         }
@@ -368,7 +374,8 @@ fn build_model(b: &BuildArgs, config: &Config) -> Result<(Model, BuildReport, f6
     let opt = BuildOptions {
         cell: b.cell,
         coarse: b.coarse,
-        weights: Weights { value: b.w_value, normal: b.w_normal, rough: b.w_rough },
+        weights: Weights { value: b.w_value, normal: b.w_normal, rough: b.w_rough.unwrap_or(DEFAULT_ROUGHNESS) },
+        auto_rough: b.w_rough.is_none(),
         step: b.step,
         grad: b.grad,
         tol: b.tol,
@@ -385,8 +392,8 @@ fn build_model(b: &BuildArgs, config: &Config) -> Result<(Model, BuildReport, f6
         m.interpolate_attribute(a, &apts).map_err(|e| lib_err(a, e))?;
     }
     config.notice(&format!(
-        "{} points, cell {:.4}: {} vertices, {} tetrahedra; CG iterations {:?}; misfit at the values mean {:.4} max {:.4}",
-        rep.points, rep.cell, rep.vertices, rep.tetrahedra, rep.cg_iterations, rep.misfit_mean, rep.misfit_max
+        "{} points, cell {:.4}, roughness weight {:.3}: {} vertices, {} tetrahedra; CG iterations {:?}; misfit at the values mean {:.4} max {:.4}",
+        rep.points, rep.cell, rep.w_rough, rep.vertices, rep.tetrahedra, rep.cg_iterations, rep.misfit_mean, rep.misfit_max
     ));
     Ok((m, rep, t0.elapsed().as_secs_f64()))
 }
@@ -405,6 +412,8 @@ fn write_report(path: &Option<String>, rep: &BuildReport, secs: f64) -> Result<(
             misfit_mean: rep.misfit_mean,
             misfit_max: rep.misfit_max,
             gradient_scale: rep.grad,
+            noise_sigma: rep.noise_sigma,
+            w_rough: rep.w_rough,
             seconds: secs,
         };
         write_json_report(p, &r)?;
