@@ -129,8 +129,25 @@ fn version_comes_from_namespaces_and_bom_is_accepted() {
     assert_eq!(v["polygons"], 7);
 }
 
-/// One line on stderr naming FILE:LINE:COL, the expected exit code, no panic.
+/// One line on stderr naming FILE:LINE:COL, the expected exit code, no panic — from `geofit
+/// info`, and from `geofit validate` (geometric checks; the XSD pass has its own messages) with
+/// the same exit code; a geometry finding (exit 1) is listed by `validate` on stdout at the same
+/// position, under `validate_code`.
 fn expect_error(dir: &Path, name: &str, bytes: &[u8], exit: i32, line: usize, col: usize, what: &str) {
+    expect_error_code(dir, name, bytes, exit, line, col, what, None)
+}
+
+#[allow(clippy::too_many_arguments)]
+fn expect_error_code(
+    dir: &Path,
+    name: &str,
+    bytes: &[u8],
+    exit: i32,
+    line: usize,
+    col: usize,
+    what: &str,
+    validate_code: Option<&str>,
+) {
     let p = dir.join(name);
     std::fs::write(&p, bytes).unwrap();
     let o = common::run(&["info", p.to_str().unwrap()], None);
@@ -142,6 +159,22 @@ fn expect_error(dir: &Path, name: &str, bytes: &[u8], exit: i32, line: usize, co
     let at = format!("{}:{line}:{col}: ", p.display());
     assert!(lines[0].contains(&at), "{name}: expected position {at} in: {stderr}");
     assert!(lines[0].contains(what), "{name}: expected '{what}' in: {stderr}");
+
+    let o = common::run(&["-q", "validate", "--no-xsd", p.to_str().unwrap()], None);
+    let (out, err) = (String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
+    assert_eq!(common::code(&o), exit, "validate {name}: {out}{err}");
+    assert!(!err.contains("panicked"), "validate {name}: {err}");
+    match validate_code {
+        None => {
+            let lines: Vec<&str> = err.lines().collect();
+            assert_eq!(lines.len(), 1, "validate {name}: one line expected: {err}");
+            assert!(lines[0].contains(&at) && lines[0].contains(what), "validate {name}: expected {at}…{what} in: {err}");
+        }
+        Some(code) => {
+            let hit = out.lines().find(|l| l.contains(&at)).unwrap_or_else(|| panic!("validate {name}: no finding at {at}: {out}"));
+            assert!(hit.contains(code), "validate {name}: expected {code} in: {hit}");
+        }
+    }
 }
 
 #[test]
@@ -174,6 +207,14 @@ fn bad_input_gives_one_line_with_position() {
     let e = String::from_utf8_lossy(&o.stderr);
     assert!(e.contains(&format!("truncated.gml:{cut_lines}:")) && e.contains("end of file"), "{e}");
     assert_eq!(e.lines().count(), 1);
+    let same_from_validate = |name: &str, want: &str| {
+        let o = common::run(&["-q", "validate", "--no-xsd", d.join(name).to_str().unwrap()], None);
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(common::code(&o), 3, "validate {name}: {e}");
+        assert_eq!(e.lines().count(), 1, "validate {name}: {e}");
+        assert!(e.contains(want), "validate {name}: expected {want} in {e}");
+    };
+    same_from_validate("truncated.gml", &format!("truncated.gml:{cut_lines}:"));
     // Truncated at an element boundary: the open root is named.
     let cut2 = &good[..good.rfind("</core:cityObjectMember>").unwrap()];
     let p = d.join("truncated2.gml");
@@ -181,6 +222,7 @@ fn bad_input_gives_one_line_with_position() {
     let o = common::run(&["info", p.to_str().unwrap()], None);
     assert_eq!(common::code(&o), 3);
     assert!(String::from_utf8_lossy(&o.stderr).contains("is not closed"), "{}", String::from_utf8_lossy(&o.stderr));
+    same_from_validate("truncated2.gml", "is not closed");
 
     let wrong = good.replace("\"http://www.opengis.net/citygml/1.0\"", "\"http://example.com/not-citygml\"");
     assert_ne!(wrong, good);
@@ -206,7 +248,11 @@ fn bad_input_gives_one_line_with_position() {
 
     // A ring of 2 positions: readable, but a geometry finding (exit 1), listed with position.
     let two = format!("{}0 0 0 1 1 1{}", &good[..text_start], &good[text_end..]);
-    expect_error(d, "two.gml", two.as_bytes(), 1, rline, rcol, "has 2 positions");
+    // validate: not closed comes first, as in val3dity (103 is checked before 101)
+    expect_error_code(d, "two.gml", two.as_bytes(), 1, rline, rcol, "has 2 positions", Some("103 RING_NOT_CLOSED"));
+    // two points, closed (3 positions): 101
+    let two_closed = format!("{}0 0 0 1 1 1 0 0 0{}", &good[..text_start], &good[text_end..]);
+    expect_error_code(d, "two_closed.gml", two_closed.as_bytes(), 1, rline, rcol, "has 3 positions", Some("101 TOO_FEW_POINTS"));
 
     // Not a number.
     let nan = format!("{}0 0 zero{}", &good[..text_start], &good[text_end..]);
