@@ -109,11 +109,15 @@ pub struct FitOptions {
     pub initial_cells: usize,
     /// Dragging: steps per iteration.
     pub drag_steps: usize,
+    /// Least squares: after a small refinement re-solve only the points it affects and re-check
+    /// only the cells they influence (see `local_update`); the tolerance is still declared on a
+    /// check of every valid cell.
+    pub local_updates: bool,
 }
 
 impl FitOptions {
     pub fn new(degree: Degree, max_error: f64) -> FitOptions {
-        FitOptions { degree, max_error, max_points: None, max_iterations: 100, method: Method::Lsq, overhang: 0.25, initial_cells: 4, drag_steps: 40 }
+        FitOptions { degree, max_error, max_points: None, max_iterations: 100, method: Method::Lsq, overhang: 0.25, initial_cells: 4, drag_steps: 40, local_updates: true }
     }
 }
 
@@ -161,6 +165,11 @@ pub struct IterationStats {
     #[serde(flatten)]
     pub error: ErrorStats,
     pub seconds: f64,
+    /// Of `seconds`: knot inference + PB-spline build, the geometry optimisation (assembly and
+    /// solve, or dragging), and the error check over every valid cell.
+    pub seconds_build: f64,
+    pub seconds_optimise: f64,
+    pub seconds_check: f64,
 }
 
 /// Why the loop ended.
@@ -185,9 +194,59 @@ pub struct FitResult {
 /// Builds the PB-spline on the backend (device knot kernel or CPU ray casting).
 pub fn build_pb(mesh: &TMesh, backend: &Backend) -> Result<PbSpline, TsplineError> {
     match backend {
-        Backend::Cpu => Ok(PbSpline::build(mesh)),
+        Backend::Cpu => {
+            // PbSpline::build's knot inference, with the mesh bounds computed once
+            let active = mesh.active_points();
+            let point_ids: Vec<u32> = (0..mesh.points.len() as u32).filter(|&i| active[i as usize]).collect();
+            let b = mesh.bounds();
+            let knots: Vec<crate::knots::LocalKnots> = point_ids
+                .par_iter()
+                .map(|&i| {
+                    let p = mesh.points[i as usize];
+                    crate::knots::infer_in(mesh, b, p.s, p.t)
+                })
+                .collect();
+            Ok(PbSpline::from_parts(mesh, point_ids, knots))
+        }
         Backend::OpenCl(o) => o.build_pbspline(mesh),
     }
+}
+
+/// [`build_pb`] after a refinement, re-inferring only the knots that can have changed: a
+/// point's knots are the nearest edges along its four rays, all inside its closed support, so
+/// they change only if a cell split since `old` (`split`: the split cells' rectangles) meets
+/// that support, or the point is new. The others keep their old knots (equal to a full
+/// inference: tested).
+pub fn build_pb_incremental(mesh: &TMesh, old: &PbSpline, split: &[crate::mesh::Rect]) -> PbSpline {
+    use rstar::{primitives::Rectangle, RTree, AABB};
+    let tree: RTree<Rectangle<[f64; 2]>> = RTree::bulk_load(split.iter().map(|r| Rectangle::from_corners([r.s_min, r.t_min], [r.s_max, r.t_max])).collect());
+    let mut old_of = vec![u32::MAX; mesh.points.len()];
+    for (i, &pid) in old.point_ids.iter().enumerate() {
+        old_of[pid as usize] = i as u32;
+    }
+    let k = old.degree.k();
+    let active = mesh.active_points();
+    let point_ids: Vec<u32> = (0..mesh.points.len() as u32).filter(|&i| active[i as usize]).collect();
+    let b = mesh.bounds();
+    let knots: Vec<crate::knots::LocalKnots> = point_ids
+        .par_iter()
+        .map(|&i| {
+            let o = old_of[i as usize];
+            if o != u32::MAX {
+                let a = &old.knots[o as usize];
+                let env = AABB::from_corners([a[0], a[5]], [a[k + 1], a[5 + k + 1]]);
+                if tree.locate_in_envelope_intersecting(env).next().is_none() {
+                    let mut kn = crate::knots::LocalKnots { s: [0.0; 5], t: [0.0; 5] };
+                    kn.s[..k + 2].copy_from_slice(&a[..k + 2]);
+                    kn.t[..k + 2].copy_from_slice(&a[5..5 + k + 2]);
+                    return kn;
+                }
+            }
+            let p = mesh.points[i as usize];
+            crate::knots::infer_in(mesh, b, p.s, p.t)
+        })
+        .collect();
+    PbSpline::from_parts(mesh, point_ids, knots)
 }
 
 /// Heights at every raster cell (row-major from t = 0).
@@ -230,8 +289,8 @@ pub fn initial_mesh(samples: &Samples, opts: &FitOptions) -> TMesh {
     let s0 = place((samples.width - 1) as f64, &mut ns);
     let t0 = place((samples.height - 1) as f64, &mut nt);
     let mut m = TMesh::grid(opts.degree, s0, t0, c0, ns, nt);
-    let valid: Vec<f64> = samples.z.iter().copied().filter(|v| !v.is_nan()).collect();
-    let mean = if valid.is_empty() { 0.0 } else { valid.iter().sum::<f64>() / valid.len() as f64 };
+    let (sum, cnt) = samples.z.iter().filter(|v| !v.is_nan()).fold((0.0, 0usize), |(s, n), v| (s + v, n + 1));
+    let mean = if cnt == 0 { 0.0 } else { sum / cnt as f64 };
     for p in &mut m.points {
         p.z = mean;
     }
@@ -263,12 +322,16 @@ impl Csr {
 
 /// Pattern: pairs of PB points whose supports overlap with positive area, plus mesh-line
 /// neighbours used by the regulariser.
-fn pattern(pb: &PbSpline, extra: &[Vec<u32>]) -> Csr {
+fn pattern(pb: &PbSpline, extra: &[Vec<u32>], free: Option<&[bool]>) -> Csr {
     let k = pb.degree.k();
     let n = pb.knots.len();
+    let is_free = |i: usize| free.is_none_or(|f| f[i]);
     let rows: Vec<Vec<u32>> = (0..n)
         .into_par_iter()
         .map(|i| {
+            if !is_free(i) {
+                return vec![i as u32]; // held: z_i = current value
+            }
             let a = &pb.knots[i];
             let (i0, i1) = pb.grid.index_range(a[0], a[k + 1], true);
             let (j0, j1) = pb.grid.index_range(a[5], a[5 + k + 1], false);
@@ -288,6 +351,7 @@ fn pattern(pb: &PbSpline, extra: &[Vec<u32>]) -> Csr {
             }
             v.push(i as u32);
             v.extend_from_slice(&extra[i]);
+            v.retain(|&q| is_free(q as usize));
             v.sort_unstable();
             v.dedup();
             v
@@ -338,7 +402,76 @@ fn line_triples(mesh: &TMesh, pb: &PbSpline) -> Vec<Vec<(u32, u32, f64, f64)>> {
 /// rational basis): z of every PB point; the current z are the warm start and the regulariser's
 /// prior. Returns the new z per PB point.
 pub fn fit_lsq(mesh: &TMesh, pb: &PbSpline, samples: &Samples) -> Result<Vec<f64>, TsplineError> {
+    fit_lsq_local(mesh, pb, samples, None, None)
+}
+
+/// A set of raster cells (bit per cell, row-major from t = 0).
+#[derive(Debug, Clone)]
+pub struct Region {
+    w: usize,
+    h: usize,
+    bits: Vec<u64>,
+    count: usize,
+}
+
+impl Region {
+    pub fn new(w: usize, h: usize) -> Region {
+        Region { w, h, bits: vec![0; (w * h).div_ceil(64)], count: 0 }
+    }
+    /// Adds the cells with s ∈ [s0, s1], t ∈ [t0, t1] (closed, clipped to the raster).
+    pub fn add_rect(&mut self, s0: f64, s1: f64, t0: f64, t1: f64) {
+        let i0 = s0.ceil().max(0.0);
+        let i1 = s1.floor().min(self.w as f64 - 1.0);
+        let j0 = t0.ceil().max(0.0);
+        let j1 = t1.floor().min(self.h as f64 - 1.0);
+        if i0 > i1 || j0 > j1 {
+            return;
+        }
+        for j in j0 as usize..=j1 as usize {
+            for i in i0 as usize..=i1 as usize {
+                let q = j * self.w + i;
+                let (wd, b) = (q / 64, 1u64 << (q % 64));
+                if self.bits[wd] & b == 0 {
+                    self.bits[wd] |= b;
+                    self.count += 1;
+                }
+            }
+        }
+    }
+    #[inline]
+    pub fn contains(&self, q: usize) -> bool {
+        self.bits[q / 64] & (1u64 << (q % 64)) != 0
+    }
+    pub fn len(&self) -> usize {
+        self.count
+    }
+    pub fn is_empty(&self) -> bool {
+        self.count == 0
+    }
+    /// Calls `f(q)` for the cells of rows j0..j1 in the set, in order (skips empty words).
+    fn for_rows(&self, j0: usize, j1: usize, mut f: impl FnMut(usize)) {
+        let (q0, q1) = (j0 * self.w, j1 * self.w);
+        let mut q = q0;
+        while q < q1 {
+            let wd = self.bits[q / 64];
+            if wd == 0 && q % 64 == 0 {
+                q += 64;
+                continue;
+            }
+            if wd & (1u64 << (q % 64)) != 0 {
+                f(q);
+            }
+            q += 1;
+        }
+    }
+}
+
+/// [`fit_lsq`] with some control points held (`free[i] == false`: z_i stays at its current
+/// value, its data terms move to the right-hand side) and the data restricted to `region` (the
+/// supports of the free points; cells outside do not depend on them).
+fn fit_lsq_local(mesh: &TMesh, pb: &PbSpline, samples: &Samples, free: Option<&[bool]>, region: Option<&Region>) -> Result<Vec<f64>, TsplineError> {
     let n = pb.knots.len();
+    let is_free = |i: usize| free.is_none_or(|f| f[i]);
     let triples = line_triples(mesh, pb);
     // The regulariser couples i, l and r of each triple: all pairs enter the pattern.
     let mut extra: Vec<Vec<u32>> = vec![Vec::new(); n];
@@ -354,7 +487,8 @@ pub fn fit_lsq(mesh: &TMesh, pb: &PbSpline, samples: &Samples) -> Result<Vec<f64
             }
         }
     }
-    let mut a = pattern(pb, &extra);
+    let mut a = pattern(pb, &extra, free);
+    let prior: Vec<f64> = pb.geom.iter().map(|g| g[2]).collect();
     let w = samples.width;
     let rows: Vec<usize> = (0..samples.height).collect();
     // A fixed number of row blocks (not the thread count) keeps the summation order, and so
@@ -368,24 +502,62 @@ pub fn fit_lsq(mesh: &TMesh, pb: &PbSpline, samples: &Samples) -> Result<Vec<f64
             let mut support = vec![0.0; n];
             let mut scratch = Vec::new();
             let mut row: Vec<(u32, f64)> = Vec::with_capacity(32);
-            for &j in js {
-                for i in 0..w {
-                    let d = samples.get(i, j);
-                    if d.is_nan() {
-                        continue;
+            // Neighbouring cells mostly see the same basis functions in the same order (same
+            // bucket, same spans): their CSR positions are looked up once and reused. Only the
+            // upper triangle (by PB index) is accumulated; it is mirrored after the merge.
+            let mut prev: Vec<u32> = Vec::with_capacity(32);
+            let mut pos: Vec<usize> = Vec::with_capacity(32 * 33 / 2);
+            let mut cell = |q: usize| {
+                let (i, j) = (q % w, q / w);
+                let d = samples.z[q];
+                if d.is_nan() {
+                    return;
+                }
+                row.clear();
+                if !pb.for_each_basis(i as f64, j as f64, &mut scratch, |q, v| row.push((q, v))) {
+                    return;
+                }
+                let mut d = d;
+                if free.is_some() {
+                    // held points: their part of the model moves to the right-hand side
+                    row.retain(|&(q, v)| {
+                        if is_free(q as usize) {
+                            true
+                        } else {
+                            d -= v * prior[q as usize];
+                            false
+                        }
+                    });
+                }
+                {
+                    let m = row.len();
+                    if !(m == prev.len() && row.iter().zip(&prev).all(|(r, &q)| r.0 == q)) {
+                        prev.clear();
+                        prev.extend(row.iter().map(|r| r.0));
+                        pos.clear();
+                        for x in 0..m {
+                            for y in x..m {
+                                let (p, q) = (row[x].0.min(row[y].0), row[x].0.max(row[y].0));
+                                pos.push(a.pos(p as usize, q));
+                            }
+                        }
                     }
-                    row.clear();
-                    if !pb.for_each_basis(i as f64, j as f64, &mut scratch, |q, v| row.push((q, v))) {
-                        continue;
-                    }
-                    for &(p, vp) in &row {
+                    let mut k = 0;
+                    for x in 0..m {
+                        let (p, vp) = row[x];
                         rhs[p as usize] += vp * d;
                         support[p as usize] += vp;
-                        for &(q, vq) in &row {
-                            vals[a.pos(p as usize, q)] += vp * vq;
+                        for &(_, vq) in &row[x..] {
+                            vals[pos[k]] += vp * vq;
+                            k += 1;
                         }
                     }
                 }
+            };
+            let (j0, j1) = (js[0], js[js.len() - 1] + 1);
+            match region {
+                Some(r) => r.for_rows(j0, j1, &mut cell),
+                None => (j0 * w..j1 * w).for_each(&mut cell),
             }
             (vals, rhs, support)
         })
@@ -397,15 +569,29 @@ pub fn fit_lsq(mesh: &TMesh, pb: &PbSpline, samples: &Samples) -> Result<Vec<f64
         rhs.iter_mut().zip(&r).for_each(|(x, y)| *x += y);
         support.iter_mut().zip(&s).for_each(|(x, y)| *x += y);
     }
-    let prior: Vec<f64> = pb.geom.iter().map(|g| g[2]).collect();
+    // mirror the accumulated upper triangle
+    for i in 0..n {
+        for k in a.start[i]..a.start[i + 1] {
+            let j = a.cols[k] as usize;
+            if j < i {
+                a.vals[k] = a.vals[a.pos(j, i as u32)];
+            }
+        }
+    }
     let diag: Vec<f64> = (0..n).map(|i| a.vals[a.pos(i, i as u32)]).collect();
-    let supported: Vec<f64> = diag.iter().cloned().filter(|&d| d > 0.0).collect();
+    let supported: Vec<f64> = (0..n).filter(|&i| is_free(i) && diag[i] > 0.0).map(|i| diag[i]).collect();
     if supported.is_empty() {
         return Err(TsplineError::Fit("no valid raster cell lies inside the mesh".into()));
     }
     let mean_diag = supported.iter().sum::<f64>() / supported.len() as f64;
     // A9 regulariser
     for i in 0..n {
+        if !is_free(i) {
+            let pii = a.pos(i, i as u32);
+            a.vals[pii] = 1.0;
+            rhs[i] = prior[i];
+            continue;
+        }
         let lack = (1.0 - support[i] / 0.5).max(0.0);
         let lam = 1e-3 * mean_diag * lack * lack;
         // ridge: tiny everywhere, stronger where data is lacking
@@ -421,9 +607,16 @@ pub fn fit_lsq(mesh: &TMesh, pb: &PbSpline, samples: &Samples) -> Result<Vec<f64
             let idx = [i as u32, l, r];
             let c = [1.0, -wl, -wr];
             for x in 0..3 {
+                if !is_free(idx[x] as usize) {
+                    continue;
+                }
                 for y in 0..3 {
-                    let p = a.pos(idx[x] as usize, idx[y]);
-                    a.vals[p] += lam * c[x] * c[y];
+                    if is_free(idx[y] as usize) {
+                        let p = a.pos(idx[x] as usize, idx[y]);
+                        a.vals[p] += lam * c[x] * c[y];
+                    } else {
+                        rhs[idx[x] as usize] -= lam * c[x] * c[y] * prior[idx[y] as usize];
+                    }
                 }
             }
         }
@@ -559,8 +752,9 @@ fn pb_param(pb: &PbSpline, i: usize) -> [f64; 2] {
     [pb.knots[i][h], pb.knots[i][5 + h]]
 }
 
-/// Leaves to refine: the thesis' 3×3 probes plus leaves holding valid cells over the tolerance.
-fn mark_cells(mesh: &TMesh, pb: &PbSpline, samples: &Samples, surf: &[f64], tol: f64) -> Vec<CellId> {
+/// Leaves to refine: the thesis' 3×3 probes plus `over_leaves` (leaves holding valid cells over
+/// the tolerance, from [`error_pass`]).
+fn mark_cells(mesh: &TMesh, pb: &PbSpline, samples: &Samples, tol: f64, over_leaves: Vec<CellId>) -> Vec<CellId> {
     let leaves: Vec<CellId> = mesh.leaves().collect();
     let mut marked: Vec<CellId> = leaves
         .par_iter()
@@ -587,27 +781,275 @@ fn mark_cells(mesh: &TMesh, pb: &PbSpline, samples: &Samples, surf: &[f64], tol:
             inside && over
         })
         .collect();
-    let w = samples.width;
-    let extra: Vec<CellId> = (0..samples.z.len())
-        .into_par_iter()
-        .filter(|&q| {
-            let d = samples.z[q];
-            !d.is_nan() && !((surf[q] - d).abs() <= tol)
-        })
-        .flat_map_iter(|q| {
-            let (i, j) = (q % w, q / w);
-            mesh.cells_at(i as f64, j as f64).into_iter().filter(|&c| mesh.cells[c as usize].is_leaf())
-        })
-        .collect();
-    marked.extend(extra);
+    marked.extend(over_leaves);
     marked.sort_unstable();
     marked.dedup();
     marked
 }
 
-/// Per-cell |Δz| over valid cells.
-fn abs_errors(samples: &Samples, surf: &[f64]) -> Vec<f64> {
-    samples.z.iter().zip(surf).filter(|(d, _)| !d.is_nan()).map(|(d, z)| if z.is_nan() { f64::INFINITY } else { (z - d).abs() }).collect()
+/// Streaming sums of |Δz| over a block of cells (merged in block order: deterministic).
+#[derive(Debug, Clone, Copy, Default)]
+struct ErrAcc {
+    n: usize,
+    sum: f64,
+    sumsq: f64,
+    max: f64,
+    over: usize,
+}
+
+impl ErrAcc {
+    #[inline]
+    fn push(&mut self, e: f64, tol: f64) {
+        self.n += 1;
+        self.sum += e;
+        self.sumsq += e * e;
+        self.max = self.max.max(e);
+        self.over += (e > tol) as usize;
+    }
+    fn merge(&mut self, o: &ErrAcc) {
+        self.n += o.n;
+        self.sum += o.sum;
+        self.sumsq += o.sumsq;
+        self.max = self.max.max(o.max);
+        self.over += o.over;
+    }
+}
+
+/// Cells per evaluation block of the error pass (fixed, so sums do not depend on the threads).
+const PASS_BLOCK: usize = 1 << 16;
+/// Cells per dense evaluation call of the error pass (at least 16 per leaf cell).
+const PASS_BLOCK_EVAL: usize = 1 << 22;
+
+/// The error check over EVERY valid cell (A7/A17), streamed in row blocks so no full-raster
+/// surface is ever held: [`eval_errors`] then [`summarize`]. Returns the statistics and the leaf
+/// cells holding a valid cell over the tolerance.
+pub fn error_pass(mesh: &TMesh, pb: &PbSpline, samples: &Samples, tol: f64, backend: &Backend) -> Result<(ErrorStats, Vec<CellId>), TsplineError> {
+    let mut errs = vec![f64::NAN; samples.z.len()];
+    eval_errors(pb, samples, backend, &mut errs)?;
+    Ok(summarize(mesh, pb, samples.width, &errs, tol))
+}
+
+/// |Δz| at every valid cell into `errs` (NaN at no-data cells; +∞ where the surface is
+/// undefined), the surface evaluated in big row blocks (CPU in parallel, or the OpenCL grid
+/// kernel per block): the dense evaluators amortise their per-call set-up (e.g. an element
+/// extraction) over a block, and only one block of heights is held at a time.
+pub fn eval_errors(pb: &PbSpline, samples: &Samples, backend: &Backend, errs: &mut [f64]) -> Result<(), TsplineError> {
+    let w = samples.width;
+    let sub = (PASS_BLOCK / w.max(1)).max(1);
+    let br = ((PASS_BLOCK_EVAL.max(16 * pb.cells.len()) / w.max(1)).max(1) / sub).max(1) * sub;
+    let sp = match backend {
+        Backend::OpenCl(o) => Some(o.upload(pb)?),
+        Backend::Cpu => None,
+    };
+    for (b, out) in errs.chunks_mut(br * w).enumerate() {
+        let j0 = b * br;
+        let g = GridSpec { s0: 0.0, t0: j0 as f64, ds: 1.0, dt: 1.0, ns: w, nt: out.len() / w };
+        let z = match (backend, &sp) {
+            (Backend::OpenCl(o), Some(sp)) => o.eval_grid(sp, &g)?,
+            _ => pb.eval_grid(&g, true),
+        };
+        let d = &samples.z[j0 * w..j0 * w + out.len()];
+        out.par_chunks_mut(sub * w).zip(z.par_chunks(sub * w)).zip(d.par_chunks(sub * w)).for_each(|((o, zc), dc)| {
+            for ((e, &zk), &dk) in o.iter_mut().zip(zc).zip(dc) {
+                *e = if dk.is_nan() { f64::NAN } else if zk.is_nan() { f64::INFINITY } else { (zk - dk).abs() };
+            }
+        });
+    }
+    Ok(())
+}
+
+/// [`eval_errors`] restricted to the cells of `region` (PB-spline path, point by point).
+fn eval_errors_region(pb: &PbSpline, samples: &Samples, region: &Region, errs: &mut [f64]) {
+    let w = samples.width;
+    let sub = (PASS_BLOCK / w.max(1)).max(1);
+    errs.par_chunks_mut(sub * w).enumerate().for_each(|(b, out)| {
+        let j0 = b * sub;
+        let j1 = j0 + out.len() / w;
+        region.for_rows(j0, j1, |q| {
+            let dk = samples.z[q];
+            out[q - j0 * w] = if dk.is_nan() {
+                f64::NAN
+            } else {
+                let zk = pb.point((q % w) as f64, (q / w) as f64)[2];
+                if zk.is_nan() { f64::INFINITY } else { (zk - dk).abs() }
+            };
+        });
+    });
+}
+
+/// Statistics of `errs` over the valid cells (summed over fixed blocks in order: independent of
+/// the thread count) and the leaf cells whose closed box holds a cell over the tolerance.
+/// The median is taken on an f32 copy (exact to f32 rounding); the maximum and the tolerance
+/// test use the f64 errors.
+pub fn summarize(mesh: &TMesh, pb: &PbSpline, w: usize, errs: &[f64], tol: f64) -> (ErrorStats, Vec<CellId>) {
+    // Leaves whose closed box holds (s, t): through the PB-spline's bucket grid when its cell
+    // list is the mesh's leaves in id order (checked per hit), else through the R-tree.
+    let leaf_ids: Vec<CellId> = mesh.leaves().collect();
+    let same_order = leaf_ids.len() == pb.cells.len();
+    let leaves_at = |s: f64, t: f64, f: &mut dyn FnMut(CellId, crate::mesh::Rect)| {
+        if same_order {
+            let (bi, _) = pb.grid.index_range(s, s, true);
+            let (bj, _) = pb.grid.index_range(t, t, false);
+            let b = (bj * pb.grid.ns + bi) as usize;
+            let mut ok = true;
+            let mut hits: [(CellId, crate::mesh::Rect); 8] = [(0, crate::mesh::Rect::new(0.0, 0.0, 0.0, 0.0)); 8];
+            let mut nh = 0;
+            for &ci in &pb.cell_items[pb.cell_start[b] as usize..pb.cell_start[b + 1] as usize] {
+                let c = pb.cells[ci as usize];
+                if s < c[0] || s > c[2] || t < c[1] || t > c[3] {
+                    continue;
+                }
+                let id = leaf_ids[ci as usize];
+                let r = mesh.cells[id as usize].rect;
+                if nh == hits.len() || r != crate::mesh::Rect::new(c[0], c[1], c[2], c[3]) {
+                    ok = false;
+                    break;
+                }
+                hits[nh] = (id, r);
+                nh += 1;
+            }
+            if ok && nh > 0 {
+                for &(id, r) in &hits[..nh] {
+                    f(id, r);
+                }
+                return;
+            }
+        }
+        for c in mesh.cells_at(s, t) {
+            let cell = &mesh.cells[c as usize];
+            if cell.is_leaf() {
+                f(c, cell.rect);
+            }
+        }
+    };
+    let parts: Vec<(ErrAcc, Vec<CellId>)> = errs
+        .par_chunks(PASS_BLOCK)
+        .enumerate()
+        .map(|(b, ch)| {
+            let q0 = b * PASS_BLOCK;
+            let mut acc = ErrAcc::default();
+            let mut over = Vec::new();
+            let mut interior: Option<crate::mesh::Rect> = None;
+            for (k, &e) in ch.iter().enumerate() {
+                if e.is_nan() {
+                    continue;
+                }
+                acc.push(e, tol);
+                if e <= tol {
+                    continue;
+                }
+                let q = q0 + k;
+                let (s, t) = ((q % w) as f64, (q / w) as f64);
+                if let Some(r) = interior {
+                    if r.s_min < s && s < r.s_max && r.t_min < t && t < r.t_max {
+                        continue; // the only leaf holding this cell is already collected
+                    }
+                }
+                interior = None;
+                leaves_at(s, t, &mut |c, r| {
+                    over.push(c);
+                    if r.s_min < s && s < r.s_max && r.t_min < t && t < r.t_max {
+                        interior = Some(r);
+                    }
+                });
+            }
+            over.sort_unstable();
+            over.dedup();
+            (acc, over)
+        })
+        .collect();
+    let mut acc = ErrAcc::default();
+    let mut over = Vec::new();
+    for (a, o) in parts {
+        acc.merge(&a);
+        over.extend(o);
+    }
+    over.sort_unstable();
+    over.dedup();
+    let n = acc.n;
+    if n == 0 {
+        return (ErrorStats::default(), over);
+    }
+    let mut e32: Vec<f32> = errs.iter().filter(|e| !e.is_nan()).map(|&e| e as f32).collect();
+    let mean = acc.sum / n as f64;
+    let sigma = (acc.sumsq / n as f64 - mean * mean).max(0.0).sqrt();
+    let mid = n / 2;
+    let (_, m, _) = e32.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
+    let mut median = *m as f64;
+    if n % 2 == 0 {
+        let lo = e32[..mid].iter().cloned().fold(f32::MIN, f32::max) as f64;
+        median = 0.5 * (median + lo);
+    }
+    (ErrorStats { count: n, mean, sigma, median, max: acc.max, rms: (acc.sumsq / n as f64).sqrt(), over_tolerance: acc.over }, over)
+}
+
+/// Share of the PB points whose basis changed (new, or other knots) up to which an iteration
+/// re-solves and re-checks locally instead of globally.
+const LOCAL_SHARE: f64 = 0.2;
+
+/// The local update after a refinement (an optimisation of the loop, not of the result's
+/// guarantee): points whose blending function changed (new points, changed knots) and every
+/// point whose support overlaps theirs are re-solved with the others held; the surface changes
+/// only inside the supports of the re-solved points, so only those cells are re-checked.
+/// Returns None when the change is too large for that to pay (the iteration goes global).
+fn local_update(old: &PbSpline, new: &PbSpline, n_points: usize, w: usize, h: usize) -> Option<(Vec<bool>, Region)> {
+    let n = new.knots.len();
+    let mut old_of = vec![u32::MAX; n_points];
+    for (i, &pid) in old.point_ids.iter().enumerate() {
+        old_of[pid as usize] = i as u32;
+    }
+    let changed: Vec<bool> = (0..n)
+        .map(|i| {
+            let o = old_of[new.point_ids[i] as usize];
+            o == u32::MAX || old.knots[o as usize] != new.knots[i] || old.geom[o as usize][3] != new.geom[i][3]
+        })
+        .collect();
+    let nu = changed.iter().filter(|&&c| c).count();
+    if nu == 0 || nu as f64 > LOCAL_SHARE * n as f64 {
+        return None;
+    }
+    let k = new.degree.k();
+    let supp = |i: usize| {
+        let a = &new.knots[i];
+        (a[0], a[k + 1], a[5], a[5 + k + 1])
+    };
+    let lists: Vec<Vec<u32>> = (0..n)
+        .into_par_iter()
+        .filter(|&i| changed[i])
+        .map(|i| {
+            let (s0, s1, t0, t1) = supp(i);
+            let (i0, i1) = new.grid.index_range(s0, s1, true);
+            let (j0, j1) = new.grid.index_range(t0, t1, false);
+            let mut v = vec![i as u32];
+            for bj in j0..=j1 {
+                for bi in i0..=i1 {
+                    let b = (bj * new.grid.ns + bi) as usize;
+                    for &q in &new.pt_items[new.pt_start[b] as usize..new.pt_start[b + 1] as usize] {
+                        let (a0, a1, b0, b1) = supp(q as usize);
+                        if s1.min(a1) - s0.max(a0) > 0.0 && t1.min(b1) - t0.max(b0) > 0.0 {
+                            v.push(q);
+                        }
+                    }
+                }
+            }
+            v
+        })
+        .collect();
+    let mut free = vec![false; n];
+    for l in &lists {
+        for &q in l {
+            free[q as usize] = true;
+        }
+    }
+    let mut region = Region::new(w, h);
+    for i in (0..n).filter(|&i| free[i]) {
+        let (s0, s1, t0, t1) = supp(i);
+        region.add_rect(s0, s1, t0, t1);
+    }
+    if region.len() * 2 > w * h {
+        return None;
+    }
+    Some((free, region))
 }
 
 /// The approximation loop (Alg. 3). `progress` gets every iteration's statistics.
@@ -624,19 +1066,44 @@ pub fn fit(samples: &Samples, opts: &FitOptions, backend: &Backend, progress: &m
     let mut mesh = initial_mesh(samples, opts);
     let mut iterations = Vec::new();
     let mut refined = 0usize;
+    // |Δz| per raster cell of the current surface, kept across iterations (local updates
+    // re-check only the cells whose surface value can have changed)
+    let mut errs = vec![f64::NAN; samples.z.len()];
+    let mut prev: Option<PbSpline> = None;
+    let mut split_rects: Vec<crate::mesh::Rect> = Vec::new();
+    let (w, h) = (samples.width, samples.height);
     for it in 0.. {
         let t0 = Instant::now();
-        let mut pb = build_pb(&mesh, backend)?;
-        let z = match opts.method {
-            Method::Lsq => fit_lsq(&mesh, &pb, samples)?,
-            Method::Drag => fit_drag(&pb, samples, opts.drag_steps, 0.01 * opts.max_error, backend)?,
+        let mut pb = match (&prev, backend) {
+            (Some(old), Backend::Cpu) => build_pb_incremental(&mesh, old, &split_rects),
+            _ => build_pb(&mesh, backend)?,
+        };
+        let t_build = t0.elapsed().as_secs_f64();
+        let local = match (&prev, opts.method, opts.local_updates) {
+            (Some(old), Method::Lsq, true) => local_update(old, &pb, mesh.points.len(), w, h),
+            _ => None,
+        };
+        let z = match (opts.method, &local) {
+            (Method::Lsq, Some((free, region))) => fit_lsq_local(&mesh, &pb, samples, Some(free), Some(region))?,
+            (Method::Lsq, None) => fit_lsq(&mesh, &pb, samples)?,
+            (Method::Drag, _) => fit_drag(&pb, samples, opts.drag_steps, 0.01 * opts.max_error, backend)?,
         };
         for (i, &pid) in pb.point_ids.iter().enumerate() {
             mesh.points[pid as usize].z = z[i];
             pb.geom[i][2] = z[i];
         }
-        let surf = eval_samples(&pb, samples.width, samples.height, backend)?;
-        let err = ErrorStats::from_abs(abs_errors(samples, &surf), opts.max_error);
+        let t_opt = t0.elapsed().as_secs_f64();
+        match &local {
+            Some((_, region)) => eval_errors_region(&pb, samples, region, &mut errs),
+            None => eval_errors(&pb, samples, backend, &mut errs)?,
+        }
+        let (mut err, mut over_leaves) = summarize(&mesh, &pb, w, &errs, opts.max_error);
+        if err.over_tolerance == 0 && local.is_some() {
+            // the tolerance is declared only on a fresh check of every cell
+            eval_errors(&pb, samples, backend, &mut errs)?;
+            (err, over_leaves) = summarize(&mesh, &pb, w, &errs, opts.max_error);
+        }
+        let t_check = t0.elapsed().as_secs_f64();
         let st = IterationStats {
             iteration: it,
             control_points: pb.point_ids.len(),
@@ -644,6 +1111,9 @@ pub fn fit(samples: &Samples, opts: &FitOptions, backend: &Backend, progress: &m
             refined_cells: refined,
             error: err.clone(),
             seconds: t0.elapsed().as_secs_f64(),
+            seconds_build: t_build,
+            seconds_optimise: t_opt - t_build,
+            seconds_check: t_check - t_opt,
         };
         progress(&st);
         iterations.push(st);
@@ -653,7 +1123,7 @@ pub fn fit(samples: &Samples, opts: &FitOptions, backend: &Backend, progress: &m
         if it >= opts.max_iterations {
             return Ok(FitResult { mesh, iterations, stop: StopReason::MaxIterations });
         }
-        let marked = mark_cells(&mesh, &pb, samples, &surf, opts.max_error);
+        let marked = mark_cells(&mesh, &pb, samples, opts.max_error, over_leaves);
         let splittable: Vec<CellId> = marked
             .into_iter()
             .filter(|&c| {
@@ -682,7 +1152,10 @@ pub fn fit(samples: &Samples, opts: &FitOptions, backend: &Backend, progress: &m
             }
         }
         refined = splittable.len();
+        // leaves of this mesh that the refinement (splits and repair) turned into parents
+        split_rects = mesh.leaves().filter(|&c| !next.cells[c as usize].is_leaf()).map(|c| mesh.cells[c as usize].rect).collect();
         mesh = next;
+        prev = Some(pb);
     }
     unreachable!("the loop returns")
 }
@@ -754,6 +1227,36 @@ mod tests {
                     let id = r.mesh.point_id_at(p.s, p.t).expect("truth point in the fitted mesh");
                     assert!((r.mesh.points[id as usize].z - p.z).abs() < 1e-9);
                 }
+            }
+        }
+    }
+
+    /// The incremental PB-spline build (knots re-inferred only near split cells) equals a full
+    /// build after every refinement step of a fit on a bumpy surface.
+    #[test]
+    fn incremental_knots_equal_full_inference() {
+        for degree in [Degree::Linear, Degree::Cubic] {
+            let mut m = TMesh::grid(degree, -8.0, -8.0, 16.0, 5, 4);
+            let mut g = |s: f64, t: f64| (s, t, 0.0);
+            let mut seed = 11u64;
+            let mut old = PbSpline::build(&m);
+            for _ in 0..5 {
+                let leaves: Vec<CellId> = m.leaves().collect();
+                let mut next = m.clone();
+                for &c in &leaves {
+                    let r = m.cells[c as usize].rect;
+                    if lcg(&mut seed) < 0.15 && r.width() >= 2.0 && next.cells[c as usize].is_leaf() {
+                        next.split(c, &mut g);
+                    }
+                }
+                next.repair(1.0, &mut g);
+                let split: Vec<Rect> = m.leaves().filter(|&c| !next.cells[c as usize].is_leaf()).map(|c| m.cells[c as usize].rect).collect();
+                let inc = build_pb_incremental(&next, &old, &split);
+                let full = PbSpline::build(&next);
+                assert_eq!(inc.point_ids, full.point_ids);
+                assert_eq!(inc.knots, full.knots, "{degree:?}");
+                m = next;
+                old = full;
             }
         }
     }

@@ -70,8 +70,13 @@ fn ray(mesh: &TMesh, horizontal: bool, at: f64, from: f64, dir: f64, k: usize, l
 
 /// Knot inference for one point (spec §3.6): returns σ_i, τ_i with K+2 entries each.
 pub fn infer(mesh: &TMesh, s: f64, t: f64) -> LocalKnots {
+    infer_in(mesh, mesh.bounds(), s, t)
+}
+
+/// [`infer`] with the mesh bounds given: `TMesh::bounds` visits every cell, so callers that
+/// infer the knots of many points compute it once (the fit: O(n) instead of O(n·cells)).
+pub fn infer_in(mesh: &TMesh, b: Rect, s: f64, t: f64) -> LocalKnots {
     let k = mesh.degree.half();
-    let b = mesh.bounds();
     let mut buf = Vec::new();
     let mut out = LocalKnots { s: [0.0; 5], t: [0.0; 5] };
     for (horizontal, centre, at, lo_lim, hi_lim) in [(true, s, t, b.s_min, b.s_max), (false, t, s, b.t_min, b.t_max)] {

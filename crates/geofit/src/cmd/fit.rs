@@ -166,6 +166,16 @@ struct Report<'a> {
     compression_ratio: f64,
     iterations: &'a [IterationStats],
     seconds: f64,
+    /// Peak resident memory of the process (Linux VmHWM), MiB; null elsewhere.
+    peak_rss_mib: Option<f64>,
+}
+
+/// Peak resident set size of this process in MiB (Linux `/proc/self/status` VmHWM).
+fn peak_rss_mib() -> Option<f64> {
+    let s = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = s.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kib: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib / 1024.0)
 }
 
 pub fn run(args: Args, config: &Config) -> CmdResult {
@@ -193,6 +203,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         (raster, None)
     };
     let (samples, georef, mask) = samples_from_raster(&raster, &name)?;
+    drop(raster); // the samples hold the data from here on (halves the peak for big rasters)
     let valid = samples.valid_count();
     if valid == 0 {
         return Err(CliError::findings(format!("{name}: the raster has no valid cell")));
@@ -225,8 +236,18 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         progress.set(
             st.iteration as u64,
             &format!(
-                "iteration {}: {} control points, max {:.4}, mean {:.4}, RMS {:.4}, {} cells over {} ({:.2} s)",
-                st.iteration, st.control_points, st.error.max, st.error.mean, st.error.rms, st.error.over_tolerance, e, st.seconds
+                "iteration {}: {} control points, max {:.4}, mean {:.4}, RMS {:.4}, {} cells over {} ({:.2} s: build {:.2}, optimise {:.2}, check {:.2})",
+                st.iteration,
+                st.control_points,
+                st.error.max,
+                st.error.mean,
+                st.error.rms,
+                st.error.over_tolerance,
+                e,
+                st.seconds,
+                st.seconds_build,
+                st.seconds_optimise,
+                st.seconds_check
             ),
         );
     };
@@ -248,6 +269,9 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         ),
     };
     progress.finish(&line);
+    if let Some(mib) = peak_rss_mib() {
+        config.notice(&format!("fit: {:.1} s, peak memory {mib:.0} MiB", t_start.elapsed().as_secs_f64()));
+    }
     let points = last.control_points;
     if points as f64 > 0.25 * valid as f64 {
         config.notice(&format!(
@@ -296,6 +320,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
             compression_ratio: valid as f64 / points as f64,
             iterations: &result.iterations,
             seconds: t_start.elapsed().as_secs_f64(),
+            peak_rss_mib: peak_rss_mib(),
         };
         write_json_report(path, &rep)?;
     }
