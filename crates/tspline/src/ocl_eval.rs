@@ -11,9 +11,13 @@
 use ocl::{flags, Buffer, Context, Device, Kernel, Platform, Program, Queue};
 
 use crate::eval::{GridSpec, PbSpline};
+use crate::extraction::Extraction;
 use crate::knots::LocalKnots;
 use crate::mesh::TMesh;
 use crate::TsplineError;
+
+/// Points per work item of the element kernels (`RUN` in `tspline.cl`).
+const RUN: usize = 64;
 
 /// The kernel source, compiled at run time.
 pub const KERNEL_SRC: &str = include_str!("tspline.cl");
@@ -40,6 +44,20 @@ pub struct OclSpline {
     cstart: Buffer<u32>,
     citems: Buffer<u32>,
     pb: PbSplineGrid,
+    /// The element extraction (dense evaluation), `None` after [`OclEvaluator::update_geometry`]
+    /// (its blocks depend on the geometry; the PB-spline kernels serve until the next upload)
+    /// and for small uploads.
+    ext: Option<OclExtraction>,
+}
+
+/// Device buffers of an [`Extraction`].
+struct OclExtraction {
+    data: Buffer<f64>,
+    flags: Buffer<u32>,
+    start: Buffer<u32>,
+    items: Buffer<u32>,
+    grid: crate::eval::BucketGrid,
+    stride: u32,
 }
 
 #[derive(Clone, Copy)]
@@ -127,8 +145,24 @@ impl OclEvaluator {
         Buffer::<f64>::builder().queue(self.queue.clone()).flags(flags::MEM_WRITE_ONLY).len(n.max(1)).build().map_err(err)
     }
 
-    /// Uploads a compiled PB-spline.
+    /// Uploads a compiled PB-spline and its element extraction (computed here, on the host's
+    /// rayon pool: it is a per-cell pass that the dense kernels then amortise).
     pub fn upload(&self, pb: &PbSpline) -> Result<OclSpline, TsplineError> {
+        let mut sp = self.upload_pb(pb)?;
+        let ex = Extraction::new(pb, true);
+        sp.ext = Some(OclExtraction {
+            data: self.buf(&ex.data)?,
+            flags: self.buf(&ex.flags)?,
+            start: self.buf(&ex.start)?,
+            items: self.buf(&ex.items)?,
+            grid: ex.grid,
+            stride: ex.stride as u32,
+        });
+        Ok(sp)
+    }
+
+    /// The PB-spline buffers only (reference kernels, knot derivation).
+    fn upload_pb(&self, pb: &PbSpline) -> Result<OclSpline, TsplineError> {
         let knots: Vec<f64> = pb.knots.iter().flatten().copied().collect();
         let poly: Vec<f64> = pb.poly.iter().flatten().copied().collect();
         let geom: Vec<f64> = pb.geom.iter().flatten().copied().collect();
@@ -144,13 +178,37 @@ impl OclEvaluator {
             cstart: self.buf(&pb.cell_start)?,
             citems: self.buf(&pb.cell_items)?,
             pb: PbSplineGrid { s0: g.s0, t0: g.t0, ds: g.ds, dt: g.dt, ns: g.ns, nt: g.nt, k: pb.degree.k() as u32 },
+            ext: None,
         })
     }
 
     /// Replaces the geometry (after a fit step) without re-uploading the rest.
     pub fn update_geometry(&self, sp: &mut OclSpline, pb: &PbSpline) -> Result<(), TsplineError> {
         let geom: Vec<f64> = pb.geom.iter().flatten().copied().collect();
+        sp.ext = None;
         sp.geom.write(&geom).enq().map_err(err)
+    }
+
+    /// The dense-evaluation kernel: the element path when the extraction is current, else the
+    /// PB-spline kernel `name` (same numbers to 1e-12).
+    /// `n`: points; `runs`: work items of the element kernel (each evaluates up to [`RUN`]
+    /// consecutive points).
+    fn dense_kernel<'a>(&'a self, name: &str, sp: &'a OclSpline, n: usize, runs: usize) -> Result<ocl::builders::KernelBuilder<'a>, TsplineError> {
+        match &sp.ext {
+            Some(ex) => {
+                let mut kb = self.kernel(&format!("{name}_ext"), sp, runs)?;
+                let eg = ex.grid;
+                kb.arg(eg.s0).arg(eg.t0).arg(eg.ds).arg(eg.dt).arg(eg.ns).arg(eg.nt).arg(ex.stride);
+                kb.arg(&sp.knots).arg(&sp.poly).arg(&sp.geom).arg(&sp.cells).arg(&sp.pstart).arg(&sp.pitems).arg(&sp.cstart).arg(&sp.citems);
+                kb.arg(&ex.data).arg(&ex.flags).arg(&ex.start).arg(&ex.items);
+                Ok(kb)
+            }
+            None => {
+                let mut kb = self.kernel(name, sp, n)?;
+                kb.arg(&sp.knots).arg(&sp.poly).arg(&sp.geom).arg(&sp.cells).arg(&sp.pstart).arg(&sp.pitems).arg(&sp.cstart).arg(&sp.citems);
+                Ok(kb)
+            }
+        }
     }
 
     fn kernel(&self, name: &str, sp: &OclSpline, n: usize) -> Result<ocl::builders::KernelBuilder<'_>, TsplineError> {
@@ -167,11 +225,9 @@ impl OclEvaluator {
         if n == 0 {
             return Ok(Vec::new());
         }
-        let flat: Vec<f64> = st.iter().flatten().copied().collect();
-        let stb = self.buf(&flat)?;
+        let stb = self.buf(st.as_flattened())?;
         let out = self.out_buf(n)?;
-        let mut kb = self.kernel("eval_points", sp, n)?;
-        kb.arg(&sp.knots).arg(&sp.poly).arg(&sp.geom).arg(&sp.cells).arg(&sp.pstart).arg(&sp.pitems).arg(&sp.cstart).arg(&sp.citems);
+        let mut kb = self.dense_kernel("eval_points", sp, n, n.div_ceil(RUN))?;
         kb.arg(&stb).arg(&out).arg(n as u32);
         let k = kb.build().map_err(err)?;
         unsafe { k.enq().map_err(err)? };
@@ -187,8 +243,7 @@ impl OclEvaluator {
             return Ok(Vec::new());
         }
         let out = self.out_buf(n)?;
-        let mut kb = self.kernel("eval_grid", sp, n)?;
-        kb.arg(&sp.knots).arg(&sp.poly).arg(&sp.geom).arg(&sp.cells).arg(&sp.pstart).arg(&sp.pitems).arg(&sp.cstart).arg(&sp.citems);
+        let mut kb = self.dense_kernel("eval_grid", sp, n, g.ns.div_ceil(RUN) * g.nt)?;
         kb.arg(g.s0).arg(g.t0).arg(g.ds).arg(g.dt).arg(g.ns as u32).arg(g.nt as u32).arg(&out);
         let k = kb.build().map_err(err)?;
         unsafe { k.enq().map_err(err)? };
@@ -222,7 +277,7 @@ impl OclEvaluator {
         let ids: Vec<u32> = (0..mesh.points.len() as u32).filter(|&i| active[i as usize]).collect();
         let zero = LocalKnots { s: [0.0; 5], t: [0.0; 5] };
         let tmp = PbSpline::from_parts(mesh, ids.clone(), vec![zero; ids.len()]);
-        let sp = self.upload(&tmp)?;
+        let sp = self.upload_pb(&tmp)?;
         let params: Vec<f64> = ids.iter().flat_map(|&i| [mesh.points[i as usize].s, mesh.points[i as usize].t]).collect();
         let n = ids.len();
         let pbuf = self.buf(&params)?;
@@ -306,6 +361,14 @@ mod tests {
                 assert!((a - g).abs() <= 1e-12 * a.abs().max(1.0), "{degree:?} point {:?}: cpu {a} ocl {g}", st[i]);
             }
             assert!(nan > 0 && nan < st.len() / 2);
+            // the PB-spline kernel (used once the geometry changed) gives the same numbers
+            let mut sp_ref = ocl.upload(&pb).unwrap();
+            ocl.update_geometry(&mut sp_ref, &pb).unwrap();
+            let n_ref = if degree == Degree::Cubic { 200_000 } else { st.len() };
+            let gpu_ref = ocl.eval_points(&sp_ref, &st[..n_ref]).unwrap();
+            for (i, (a, g)) in cpu.iter().zip(&gpu_ref).enumerate() {
+                assert!((a.is_nan() && g.is_nan()) || (a - g).abs() <= 1e-12 * a.abs().max(1.0), "{degree:?} reference kernel at {:?}: cpu {a} ocl {g}", st[i]);
+            }
             // grid kernel
             let gs = GridSpec { s0: b.s_min, t0: b.t_min, ds: 0.7, dt: 0.9, ns: 150, nt: 100 };
             let a = pb.eval_grid(&gs, false);
@@ -350,6 +413,65 @@ mod tests {
         let b = fit_drag(&pb, &samples, 25, 0.0, &Backend::OpenCl(&ocl)).unwrap();
         for (x, y) in a.iter().zip(&b) {
             assert!((x - y).abs() <= 1e-9 * x.abs().max(1.0), "{x} vs {y}");
+        }
+    }
+
+    /// Where the PoCL time goes (ignored; `cargo test -p tspline --release -- --ignored
+    /// --nocapture ocl_throughput`): host-side extraction + upload, the points kernel (10^7
+    /// parameter pairs in, heights out), the grid kernel (no input transfer), and the PB-spline
+    /// kernel, on the benchmark's mesh shape.
+    #[test]
+    #[ignore]
+    fn ocl_throughput() {
+        use std::time::Instant;
+        let ocl = OclEvaluator::new().expect("OpenCL");
+        let n = 315;
+        let mut m = TMesh::grid(Degree::Cubic, 0.0, 0.0, 10.0, n, n);
+        let mut g = |s: f64, t: f64| (s, t, 0.0);
+        let band = (n / 2) as f64 * 10.0;
+        for c in m.leaves_in(Rect::new(0.5, band + 0.5, n as f64 * 10.0 - 0.5, band + 9.5)) {
+            m.split(c, &mut g);
+        }
+        for p in &mut m.points {
+            p.z = 20.0 * (p.s * 0.013).sin() * (p.t * 0.011).cos() + 0.01 * p.s;
+        }
+        let pb = PbSpline::build(&m);
+        let side = n * 10 + 1;
+        let st: Vec<[f64; 2]> = (0..side * side).map(|q| [(q % side) as f64, (side - 1 - q / side) as f64]).collect();
+        // process CPU seconds (utime + stime, all threads incl. PoCL's): robust to a loaded machine
+        let cpu = || -> f64 {
+            let s = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
+            let f: Vec<&str> = s.rsplit(')').next().unwrap_or("").split_whitespace().collect();
+            (f.get(11).and_then(|v| v.parse::<f64>().ok()).unwrap_or(f64::NAN) + f.get(12).and_then(|v| v.parse::<f64>().ok()).unwrap_or(f64::NAN)) / 100.0
+        };
+        let c0 = cpu();
+        let t = Instant::now();
+        let mut sp = ocl.upload(&pb).unwrap();
+        eprintln!("{}: upload incl. extraction {:.3} s", ocl.device_name(), t.elapsed().as_secs_f64());
+        let t = Instant::now();
+        let a = ocl.eval_points(&sp, &st).unwrap();
+        let tp = t.elapsed().as_secs_f64();
+        let c1 = cpu();
+        eprintln!("eval_points (element kernel): {:.3} s = {:.2} M points/s; {:.2} M points per CPU-second (upload+eval)", tp, st.len() as f64 / tp / 1e6, st.len() as f64 / (c1 - c0) / 1e6);
+        let gs = GridSpec { s0: 0.0, t0: 0.0, ds: 1.0, dt: 1.0, ns: side, nt: side };
+        let t = Instant::now();
+        let b = ocl.eval_grid(&sp, &gs).unwrap();
+        let tg = t.elapsed().as_secs_f64();
+        let c2 = cpu();
+        eprintln!("eval_grid (element kernel): {:.3} s = {:.2} M points/s; {:.2} M points per CPU-second", tg, b.len() as f64 / tg / 1e6, b.len() as f64 / (c2 - c1) / 1e6);
+        ocl.update_geometry(&mut sp, &pb).unwrap();
+        let sub = &st[..1_000_000];
+        let t = Instant::now();
+        let c = ocl.eval_points(&sp, sub).unwrap();
+        let tr = t.elapsed().as_secs_f64();
+        eprintln!("eval_points (PB-spline kernel): {:.2} M points/s; {:.2} M points per CPU-second", sub.len() as f64 / tr / 1e6, sub.len() as f64 / (cpu() - c2) / 1e6);
+        let cpu = pb.eval_z(&st, true);
+        for (q, x) in cpu.iter().enumerate() {
+            let y = a[q];
+            assert!((x.is_nan() && y.is_nan()) || (x - y).abs() <= 1e-12 * x.abs().max(1.0));
+            if q < c.len() {
+                assert!((x.is_nan() && c[q].is_nan()) || (x - c[q]).abs() <= 1e-12 * x.abs().max(1.0));
+            }
         }
     }
 

@@ -112,6 +112,126 @@ inline double surface_z(const grid_t g, __global const double* knots, __global c
     return z / den;
 }
 
+// ---- Element path (extraction.rs, spec §3.2 eq. 2.7): per element the numerator sum(w z N)
+// and the denominator sum(w N) are one (K+1)x(K+1) block each in local (u, v); the record is
+// s0 t0 s1 t1 1/(s1-s0) 1/(t1-t0) den_threshold 0, then the z*w block and the w block
+// (coefficient of u^i v^j at j (K+1) + i). Same operation order as Extraction::z.
+
+#define EGRID_ARGS const double es0, const double et0, const double eds, const double edt, const uint ens, const uint ent, const uint estride
+#define MAKE_EGRID grid_t eg; eg.s0 = es0; eg.t0 = et0; eg.ds = eds; eg.dt = edt; eg.ns = ens; eg.nt = ent; eg.k = gk; eg.pad = 0
+
+// Horner in u per row, then in v (bipoly in extraction.rs).
+inline double bipoly(__global const double* c, uint n, double u, double v) {
+    double acc = 0.0;
+    for (int j = (int)n - 1; j >= 0; j--) {
+        __global const double* row = c + (uint)j * n;
+        double r = row[n - 1];
+        for (int i = (int)n - 2; i >= 0; i--) r = r * u + row[i];
+        acc = (j == (int)n - 1) ? r : acc * v + r;
+    }
+    return acc;
+}
+
+// bipoly for n = 4, unrolled (PoCL does not unroll the runtime-bound loops); same order.
+inline double bipoly4(__global const double* c, double u, double v) {
+    double r3 = ((c[15] * u + c[14]) * u + c[13]) * u + c[12];
+    double r2 = ((c[11] * u + c[10]) * u + c[9]) * u + c[8];
+    double r1 = ((c[7] * u + c[6]) * u + c[5]) * u + c[4];
+    double r0 = ((c[3] * u + c[2]) * u + c[1]) * u + c[0];
+    return ((r3 * v + r2) * v + r1) * v + r0;
+}
+
+// Height through the element blocks; borders (A1), small denominators and points outside
+// every element take the PB-spline path (surface_z), exactly as on the CPU.
+inline double surface_z_ext(const grid_t g, __global const double* knots, __global const double* poly, __global const double* geom,
+                            __global const double* cells, __global const uint* pstart, __global const uint* pitems,
+                            __global const uint* cstart, __global const uint* citems,
+                            const grid_t eg, const uint stride, __global const double* edata, __global const uint* eflags,
+                            __global const uint* estart, __global const uint* eitems, double s, double t) {
+    uint b = bucket_of(eg, s, t);
+    for (uint q = estart[b]; q < estart[b + 1]; q++) {
+        uint e = eitems[q];
+        __global const double* r = edata + (size_t)stride * e;
+        if (r[0] <= s && s < r[2] && r[1] <= t && t < r[3]) {
+            uint f = eflags[e];
+            if (((f & 1u) && s == r[0]) || ((f & 2u) && t == r[1])) break;
+            double u = (s - r[0]) * r[4];
+            double v = (t - r[1]) * r[5];
+            double num, den;
+            if (g.k == 3) { num = bipoly4(r + 8, u, v); den = bipoly4(r + 24, u, v); }
+            else { num = bipoly(r + 8, 2, u, v); den = bipoly(r + 12, 2, u, v); }
+            if (!(den >= r[6])) break;
+            return num / den;
+        }
+    }
+    return surface_z(g, knots, poly, geom, cells, pstart, pitems, cstart, citems, s, t);
+}
+
+#define EXT_PARAMS __global const double* knots, __global const double* poly, __global const double* geom, \
+    __global const double* cells, __global const uint* pstart, __global const uint* pitems, \
+    __global const uint* cstart, __global const uint* citems, \
+    __global const double* edata, __global const uint* eflags, __global const uint* estart, __global const uint* eitems
+#define EXT_ARGS knots, poly, geom, cells, pstart, pitems, cstart, citems, eg, estride, edata, eflags, estart, eitems
+
+// Element path with RUN consecutive points per work item and the last element as a hint
+// (as Extraction::eval_z on the CPU): PoCL runs each work item as a scalar loop, so most points
+// skip the bucket search. The hint never changes a result (elements are disjoint half-open).
+#define RUN 64
+
+inline double z_ext_hint(const grid_t g, __global const double* knots, __global const double* poly, __global const double* geom,
+                         __global const double* cells, __global const uint* pstart, __global const uint* pitems,
+                         __global const uint* cstart, __global const uint* citems,
+                         const grid_t eg, const uint stride, __global const double* edata, __global const uint* eflags,
+                         __global const uint* estart, __global const uint* eitems, double s, double t, uint* hint) {
+    __global const double* r = edata + (size_t)stride * *hint;
+    int ok = r[0] <= s && s < r[2] && r[1] <= t && t < r[3];
+    if (!ok) {
+        uint b = bucket_of(eg, s, t);
+        for (uint q = estart[b]; q < estart[b + 1]; q++) {
+            __global const double* c = edata + (size_t)stride * eitems[q];
+            if (c[0] <= s && s < c[2] && c[1] <= t && t < c[3]) { r = c; *hint = eitems[q]; ok = 1; break; }
+        }
+    }
+    if (ok) {
+        uint f = eflags[*hint];
+        ok = !(((f & 1u) && s == r[0]) || ((f & 2u) && t == r[1]));
+    }
+    if (ok) {
+        double u = (s - r[0]) * r[4];
+        double v = (t - r[1]) * r[5];
+        double num, den;
+        if (g.k == 3) { num = bipoly4(r + 8, u, v); den = bipoly4(r + 24, u, v); }
+        else { num = bipoly(r + 8, 2, u, v); den = bipoly(r + 12, 2, u, v); }
+        if (den >= r[6]) return num / den;
+    }
+    return surface_z(g, knots, poly, geom, cells, pstart, pitems, cstart, citems, s, t);
+}
+
+__kernel void eval_points_ext(GRID_ARGS, EGRID_ARGS, EXT_PARAMS, __global const double* st, __global double* out, const uint n) {
+    size_t i0 = get_global_id(0) * RUN;
+    if (i0 >= n) return;
+    MAKE_GRID;
+    MAKE_EGRID;
+    uint hint = 0;
+    size_t i1 = min(i0 + RUN, (size_t)n);
+    for (size_t i = i0; i < i1; i++) out[i] = z_ext_hint(g, EXT_ARGS, st[2 * i], st[2 * i + 1], &hint);
+}
+
+// Runs stay inside one grid row (work item = (row, run)).
+__kernel void eval_grid_ext(GRID_ARGS, EGRID_ARGS, EXT_PARAMS, const double s0, const double t0, const double ds, const double dt,
+                            const uint ns, const uint nt, __global double* out) {
+    size_t w = get_global_id(0);
+    uint runs = (ns + RUN - 1) / RUN;
+    if (w >= (size_t)runs * nt) return;
+    MAKE_GRID;
+    MAKE_EGRID;
+    uint j = w / runs, i0 = (w % runs) * RUN;
+    uint i1 = min(i0 + RUN, ns);
+    double t = t0 + (double)j * dt;
+    uint hint = 0;
+    for (uint i = i0; i < i1; i++) out[(size_t)j * ns + i] = z_ext_hint(g, EXT_ARGS, s0 + (double)i * ds, t, &hint);
+}
+
 // Surface heights at arbitrary parameter points st[2i], st[2i+1].
 __kernel void eval_points(GRID_ARGS, __global const double* knots, __global const double* poly, __global const double* geom,
                           __global const double* cells, __global const uint* pstart, __global const uint* pitems,
