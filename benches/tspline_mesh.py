@@ -44,4 +44,4 @@ with open(out, "w") as f:
     for c in cells:
         f.write("%d %d %d %d\n" % c)
     f.write("</cells>\n</tmesh>\n")
-print(f"{out}: {len(order)} control points, {len(cells)} cells", file=sys.stderr)
+print(f"{out.rsplit('/', 1)[-1]}: {len(order)} control points, {len(cells)} cells", file=sys.stderr)
