@@ -8,8 +8,8 @@ use crate::model::SourceSpan;
 #[derive(Debug)]
 pub struct LineIndex {
     starts: Vec<usize>,
-    /// Line of the last lookup: the reader asks for offsets that mostly move forward by a few
-    /// lines, so a short walk from here beats a binary search over the whole table.
+    /// Line of the last lookup: the reader asks for offsets a few lines from the previous one,
+    /// so a galloping search from here beats a binary search over the whole table.
     hint: AtomicUsize,
 }
 
@@ -30,24 +30,55 @@ impl LineIndex {
     /// 1-based (line, column) of a byte offset.
     pub fn line_col(&self, byte: usize) -> (usize, usize) {
         let st = &self.starts;
-        let mut line = self.hint.load(Ordering::Relaxed).min(st.len() - 1);
-        // The reader asks for offsets near the last one (a ring's text, then its start tag a
-        // line or two back, then the polygon's...): walk up to 8 lines either way, else search.
-        let mut steps = 0;
-        while steps < 8 && st[line] > byte {
-            line -= 1;
-            steps += 1;
+        let n = st.len();
+        // Galloping search from the line of the last lookup (the reader asks for offsets near
+        // the previous one, forwards and backwards): O(log distance) instead of O(log lines).
+        // Invariant: st[lo] <= byte < st[hi] (hi == n: past the last line start).
+        let h = self.hint.load(Ordering::Relaxed).min(n - 1);
+        let (mut lo, mut hi);
+        if st[h] <= byte {
+            lo = h;
+            let mut step = 1;
+            loop {
+                let next = lo + step;
+                if next >= n {
+                    hi = n;
+                    break;
+                }
+                if st[next] <= byte {
+                    lo = next;
+                    step *= 2;
+                } else {
+                    hi = next;
+                    break;
+                }
+            }
+        } else {
+            hi = h;
+            let mut step = 1;
+            loop {
+                if hi < step {
+                    lo = 0; // st[0] == 0 <= byte
+                    break;
+                }
+                let next = hi - step;
+                if st[next] <= byte {
+                    lo = next;
+                    break;
+                }
+                hi = next;
+                step *= 2;
+            }
         }
-        while steps < 8 && st.get(line + 1).is_some_and(|&n| n <= byte) {
-            line += 1;
-            steps += 1;
+        while hi - lo > 1 {
+            let mid = lo + (hi - lo) / 2;
+            if st[mid] <= byte {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
         }
-        if st[line] > byte || st.get(line + 1).is_some_and(|&n| n <= byte) {
-            line = match st.binary_search(&byte) {
-                Ok(i) => i,
-                Err(i) => i - 1,
-            };
-        }
+        let line = lo;
         self.hint.store(line, Ordering::Relaxed);
         (line + 1, byte - self.starts[line] + 1)
     }

@@ -371,6 +371,9 @@ pub(crate) struct Parser<'a> {
     /// that contain one, not in every tag's attributes.
     limit: usize,
     next_xmlns: usize,
+    /// Reused buffer for a posList's points: the ring gets an exact-size copy (a capacity
+    /// guessed from the text length would leave ~30 % slack in every ring of a big model).
+    scratch: Vec<Point3>,
 }
 
 static XMLNS: std::sync::LazyLock<memchr::memmem::Finder<'static>> =
@@ -398,6 +401,7 @@ impl<'a> Parser<'a> {
             placeholders: 0,
             limit: range.end,
             next_xmlns: 0,
+            scratch: Vec::new(),
         }
     }
 
@@ -789,6 +793,7 @@ impl<'a> Parser<'a> {
             _ => {
                 let mut v = Vec::new();
                 self.collect_element(t, false, Some(prop_start), &mut v)?;
+                v.shrink_to_fit(); // a Polygon is ~340 bytes: no doubling slack in big models
                 GeometryKind::Surfaces(v)
             }
         };
@@ -808,6 +813,7 @@ impl<'a> Parser<'a> {
                     if is_ext || c.is_gml(b"interior") {
                         let mut polys = Vec::new();
                         let id = self.collect_prop(c, false, &mut polys)?;
+                        polys.shrink_to_fit();
                         let shell = Shell { id, polygons: polys };
                         if is_ext {
                             exterior = shell;
@@ -1131,11 +1137,11 @@ impl<'a> Parser<'a> {
     /// A posList straight into points (no intermediate Vec<f64>, no token slices: each number
     /// is parsed in place from the buffer): returns the complete positions and the number of
     /// values read (a count that is not a multiple of `d` is the caller's error to report).
-    fn pos_list(&self, r: Range<usize>, d: u8) -> Result<(Vec<Point3>, usize), ReadError> {
-        let s = &self.src[r.clone()];
-        // A coordinate and its separator take at least ~8 bytes in real files; reserving that
-        // many points over-allocates a little but never reallocates for the common case.
-        let mut pts = Vec::with_capacity(s.len() / (8 * d as usize) + 1);
+    fn pos_list(&mut self, r: Range<usize>, d: u8) -> Result<(Vec<Point3>, usize), ReadError> {
+        let src = self.src;
+        let s = &src[r.clone()];
+        let mut pts = std::mem::take(&mut self.scratch);
+        pts.clear();
         let mut cur = [0.0f64; 3];
         let mut k = 0usize;
         let mut n = 0usize;
@@ -1153,7 +1159,10 @@ impl<'a> Parser<'a> {
                     i += len;
                     x
                 }
-                Err(bad) => return Err(self.number_err(r.start + i, bad, "gml:posList")),
+                Err(bad) => {
+                    self.scratch = pts;
+                    return Err(self.number_err(r.start + i, bad, "gml:posList"));
+                }
             };
             cur[k] = x;
             k += 1;
@@ -1166,7 +1175,9 @@ impl<'a> Parser<'a> {
                 k = 0;
             }
         }
-        Ok((pts, n))
+        let out = pts.as_slice().to_vec();
+        self.scratch = pts;
+        Ok((out, n))
     }
 
     fn number_err(&self, at: usize, bad: NumErr<'_>, what: &str) -> ReadError {
