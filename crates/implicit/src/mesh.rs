@@ -11,6 +11,32 @@
 //! sizes smoothly from small elements near the data to large ones away from it (seed §2.1).
 
 use std::collections::HashMap;
+use std::hash::{BuildHasherDefault, Hasher};
+
+/// Multiplicative hash for the edge keys (two vertex indices packed in a u64): the std SipHash
+/// was the largest single cost of meshing. Lookups only, never iteration, so the output does not
+/// depend on the hasher.
+#[derive(Default, Clone, Copy)]
+struct EdgeHasher(u64);
+
+impl Hasher for EdgeHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.0 = (self.0.rotate_left(5) ^ b as u64).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
+        }
+    }
+    fn write_u64(&mut self, x: u64) {
+        // Fold the high half in before the multiply so both vertex indices reach the top bits.
+        let x = x ^ (x >> 29);
+        self.0 = (self.0.rotate_left(5) ^ x).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+        self.0 ^= self.0 >> 32;
+    }
+}
+
+type EdgeMap<V> = HashMap<u64, V, BuildHasherDefault<EdgeHasher>>;
 
 use crate::geom::{barycentric, mid, vol6, V3};
 
@@ -178,11 +204,12 @@ pub struct Refiner {
     /// For each vertex the two edge end points it is the midpoint of (grid vertices: none).
     pub parents: Vec<Option<[u32; 2]>>,
     tets: Vec<RTet>,
-    edge_tets: HashMap<u64, Vec<u32>>,
+    edge_tets: EdgeMap<Vec<u32>>,
     pts: Vec<V3>,
     pt_target: Vec<u16>,
     tet_pts: Vec<Vec<u32>>,
-    children: HashMap<u32, [u32; 2]>,
+    /// The two halves of each bisected tetrahedron (index = parent).
+    children: Vec<[u32; 2]>,
     pub lo: V3,
     pub dims: [usize; 3],
     pub cube: f64,
@@ -206,11 +233,11 @@ impl Refiner {
             parents: vec![None; verts.len()],
             verts,
             tets: Vec::new(),
-            edge_tets: HashMap::new(),
+            edge_tets: EdgeMap::default(),
             pts: Vec::new(),
             pt_target: Vec::new(),
             tet_pts: Vec::new(),
-            children: HashMap::new(),
+            children: Vec::new(),
             lo,
             dims,
             cube,
@@ -289,7 +316,7 @@ impl Refiner {
     fn sink(&mut self, t: u32, id: u32) {
         if self.tets[t as usize].alive {
             self.tet_pts[t as usize].push(id);
-        } else if let Some(ch) = self.children.get(&t).copied() {
+        } else if let Some(ch) = self.children.get(t as usize).copied().filter(|c| c[0] != u32::MAX) {
             let p = self.pts[id as usize];
             let c = self.pick_child(ch, p);
             self.sink(c, id);
@@ -318,8 +345,8 @@ impl Refiner {
                 return;
             }
             let e = self.ref_edge(t);
-            let around = self.edge_tets.get(&e).cloned().unwrap_or_default();
-            match around.into_iter().find(|&s| self.ref_edge(s) != e) {
+            let next = self.edge_tets.get(&e).and_then(|around| around.iter().copied().find(|&s| self.ref_edge(s) != e));
+            match next {
                 Some(s) => self.bisect(s),
                 None => break,
             }
@@ -365,7 +392,10 @@ impl Refiner {
         let nt = if k > 1 { k as u8 - 1 } else { 3 };
         let t1 = self.push_tet(c1, nt, level + 1);
         let t2 = self.push_tet(c2, nt, level + 1);
-        self.children.insert(s, [t1, t2]);
+        if self.children.len() < self.tets.len() {
+            self.children.resize(self.tets.len(), [u32::MAX; 2]);
+        }
+        self.children[s as usize] = [t1, t2];
         let pts = std::mem::take(&mut self.tet_pts[s as usize]);
         for id in pts {
             let c = self.pick_child([t1, t2], self.pts[id as usize]);

@@ -5,6 +5,7 @@
 //! less than the surface's radius of curvature; a robust spread (1.4826 × the median |residual|)
 //! keeps outliers and the few points near sharp folds from dominating.
 
+use rayon::prelude::*;
 use rstar::{primitives::GeomWithData, RTree};
 
 use crate::geom::{dot, sub, V3};
@@ -12,7 +13,7 @@ use crate::geom::{dot, sub, V3};
 /// Neighbours per local plane fit.
 const K: usize = 32;
 /// Points used for the estimate in all (a deterministic stride sample of each horizon beyond this).
-const MAX_SAMPLE: usize = 2000;
+const MAX_SAMPLE: usize = 1200;
 
 /// Estimated standard deviation of the value points' position noise normal to their horizon, in
 /// distance units; None when no horizon has enough points for a local fit (k + 1) or every
@@ -41,15 +42,19 @@ pub fn estimate_k(points: &[(V3, f64)], k: usize) -> Option<f64> {
         }
         let tree = RTree::bulk_load(group.iter().enumerate().map(|(i, &p)| GeomWithData::new(p, i)).collect::<Vec<_>>());
         let stride = points.len().div_ceil(MAX_SAMPLE).max(1);
-        for (i, &p) in group.iter().enumerate().step_by(stride) {
-            let nb: Vec<V3> = tree.nearest_neighbor_iter(p).filter(|g| g.data != i).take(k).map(|g| *g.geom()).collect();
-            if nb.len() < k {
-                continue;
-            }
-            if let Some(r) = plane_residual(&nb, p) {
-                residuals.push(r.abs());
-            }
-        }
+        let sample: Vec<usize> = (0..group.len()).step_by(stride).collect();
+        let res: Vec<Option<f64>> = sample
+            .par_iter()
+            .map(|&i| {
+                let p = group[i];
+                let nb: Vec<V3> = tree.nearest_neighbor_iter(p).filter(|g| g.data != i).take(k).map(|g| *g.geom()).collect();
+                if nb.len() < k {
+                    return None;
+                }
+                quadric_residual(&nb, p).map(f64::abs)
+            })
+            .collect();
+        residuals.extend(res.into_iter().flatten());
     }
     if residuals.len() < k {
         return None;
@@ -65,7 +70,7 @@ pub fn estimate_k(points: &[(V3, f64)], k: usize) -> Option<f64> {
 /// the plane, w along its normal), divided by √(1 + h) with h the leverage of `p` in that fit, so
 /// its variance is σ² whatever the neighbourhood. The quadric absorbs the surface's curvature;
 /// None when the neighbours are (nearly) collinear or the fit is singular.
-fn plane_residual(nb: &[V3], p: V3) -> Option<f64> {
+fn quadric_residual(nb: &[V3], p: V3) -> Option<f64> {
     let n = nb.len() as f64;
     let mut c = [0.0; 3];
     for q in nb {
