@@ -423,11 +423,25 @@ fn extract_cell(pb: &PbSpline, ci: usize, sc: &mut Scratch<'_>, data: &mut Vec<f
                 }
                 let g = pb.geom[p as usize];
                 let (w, wz) = (g[3], g[3] * g[2]);
-                for j in 0..n1 {
-                    for i in 0..n1 {
-                        let prod = fs[i] * ft[j];
-                        zw[j * n1 + i] += wz * prod;
-                        ww[j * n1 + i] += w * prod;
+                let (mut a, mut bw) = ([0.0; 4], [0.0; 4]);
+                for i in 0..4 {
+                    a[i] = wz * fs[i];
+                    bw[i] = w * fs[i];
+                }
+                if n1 == 4 {
+                    for j in 0..4 {
+                        let (z4, w4) = (&mut zw[4 * j..4 * j + 4], &mut ww[4 * j..4 * j + 4]);
+                        for i in 0..4 {
+                            z4[i] += a[i] * ft[j];
+                            w4[i] += bw[i] * ft[j];
+                        }
+                    }
+                } else {
+                    for j in 0..n1 {
+                        for i in 0..n1 {
+                            zw[j * n1 + i] += a[i] * ft[j];
+                            ww[j * n1 + i] += bw[i] * ft[j];
+                        }
                     }
                 }
             }
