@@ -163,16 +163,14 @@ impl OclEvaluator {
 
     /// The PB-spline buffers only (reference kernels, knot derivation).
     fn upload_pb(&self, pb: &PbSpline) -> Result<OclSpline, TsplineError> {
-        let knots: Vec<f64> = pb.knots.iter().flatten().copied().collect();
-        let poly: Vec<f64> = pb.poly.iter().flatten().copied().collect();
-        let geom: Vec<f64> = pb.geom.iter().flatten().copied().collect();
-        let cells: Vec<f64> = pb.cells.iter().flatten().copied().collect();
+        // flat views, no intermediate copies (the poly array alone is 320 B per point)
+        let (knots, poly, geom, cells) = (pb.knots.as_flattened(), pb.poly.as_flattened(), pb.geom.as_flattened(), pb.cells.as_flattened());
         let g = pb.grid;
         Ok(OclSpline {
-            knots: self.buf(&knots)?,
-            poly: self.buf(&poly)?,
-            geom: self.buf(&geom)?,
-            cells: self.buf(&cells)?,
+            knots: self.buf(knots)?,
+            poly: self.buf(poly)?,
+            geom: self.buf(geom)?,
+            cells: self.buf(cells)?,
             pstart: self.buf(&pb.pt_start)?,
             pitems: self.buf(&pb.pt_items)?,
             cstart: self.buf(&pb.cell_start)?,
@@ -184,9 +182,8 @@ impl OclEvaluator {
 
     /// Replaces the geometry (after a fit step) without re-uploading the rest.
     pub fn update_geometry(&self, sp: &mut OclSpline, pb: &PbSpline) -> Result<(), TsplineError> {
-        let geom: Vec<f64> = pb.geom.iter().flatten().copied().collect();
         sp.ext = None;
-        sp.geom.write(&geom).enq().map_err(err)
+        sp.geom.write(pb.geom.as_flattened()).enq().map_err(err)
     }
 
     /// The dense-evaluation kernel: the element path when the extraction is current, else the
