@@ -365,7 +365,21 @@ pub fn build(
             progress(Event::Cg { round: r, iterations: it, residual: res })
         })?;
         report.cg_iterations.extend(&sol.iterations);
-        let mis: Vec<f64> = sol.value_misfit.iter().map(|&(_, e)| e).collect();
+        // Misfits from the solve's value rows; if some value rows are missing (ϖ_value = 0 scales
+        // them to nothing), evaluate φ at the points instead.
+        let n_values = cs.iter().filter(|c| c.value.is_some()).count();
+        let value_misfit: Vec<(u32, f64)> = if sol.value_misfit.len() == n_values {
+            sol.value_misfit.clone()
+        } else {
+            cs.iter()
+                .enumerate()
+                .filter_map(|(i, c)| {
+                    let v = c.value?;
+                    dsi::eval(&mesh, &loc, &sol.phi, c.pos).map(|f| (i as u32, (f - v).abs()))
+                })
+                .collect()
+        };
+        let mis: Vec<f64> = value_misfit.iter().map(|&(_, e)| e).collect();
         let (mean, max) = stats(&mis);
         report.misfit_mean = mean;
         report.misfit_max = max;
@@ -373,7 +387,7 @@ pub fn build(
         report.tetrahedra = mesh.tets.len();
         report.refinement_rounds = round;
         let bad: Vec<V3> =
-            sol.value_misfit.iter().filter(|&&(_, e)| e / grad > misfit_tol).map(|&(c, _)| cs[c as usize].pos).collect();
+            value_misfit.iter().filter(|&&(_, e)| e / grad > misfit_tol).map(|&(c, _)| cs[c as usize].pos).collect();
         if round >= opt.refine_rounds || bad.is_empty() {
             let model = Model {
                 origin,
