@@ -18,6 +18,9 @@
 //!
 //! The minimiser of seed eq. 12 solves `A·φ = b` with `A = Σ A_c A_cᵗ = A_B + A_F` (seed eq. 1–3),
 //! solved by conjugate gradients with an incomplete-Cholesky IC(0) preconditioner.
+//!
+//! The default roughness weight is not a constant but follows the data's noise measured in cells
+//! ([`auto_roughness`]), so one default serves a unit sphere and geology in metres alike.
 
 use rayon::prelude::*;
 
@@ -64,7 +67,7 @@ pub const ROUGHNESS_TAU: f64 = 0.04;
 /// units (g cancels: Claudius' 0–330 horizons or a unit sphere's distance field give the same
 /// weight for the same geometry) nor on the coordinate units (σ and h scale together). A fixed
 /// ϖ_r is right only for one noise-to-cell ratio: ϖ_r = 5 suits the noisy sphere (σ/h ≈ 0.2) but
-/// over-smooths Claudius' seismic picks (σ̂ ≈ 1.6 m at h ≈ 198 m, σ/h ≈ 0.008) — their mean
+/// over-smooths Claudius' seismic picks (σ̂ ≈ 1.5 m at h ≈ 198 m, σ/h ≈ 0.008) — their mean
 /// misfit was 3.9 at ϖ_r = 5 and 0.8 here.
 ///
 /// σ̂ comes from the data alone ([`crate::noise::estimate`]: leave-one-out residuals of local
@@ -74,7 +77,8 @@ pub const ROUGHNESS_TAU: f64 = 0.04;
 /// therefore at least 0.5. τ = 0.04 is the one calibrated number: it puts the default at the
 /// minimum of the sphere's U-shaped error curve at σ = 0.03 (tests/implicit.rs
 /// `roughness_sweep_traces_u_shape`), and the same τ then lands near the minima at σ = 0.01 and
-/// σ = 0.06 too (`auto_roughness_tracks_the_noise`). Capped at 50 (CG conditioning).
+/// σ = 0.06 too (tests/implicit.rs `auto_roughness_tracks_the_noise`; table in
+/// benches/results/implicit.md). Capped at 50 (CG conditioning).
 pub fn auto_roughness(sigma: Option<f64>, cell: f64) -> f64 {
     match sigma {
         Some(s) if s.is_finite() && s >= 0.0 && cell > 0.0 => {
