@@ -3,6 +3,14 @@
 //! structure. The same flat arrays feed the OpenCL kernels (`ocl_eval.rs`), so CPU and GPU run
 //! the same algorithm in the same operation order.
 //!
+//! Two paths give the same numbers (to 1e-12, tested): [`PbSpline::point`] sums the candidate
+//! blending functions (the reference; fit, dragging and single points use it), and the dense
+//! paths [`PbSpline::eval_z`] / [`PbSpline::eval_grid`] go through the per-element polynomial
+//! extraction of `extraction.rs` (spec §6.3 Alg. 6 evaluated per element: 2 bicubic Horner forms
+//! and a division per point instead of ~16 pairs of basis functions), falling back to the
+//! reference at A1 borders, outside the domain and where the 0/0 limit at cubic borders makes
+//! the summed polynomials ill-conditioned.
+//!
 //! Decisions:
 //! - **A1** upper border: spans are half-open [a, b). A point on the upper s (or t) border of the
 //!   domain — no leaf cell holds it half-open in that direction — is evaluated as the limit from
