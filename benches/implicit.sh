@@ -16,7 +16,7 @@ mkdir -p benches/results
 [ -f "$CSV" ] || { echo "missing $CSV"; exit 1; }
 
 field() { python3 -c "import json,sys; r=json.load(open(sys.argv[1])); print(r[sys.argv[2]])" "$1" "$2"; }
-row() { printf '| %-50s | %8s | %8s | %10s | %10s |\n' "$@"; }
+row() { printf '| %-50s | %8s | %8s | %8s | %10s | %10s |\n' "$@"; }
 
 median() { python3 -c "import sys,statistics; print(statistics.median(float(x) for x in sys.argv[1:]))" "$@"; }
 REPS="${GEOFIT_BENCH_REPS:-3}"
@@ -29,29 +29,29 @@ echo "Both tools run in this one script, interleaved; seconds are the median of 
 echo
 echo "## Claudius (4 horizons, 21,048 rows incl. 25 normals): misfit |φ − v| at the value points"
 echo
-row "interpolator" "unknowns" "seconds" "mean" "max"
-row "---" "---:" "---:" "---:" "---:"
+row "interpolator" "unknowns" "seconds" "CPU s" "mean" "max"
+row "---" "---:" "---:" "---:" "---:" "---:"
 } > "$RES"
 
 ours() { # label, repetitions, extra options
-  local secs=()
+  local secs=() cpus=()
   for _ in $(seq "$2"); do
     "$BIN" -q implicit interpolate "$CSV" -o "$TMP/c.gfim" --report "$TMP/c.json" "${@:3}" || return 1
-    secs+=("$(field "$TMP/c.json" seconds)")
+    secs+=("$(field "$TMP/c.json" seconds)"); cpus+=("$(field "$TMP/c.json" cpu_seconds)")
   done
   local lab="$1"; [ "$2" -gt 1 ] && lab="$lab (×$2)"
-  row "$lab" "$(field "$TMP/c.json" vertices)" "$(printf %.2f "$(median "${secs[@]}")")" \
+  row "$lab" "$(field "$TMP/c.json" vertices)" "$(printf %.2f "$(median "${secs[@]}")")" "$(printf %.2f "$(median "${cpus[@]}")")" \
       "$(printf %.3f "$(field "$TMP/c.json" misfit_mean)")" "$(printf %.2f "$(field "$TMP/c.json" misfit_max)")" | tee -a "$RES"
 }
 theirs() { # nelements, repetitions
-  local secs=() out
+  local secs=() cpus=() out
   for _ in $(seq "$2"); do
     out=$(python3 tests/scripts/implicit_loopstructural.py "$CSV" "$1" 2>/dev/null | tail -1) || { echo "LoopStructural run failed (nelements $1)" | tee -a "$RES"; return 1; }
     echo "$out" > "$TMP/ls.json"
-    secs+=("$(field "$TMP/ls.json" seconds)")
+    secs+=("$(field "$TMP/ls.json" seconds)"); cpus+=("$(field "$TMP/ls.json" cpu_seconds)")
   done
   local lab="$(field "$TMP/ls.json" tool) (nelements $1)"; [ "$2" -gt 1 ] && lab="$lab (×$2)"
-  row "$lab" "$(field "$TMP/ls.json" unknowns)" "$(printf %.2f "$(median "${secs[@]}")")" \
+  row "$lab" "$(field "$TMP/ls.json" unknowns)" "$(printf %.2f "$(median "${secs[@]}")")" "$(printf %.2f "$(median "${cpus[@]}")")" \
       "$(printf %.3f "$(field "$TMP/ls.json" misfit_mean)")" "$(printf %.2f "$(field "$TMP/ls.json" misfit_max)")" | tee -a "$RES"
 }
 HAVE_LS=0; python3 -c "import LoopStructural" 2>/dev/null && HAVE_LS=1
@@ -135,6 +135,9 @@ Notes
 - geofit seconds are the whole `implicit interpolate` run minus process start: reading the CSV,
   noise estimate, meshing, misfit-driven refinement and all active-set rounds; LoopStructural
   seconds are `create_and_add_foliation` + `model.update()` only (no CSV reading or import).
+  "CPU s" is the CPU time of the same span summed over threads (geofit: `/proc/self/stat`;
+  LoopStructural: `time.process_time()`): the machine is shared, so wall seconds swing with the
+  load while CPU seconds measure the work.
 - Re-interpolation: both rows count every CG iteration of every active-set round to the same
   tolerance (1e-6) with the same counter as tests/implicit.rs
   `warm_started_update_needs_fewer_iterations` (`cg_iterations_total` of `implicit update`, with

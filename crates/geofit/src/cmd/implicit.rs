@@ -341,10 +341,31 @@ struct Report {
     /// Roughness weight ϖ_r used (from the noise unless --w-rough was given).
     w_rough: f64,
     seconds: f64,
+    /// CPU seconds of the same span, all threads (Linux; null elsewhere): less load-dependent.
+    cpu_seconds: Option<f64>,
 }
 
-fn build_model(b: &BuildArgs, config: &Config) -> Result<(Model, BuildReport, f64), CliError> {
+/// CPU seconds (user + system, all threads) this process has used so far: Linux
+/// `/proc/self/stat` fields 14 and 15, in USER_HZ = 100 ticks per second; None elsewhere.
+fn process_cpu_seconds() -> Option<f64> {
+    let s = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // Fields after the parenthesised command name (which may contain spaces).
+    let rest = &s[s.rfind(')')? + 2..];
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let (u, k): (f64, f64) = (f.get(11)?.parse().ok()?, f.get(12)?.parse().ok()?);
+    Some((u + k) / 100.0)
+}
+
+/// Wall-clock and CPU seconds of a build.
+#[derive(Clone, Copy)]
+struct Timing {
+    wall: f64,
+    cpu: Option<f64>,
+}
+
+fn build_model(b: &BuildArgs, config: &Config) -> Result<(Model, BuildReport, Timing), CliError> {
     let t0 = std::time::Instant::now();
+    let cpu0 = process_cpu_seconds();
     let name = b.points.clone().unwrap_or_else(|| "-".into());
     let mut pts = read_points(&name)?;
     if b.up_normals {
@@ -395,10 +416,14 @@ fn build_model(b: &BuildArgs, config: &Config) -> Result<(Model, BuildReport, f6
         "{} points, cell {:.4}, roughness weight {:.3}: {} vertices, {} tetrahedra; CG iterations {:?}; misfit at the values mean {:.4} max {:.4}",
         rep.points, rep.cell, rep.w_rough, rep.vertices, rep.tetrahedra, rep.cg_iterations, rep.misfit_mean, rep.misfit_max
     ));
-    Ok((m, rep, t0.elapsed().as_secs_f64()))
+    let cpu = match (cpu0, process_cpu_seconds()) {
+        (Some(a), Some(b)) => Some(b - a),
+        _ => None,
+    };
+    Ok((m, rep, Timing { wall: t0.elapsed().as_secs_f64(), cpu }))
 }
 
-fn write_report(path: &Option<String>, rep: &BuildReport, secs: f64) -> Result<(), CliError> {
+fn write_report(path: &Option<String>, rep: &BuildReport, secs: Timing) -> Result<(), CliError> {
     if let Some(p) = path {
         let r = Report {
             points: rep.points,
@@ -414,7 +439,8 @@ fn write_report(path: &Option<String>, rep: &BuildReport, secs: f64) -> Result<(
             gradient_scale: rep.grad,
             noise_sigma: rep.noise_sigma,
             w_rough: rep.w_rough,
-            seconds: secs,
+            seconds: secs.wall,
+            cpu_seconds: secs.cpu,
         };
         write_json_report(p, &r)?;
     }
