@@ -402,7 +402,16 @@ fn line_triples(mesh: &TMesh, pb: &PbSpline) -> Vec<Vec<(u32, u32, f64, f64)>> {
 /// rational basis): z of every PB point; the current z are the warm start and the regulariser's
 /// prior. Returns the new z per PB point.
 pub fn fit_lsq(mesh: &TMesh, pb: &PbSpline, samples: &Samples) -> Result<Vec<f64>, TsplineError> {
-    fit_lsq_local(mesh, pb, samples, None, None)
+    fit_lsq_local(mesh, pb, samples, None, None, None)
+}
+
+/// Scattered data in parameter units: positions and values (indirect reduction: the ORIGINAL
+/// raster cells mapped forward into the warped frame, so the fit and its tolerance check work
+/// on the original values at their warped positions, not on a resampled and dilated raster).
+#[derive(Debug, Clone, Default)]
+pub struct Scattered {
+    pub st: Vec<[f64; 2]>,
+    pub z: Vec<f64>,
 }
 
 /// A set of raster cells (bit per cell, row-major from t = 0).
@@ -469,7 +478,14 @@ impl Region {
 /// [`fit_lsq`] with some control points held (`free[i] == false`: z_i stays at its current
 /// value, its data terms move to the right-hand side) and the data restricted to `region` (the
 /// supports of the free points; cells outside do not depend on them).
-fn fit_lsq_local(mesh: &TMesh, pb: &PbSpline, samples: &Samples, free: Option<&[bool]>, region: Option<&Region>) -> Result<Vec<f64>, TsplineError> {
+fn fit_lsq_local(
+    mesh: &TMesh,
+    pb: &PbSpline,
+    samples: &Samples,
+    pts: Option<&Scattered>,
+    free: Option<&[bool]>,
+    region: Option<&Region>,
+) -> Result<Vec<f64>, TsplineError> {
     let n = pb.knots.len();
     let is_free = |i: usize| free.is_none_or(|f| f[i]);
     let triples = line_triples(mesh, pb);
@@ -490,7 +506,8 @@ fn fit_lsq_local(mesh: &TMesh, pb: &PbSpline, samples: &Samples, free: Option<&[
     let mut a = pattern(pb, &extra, free);
     let prior: Vec<f64> = pb.geom.iter().map(|g| g[2]).collect();
     let w = samples.width;
-    let rows: Vec<usize> = (0..samples.height).collect();
+    // units: raster rows, or the scattered points
+    let rows: Vec<usize> = (0..pts.map_or(samples.height, |p| p.z.len())).collect();
     // A fixed number of row blocks (not the thread count) keeps the summation order, and so
     // the output bytes, independent of the machine.
     let chunk = rows.len().div_ceil(4).max(1);
@@ -508,13 +525,15 @@ fn fit_lsq_local(mesh: &TMesh, pb: &PbSpline, samples: &Samples, free: Option<&[
             let mut prev: Vec<u32> = Vec::with_capacity(32);
             let mut pos: Vec<usize> = Vec::with_capacity(32 * 33 / 2);
             let mut cell = |q: usize| {
-                let (i, j) = (q % w, q / w);
-                let d = samples.z[q];
+                let (si, tj, d) = match pts {
+                    Some(p) => (p.st[q][0], p.st[q][1], p.z[q]),
+                    None => ((q % w) as f64, (q / w) as f64, samples.z[q]),
+                };
                 if d.is_nan() {
                     return;
                 }
                 row.clear();
-                if !pb.for_each_basis(i as f64, j as f64, &mut scratch, |q, v| row.push((q, v))) {
+                if !pb.for_each_basis(si, tj, &mut scratch, |q, v| row.push((q, v))) {
                     return;
                 }
                 let mut d = d;
@@ -555,9 +574,10 @@ fn fit_lsq_local(mesh: &TMesh, pb: &PbSpline, samples: &Samples, free: Option<&[
                 }
             };
             let (j0, j1) = (js[0], js[js.len() - 1] + 1);
-            match region {
-                Some(r) => r.for_rows(j0, j1, &mut cell),
-                None => (j0 * w..j1 * w).for_each(&mut cell),
+            match (pts, region) {
+                (Some(_), _) => (j0..j1).for_each(&mut cell),
+                (None, Some(r)) => r.for_rows(j0, j1, &mut cell),
+                (None, None) => (j0 * w..j1 * w).for_each(&mut cell),
             }
             (vals, rhs, support)
         })
@@ -882,6 +902,11 @@ fn eval_errors_region(pb: &PbSpline, samples: &Samples, region: &Region, errs: &
 /// The median is taken on an f32 copy (exact to f32 rounding); the maximum and the tolerance
 /// test use the f64 errors.
 pub fn summarize(mesh: &TMesh, pb: &PbSpline, w: usize, errs: &[f64], tol: f64) -> (ErrorStats, Vec<CellId>) {
+    summarize_at(mesh, pb, &|q| ((q % w) as f64, (q / w) as f64), errs, tol)
+}
+
+/// [`summarize`] with the parameter position of error `q` given by `pos`.
+fn summarize_at(mesh: &TMesh, pb: &PbSpline, pos: &(dyn Fn(usize) -> (f64, f64) + Sync), errs: &[f64], tol: f64) -> (ErrorStats, Vec<CellId>) {
     // Leaves whose closed box holds (s, t): through the PB-spline's bucket grid when its cell
     // list is the mesh's leaves in id order (checked per hit), else through the R-tree.
     let leaf_ids: Vec<CellId> = mesh.leaves().collect();
@@ -938,8 +963,7 @@ pub fn summarize(mesh: &TMesh, pb: &PbSpline, w: usize, errs: &[f64], tol: f64) 
                 if e <= tol {
                     continue;
                 }
-                let q = q0 + k;
-                let (s, t) = ((q % w) as f64, (q / w) as f64);
+                let (s, t) = pos(q0 + k);
                 if let Some(r) = interior {
                     if r.s_min < s && s < r.s_max && r.t_min < t && t < r.t_max {
                         continue; // the only leaf holding this cell is already collected
@@ -1052,8 +1076,95 @@ fn local_update(old: &PbSpline, new: &PbSpline, n_points: usize, w: usize, h: us
     Some((free, region))
 }
 
+enum Refined {
+    Stop(StopReason),
+    /// The refined mesh and the number of cells marked and split.
+    Next(TMesh, usize),
+}
+
+/// One refinement: mark (probes + leaves over the tolerance), split the splittable ones,
+/// repair; or the reason to stop (minimum cell size, control-point cap).
+/// `probes`: also mark the thesis' 3×3 probes against the raster (not for scattered data,
+/// whose raster is a resampled one: its resampling error would mark cells the data never asks
+/// for; every data point is checked instead).
+fn refine(
+    mesh: &TMesh,
+    pb: &PbSpline,
+    samples: &Samples,
+    opts: &FitOptions,
+    over_leaves: Vec<CellId>,
+    err: &ErrorStats,
+    probes: bool,
+) -> Result<Refined, TsplineError> {
+    let marked = if probes {
+        mark_cells(mesh, pb, samples, opts.max_error, over_leaves)
+    } else {
+        let mut m = over_leaves;
+        m.sort_unstable();
+        m.dedup();
+        m
+    };
+    let splittable: Vec<CellId> = marked
+        .into_iter()
+        .filter(|&c| {
+            let r = mesh.cells[c as usize].rect;
+            r.width().min(r.height()) >= 2.0
+        })
+        .collect();
+    if splittable.is_empty() {
+        return Ok(Refined::Stop(StopReason::MinCellSize { cells_over: err.over_tolerance }));
+    }
+    let mut next = mesh.clone();
+    let mut geom = |s: f64, t: f64| (s, t, {
+        let z = pb.point(s, t)[2];
+        if z.is_nan() { 0.0 } else { z }
+    });
+    for &c in &splittable {
+        if next.cells[c as usize].is_leaf() {
+            next.split(c, &mut geom);
+        }
+    }
+    next.repair(1.0, &mut geom);
+    if let Some(cap) = opts.max_points {
+        let n = next.active_points().iter().filter(|a| **a).count();
+        if n > cap {
+            return Ok(Refined::Stop(StopReason::MaxPoints { cap }));
+        }
+    }
+    Ok(Refined::Next(next, splittable.len()))
+}
+
 /// The approximation loop (Alg. 3). `progress` gets every iteration's statistics.
 pub fn fit(samples: &Samples, opts: &FitOptions, backend: &Backend, progress: &mut dyn FnMut(&IterationStats)) -> Result<FitResult, TsplineError> {
+    fit_impl(samples, None, opts, backend, progress)
+}
+
+/// The loop on scattered data (indirect reduction): `pts` are what least squares fits and what
+/// the tolerance is checked at (every point); `grid` gives the parameter extent of the initial
+/// mesh and the reference of the 3×3 probes (NaN where no point lies). Every iteration is global.
+pub fn fit_points(
+    grid: &Samples,
+    pts: &Scattered,
+    opts: &FitOptions,
+    backend: &Backend,
+    progress: &mut dyn FnMut(&IterationStats),
+) -> Result<FitResult, TsplineError> {
+    if pts.st.len() != pts.z.len() || pts.z.iter().any(|v| !v.is_finite()) || pts.st.iter().flatten().any(|v| !v.is_finite()) {
+        return Err(TsplineError::Fit("scattered data: positions and values must be finite and as many".into()));
+    }
+    if pts.z.is_empty() {
+        return Err(TsplineError::Fit("the raster has no valid cell".into()));
+    }
+    fit_impl(grid, Some(pts), opts, backend, progress)
+}
+
+fn fit_impl(
+    samples: &Samples,
+    pts: Option<&Scattered>,
+    opts: &FitOptions,
+    backend: &Backend,
+    progress: &mut dyn FnMut(&IterationStats),
+) -> Result<FitResult, TsplineError> {
     if !(opts.max_error > 0.0 && opts.max_error.is_finite()) {
         return Err(TsplineError::Fit(format!("the maximum error must be a positive number, got {}", opts.max_error)));
     }
@@ -1068,7 +1179,7 @@ pub fn fit(samples: &Samples, opts: &FitOptions, backend: &Backend, progress: &m
     let mut refined = 0usize;
     // |Δz| per raster cell of the current surface, kept across iterations (local updates
     // re-check only the cells whose surface value can have changed)
-    let mut errs = vec![f64::NAN; samples.z.len()];
+    let mut errs = vec![f64::NAN; pts.map_or(samples.z.len(), |p| p.z.len())];
     let mut prev: Option<PbSpline> = None;
     let mut split_rects: Vec<crate::mesh::Rect> = Vec::new();
     let (w, h) = (samples.width, samples.height);
@@ -1080,12 +1191,12 @@ pub fn fit(samples: &Samples, opts: &FitOptions, backend: &Backend, progress: &m
         };
         let t_build = t0.elapsed().as_secs_f64();
         let local = match (&prev, opts.method, opts.local_updates) {
-            (Some(old), Method::Lsq, true) => local_update(old, &pb, mesh.points.len(), w, h),
+            (Some(old), Method::Lsq, true) if pts.is_none() => local_update(old, &pb, mesh.points.len(), w, h),
             _ => None,
         };
         let z = match (opts.method, &local) {
-            (Method::Lsq, Some((free, region))) => fit_lsq_local(&mesh, &pb, samples, Some(free), Some(region))?,
-            (Method::Lsq, None) => fit_lsq(&mesh, &pb, samples)?,
+            (Method::Lsq, Some((free, region))) => fit_lsq_local(&mesh, &pb, samples, None, Some(free), Some(region))?,
+            (Method::Lsq, None) => fit_lsq_local(&mesh, &pb, samples, pts, None, None)?,
             (Method::Drag, _) => fit_drag(&pb, samples, opts.drag_steps, 0.01 * opts.max_error, backend)?,
         };
         for (i, &pid) in pb.point_ids.iter().enumerate() {
@@ -1093,6 +1204,44 @@ pub fn fit(samples: &Samples, opts: &FitOptions, backend: &Backend, progress: &m
             pb.geom[i][2] = z[i];
         }
         let t_opt = t0.elapsed().as_secs_f64();
+        if let Some(p) = pts {
+            let z = match backend {
+                Backend::OpenCl(o) => o.eval_points(&o.upload(&pb)?, &p.st)?,
+                Backend::Cpu => pb.eval_z(&p.st, true),
+            };
+            errs.par_iter_mut().zip(&z).zip(&p.z).for_each(|((e, zk), dk)| *e = if zk.is_nan() { f64::INFINITY } else { (zk - dk).abs() });
+            let (err, over_leaves) = summarize_at(&mesh, &pb, &|q| (p.st[q][0], p.st[q][1]), &errs, opts.max_error);
+            let t_check = t0.elapsed().as_secs_f64();
+            let st = IterationStats {
+                iteration: it,
+                control_points: pb.point_ids.len(),
+                cells: mesh.leaf_count(),
+                refined_cells: refined,
+                error: err.clone(),
+                seconds: t0.elapsed().as_secs_f64(),
+                seconds_build: t_build,
+                seconds_optimise: t_opt - t_build,
+                seconds_check: t_check - t_opt,
+            };
+            progress(&st);
+            iterations.push(st);
+            if err.over_tolerance == 0 {
+                return Ok(FitResult { mesh, iterations, stop: StopReason::ToleranceReached });
+            }
+            if it >= opts.max_iterations {
+                return Ok(FitResult { mesh, iterations, stop: StopReason::MaxIterations });
+            }
+            match refine(&mesh, &pb, samples, opts, over_leaves, &err, false)? {
+                Refined::Stop(stop) => return Ok(FitResult { mesh, iterations, stop }),
+                Refined::Next(next, n_split) => {
+                    refined = n_split;
+                    split_rects = mesh.leaves().filter(|&c| !next.cells[c as usize].is_leaf()).map(|c| mesh.cells[c as usize].rect).collect();
+                    mesh = next;
+                    prev = Some(pb);
+                }
+            }
+            continue;
+        }
         match &local {
             Some((_, region)) => eval_errors_region(&pb, samples, region, &mut errs),
             None => eval_errors(&pb, samples, backend, &mut errs)?,
@@ -1123,39 +1272,16 @@ pub fn fit(samples: &Samples, opts: &FitOptions, backend: &Backend, progress: &m
         if it >= opts.max_iterations {
             return Ok(FitResult { mesh, iterations, stop: StopReason::MaxIterations });
         }
-        let marked = mark_cells(&mesh, &pb, samples, opts.max_error, over_leaves);
-        let splittable: Vec<CellId> = marked
-            .into_iter()
-            .filter(|&c| {
-                let r = mesh.cells[c as usize].rect;
-                r.width().min(r.height()) >= 2.0
-            })
-            .collect();
-        if splittable.is_empty() {
-            return Ok(FitResult { mesh, iterations, stop: StopReason::MinCellSize { cells_over: err.over_tolerance } });
-        }
-        let mut next = mesh.clone();
-        let mut geom = |s: f64, t: f64| (s, t, {
-            let z = pb.point(s, t)[2];
-            if z.is_nan() { 0.0 } else { z }
-        });
-        for &c in &splittable {
-            if next.cells[c as usize].is_leaf() {
-                next.split(c, &mut geom);
+        match refine(&mesh, &pb, samples, opts, over_leaves, &err, true)? {
+            Refined::Stop(stop) => return Ok(FitResult { mesh, iterations, stop }),
+            Refined::Next(next, n_split) => {
+                refined = n_split;
+                // leaves of this mesh that the refinement (splits and repair) turned into parents
+                split_rects = mesh.leaves().filter(|&c| !next.cells[c as usize].is_leaf()).map(|c| mesh.cells[c as usize].rect).collect();
+                mesh = next;
+                prev = Some(pb);
             }
         }
-        next.repair(1.0, &mut geom);
-        if let Some(cap) = opts.max_points {
-            let n = next.active_points().iter().filter(|a| **a).count();
-            if n > cap {
-                return Ok(FitResult { mesh, iterations, stop: StopReason::MaxPoints { cap } });
-            }
-        }
-        refined = splittable.len();
-        // leaves of this mesh that the refinement (splits and repair) turned into parents
-        split_rects = mesh.leaves().filter(|&c| !next.cells[c as usize].is_leaf()).map(|c| mesh.cells[c as usize].rect).collect();
-        mesh = next;
-        prev = Some(pb);
     }
     unreachable!("the loop returns")
 }

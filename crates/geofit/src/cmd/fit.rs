@@ -42,6 +42,12 @@ pub enum Device {
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum WarpMode {
+    Rotate,
+    Full,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum MethodArg {
     Lsq,
     Drag,
@@ -67,6 +73,16 @@ pub struct Args {
     /// Fit the raster after the warp stored in it by `geofit warp` (indirect reduction).
     #[arg(long)]
     pub indirect: bool,
+    /// `--indirect` on an unwarped raster: which warp to build (`rotate`: the principal-axis
+    /// rotation only; `full`: rotation plus the local x/y warp of `geofit warp`). The default is
+    /// `rotate`: the local warp is piecewise linear, so the warped surface has kinks along its
+    /// triangle edges that cost control points at tight tolerances (measured in
+    /// benches/results/tspline.md).
+    #[arg(long, value_enum, default_value_t = WarpMode::Rotate)]
+    pub warp: WarpMode,
+    /// `--indirect`: landmark spacing of the local warp in cells (default that of `geofit warp`).
+    #[arg(long)]
+    pub warp_spacing: Option<f64>,
     /// Stop before the mesh would exceed this many control points.
     #[arg(long)]
     pub max_points: Option<usize>,
@@ -188,23 +204,82 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     }
     let t_start = std::time::Instant::now();
     let (raster, name) = read_raster_arg(&args.input)?;
-    // Indirect reduction (spec §1, §2.3): fit the warped, filled raster; a raster written by
-    // `geofit warp` is used as it is, any other one is warped here with the default parameters.
-    let (raster, field) = if args.indirect {
+    // Indirect reduction (spec §1, §2.3). A raster not yet warped is warped here with the default
+    // parameters and the fit works on its ORIGINAL cells mapped forward into the warped frame
+    // (scattered data): least squares and the tolerance check see the original values at the
+    // positions `geofit eval` evaluates them at, so neither the splat's resampling error nor the
+    // dilation-filled cells (which the direct fit never has to follow) enter the fit. A raster
+    // written by `geofit warp` no longer holds the original values: it is fitted as it is (the
+    // tolerance then holds in the warped frame, said in a notice).
+    let (raster, field, original) = if args.indirect {
         match raster_proc::warp::field_of(&raster) {
-            Ok(f) => (raster, Some(f)),
+            Ok(f) => {
+                config.notice(&format!(
+                    "notice: {name} is already warped: fitting its resampled, filled cells (the tolerance holds in the warped frame); pass the original raster for a fit to the original cells"
+                ));
+                (raster, Some(f), None)
+            }
             Err(_) => {
-                let (w, f, _) = raster_proc::warp::warp_raster(&raster, &raster_proc::warp::WarpParams::default())
+                let mut wp = raster_proc::warp::WarpParams::default();
+                if args.warp == WarpMode::Rotate {
+                    wp.x_warp = false;
+                    wp.y_warp = false;
+                }
+                if let Some(sp) = args.warp_spacing {
+                    if !(sp > 0.0 && sp.is_finite()) {
+                        return Err(CliError::usage(format!("--warp-spacing must be a positive number of cells, got {sp}")));
+                    }
+                    let (dx, dy) = raster.cell_size();
+                    wp.landmark_spacing = Some(sp * (dx * dy).abs().sqrt());
+                }
+                let (w, f, _) = raster_proc::warp::warp_raster(&raster, &wp)
                     .map_err(|e| super::rasterize::proc_err(&name, e))?;
-                (w, Some(f))
+                (w, Some(f), Some(raster))
             }
         }
     } else {
-        (raster, None)
+        (raster, None, None)
     };
-    let (samples, georef, mask) = samples_from_raster(&raster, &name)?;
+    let (mut samples, georef, mask) = samples_from_raster(&raster, &name)?;
     drop(raster); // the samples hold the data from here on (halves the peak for big rasters)
-    let valid = samples.valid_count();
+    let points = match (&original, &field) {
+        (Some(o), Some(f)) => {
+            let mapper = f.mapper();
+            let mut pts = tspline::fit::Scattered::default();
+            for row in 0..o.height {
+                for col in 0..o.width {
+                    if let Some(z) = o.get(col, row) {
+                        let (x, y) = o.cell_centre(col, row);
+                        let q = mapper.forward([x, y]);
+                        let (s, t) = georef.param(q[0], q[1]);
+                        pts.st.push([s, t]);
+                        pts.z.push(z);
+                    }
+                }
+            }
+            // the probes' reference: the warped raster where original cells land, NaN elsewhere
+            let (w, h) = (samples.width, samples.height);
+            let mut near = vec![false; w * h];
+            for p in &pts.st {
+                let (i0, j0) = (p[0].floor(), p[1].floor());
+                for (di, dj) in [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (1.0, 1.0)] {
+                    let (i, j) = (i0 + di, j0 + dj);
+                    if i >= 0.0 && j >= 0.0 && (i as usize) < w && (j as usize) < h {
+                        near[j as usize * w + i as usize] = true;
+                    }
+                }
+            }
+            for (z, n) in samples.z.iter_mut().zip(&near) {
+                if !n {
+                    *z = f64::NAN;
+                }
+            }
+            Some(pts)
+        }
+        _ => None,
+    };
+    drop(original);
+    let valid = points.as_ref().map_or_else(|| samples.valid_count(), |p| p.z.len());
     if valid == 0 {
         return Err(CliError::findings(format!("{name}: the raster has no valid cell")));
     }
@@ -251,7 +326,11 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
             ),
         );
     };
-    let result = tspline::fit::fit(&samples, &opts, &backend, &mut cb).map_err(|e| tspline_err(&name, e))?;
+    let result = match &points {
+        Some(p) => tspline::fit::fit_points(&samples, p, &opts, &backend, &mut cb),
+        None => tspline::fit::fit(&samples, &opts, &backend, &mut cb),
+    }
+    .map_err(|e| tspline_err(&name, e))?;
     let last = result.iterations.last().cloned().expect("at least one iteration");
     let (exit, line) = match &result.stop {
         StopReason::ToleranceReached => (Exit::Ok, format!("tolerance reached: every valid cell within {e}")),
