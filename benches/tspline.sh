@@ -67,6 +67,11 @@ echo "Load average after: $(cut -d' ' -f1-3 /proc/loadavg)"
 echo
 echo "Target: 20 M points/s on 2 cores."
 echo
+echo "Flops/point: the dense paths evaluate per-element polynomial blocks (crates/tspline/src/extraction.rs):"
+echo "element test, (u, v), two bicubic Horner forms and a division, plus the share of points that take"
+echo "the PB-spline reference path (borders). Per-CPU-second figures (robust to a loaded machine):"
+echo "\`cargo test -p tspline --release -- --ignored --nocapture throughput\`."
+echo
 }
 
 if [ "$PART" = eval ]; then
