@@ -369,9 +369,12 @@ impl PbSpline {
     /// Whether dense evaluation of `n` points goes through the element extraction: building it
     /// costs about as much as evaluating a few points per element, so small batches (the
     /// fit's per-control-point evaluations) stay on the PB-spline path.
+    /// The OpenCL side applies the same rule ([`use_extraction`]), so both devices take the
+    /// same path for the same batch and give identical numbers (the kernels mirror the CPU
+    /// operation order), which keeps fits device-independent.
     #[inline]
     pub fn use_extraction(&self, n: usize) -> bool {
-        n >= 4 * self.cells.len().max(1)
+        use_extraction(n, self.cells.len())
     }
 
     /// Heights at many parameter points, in parallel (rayon) or on one thread. Large batches go
@@ -470,6 +473,15 @@ impl PbSpline {
         // 4 compares per candidate; per hit 2 basis evaluations + 2 mul + 4 fma (8 flops) ; final 3 divisions.
         (cand as f64 * 4.0 + hit as f64 * (2.0 * basis_flops + 10.0)) / n + 3.0
     }
+}
+
+/// Dense batches of at least this many points per leaf cell use the element extraction.
+pub const EXTRACTION_POINTS_PER_CELL: usize = 4;
+
+/// Whether a batch of `n` points on a mesh with `cells` leaf cells uses the extraction.
+#[inline]
+pub fn use_extraction(n: usize, cells: usize) -> bool {
+    n >= EXTRACTION_POINTS_PER_CELL * cells.max(1)
 }
 
 /// A regular evaluation grid in parameter space.

@@ -44,6 +44,8 @@ pub struct OclSpline {
     cstart: Buffer<u32>,
     citems: Buffer<u32>,
     pb: PbSplineGrid,
+    /// Leaf cells (for [`crate::eval::use_extraction`]).
+    ncells: usize,
     /// The element extraction (dense evaluation), `None` after [`OclEvaluator::update_geometry`]
     /// (its blocks depend on the geometry; the PB-spline kernels serve until the next upload)
     /// and for small uploads.
@@ -150,6 +152,10 @@ impl OclEvaluator {
     pub fn upload(&self, pb: &PbSpline) -> Result<OclSpline, TsplineError> {
         let mut sp = self.upload_pb(pb)?;
         let ex = Extraction::new(pb, true);
+        if ex.is_empty() {
+            // the element kernels read element 0 as the first hint: keep the PB-spline kernels
+            return Ok(sp);
+        }
         sp.ext = Some(OclExtraction {
             data: self.buf(&ex.data)?,
             flags: self.buf(&ex.flags)?,
@@ -176,6 +182,7 @@ impl OclEvaluator {
             cstart: self.buf(&pb.cell_start)?,
             citems: self.buf(&pb.cell_items)?,
             pb: PbSplineGrid { s0: g.s0, t0: g.t0, ds: g.ds, dt: g.dt, ns: g.ns, nt: g.nt, k: pb.degree.k() as u32 },
+            ncells: pb.cells.len(),
             ext: None,
         })
     }
@@ -186,13 +193,13 @@ impl OclEvaluator {
         sp.geom.write(pb.geom.as_flattened()).enq().map_err(err)
     }
 
-    /// The dense-evaluation kernel: the element path when the extraction is current, else the
-    /// PB-spline kernel `name` (same numbers to 1e-12).
+    /// The dense-evaluation kernel: the element path when the extraction is current and the
+    /// batch is dense (the CPU's rule), else the PB-spline kernel `name` (same numbers to 1e-12).
     /// `n`: points; `runs`: work items of the element kernel (each evaluates up to [`RUN`]
     /// consecutive points).
     fn dense_kernel<'a>(&'a self, name: &str, sp: &'a OclSpline, n: usize, runs: usize) -> Result<ocl::builders::KernelBuilder<'a>, TsplineError> {
         match &sp.ext {
-            Some(ex) => {
+            Some(ex) if crate::eval::use_extraction(n, sp.ncells) => {
                 let mut kb = self.kernel(&format!("{name}_ext"), sp, runs)?;
                 let eg = ex.grid;
                 kb.arg(eg.s0).arg(eg.t0).arg(eg.ds).arg(eg.dt).arg(eg.ns).arg(eg.nt).arg(ex.stride);
@@ -200,7 +207,7 @@ impl OclEvaluator {
                 kb.arg(&ex.data).arg(&ex.flags).arg(&ex.start).arg(&ex.items);
                 Ok(kb)
             }
-            None => {
+            _ => {
                 let mut kb = self.kernel(name, sp, n)?;
                 kb.arg(&sp.knots).arg(&sp.poly).arg(&sp.geom).arg(&sp.cells).arg(&sp.pstart).arg(&sp.pitems).arg(&sp.cstart).arg(&sp.citems);
                 Ok(kb)
