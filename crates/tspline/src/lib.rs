@@ -26,6 +26,7 @@ pub mod format;
 pub mod knots;
 pub mod mesh;
 pub mod ocl_eval;
+pub mod ocl_fit;
 pub mod rtree_pages;
 
 pub use eval::{GridSpec, PbSpline};
