@@ -245,11 +245,11 @@ impl Extraction {
         } else {
             (bipoly::<2>(&r[8..12], u, v), bipoly::<2>(&r[12..16], u, v))
         };
-        // Also catches den = 0 and NaN: the reference decides (NaN where Σ w N = 0).
-        if !(den >= r[6]) {
-            return pb.point(s, t)[2];
+        if den >= r[6] {
+            return num / den;
         }
-        num / den
+        // Small, zero or NaN denominators: the reference decides (NaN where Σ w N = 0).
+        pb.point(s, t)[2]
     }
 
     /// Heights at many points, in chunks (each with its own element hint).
