@@ -25,6 +25,21 @@
 //! - **A19** weights are not fitted (the thesis found them within a tight interval around 1);
 //!   all w = 1.
 //! - Minimum cell edge = 1 = sample spacing (§2.2 rule): cells of edge < 2 are never split.
+//! - **Memory / scale** (10⁸ cells): neither the model matrix nor a full-raster surface is held.
+//!   The normal equations are accumulated row by row (CSR positions cached between neighbouring
+//!   cells, upper triangle only); the error check evaluates the surface in row blocks into one
+//!   f64 |Δz| per cell, kept across iterations. After a refinement that changes at most 20 % of
+//!   the blending functions (new points, changed knots), only those points and the points whose
+//!   supports overlap theirs are re-solved (the others held, their terms on the right-hand side)
+//!   and only the cells inside the re-solved supports — the only cells whose surface value can
+//!   change — are re-evaluated; "tolerance reached" is declared only after a fresh check of
+//!   every cell. Knots are re-inferred only for points whose support meets a split cell.
+//!   The OpenCL model-matrix rows (T29) are in `ocl_fit` (kernel + CPU twin).
+//! - **Indirect reduction** ([`fit_points`]): the original raster cells mapped forward into the
+//!   warped frame are the data (scattered least squares, the tolerance checked at every point,
+//!   no 3×3 probes against the resampled raster), so the splat's resampling error and the
+//!   dilation-filled cells never enter the fit, and the tolerance holds where the indirect
+//!   mesh is evaluated on the original grid.
 
 use std::time::Instant;
 
