@@ -186,11 +186,14 @@ impl PbSpline {
     pub fn build(mesh: &TMesh) -> PbSpline {
         let active = mesh.active_points();
         let point_ids: Vec<u32> = (0..mesh.points.len() as u32).filter(|&i| active[i as usize]).collect();
+        // One bounds pass for all points (TMesh::bounds visits every cell: per point it made the
+        // compile O(points · cells), 75 % of `geofit eval` on a 10^5-point mesh).
+        let bounds = mesh.bounds();
         let knots: Vec<LocalKnots> = point_ids
             .par_iter()
             .map(|&i| {
                 let p = mesh.points[i as usize];
-                knots::infer(mesh, p.s, p.t)
+                knots::infer_in(mesh, bounds, p.s, p.t)
             })
             .collect();
         PbSpline::from_parts(mesh, point_ids, knots)
