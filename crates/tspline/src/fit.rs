@@ -128,11 +128,14 @@ pub struct FitOptions {
     /// only the cells they influence (see `local_update`); the tolerance is still declared on a
     /// check of every valid cell.
     pub local_updates: bool,
+    /// Least squares: compute the model-matrix rows of global assemblies with the OpenCL kernel
+    /// (`ocl_fit`, spec T29) instead of the CPU twin.
+    pub opencl_assembly: bool,
 }
 
 impl FitOptions {
     pub fn new(degree: Degree, max_error: f64) -> FitOptions {
-        FitOptions { degree, max_error, max_points: None, max_iterations: 100, method: Method::Lsq, overhang: 0.25, initial_cells: 4, drag_steps: 40, local_updates: true }
+        FitOptions { degree, max_error, max_points: None, max_iterations: 100, method: Method::Lsq, overhang: 0.25, initial_cells: 4, drag_steps: 40, local_updates: true, opencl_assembly: false }
     }
 }
 
@@ -417,7 +420,14 @@ fn line_triples(mesh: &TMesh, pb: &PbSpline) -> Vec<Vec<(u32, u32, f64, f64)>> {
 /// rational basis): z of every PB point; the current z are the warm start and the regulariser's
 /// prior. Returns the new z per PB point.
 pub fn fit_lsq(mesh: &TMesh, pb: &PbSpline, samples: &Samples) -> Result<Vec<f64>, TsplineError> {
-    fit_lsq_local(mesh, pb, samples, None, None, None)
+    fit_lsq_local(mesh, pb, samples, None, None, None, None)
+}
+
+/// [`fit_lsq`] with the rows of the model matrix computed by the OpenCL kernel (spec T29,
+/// [`crate::ocl_fit`]) block by block when `asm` is given; the host accumulates the normal
+/// equations from them (the matrix is never stored whole).
+pub fn fit_lsq_with(mesh: &TMesh, pb: &PbSpline, samples: &Samples, asm: Option<&crate::ocl_fit::OclModel>) -> Result<Vec<f64>, TsplineError> {
+    fit_lsq_local(mesh, pb, samples, None, None, None, asm)
 }
 
 /// Scattered data in parameter units: positions and values (indirect reduction: the ORIGINAL
@@ -500,8 +510,14 @@ fn fit_lsq_local(
     pts: Option<&Scattered>,
     free: Option<&[bool]>,
     region: Option<&Region>,
+    asm: Option<&crate::ocl_fit::OclModel>,
 ) -> Result<Vec<f64>, TsplineError> {
     let n = pb.knots.len();
+    // device rows only for the global raster assembly
+    let asm = match (pts, region, asm) {
+        (None, None, Some(o)) => Some((o, o.upload(pb)?)),
+        _ => None,
+    };
     let is_free = |i: usize| free.is_none_or(|f| f[i]);
     let triples = line_triples(mesh, pb);
     // The regulariser couples i, l and r of each triple: all pairs enter the pattern.
@@ -528,7 +544,7 @@ fn fit_lsq_local(
     let chunk = rows.len().div_ceil(4).max(1);
     let parts: Vec<(Vec<f64>, Vec<f64>, Vec<f64>)> = rows
         .par_chunks(chunk)
-        .map(|js| {
+        .map(|js| -> Result<(Vec<f64>, Vec<f64>, Vec<f64>), TsplineError> {
             let mut vals = vec![0.0; a.vals.len()];
             let mut rhs = vec![0.0; n];
             let mut support = vec![0.0; n];
@@ -539,7 +555,7 @@ fn fit_lsq_local(
             // upper triangle (by PB index) is accumulated; it is mirrored after the merge.
             let mut prev: Vec<u32> = Vec::with_capacity(32);
             let mut pos: Vec<usize> = Vec::with_capacity(32 * 33 / 2);
-            let mut cell = |q: usize| {
+            let mut cell = |q: usize, given: Option<(&[u32], &[f64])>| {
                 let (si, tj, d) = match pts {
                     Some(p) => (p.st[q][0], p.st[q][1], p.z[q]),
                     None => ((q % w) as f64, (q / w) as f64, samples.z[q]),
@@ -548,8 +564,18 @@ fn fit_lsq_local(
                     return;
                 }
                 row.clear();
-                if !pb.for_each_basis(si, tj, &mut scratch, |q, v| row.push((q, v))) {
-                    return;
+                match given {
+                    Some((ix, v)) => {
+                        if ix.is_empty() {
+                            return; // outside the domain
+                        }
+                        row.extend(ix.iter().copied().zip(v.iter().copied()));
+                    }
+                    None => {
+                        if !pb.for_each_basis(si, tj, &mut scratch, |q, v| row.push((q, v))) {
+                            return;
+                        }
+                    }
                 }
                 let mut d = d;
                 if free.is_some() {
@@ -589,14 +615,28 @@ fn fit_lsq_local(
                 }
             };
             let (j0, j1) = (js[0], js[js.len() - 1] + 1);
-            match (pts, region) {
-                (Some(_), _) => (j0..j1).for_each(&mut cell),
-                (None, Some(r)) => r.for_rows(j0, j1, &mut cell),
-                (None, None) => (j0 * w..j1 * w).for_each(&mut cell),
+            match (pts, region, &asm) {
+                (Some(_), _, _) => (j0..j1).for_each(|q| cell(q, None)),
+                (None, Some(r), _) => r.for_rows(j0, j1, |q| cell(q, None)),
+                (None, None, Some((o, sp))) => {
+                    // the kernel's rows for blocks of raster rows (2^16 cells of ELL at a time)
+                    let br = ((1usize << 16) / w.max(1)).max(1);
+                    let mut jb = j0;
+                    while jb < j1 {
+                        let nr = br.min(j1 - jb);
+                        let g = GridSpec { s0: 0.0, t0: jb as f64, ds: 1.0, dt: 1.0, ns: w, nt: nr };
+                        let t = o.model_rows(sp, &g)?;
+                        for r in 0..t.len() {
+                            cell(jb * w + r, Some(t.row(r)));
+                        }
+                        jb += nr;
+                    }
+                }
+                (None, None, None) => (j0 * w..j1 * w).for_each(|q| cell(q, None)),
             }
-            (vals, rhs, support)
+            Ok((vals, rhs, support))
         })
-        .collect();
+        .collect::<Result<_, _>>()?;
     let mut rhs = vec![0.0; n];
     let mut support = vec![0.0; n];
     for (v, r, s) in parts {
@@ -1196,6 +1236,7 @@ fn fit_impl(
     // re-check only the cells whose surface value can have changed)
     let mut errs = vec![f64::NAN; pts.map_or(samples.z.len(), |p| p.z.len())];
     let mut prev: Option<PbSpline> = None;
+    let asm = if opts.opencl_assembly && opts.method == Method::Lsq { Some(crate::ocl_fit::OclModel::new()?) } else { None };
     let mut split_rects: Vec<crate::mesh::Rect> = Vec::new();
     let (w, h) = (samples.width, samples.height);
     for it in 0.. {
@@ -1210,8 +1251,8 @@ fn fit_impl(
             _ => None,
         };
         let z = match (opts.method, &local) {
-            (Method::Lsq, Some((free, region))) => fit_lsq_local(&mesh, &pb, samples, None, Some(free), Some(region))?,
-            (Method::Lsq, None) => fit_lsq_local(&mesh, &pb, samples, pts, None, None)?,
+            (Method::Lsq, Some((free, region))) => fit_lsq_local(&mesh, &pb, samples, None, Some(free), Some(region), None)?,
+            (Method::Lsq, None) => fit_lsq_local(&mesh, &pb, samples, pts, None, None, asm.as_ref())?,
             (Method::Drag, _) => fit_drag(&pb, samples, opts.drag_steps, 0.01 * opts.max_error, backend)?,
         };
         for (i, &pid) in pb.point_ids.iter().enumerate() {

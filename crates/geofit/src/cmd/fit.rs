@@ -42,6 +42,12 @@ pub enum Device {
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Assembly {
+    Cpu,
+    Opencl,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum WarpMode {
     Rotate,
     Full,
@@ -95,6 +101,10 @@ pub struct Args {
     /// Where dense evaluations run.
     #[arg(long, value_enum, default_value_t = Device::Auto)]
     pub device: Device,
+    /// Where the least-squares model-matrix rows are computed: `cpu`, or `opencl` (the T29
+    /// kernel; the host accumulates the normal equations from its rows block by block).
+    #[arg(long, value_enum, default_value_t = Assembly::Cpu)]
+    pub assembly: Assembly,
     /// Write a JSON report (options, per-iteration table, stop reason) to this path.
     #[arg(long)]
     pub report: Option<String>,
@@ -301,6 +311,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     opts.max_points = args.max_points;
     opts.max_iterations = args.max_iterations;
     opts.overhang = args.overhang;
+    opts.opencl_assembly = args.assembly == Assembly::Opencl;
     opts.method = match args.method {
         MethodArg::Lsq => Method::Lsq,
         MethodArg::Drag => Method::Drag,
