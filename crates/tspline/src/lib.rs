@@ -25,6 +25,7 @@ pub mod fit;
 pub mod format;
 pub mod knots;
 pub mod mesh;
+mod ocl_device;
 pub mod ocl_eval;
 pub mod ocl_fit;
 pub mod rtree_pages;

@@ -8,12 +8,13 @@
 //! reports a typed error; a kernel that fails to build is an error too. The caller decides
 //! whether to fall back to the CPU (`--device auto`) or to fail (`--device opencl`).
 
-use ocl::{flags, Buffer, Context, Device, Kernel, Platform, Program, Queue};
+use ocl::{Buffer, Device, Kernel, Platform};
 
 use crate::eval::{GridSpec, PbSpline};
 use crate::extraction::Extraction;
 use crate::knots::LocalKnots;
 use crate::mesh::TMesh;
+use crate::ocl_device::{err, OclDevice};
 use crate::TsplineError;
 
 /// Points per work item of the element kernels (`RUN` in `tspline.cl`).
@@ -22,15 +23,10 @@ const RUN: usize = 64;
 /// The kernel source, compiled at run time.
 pub const KERNEL_SRC: &str = include_str!("tspline.cl");
 
-fn err(e: impl std::fmt::Display) -> TsplineError {
-    TsplineError::OpenCl(e.to_string())
-}
 
 /// An OpenCL device with the compiled T-spline program.
 pub struct OclEvaluator {
-    queue: Queue,
-    program: Program,
-    device_name: String,
+    dev: OclDevice,
 }
 
 /// Device buffers of one compiled PB-spline.
@@ -95,56 +91,15 @@ impl OclEvaluator {
 
     /// As [`OclEvaluator::new`] with another kernel source (tests feed a broken one).
     pub fn with_source(src: &str) -> Result<OclEvaluator, TsplineError> {
-        // ICD loaders and PoCL are not reliable when several threads enumerate at once.
-        static INIT: std::sync::Mutex<()> = std::sync::Mutex::new(());
-        let _guard = INIT.lock().unwrap_or_else(|e| e.into_inner());
-        let ids = ocl::core::get_platform_ids().map_err(|e| err(format!("no OpenCL platform available ({e})")))?;
-        let mut chosen = None;
-        let mut last_err = String::new();
-        for id in ids {
-            let p = Platform::new(id);
-            match Device::list_all(p) {
-                Ok(devs) => {
-                    if let Some(d) = devs.into_iter().next() {
-                        chosen = Some((p, d));
-                        break;
-                    }
-                }
-                Err(e) => last_err = e.to_string(),
-            }
-        }
-        let (platform, device) = chosen.ok_or_else(|| err(format!("no OpenCL platform with a device found {last_err}")))?;
-        let context = Context::builder().platform(platform).devices(device).build().map_err(err)?;
-        let queue = Queue::new(&context, device, None).map_err(err)?;
-        let program = Program::builder()
-            .src(src)
-            .devices(device)
-            .cmplr_opt("-cl-std=CL1.2")
-            .build(&context)
-            .map_err(|e| err(format!("kernel build failed: {}", first_lines(&e.to_string(), 6))))?;
-        let device_name = format!("{} / {}", platform.name().unwrap_or_default(), device.name().unwrap_or_default());
-        Ok(OclEvaluator { queue, program, device_name })
+        Ok(OclEvaluator { dev: OclDevice::build(src, "kernel")? })
     }
 
     pub fn device_name(&self) -> &str {
-        &self.device_name
-    }
-
-    fn buf<T: ocl::OclPrm>(&self, data: &[T]) -> Result<Buffer<T>, TsplineError> {
-        // OpenCL refuses zero-sized buffers: pad with one default element.
-        let pad = [T::default()];
-        let data = if data.is_empty() { &pad[..] } else { data };
-        Buffer::<T>::builder()
-            .queue(self.queue.clone())
-            .flags(flags::MEM_READ_ONLY)
-            .len(data.len())
-            .copy_host_slice(data)
-            .build()
-            .map_err(err)
+        &self.dev.name
     }
 
     fn out_buf(&self, n: usize) -> Result<Buffer<f64>, TsplineError> {
-        Buffer::<f64>::builder().queue(self.queue.clone()).flags(flags::MEM_WRITE_ONLY).len(n.max(1)).build().map_err(err)
+        self.dev.out::<f64>(n)
     }
 
     /// Uploads a compiled PB-spline and its element extraction (computed here, on the host's
@@ -157,10 +112,10 @@ impl OclEvaluator {
             return Ok(sp);
         }
         sp.ext = Some(OclExtraction {
-            data: self.buf(&ex.data)?,
-            flags: self.buf(&ex.flags)?,
-            start: self.buf(&ex.start)?,
-            items: self.buf(&ex.items)?,
+            data: self.dev.buf(&ex.data)?,
+            flags: self.dev.buf(&ex.flags)?,
+            start: self.dev.buf(&ex.start)?,
+            items: self.dev.buf(&ex.items)?,
             grid: ex.grid,
             stride: ex.stride as u32,
         });
@@ -173,14 +128,14 @@ impl OclEvaluator {
         let (knots, poly, geom, cells) = (pb.knots.as_flattened(), pb.poly.as_flattened(), pb.geom.as_flattened(), pb.cells.as_flattened());
         let g = pb.grid;
         Ok(OclSpline {
-            knots: self.buf(knots)?,
-            poly: self.buf(poly)?,
-            geom: self.buf(geom)?,
-            cells: self.buf(cells)?,
-            pstart: self.buf(&pb.pt_start)?,
-            pitems: self.buf(&pb.pt_items)?,
-            cstart: self.buf(&pb.cell_start)?,
-            citems: self.buf(&pb.cell_items)?,
+            knots: self.dev.buf(knots)?,
+            poly: self.dev.buf(poly)?,
+            geom: self.dev.buf(geom)?,
+            cells: self.dev.buf(cells)?,
+            pstart: self.dev.buf(&pb.pt_start)?,
+            pitems: self.dev.buf(&pb.pt_items)?,
+            cstart: self.dev.buf(&pb.cell_start)?,
+            citems: self.dev.buf(&pb.cell_items)?,
             pb: PbSplineGrid { s0: g.s0, t0: g.t0, ds: g.ds, dt: g.dt, ns: g.ns, nt: g.nt, k: pb.degree.k() as u32 },
             ncells: pb.cells.len(),
             ext: None,
@@ -219,7 +174,7 @@ impl OclEvaluator {
     fn kernel(&self, name: &str, sp: &OclSpline, n: usize) -> Result<ocl::builders::KernelBuilder<'_>, TsplineError> {
         let g = sp.pb;
         let mut kb = Kernel::builder();
-        kb.program(&self.program).name(name).queue(self.queue.clone()).global_work_size(n.max(1));
+        kb.program(&self.dev.program).name(name).queue(self.dev.queue.clone()).global_work_size(n.max(1));
         kb.arg(g.s0).arg(g.t0).arg(g.ds).arg(g.dt).arg(g.ns).arg(g.nt).arg(g.k);
         Ok(kb)
     }
@@ -230,7 +185,7 @@ impl OclEvaluator {
         if n == 0 {
             return Ok(Vec::new());
         }
-        let stb = self.buf(st.as_flattened())?;
+        let stb = self.dev.buf(st.as_flattened())?;
         let out = self.out_buf(n)?;
         let mut kb = self.dense_kernel("eval_points", sp, n, n.div_ceil(RUN))?;
         kb.arg(&stb).arg(&out).arg(n as u32);
@@ -261,8 +216,8 @@ impl OclEvaluator {
     pub fn drag_vectors(&self, sp: &OclSpline, params: &[[f64; 2]], refz: &[f64]) -> Result<Vec<f64>, TsplineError> {
         let n = params.len();
         let flat: Vec<f64> = params.iter().flatten().copied().collect();
-        let pb = self.buf(&flat)?;
-        let rb = self.buf(refz)?;
+        let pb = self.dev.buf(&flat)?;
+        let rb = self.dev.buf(refz)?;
         let out = self.out_buf(n)?;
         let mut kb = self.kernel("drag_vectors", sp, n)?;
         kb.arg(&sp.knots).arg(&sp.poly).arg(&sp.geom).arg(&sp.cells).arg(&sp.pstart).arg(&sp.pitems).arg(&sp.cstart).arg(&sp.citems);
@@ -285,7 +240,7 @@ impl OclEvaluator {
         let sp = self.upload_pb(&tmp)?;
         let params: Vec<f64> = ids.iter().flat_map(|&i| [mesh.points[i as usize].s, mesh.points[i as usize].t]).collect();
         let n = ids.len();
-        let pbuf = self.buf(&params)?;
+        let pbuf = self.dev.buf(&params)?;
         let out = self.out_buf(10 * n)?;
         let mut kb = self.kernel("derive_knots", &sp, n)?;
         kb.arg(&sp.cells).arg(&sp.cstart).arg(&sp.citems).arg(&pbuf).arg(&out).arg(n as u32);
@@ -305,10 +260,6 @@ impl OclEvaluator {
             .collect();
         Ok(PbSpline::from_parts(mesh, ids, knots))
     }
-}
-
-fn first_lines(s: &str, n: usize) -> String {
-    s.lines().filter(|l| !l.trim().is_empty()).take(n).collect::<Vec<_>>().join(" | ")
 }
 
 #[cfg(test)]

@@ -10,9 +10,10 @@
 //! Like `ocl_eval`, nothing here panics when OpenCL is missing: [`OclModel::new`] returns a
 //! typed error.
 
-use ocl::{flags, Buffer, Context, Device, Kernel, Platform, Program, Queue};
+use ocl::{Buffer, Kernel};
 
 use crate::eval::{GridSpec, PbSpline};
+use crate::ocl_device::{err, OclDevice};
 use crate::TsplineError;
 
 /// The kernel source, compiled at run time.
@@ -21,9 +22,6 @@ pub const KERNEL_SRC: &str = include_str!("fit.cl");
 /// Slots per row (more non-zero basis functions at one point is an error).
 pub const MAXNZ: usize = 32;
 
-fn err(e: impl std::fmt::Display) -> TsplineError {
-    TsplineError::OpenCl(e.to_string())
-}
 
 /// Rows of T in ELL layout: row r has `count[r]` entries `idx/val[r·MAXNZ ..]`; count 0 = the
 /// sample lies outside the domain.
@@ -78,9 +76,7 @@ pub fn model_rows_cpu(pb: &PbSpline, g: &GridSpec) -> Result<ModelRows, TsplineE
 
 /// An OpenCL device with the model-matrix kernel built.
 pub struct OclModel {
-    queue: Queue,
-    program: Program,
-    device_name: String,
+    dev: OclDevice,
 }
 
 /// Device buffers of one PB-spline (knots, weights, cells, bucket lists).
@@ -100,40 +96,11 @@ pub struct OclModelSpline {
 impl OclModel {
     /// The first device of the first platform that has one, with `fit.cl` built.
     pub fn new() -> Result<OclModel, TsplineError> {
-        static INIT: std::sync::Mutex<()> = std::sync::Mutex::new(());
-        let _guard = INIT.lock().unwrap_or_else(|e| e.into_inner());
-        let ids = ocl::core::get_platform_ids().map_err(|e| err(format!("no OpenCL platform available ({e})")))?;
-        let mut chosen = None;
-        for id in ids {
-            let p = Platform::new(id);
-            if let Ok(devs) = Device::list_all(p) {
-                if let Some(d) = devs.into_iter().next() {
-                    chosen = Some((p, d));
-                    break;
-                }
-            }
-        }
-        let (platform, device) = chosen.ok_or_else(|| err("no OpenCL platform with a device found"))?;
-        let context = Context::builder().platform(platform).devices(device).build().map_err(err)?;
-        let queue = Queue::new(&context, device, None).map_err(err)?;
-        let program = Program::builder()
-            .src(KERNEL_SRC)
-            .devices(device)
-            .cmplr_opt("-cl-std=CL1.2")
-            .build(&context)
-            .map_err(|e| err(format!("fit.cl build failed: {}", e.to_string().lines().take(6).collect::<Vec<_>>().join(" / "))))?;
-        let device_name = format!("{} / {}", platform.name().unwrap_or_default(), device.name().unwrap_or_default());
-        Ok(OclModel { queue, program, device_name })
+        Ok(OclModel { dev: OclDevice::build(KERNEL_SRC, "fit.cl")? })
     }
 
     pub fn device_name(&self) -> &str {
-        &self.device_name
-    }
-
-    fn buf<T: ocl::OclPrm>(&self, data: &[T]) -> Result<Buffer<T>, TsplineError> {
-        let pad = [T::default()];
-        let data = if data.is_empty() { &pad[..] } else { data };
-        Buffer::<T>::builder().queue(self.queue.clone()).flags(flags::MEM_READ_ONLY).len(data.len()).copy_host_slice(data).build().map_err(err)
+        &self.dev.name
     }
 
     /// Uploads the PB-spline's knots, weights, leaf cells and bucket lists.
@@ -143,14 +110,14 @@ impl OclModel {
         let poly: Vec<f64> = pb.poly.iter().flatten().copied().collect();
         let cells: Vec<f64> = pb.cells.iter().flatten().copied().collect();
         Ok(OclModelSpline {
-            knots: self.buf(&knots)?,
-            poly: self.buf(&poly)?,
-            geom: self.buf(&geom)?,
-            cells: self.buf(&cells)?,
-            pstart: self.buf(&pb.pt_start)?,
-            pitems: self.buf(&pb.pt_items)?,
-            cstart: self.buf(&pb.cell_start)?,
-            citems: self.buf(&pb.cell_items)?,
+            knots: self.dev.buf(&knots)?,
+            poly: self.dev.buf(&poly)?,
+            geom: self.dev.buf(&geom)?,
+            cells: self.dev.buf(&cells)?,
+            pstart: self.dev.buf(&pb.pt_start)?,
+            pitems: self.dev.buf(&pb.pt_items)?,
+            cstart: self.dev.buf(&pb.cell_start)?,
+            citems: self.dev.buf(&pb.cell_items)?,
             grid: pb.grid,
             k: pb.degree.k() as u32,
         })
@@ -162,15 +129,14 @@ impl OclModel {
         if n == 0 {
             return Ok(ModelRows { count: vec![], idx: vec![], val: vec![] });
         }
-        let out = |len: usize| Buffer::<u32>::builder().queue(self.queue.clone()).flags(flags::MEM_WRITE_ONLY).len(len).build().map_err(err);
-        let idx = out(n * MAXNZ)?;
-        let count = out(n)?;
-        let val = Buffer::<f64>::builder().queue(self.queue.clone()).flags(flags::MEM_WRITE_ONLY).len(n * MAXNZ).build().map_err(err)?;
+        let idx = self.dev.out::<u32>(n * MAXNZ)?;
+        let count = self.dev.out::<u32>(n)?;
+        let val = self.dev.out::<f64>(n * MAXNZ)?;
         let gr = sp.grid;
         let k = Kernel::builder()
-            .program(&self.program)
+            .program(&self.dev.program)
             .name("model_rows")
-            .queue(self.queue.clone())
+            .queue(self.dev.queue.clone())
             .global_work_size(n)
             .arg(&sp.knots)
             .arg(&sp.poly)
