@@ -21,7 +21,7 @@ use crate::TsplineError;
 const RUN: usize = 64;
 
 /// The kernel source, compiled at run time.
-pub const KERNEL_SRC: &str = include_str!("tspline.cl");
+pub const KERNEL_SRC: &str = concat!(include_str!("common.cl"), include_str!("tspline.cl"));
 
 
 /// An OpenCL device with the compiled T-spline program.

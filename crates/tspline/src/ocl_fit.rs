@@ -17,7 +17,7 @@ use crate::ocl_device::{err, OclDevice};
 use crate::TsplineError;
 
 /// The kernel source, compiled at run time.
-pub const KERNEL_SRC: &str = include_str!("fit.cl");
+pub const KERNEL_SRC: &str = concat!(include_str!("common.cl"), include_str!("fit.cl"));
 
 /// Slots per row (more non-zero basis functions at one point is an error).
 pub const MAXNZ: usize = 32;
