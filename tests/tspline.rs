@@ -231,8 +231,8 @@ fn fitted_tmesh_validates_against_the_schema() {
     assert!(v.status.success(), "{}", String::from_utf8_lossy(&v.stderr));
 }
 
-/// `geofit surface` writes glb that the Khronos validator accepts with 0 errors, and OBJ+MTL
-/// with the expected triangle count (two per grid quad inside the mask).
+/// `geofit surface` (and `geofit export` on a T-mesh) writes glb that the Khronos validator accepts
+/// with 0 errors, and OBJ+MTL with the expected triangle count (two per grid quad inside the mask).
 #[test]
 fn surface_export_validates() {
     let Some(input) = common::fixture("terrain/gmt_guinea_bay.nc") else { return };
@@ -250,6 +250,15 @@ fn surface_export_validates() {
     // guinea_bay: 61x61 cells all valid, step 1 → 60x60 quads → 7200 triangles
     assert_eq!(text.lines().filter(|l| l.starts_with("f ")).count(), 7200);
     assert!(dir.path().join("g.mtl").exists());
+    // `geofit export MESH` (the spelling) is the same tessellation, byte for byte; the
+    // options of the other input kind are usage errors, not silently ignored.
+    let eglb = dir.path().join("e.glb");
+    let o = common::run(&["export", m.to_str().unwrap(), "-o", eglb.to_str().unwrap(), "--reference", input.to_str().unwrap()], None);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(std::fs::read(&eglb).unwrap(), std::fs::read(&glb).unwrap(), "export MESH differs from surface MESH");
+    let o = common::run(&["export", m.to_str().unwrap(), "-o", eglb.to_str().unwrap(), "--lod", "2"], None);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--lod applies to CityGML input only"));
     if common::tool("node") {
         let v = Command::new("node").args([script("gltf_validator.js").as_str(), glb.to_str().unwrap()]).output().unwrap();
         let rep = String::from_utf8_lossy(&v.stdout);

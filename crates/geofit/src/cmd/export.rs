@@ -1,4 +1,5 @@
-//! `geofit export`: CityGML buildings as triangle meshes (glb, glTF, OBJ) for viewers and CAD.
+//! `geofit export`: CityGML buildings as triangle meshes (glb, glTF, OBJ) for viewers and CAD;
+//! a T-mesh (`.tmesh`, recognised by its root element) is tessellated by `geofit surface`'s code.
 //!
 //! The CityGML → scene mapping lives here (which polygons, which node, which material); the
 //! triangulation and the file formats are `mesh_export`'s.
@@ -11,6 +12,7 @@ use clap::{Args as ClapArgs, ValueEnum};
 use mesh_export::{GltfBuffer, Material, MeshNode, Scene};
 use serde::Serialize;
 
+use crate::cmd::surface::{tessellate, SurfaceFormat, SurfaceOptions};
 use crate::config::{write_atomic, write_json_report, Config, Input, Output};
 use crate::error::{CliError, CmdResult, Exit};
 
@@ -20,6 +22,7 @@ Example:
   $ geofit export FZK-Haus-LoD2.gml --lod 2 -o haus.obj        # also writes haus.mtl
   $ geofit export tile.gml --t-srs EPSG:4647 --origin 32332000,5729000,0 -o tile.gltf
   $ cat city.gml | geofit export - --format glb > city.glb
+  $ geofit export bathy.tmesh -o bathy.glb --reference bathy.tif  # T-mesh: as `geofit surface`
 
 What is exported: every top-level city object with polygons of the chosen LoD becomes one node
 (glTF node / OBJ object) named by its gml:id; BuildingParts become child nodes (OBJ objects
@@ -41,7 +44,12 @@ Coordinates: --origin auto (default) subtracts the bounding-box centre (x, y) an
 rounded to whole units; `none` keeps world coordinates; `x,y,z` gives it. The origin is recorded:
 glTF root node `extras.origin` (f64; world = local + origin), OBJ header `# origin: x y z`.
 glTF is Y-up: vertex data stay Z-up and the root node's matrix turns them. --t-srs reprojects x
-and y with PROJ from the file's CRS (or --s-srs); heights are kept.";
+and y with PROJ from the file's CRS (or --s-srs); heights are kept.
+
+T-mesh input (a geofit .tmesh, root element <tmesh>) is tessellated exactly as `geofit surface`
+does it (same bytes): the surface with vertex colours by height or by |dz| against --reference,
+the T-mesh cell edges as a second node; --step, --reference, --no-mask and --device apply, the
+CityGML options do not.";
 
 /// Output format.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum, Serialize)]
@@ -56,9 +64,9 @@ pub enum Format {
 }
 
 #[derive(ClapArgs, Debug)]
-#[command(about = "Export CityGML buildings as triangle meshes: glb, glTF or OBJ (+MTL)", after_help = EXAMPLE)]
+#[command(about = "Export CityGML buildings (or a T-mesh surface) as triangle meshes: glb, glTF or OBJ (+MTL)", after_help = EXAMPLE)]
 pub struct Args {
-    /// CityGML file (1.0, 2.0 or 3.0), or `-` for stdin.
+    /// CityGML file (1.0, 2.0 or 3.0) or T-mesh, or `-` for stdin.
     pub input: String,
     /// Output file (.glb, .gltf, .obj); `-` or none = stdout (then --format is required).
     #[arg(short, long)]
@@ -88,6 +96,52 @@ pub struct Args {
     /// Write a JSON report (objects, polygons, triangles, area, skipped polygons) to PATH (`-` = stdout).
     #[arg(long, value_name = "PATH")]
     pub report: Option<String>,
+    #[command(flatten, next_help_heading = "T-mesh input")]
+    pub surface: SurfaceOptions,
+}
+
+/// A T-mesh document: the first element (after the XML declaration, comments and a BOM) is
+/// `<tmesh`. CityGML never starts so, so the sniff cannot take a city model for a T-mesh.
+fn is_tmesh(src: &[u8]) -> bool {
+    let mut rest = src.strip_prefix(b"\xEF\xBB\xBF".as_slice()).unwrap_or(src);
+    loop {
+        let start = rest.iter().position(|b| !b.is_ascii_whitespace()).unwrap_or(rest.len());
+        rest = &rest[start..];
+        let skip = if rest.starts_with(b"<?") {
+            rest.windows(2).position(|w| w == b"?>").map(|i| i + 2)
+        } else if rest.starts_with(b"<!--") {
+            rest.windows(3).position(|w| w == b"-->").map(|i| i + 3)
+        } else {
+            return rest.starts_with(b"<tmesh") && rest.get(6).is_some_and(|b| b.is_ascii_whitespace() || *b == b'>' || *b == b'/');
+        };
+        match skip {
+            Some(n) => rest = &rest[n..],
+            None => return false,
+        }
+    }
+}
+
+/// T-mesh input: reject the CityGML-only options, then tessellate like `geofit surface`.
+fn export_tmesh(args: &Args, src: &[u8], name: &str, output: &Output, format: Format, config: &Config) -> CmdResult {
+    let citygml_only = [
+        ("--lod", args.lod.is_some()),
+        ("--t-srs", args.t_srs.is_some()),
+        ("--s-srs", args.s_srs.is_some()),
+        ("--origin", args.origin != "auto"),
+        ("--planar", args.planar),
+        ("--gltf-bin", args.gltf_bin),
+        ("--report", args.report.is_some()),
+    ];
+    if let Some((opt, _)) = citygml_only.iter().find(|(_, given)| *given) {
+        return Err(CliError::usage(format!("{name} is a T-mesh: {opt} applies to CityGML input only")));
+    }
+    let file = tspline::format::read(src).map_err(|e| CliError::unreadable(format!("{name}: {e}")))?;
+    let format = match format {
+        Format::Glb => SurfaceFormat::Glb,
+        Format::Gltf => SurfaceFormat::Gltf,
+        Format::Obj => SurfaceFormat::Obj,
+    };
+    tessellate(file, name, output, format, &args.surface, config)
 }
 
 /// What `--report` writes.
@@ -367,6 +421,12 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     let fixed_origin = parse_origin(&args.origin)?;
 
     let src = input.read_all()?;
+    if is_tmesh(&src) {
+        return export_tmesh(&args, &src, &name, &output, format, config);
+    }
+    if let Some(opt) = args.surface.given().first() {
+        return Err(CliError::usage(format!("{name}: {opt} applies to T-mesh input only")));
+    }
     let progress = config.progress("export: read", 0);
     let model = citygml_io::parse(&src).map_err(|e| CliError::unreadable(format!("{name}:{e}")))?;
     drop(src);

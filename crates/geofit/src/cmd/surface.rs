@@ -1,6 +1,7 @@
 //! `geofit surface`: a T-mesh's surface as a triangle mesh (glb / gltf / obj) with vertex colours
 //! by height or by error against a reference raster, and the T-mesh cell edges as a separate
-//! line node. (Named `surface` because `geofit export` is the CityGML exporter.)
+//! line node. `geofit export MESH.tmesh` lands here too (the issue's spelling): export sniffs the
+//! root element and hands T-mesh input to [`tessellate`].
 
 use std::path::Path;
 
@@ -8,6 +9,7 @@ use clap::Args as ClapArgs;
 
 use mesh_export::{LineSet, Material, MeshNode, Scene, TriangleMesh};
 use raster_io::MissingCorners;
+use tspline::format::TMeshFile;
 use tspline::PbSpline;
 
 use super::fit::{read_tmesh_arg, select_device, tspline_err, Device};
@@ -36,6 +38,13 @@ pub struct Args {
     /// Output (.glb, .gltf or .obj; `-` or none = glb on stdout).
     #[arg(short, long)]
     pub output: Option<String>,
+    #[command(flatten)]
+    pub opts: SurfaceOptions,
+}
+
+/// How a T-mesh is tessellated; shared with `geofit export`, which takes T-mesh input too.
+#[derive(ClapArgs, Debug, Clone)]
+pub struct SurfaceOptions {
     /// Sample spacing in parameter units (raster cells).
     #[arg(long)]
     pub step: Option<f64>,
@@ -48,6 +57,34 @@ pub struct Args {
     /// Where the evaluation runs.
     #[arg(long, value_enum, default_value_t = Device::Auto)]
     pub device: Device,
+}
+
+impl SurfaceOptions {
+    /// The options a user set (for the error when they are given with CityGML input).
+    pub fn given(&self) -> Vec<&'static str> {
+        let mut v = Vec::new();
+        if self.step.is_some() {
+            v.push("--step");
+        }
+        if self.reference.is_some() {
+            v.push("--reference");
+        }
+        if self.no_mask {
+            v.push("--no-mask");
+        }
+        if !matches!(self.device, Device::Auto) {
+            v.push("--device");
+        }
+        v
+    }
+}
+
+/// Output format of a tessellated surface.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SurfaceFormat {
+    Glb,
+    Gltf,
+    Obj,
 }
 
 fn ramp(f: f64) -> [f32; 4] {
@@ -76,10 +113,25 @@ fn error_colour(e: f64) -> [f32; 4] {
 }
 
 pub fn run(args: Args, config: &Config) -> CmdResult {
+    let output = Output::from_arg(args.output.as_deref());
+    let format = match output.extension().as_deref() {
+        Some("obj") => SurfaceFormat::Obj,
+        Some("gltf") => SurfaceFormat::Gltf,
+        Some("glb") | None => SurfaceFormat::Glb,
+        Some(other) => return Err(CliError::usage(format!("unknown output format .{other} (use .glb, .gltf or .obj)"))),
+    };
     let file = read_tmesh_arg(&args.mesh)?;
+    tessellate(file, &args.mesh, &output, format, &args.opts, config)
+}
+
+/// Tessellates `file` (read from `name`) and writes it to `output` as `format`.
+pub fn tessellate(file: TMeshFile, name: &str, output: &Output, format: SurfaceFormat, opts: &SurfaceOptions, config: &Config) -> CmdResult {
+    if format == SurfaceFormat::Obj && output.path().is_none() {
+        return Err(CliError::usage("OBJ output of a surface needs a file (-o OUT.obj): its materials go to OUT.mtl beside it"));
+    }
     let g = file.georef.clone();
     let b = file.mesh.bounds();
-    let step = match args.step {
+    let step = match opts.step {
         Some(s) if s > 0.0 && s.is_finite() => s,
         Some(s) => return Err(CliError::usage(format!("--step must be positive, got {s}"))),
         None => (b.width().max(b.height()) / 512.0).max(1.0),
@@ -90,19 +142,19 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         return Err(CliError::usage(format!("{ns}×{nt} samples are too many; raise --step")));
     }
     let st: Vec<[f64; 2]> = (0..nt).flat_map(|j| (0..ns).map(move |i| [b.s_min + i as f64 * step, b.t_min + j as f64 * step])).collect();
-    let ocl = select_device(args.device, config)?;
+    let ocl = select_device(opts.device, config)?;
     let pb = match &ocl {
-        Some(o) => o.build_pbspline(&file.mesh).map_err(|e| tspline_err(&args.mesh, e))?,
+        Some(o) => o.build_pbspline(&file.mesh).map_err(|e| tspline_err(name, e))?,
         None => PbSpline::build(&file.mesh),
     };
     let mut z = match &ocl {
         Some(o) => {
-            let sp = o.upload(&pb).map_err(|e| tspline_err(&args.mesh, e))?;
-            o.eval_points(&sp, &st).map_err(|e| tspline_err(&args.mesh, e))?
+            let sp = o.upload(&pb).map_err(|e| tspline_err(name, e))?;
+            o.eval_points(&sp, &st).map_err(|e| tspline_err(name, e))?
         }
         None => pb.eval_z(&st, true),
     };
-    if let (Some(m), false) = (&file.mask, args.no_mask) {
+    if let (Some(m), false) = (&file.mask, opts.no_mask) {
         for (q, p) in st.iter().enumerate() {
             let (i, j) = (p[0].round(), p[1].round());
             let inside = i >= 0.0 && j >= 0.0 && (i as usize) < m.width && (j as usize) < m.height && m.get(i as usize, j as usize);
@@ -111,13 +163,13 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
             }
         }
     }
-    let reference = match &args.reference {
+    let reference = match &opts.reference {
         Some(r) => Some(read_raster_arg(r)?.0),
         None => None,
     };
     let (zmin, zmax) = z.iter().filter(|v| v.is_finite()).fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
     if !zmin.is_finite() {
-        return Err(CliError::findings(format!("{}: the surface has no point inside the mask", args.mesh)));
+        return Err(CliError::findings(format!("{name}: the surface has no point inside the mask")));
     }
     let mut mesh = TriangleMesh::new(Some(0));
     let mut colours = Vec::new();
@@ -153,7 +205,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
                 let f = k as f64 / 8.0;
                 let (s, t) = (s0 + (s1 - s0) * f, t0 + (t1 - t0) * f);
                 let zz = pb.point(s, t)[2];
-                let masked = match (&file.mask, args.no_mask) {
+                let masked = match (&file.mask, opts.no_mask) {
                     (Some(m), false) => {
                         let (i, j) = (s.round(), t.round());
                         !(i >= 0.0 && j >= 0.0 && (i as usize) < m.width && (j as usize) < m.height && m.get(i as usize, j as usize))
@@ -193,10 +245,9 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         mesh_export::ExportError::Io(e) => CliError::io_out(e),
         e => CliError::internal(format!("surface export: {e}")),
     };
-    let output = Output::from_arg(args.output.as_deref());
-    match output.extension().as_deref() {
-        Some("obj") => {
-            let path = output.path().expect("has an extension");
+    match format {
+        SurfaceFormat::Obj => {
+            let path = output.path().expect("checked above: OBJ goes to a file");
             let mtl_path = path.with_extension("mtl");
             let mtl_name = file_name(&mtl_path)?;
             let (mut obj, mut mtl) = (Vec::new(), Vec::new());
@@ -204,9 +255,8 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
             write_atomic(&mtl_path, |w| w.write_all(&mtl).map_err(CliError::io_out))?;
             output.write_bytes(&obj)?;
         }
-        Some("gltf") => output.write_with(|w| mesh_export::write_gltf(&scene, w, mesh_export::GltfBuffer::Embedded).map_err(export_err))?,
-        Some("glb") | None => output.write_with(|w| mesh_export::write_glb(&scene, w).map_err(export_err))?,
-        Some(other) => return Err(CliError::usage(format!("unknown output format .{other} (use .glb, .gltf or .obj)"))),
+        SurfaceFormat::Gltf => output.write_with(|w| mesh_export::write_gltf(&scene, w, mesh_export::GltfBuffer::Embedded).map_err(export_err))?,
+        SurfaceFormat::Glb => output.write_with(|w| mesh_export::write_glb(&scene, w).map_err(export_err))?,
     }
     Ok(Exit::Ok)
 }
