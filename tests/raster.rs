@@ -70,6 +70,18 @@ fn terrain_fixtures_read_like_gdal() {
         assert!((mean - f(&truth["mean"])).abs() < 1e-9 * mean.abs().max(1.0), "{name} mean {mean} vs {}", truth["mean"]);
         // the validity mask is exactly "value present"
         assert!(r.valid.iter().zip(&r.data).all(|(v, d)| *v == d.is_finite()), "{name} mask");
+        // `geofit info --json` reports the same size, geotransform and nodata count.
+        let o = common::run(&["-q", "info", "--json", p.to_str().unwrap()], None);
+        assert!(o.status.success(), "{name}: {}", String::from_utf8_lossy(&o.stderr));
+        let info: Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!(info["kind"], "raster", "{name}");
+        assert_eq!(info["width"], truth["width"], "{name} info width");
+        assert_eq!(info["height"], truth["height"], "{name} info height");
+        assert_eq!(info["nodata_count"], truth["nodata_count"], "{name} info nodata count");
+        let igt: Vec<f64> = info["geotransform"].as_array().unwrap().iter().map(f).collect();
+        for k in 0..6 {
+            assert!((igt[k] - gt[k]).abs() <= 1e-12 * gt[k].abs().max(1.0), "{name} info gt[{k}] {} vs {}", igt[k], gt[k]);
+        }
     }
     // The README's count for Kilauea, as a fixed anchor.
     let k = raster_io::read_raster(&dir.join("gmt_Kilauea.utm.nc")).unwrap();

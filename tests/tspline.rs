@@ -231,6 +231,46 @@ fn fitted_tmesh_validates_against_the_schema() {
     assert!(v.status.success(), "{}", String::from_utf8_lossy(&v.stderr));
 }
 
+/// `geofit info` on a T-mesh names degree, cells and control points as the file itself states
+/// them (counted here from the text: the root's degree, the lines of <points> and <cells>), also
+/// from stdin without an extension; on a point file, the number of data lines.
+#[test]
+fn info_reads_tmesh_and_point_files() {
+    let Some(input) = common::fixture("terrain/gmt_guinea_bay.nc") else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let m = dir.path().join("g.tmesh");
+    let o = common::run(&["-q", "fit", input.to_str().unwrap(), "--max-error", "100", "--degree", "3", "-o", m.to_str().unwrap()], None);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = std::fs::read_to_string(&m).unwrap();
+    let block = |tag: &str| -> usize {
+        let start = text.find(&format!("<{tag} ")).unwrap();
+        let body = &text[start..text.find(&format!("</{tag}>")).unwrap()];
+        body.lines().skip(1).filter(|l| !l.trim().is_empty()).count()
+    };
+    let degree: u64 = text.split("degree=\"").nth(1).unwrap().split('"').next().unwrap().parse().unwrap();
+    for stdin in [false, true] {
+        let o = if stdin {
+            common::run(&["info", "--json", "-"], Some(text.as_bytes()))
+        } else {
+            common::run(&["info", "--json", m.to_str().unwrap()], None)
+        };
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!(v["kind"], "tmesh");
+        assert_eq!(v["degree"].as_u64(), Some(degree));
+        assert_eq!(v["cells"].as_u64(), Some(block("cells") as u64));
+        assert_eq!(v["control_points"].as_u64(), Some(block("points") as u64));
+        assert_eq!(v["mask"][2].as_u64(), Some(61 * 61), "guinea_bay has no nodata");
+    }
+    let Some(ship) = common::fixture("terrain/gmt_ship_03.txt") else { return };
+    let lines = std::fs::read_to_string(&ship).unwrap();
+    let data = lines.lines().filter(|l| l.split_whitespace().count() >= 3 && l.split_whitespace().all(|t| t.parse::<f64>().is_ok())).count();
+    let o = common::run(&["info", "--json", ship.to_str().unwrap()], None);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!((v["kind"].as_str(), v["points"].as_u64()), (Some("points"), Some(data as u64)));
+}
+
 /// `geofit surface` (and `geofit export` on a T-mesh) writes glb that the Khronos validator accepts
 /// with 0 errors, and OBJ+MTL with the expected triangle count (two per grid quad inside the mask).
 #[test]

@@ -104,6 +104,28 @@ fn esc(s: &str) -> String {
     s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;").replace('"', "&quot;")
 }
 
+/// A T-mesh document: the first element (after the XML declaration, comments and a BOM) is
+/// `<tmesh`. CityGML never starts so, so the sniff cannot take a city model for a T-mesh; commands
+/// that take either (`geofit export`, `geofit info`) use it to choose the reader.
+pub fn is_tmesh_document(src: &[u8]) -> bool {
+    let mut rest = src.strip_prefix(b"\xEF\xBB\xBF".as_slice()).unwrap_or(src);
+    loop {
+        let start = rest.iter().position(|b| !b.is_ascii_whitespace()).unwrap_or(rest.len());
+        rest = &rest[start..];
+        let skip = if rest.starts_with(b"<?") {
+            rest.windows(2).position(|w| w == b"?>").map(|i| i + 2)
+        } else if rest.starts_with(b"<!--") {
+            rest.windows(3).position(|w| w == b"-->").map(|i| i + 3)
+        } else {
+            return rest.starts_with(b"<tmesh") && rest.get(6).is_some_and(|b| b.is_ascii_whitespace() || *b == b'>' || *b == b'/');
+        };
+        match skip {
+            Some(n) => rest = &rest[n..],
+            None => return false,
+        }
+    }
+}
+
 /// Writes a T-mesh file (leaf cells only, compact point numbering).
 pub fn write(f: &TMeshFile, w: &mut dyn Write) -> std::io::Result<()> {
     let m = f.mesh.compacted();
@@ -327,6 +349,17 @@ fn parse_f64s(text: &str) -> Result<Vec<f64>, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn tmesh_documents_are_recognised_by_their_root() {
+        assert!(is_tmesh_document(b"\xEF\xBB\xBF<?xml version=\"1.0\"?>\n<!-- a > b --><tmesh xmlns=\"urn:geofit:tmesh:1\">"));
+        assert!(is_tmesh_document(b"  <tmesh>"));
+        assert!(!is_tmesh_document(b"<?xml version=\"1.0\"?><core:CityModel>"));
+        assert!(!is_tmesh_document(b"<tmeshes>"));
+        assert!(!is_tmesh_document(b"<?xml unterminated"));
+        assert!(!is_tmesh_document(b""));
+        assert!(!is_tmesh_document(b"1 2 3\n"));
+    }
 
     #[test]
     fn write_read_exact() {

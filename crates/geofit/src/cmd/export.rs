@@ -100,27 +100,6 @@ pub struct Args {
     pub surface: SurfaceOptions,
 }
 
-/// A T-mesh document: the first element (after the XML declaration, comments and a BOM) is
-/// `<tmesh`. CityGML never starts so, so the sniff cannot take a city model for a T-mesh.
-fn is_tmesh(src: &[u8]) -> bool {
-    let mut rest = src.strip_prefix(b"\xEF\xBB\xBF".as_slice()).unwrap_or(src);
-    loop {
-        let start = rest.iter().position(|b| !b.is_ascii_whitespace()).unwrap_or(rest.len());
-        rest = &rest[start..];
-        let skip = if rest.starts_with(b"<?") {
-            rest.windows(2).position(|w| w == b"?>").map(|i| i + 2)
-        } else if rest.starts_with(b"<!--") {
-            rest.windows(3).position(|w| w == b"-->").map(|i| i + 3)
-        } else {
-            return rest.starts_with(b"<tmesh") && rest.get(6).is_some_and(|b| b.is_ascii_whitespace() || *b == b'>' || *b == b'/');
-        };
-        match skip {
-            Some(n) => rest = &rest[n..],
-            None => return false,
-        }
-    }
-}
-
 /// T-mesh input: reject the CityGML-only options, then tessellate like `geofit surface`.
 fn export_tmesh(args: &Args, src: &[u8], name: &str, output: &Output, format: Format, config: &Config) -> CmdResult {
     let citygml_only = [
@@ -421,7 +400,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     let fixed_origin = parse_origin(&args.origin)?;
 
     let src = input.read_all()?;
-    if is_tmesh(&src) {
+    if tspline::format::is_tmesh_document(&src) {
         return export_tmesh(&args, &src, &name, &output, format, config);
     }
     if let Some(opt) = args.surface.given().first() {

@@ -1,5 +1,9 @@
-//! `geofit info`: what a CityGML file holds — version, CRS, envelope, counts per feature type
-//! and LoD, polygons, rings, points. Reads object by object (bounded memory on big tiles).
+//! `geofit info`: what a file holds. CityGML: version, CRS, envelope, counts per feature type
+//! and LoD, polygons, rings, points, read object by object (bounded memory on big tiles).
+//! Also T-meshes (degree, cells, control points, georeference, mask), rasters (anything GDAL
+//! opens: size, geotransform, CRS, nodata marker and count, value range) and point files
+//! (XYZ/CSV text, LAS/LAZ: count, bounds, CRS). The kind comes from the extension where it is
+//! unambiguous, otherwise from the content (root element, then GDAL, then XYZ text).
 
 use std::collections::BTreeMap;
 use std::io::Write;
@@ -33,6 +37,9 @@ Example:
   points:      43
   xlinks:      9 resolved, 0 unresolved
   $ geofit info --json - < city.gml | jq .polygons
+  $ geofit info --json bathy.tmesh | jq '.degree, .cells, .control_points'
+  $ geofit info --json gmt_Kilauea.utm.nc | jq '.width, .height, .geotransform, .nodata_count'
+  $ geofit info soundings.xyz
 
 Counts are of definitions: a polygon referenced by xlink:href (the faces of an NRW lod2Solid)
 is counted once, where it is defined; `xlinks_resolved` says how many references were followed.
@@ -40,9 +47,9 @@ Exit 1 when the file is readable but has rings with fewer than 4 positions or XL
 target is missing (each listed on stderr as FILE:LINE:COL); exit 3 when it cannot be read.";
 
 #[derive(ClapArgs, Debug)]
-#[command(about = "Summarise a CityGML file: version, CRS, envelope, feature/LoD/polygon counts", after_help = EXAMPLE)]
+#[command(about = "Summarise a CityGML file (or a T-mesh, raster or point file): counts, extent, CRS", after_help = EXAMPLE)]
 pub struct Args {
-    /// CityGML file (1.0, 2.0 or 3.0), or `-` for stdin.
+    /// CityGML file (1.0, 2.0 or 3.0), T-mesh, raster (GDAL) or point file (XYZ/CSV, LAS/LAZ), or `-` for stdin.
     pub input: String,
     /// Print the report as JSON on stdout instead of text.
     #[arg(long)]
@@ -86,10 +93,61 @@ fn env(e: &Envelope) -> Option<[[f64; 3]; 2]> {
     (!e.is_empty()).then_some([e.min, e.max])
 }
 
-pub fn run(args: Args, _config: &Config) -> CmdResult {
+/// What `info` summarises, by extension where it is unambiguous.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Kind {
+    CityGml,
+    TMesh,
+    Raster,
+    Points,
+}
+
+fn kind_by_extension(p: &std::path::Path) -> Option<Kind> {
+    let ext = p.extension()?.to_string_lossy().to_ascii_lowercase();
+    Some(match ext.as_str() {
+        "gml" | "citygml" | "xml" => Kind::CityGml,
+        "tmesh" => Kind::TMesh,
+        "las" | "laz" | "xyz" | "csv" | "txt" | "pts" => Kind::Points,
+        "tif" | "tiff" | "nc" | "nc4" | "asc" | "grd" | "dem" | "img" | "vrt" | "bag" | "flt" | "hgt" => Kind::Raster,
+        _ => return None,
+    })
+}
+
+/// The first non-blank byte (after a UTF-8 BOM) is `<`.
+fn looks_like_xml(src: &[u8]) -> bool {
+    let src = src.strip_prefix(b"\xEF\xBB\xBF".as_slice()).unwrap_or(src);
+    src.iter().find(|b| !b.is_ascii_whitespace()) == Some(&b'<')
+}
+
+pub fn run(args: Args, config: &Config) -> CmdResult {
     let input = Input::from_arg(&args.input);
     let name = input.display_name();
+    super::rasterize::gdal_notices(config);
+    // Binary rasters and LAS/LAZ are opened by path (GDAL, las): decide before reading.
+    let by_ext = input.path().and_then(kind_by_extension);
+    match (by_ext, input.path()) {
+        (Some(Kind::Raster), Some(p)) => return raster_info(&read_raster_path(p, &name)?, &name, args.json),
+        (Some(Kind::Points), Some(p)) => {
+            let cloud = raster_io::read_points(p, None).map_err(|e| CliError::unreadable(e.to_string()))?;
+            return points_info(&cloud, &name, args.json);
+        }
+        _ => {}
+    }
     let src = input.read_all()?;
+    if by_ext == Some(Kind::TMesh) || (by_ext.is_none() && tspline::format::is_tmesh_document(&src)) {
+        let file = tspline::format::read(&src).map_err(|e| CliError::unreadable(format!("{name}: {e}")))?;
+        return tmesh_info(&file, &name, args.json);
+    }
+    if by_ext.is_none() && !src.is_empty() && !looks_like_xml(&src) {
+        // No telling extension and not XML: a raster GDAL opens, else XYZ text; if neither,
+        // the CityGML reader's error (it names the position) is the one reported.
+        if let Some(r) = raster_from_bytes(&src, input.path()) {
+            return raster_info(&r, &name, args.json);
+        }
+        if let Ok(cloud) = raster_io::points::read_xyz(&src[..], &name) {
+            return points_info(&cloud, &name, args.json);
+        }
+    }
     let located = |e: ReadError| CliError::unreadable(format!("{name}:{e}"));
 
     let mut stream = ObjectStream::new(&src).map_err(located)?;
@@ -216,4 +274,187 @@ fn write_text(w: &mut dyn Write, r: &InfoReport) -> std::io::Result<()> {
     }
     writeln!(w, "xlinks:      {} resolved, {} unresolved", r.xlinks_resolved, r.unresolved_xlinks)?;
     Ok(())
+}
+
+/// Reads a raster by path; errors name the file.
+fn read_raster_path(p: &std::path::Path, name: &str) -> Result<raster_io::Raster, CliError> {
+    raster_io::read_raster(p).map_err(|e| CliError::unreadable(format!("{name}: {e}")))
+}
+
+/// A raster GDAL opens from these bytes (through a temporary file for stdin), or None.
+fn raster_from_bytes(src: &[u8], path: Option<&std::path::Path>) -> Option<raster_io::Raster> {
+    if let Some(p) = path {
+        return raster_io::read_raster(p).ok();
+    }
+    let dir = tempfile::tempdir().ok()?;
+    let p = dir.path().join("stdin.raster");
+    std::fs::write(&p, src).ok()?;
+    raster_io::read_raster(&p).ok()
+}
+
+fn json_out<T: Serialize>(report: &T, text: impl FnOnce(&mut dyn Write) -> std::io::Result<()>, json: bool) -> CmdResult {
+    Output::Stdout.write_with(|w| {
+        if json {
+            serde_json::to_writer_pretty(&mut *w, report).map_err(|e| CliError::internal(e.to_string()))?;
+            writeln!(w).map_err(CliError::io_out)
+        } else {
+            text(w).map_err(CliError::io_out)
+        }
+    })?;
+    Ok(Exit::Ok)
+}
+
+/// `info` of a T-mesh file.
+#[derive(Debug, Serialize)]
+pub struct TMeshInfo {
+    pub file: String,
+    pub kind: &'static str,
+    pub degree: usize,
+    /// Leaf cells (faces of the T-mesh).
+    pub cells: usize,
+    /// Control points that carry a blending function (all points of a written file).
+    pub control_points: usize,
+    /// Parameter domain [s_min, t_min, s_max, t_max] (raster cell units).
+    pub domain: [f64; 4],
+    /// World = (x0 + s·dx, y0 + t·dy).
+    pub georef: [f64; 4],
+    pub crs: Option<String>,
+    /// Data mask size and the number of cells with data; null without a mask.
+    pub mask: Option<[usize; 3]>,
+    /// Indirect reduction: the warp field travels in the file.
+    pub indirect: bool,
+}
+
+fn tmesh_info(f: &tspline::format::TMeshFile, name: &str, json: bool) -> CmdResult {
+    let m = &f.mesh;
+    let b = m.bounds();
+    let g = &f.georef;
+    let r = TMeshInfo {
+        file: name.to_string(),
+        kind: "tmesh",
+        degree: m.degree.k(),
+        cells: m.cells.iter().filter(|c| c.is_leaf()).count(),
+        control_points: m.active_points().iter().filter(|a| **a).count(),
+        domain: [b.s_min, b.t_min, b.s_max, b.t_max],
+        georef: [g.x0, g.y0, g.dx, g.dy],
+        crs: (!g.crs.is_empty()).then(|| g.crs.clone()),
+        mask: f.mask.as_ref().map(|k| [k.width, k.height, k.bits.iter().filter(|v| **v).count()]),
+        indirect: f.warp.is_some(),
+    };
+    json_out(
+        &r,
+        |w| {
+            writeln!(w, "file:           {}", r.file)?;
+            writeln!(w, "kind:           T-mesh, degree {}", r.degree)?;
+            writeln!(w, "cells:          {}", r.cells)?;
+            writeln!(w, "control points: {}", r.control_points)?;
+            writeln!(w, "domain (s, t):  {} {} .. {} {}", r.domain[0], r.domain[1], r.domain[2], r.domain[3])?;
+            writeln!(w, "georef:         x = {} + s·{}, y = {} + t·{}", r.georef[0], r.georef[2], r.georef[1], r.georef[3])?;
+            writeln!(w, "crs:            {}", r.crs.as_deref().map(short_crs).unwrap_or("none"))?;
+            match r.mask {
+                Some([mw, mh, n]) => writeln!(w, "mask:           {mw}×{mh}, {n} cells with data")?,
+                None => writeln!(w, "mask:           none")?,
+            }
+            writeln!(w, "indirect:       {}", if r.indirect { "yes (warp field stored)" } else { "no" })
+        },
+        json,
+    )
+}
+
+/// `info` of a raster.
+#[derive(Debug, Serialize)]
+pub struct RasterInfo {
+    pub file: String,
+    pub kind: &'static str,
+    pub width: usize,
+    pub height: usize,
+    /// GDAL order: [x0, dx, rx, y0, ry, dy] of the upper-left corner.
+    pub geotransform: [f64; 6],
+    pub crs: Option<String>,
+    /// The band's nodata marker, if it declares one.
+    pub nodata: Option<f64>,
+    /// Cells without a value (the marker, NaN, or outside the valid range).
+    pub nodata_count: usize,
+    pub valid_count: usize,
+    /// [min, max] of the valid cells; null when there are none.
+    pub range: Option<[f64; 2]>,
+}
+
+fn raster_info(r: &raster_io::Raster, name: &str, json: bool) -> CmdResult {
+    let info = RasterInfo {
+        file: name.to_string(),
+        kind: "raster",
+        width: r.width,
+        height: r.height,
+        geotransform: r.geotransform,
+        crs: r.crs.clone(),
+        nodata: r.nodata,
+        nodata_count: r.nodata_count(),
+        valid_count: r.valid_count(),
+        range: r.min_max().map(|(a, b)| [a, b]),
+    };
+    json_out(
+        &info,
+        |w| {
+            let gt = &info.geotransform;
+            writeln!(w, "file:         {}", info.file)?;
+            writeln!(w, "kind:         raster, {}×{} cells", info.width, info.height)?;
+            writeln!(w, "geotransform: {} {} {} {} {} {}", gt[0], gt[1], gt[2], gt[3], gt[4], gt[5])?;
+            writeln!(w, "crs:          {}", info.crs.as_deref().map(short_crs).unwrap_or("none"))?;
+            writeln!(w, "nodata:       {} cells (marker {})", info.nodata_count, info.nodata.map(|v| v.to_string()).unwrap_or_else(|| "none".into()))?;
+            writeln!(w, "valid:        {} cells", info.valid_count)?;
+            match info.range {
+                Some([a, b]) => writeln!(w, "range:        {a} .. {b}"),
+                None => writeln!(w, "range:        none (no valid cell)"),
+            }
+        },
+        json,
+    )
+}
+
+/// `info` of a point file.
+#[derive(Debug, Serialize)]
+pub struct PointsInfo {
+    pub file: String,
+    pub kind: &'static str,
+    pub points: usize,
+    /// [[min x, min y, min z], [max x, max y, max z]]; null for an empty file.
+    pub envelope: Option<[[f64; 3]; 2]>,
+    pub crs: Option<String>,
+}
+
+fn points_info(c: &raster_io::PointCloud, name: &str, json: bool) -> CmdResult {
+    let mut e = Envelope::empty();
+    for p in &c.points {
+        e.add_point(p);
+    }
+    let info = PointsInfo { file: name.to_string(), kind: "points", points: c.points.len(), envelope: env(&e), crs: c.crs.clone() };
+    json_out(
+        &info,
+        |w| {
+            writeln!(w, "file:     {}", info.file)?;
+            writeln!(w, "kind:     points")?;
+            writeln!(w, "points:   {}", info.points)?;
+            match info.envelope {
+                Some([a, b]) => writeln!(w, "envelope: {} {} {} .. {} {} {}", a[0], a[1], a[2], b[0], b[1], b[2])?,
+                None => writeln!(w, "envelope: none")?,
+            }
+            writeln!(w, "crs:      {}", info.crs.as_deref().map(short_crs).unwrap_or("none"))
+        },
+        json,
+    )
+}
+
+/// The first line of a CRS for the text report (WKT is long; the JSON keeps all of it).
+fn short_crs(s: &str) -> &str {
+    let s = s.trim();
+    match s.find('[') {
+        Some(i) if s.len() > 80 => {
+            // PROJCS["name", ... → PROJCS["name"
+            let rest = &s[i + 1..];
+            let end = rest.find(',').map(|j| i + 1 + j).unwrap_or(s.len());
+            &s[..end]
+        }
+        _ => s,
+    }
 }
