@@ -290,6 +290,19 @@ fn surface_export_validates() {
     // guinea_bay: 61x61 cells all valid, step 1 → 60x60 quads → 7200 triangles
     assert_eq!(text.lines().filter(|l| l.starts_with("f ")).count(), 7200);
     assert!(dir.path().join("g.mtl").exists());
+    // MeshLab's importers read both files with the same triangle count (its glTF importer makes
+    // a second mesh of the T-mesh line node: only the first, the surface, has triangles to count).
+    if python_ok() && std::process::Command::new("python3").args(["-c", "import pymeshlab"]).output().is_ok_and(|o| o.status.success()) {
+        let glb1 = dir.path().join("g1.glb");
+        let o = common::run(&["surface", m.to_str().unwrap(), "-o", glb1.to_str().unwrap(), "--step", "1"], None);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        for (f, mesh) in [(&obj, 0usize), (&glb1, 0)] {
+            let o = Command::new("python3").arg(script("export_meshlab.py")).arg(f).output().unwrap();
+            assert!(o.status.success(), "pymeshlab {}: {}", f.display(), String::from_utf8_lossy(&o.stderr));
+            let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+            assert_eq!(v["faces_per_mesh"][mesh].as_u64(), Some(7200), "pymeshlab {}: {v}", f.display());
+        }
+    }
     // `geofit export MESH` (the spelling) is the same tessellation, byte for byte; the
     // options of the other input kind are usage errors, not silently ignored.
     let eglb = dir.path().join("e.glb");
