@@ -665,8 +665,21 @@ pub fn solve(
     active: Option<&[bool]>,
     progress: &mut dyn FnMut(usize, usize, f64),
 ) -> Result<Solution, Error> {
-    let n = mesh.verts.len();
     let data = data_rows(mesh, loc, cs, p)?;
+    solve_rows(mesh, &data, p, start, active, progress)
+}
+
+/// [`solve`] with the data rows already built by [`data_rows`] (a warm update builds them once
+/// to carry the saved active set over, and solves with the same rows).
+pub fn solve_rows(
+    mesh: &TetMesh,
+    data: &Rows,
+    p: &Params,
+    start: Option<&[f64]>,
+    active: Option<&[bool]>,
+    progress: &mut dyn FnMut(usize, usize, f64),
+) -> Result<Solution, Error> {
+    let n = mesh.verts.len();
     let rough = roughness_rows(mesh, p.weights.rough);
     let mut act: Vec<bool> = match active {
         Some(a) if a.len() == data.len() => a.to_vec(),

@@ -483,7 +483,7 @@ impl Model {
                 progress(Event::Cg { round: r, iterations: it, residual: res })
             })?
         } else {
-            dsi::solve(&self.mesh, &loc, &self.constraints, &self.params, Some(&self.phi), Some(&active), &mut |r, it, res| {
+            dsi::solve_rows(&self.mesh, &rows, &self.params, Some(&self.phi), Some(&active), &mut |r, it, res| {
                 progress(Event::Cg { round: r, iterations: it, residual: res })
             })?
         };
