@@ -316,7 +316,7 @@ pub fn polar_start(pointings: &[Pointing], ih: f64) -> Option<([f64; 4], [f64; 3
                 rows.push((n, rhs));
             }
         }
-        let Some(chol) = ata.cholesky() else { return None };
+        let chol = ata.cholesky()?;
         let t = chol.solve(&atb);
         let ssr: f64 = rows.iter().map(|(n, rhs)| (n[0] * t[0] + n[1] * t[1] + n[2] * t[2] - rhs).powi(2)).sum();
         if best.as_ref().is_none_or(|b| ssr < b.2) {

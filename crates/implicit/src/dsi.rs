@@ -706,8 +706,8 @@ pub fn solve_rows(
     let mut round = 0;
     let mut settled = !has_ineq;
     loop {
-        let (a_base, b_base) = normal_system(n, &[&data], &|_, r| act[r] && !data.float[r]);
-        let (a_float, b_float) = normal_system(n, &[&data], &|_, r| act[r] && data.float[r]);
+        let (a_base, b_base) = normal_system(n, &[data], &|_, r| act[r] && !data.float[r]);
+        let (a_float, b_float) = normal_system(n, &[data], &|_, r| act[r] && data.float[r]);
         let b: Vec<f64> = b_base.iter().zip(&b_float).map(|(a, b)| a + b).collect();
         // seed §3: the base and float systems are merged into one system for CG.
         let a = csr_sum(&[&a_rough, &a_base, &a_float], shift);
@@ -720,7 +720,7 @@ pub fn solve_rows(
             pcg(&a, &b, &mut x, p.tol, p.max_iter)
         } else {
             let mut go_on = |xx: &[f64]| {
-                let new = next_active(&data, xx, &act, p);
+                let new = next_active(data, xx, &act, p);
                 let same = new == act;
                 if std::env::var_os("GEOFIT_DEBUG_ACTIVE").is_some() {
                     eprintln!("active-set round {round}: {} rows change", new.iter().zip(&act).filter(|(a, b)| a != b).count());
@@ -749,7 +749,7 @@ pub fn solve_rows(
             None => {
                 // Converged to the loose tolerance before the first check (start already close):
                 // decide from the current iterate.
-                let new = next_active(&data, &x, &act, p);
+                let new = next_active(data, &x, &act, p);
                 settled = new == act;
                 act = new;
             }
