@@ -4,8 +4,10 @@
 //! failed builds the same way. Nothing here panics when OpenCL is missing or a kernel does not
 //! compile: every step returns [`TsplineError::OpenCl`].
 
+use ocl::builders::KernelBuilder;
 use ocl::{flags, Buffer, Context, Device, Platform, Program, Queue};
 
+use crate::eval::PbSpline;
 use crate::TsplineError;
 
 pub(crate) fn err(e: impl std::fmt::Display) -> TsplineError {
@@ -77,5 +79,42 @@ impl OclDevice {
     /// A write-only output buffer of `len` elements (at least one).
     pub fn out<T: ocl::OclPrm>(&self, len: usize) -> Result<Buffer<T>, TsplineError> {
         Buffer::<T>::builder().queue(self.queue.clone()).flags(flags::MEM_WRITE_ONLY).len(len.max(1)).build().map_err(err)
+    }
+}
+
+/// Device copies of a compiled PB-spline's arrays, as both kernel families take them: knots
+/// (10 per point), polynomial pieces (40), geometry (x, y, z, w), leaf cells, and the bucket lists
+/// of points and cells.
+pub(crate) struct PbBuffers {
+    pub knots: Buffer<f64>,
+    pub poly: Buffer<f64>,
+    pub geom: Buffer<f64>,
+    pub cells: Buffer<f64>,
+    pub pstart: Buffer<u32>,
+    pub pitems: Buffer<u32>,
+    pub cstart: Buffer<u32>,
+    pub citems: Buffer<u32>,
+}
+
+impl PbBuffers {
+    /// Uploads from flat views of the arrays (no intermediate copies: the pieces alone are
+    /// 320 B per point).
+    pub fn upload(dev: &OclDevice, pb: &PbSpline) -> Result<PbBuffers, TsplineError> {
+        Ok(PbBuffers {
+            knots: dev.buf(pb.knots.as_flattened())?,
+            poly: dev.buf(pb.poly.as_flattened())?,
+            geom: dev.buf(pb.geom.as_flattened())?,
+            cells: dev.buf(pb.cells.as_flattened())?,
+            pstart: dev.buf(&pb.pt_start)?,
+            pitems: dev.buf(&pb.pt_items)?,
+            cstart: dev.buf(&pb.cell_start)?,
+            citems: dev.buf(&pb.cell_items)?,
+        })
+    }
+
+    /// Appends the eight buffers as kernel arguments, in the order above.
+    pub fn args<'b>(&'b self, kb: &mut KernelBuilder<'b>) {
+        kb.arg(&self.knots).arg(&self.poly).arg(&self.geom).arg(&self.cells);
+        kb.arg(&self.pstart).arg(&self.pitems).arg(&self.cstart).arg(&self.citems);
     }
 }

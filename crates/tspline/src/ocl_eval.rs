@@ -14,7 +14,7 @@ use crate::eval::{GridSpec, PbSpline};
 use crate::extraction::Extraction;
 use crate::knots::LocalKnots;
 use crate::mesh::TMesh;
-use crate::ocl_device::{err, OclDevice};
+use crate::ocl_device::{err, OclDevice, PbBuffers};
 use crate::TsplineError;
 
 /// Points per work item of the element kernels (`RUN` in `tspline.cl`).
@@ -31,14 +31,7 @@ pub struct OclEvaluator {
 
 /// Device buffers of one compiled PB-spline.
 pub struct OclSpline {
-    knots: Buffer<f64>,
-    poly: Buffer<f64>,
-    geom: Buffer<f64>,
-    cells: Buffer<f64>,
-    pstart: Buffer<u32>,
-    pitems: Buffer<u32>,
-    cstart: Buffer<u32>,
-    citems: Buffer<u32>,
+    bufs: PbBuffers,
     pb: PbSplineGrid,
     /// Leaf cells (for [`crate::eval::use_extraction`]).
     ncells: usize,
@@ -124,18 +117,9 @@ impl OclEvaluator {
 
     /// The PB-spline buffers only (reference kernels, knot derivation).
     fn upload_pb(&self, pb: &PbSpline) -> Result<OclSpline, TsplineError> {
-        // flat views, no intermediate copies (the poly array alone is 320 B per point)
-        let (knots, poly, geom, cells) = (pb.knots.as_flattened(), pb.poly.as_flattened(), pb.geom.as_flattened(), pb.cells.as_flattened());
         let g = pb.grid;
         Ok(OclSpline {
-            knots: self.dev.buf(knots)?,
-            poly: self.dev.buf(poly)?,
-            geom: self.dev.buf(geom)?,
-            cells: self.dev.buf(cells)?,
-            pstart: self.dev.buf(&pb.pt_start)?,
-            pitems: self.dev.buf(&pb.pt_items)?,
-            cstart: self.dev.buf(&pb.cell_start)?,
-            citems: self.dev.buf(&pb.cell_items)?,
+            bufs: PbBuffers::upload(&self.dev, pb)?,
             pb: PbSplineGrid { s0: g.s0, t0: g.t0, ds: g.ds, dt: g.dt, ns: g.ns, nt: g.nt, k: pb.degree.k() as u32 },
             ncells: pb.cells.len(),
             ext: None,
@@ -145,7 +129,7 @@ impl OclEvaluator {
     /// Replaces the geometry (after a fit step) without re-uploading the rest.
     pub fn update_geometry(&self, sp: &mut OclSpline, pb: &PbSpline) -> Result<(), TsplineError> {
         sp.ext = None;
-        sp.geom.write(pb.geom.as_flattened()).enq().map_err(err)
+        sp.bufs.geom.write(pb.geom.as_flattened()).enq().map_err(err)
     }
 
     /// The dense-evaluation kernel: the element path when the extraction is current and the
@@ -159,13 +143,13 @@ impl OclEvaluator {
                 let mut kb = self.kernel(&format!("{name}_ext"), sp, runs)?;
                 let eg = ex.grid;
                 kb.arg(eg.s0).arg(eg.t0).arg(eg.ds).arg(eg.dt).arg(eg.ns).arg(eg.nt).arg(ex.stride);
-                kb.arg(&sp.knots).arg(&sp.poly).arg(&sp.geom).arg(&sp.cells).arg(&sp.pstart).arg(&sp.pitems).arg(&sp.cstart).arg(&sp.citems);
+                sp.bufs.args(&mut kb);
                 kb.arg(&ex.data).arg(&ex.flags).arg(&ex.start).arg(&ex.items);
                 Ok(kb)
             }
             _ => {
                 let mut kb = self.kernel(name, sp, n)?;
-                kb.arg(&sp.knots).arg(&sp.poly).arg(&sp.geom).arg(&sp.cells).arg(&sp.pstart).arg(&sp.pitems).arg(&sp.cstart).arg(&sp.citems);
+                sp.bufs.args(&mut kb);
                 Ok(kb)
             }
         }
@@ -220,7 +204,7 @@ impl OclEvaluator {
         let rb = self.dev.buf(refz)?;
         let out = self.out_buf(n)?;
         let mut kb = self.kernel("drag_vectors", sp, n)?;
-        kb.arg(&sp.knots).arg(&sp.poly).arg(&sp.geom).arg(&sp.cells).arg(&sp.pstart).arg(&sp.pitems).arg(&sp.cstart).arg(&sp.citems);
+        sp.bufs.args(&mut kb);
         kb.arg(&pb).arg(&rb).arg(&out).arg(n as u32);
         let k = kb.build().map_err(err)?;
         unsafe { k.enq().map_err(err)? };
@@ -243,7 +227,7 @@ impl OclEvaluator {
         let pbuf = self.dev.buf(&params)?;
         let out = self.out_buf(10 * n)?;
         let mut kb = self.kernel("derive_knots", &sp, n)?;
-        kb.arg(&sp.cells).arg(&sp.cstart).arg(&sp.citems).arg(&pbuf).arg(&out).arg(n as u32);
+        kb.arg(&sp.bufs.cells).arg(&sp.bufs.cstart).arg(&sp.bufs.citems).arg(&pbuf).arg(&out).arg(n as u32);
         let k = kb.build().map_err(err)?;
         unsafe { k.enq().map_err(err)? };
         let mut v = vec![0.0; 10 * n];

@@ -10,10 +10,10 @@
 //! Like `ocl_eval`, nothing here panics when OpenCL is missing: [`OclModel::new`] returns a
 //! typed error.
 
-use ocl::{Buffer, Kernel};
+use ocl::Kernel;
 
 use crate::eval::{GridSpec, PbSpline};
-use crate::ocl_device::{err, OclDevice};
+use crate::ocl_device::{err, OclDevice, PbBuffers};
 use crate::TsplineError;
 
 /// The kernel source, compiled at run time.
@@ -81,14 +81,7 @@ pub struct OclModel {
 
 /// Device buffers of one PB-spline (knots, weights, cells, bucket lists).
 pub struct OclModelSpline {
-    knots: Buffer<f64>,
-    poly: Buffer<f64>,
-    geom: Buffer<f64>,
-    cells: Buffer<f64>,
-    pstart: Buffer<u32>,
-    pitems: Buffer<u32>,
-    cstart: Buffer<u32>,
-    citems: Buffer<u32>,
+    bufs: PbBuffers,
     grid: crate::eval::BucketGrid,
     k: u32,
 }
@@ -105,19 +98,8 @@ impl OclModel {
 
     /// Uploads the PB-spline's knots, weights, leaf cells and bucket lists.
     pub fn upload(&self, pb: &PbSpline) -> Result<OclModelSpline, TsplineError> {
-        let knots: Vec<f64> = pb.knots.iter().flatten().copied().collect();
-        let geom: Vec<f64> = pb.geom.iter().flatten().copied().collect();
-        let poly: Vec<f64> = pb.poly.iter().flatten().copied().collect();
-        let cells: Vec<f64> = pb.cells.iter().flatten().copied().collect();
         Ok(OclModelSpline {
-            knots: self.dev.buf(&knots)?,
-            poly: self.dev.buf(&poly)?,
-            geom: self.dev.buf(&geom)?,
-            cells: self.dev.buf(&cells)?,
-            pstart: self.dev.buf(&pb.pt_start)?,
-            pitems: self.dev.buf(&pb.pt_items)?,
-            cstart: self.dev.buf(&pb.cell_start)?,
-            citems: self.dev.buf(&pb.cell_items)?,
+            bufs: PbBuffers::upload(&self.dev, pb)?,
             grid: pb.grid,
             k: pb.degree.k() as u32,
         })
@@ -133,19 +115,10 @@ impl OclModel {
         let count = self.dev.out::<u32>(n)?;
         let val = self.dev.out::<f64>(n * MAXNZ)?;
         let gr = sp.grid;
-        let k = Kernel::builder()
-            .program(&self.dev.program)
-            .name("model_rows")
-            .queue(self.dev.queue.clone())
-            .global_work_size(n)
-            .arg(&sp.knots)
-            .arg(&sp.poly)
-            .arg(&sp.geom)
-            .arg(&sp.cells)
-            .arg(&sp.pstart)
-            .arg(&sp.pitems)
-            .arg(&sp.cstart)
-            .arg(&sp.citems)
+        let mut kb = Kernel::builder();
+        kb.program(&self.dev.program).name("model_rows").queue(self.dev.queue.clone()).global_work_size(n);
+        sp.bufs.args(&mut kb);
+        let k = kb
             .arg(gr.s0)
             .arg(gr.t0)
             .arg(gr.ds)
