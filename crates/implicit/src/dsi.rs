@@ -820,11 +820,16 @@ pub fn gradient_scale(cs: &[Constraint]) -> f64 {
     }
 }
 
-/// Misfit |φ(p) − v| at every value constraint (None where p is outside the mesh).
-pub fn value_misfits(mesh: &TetMesh, loc: &Locator, cs: &[Constraint], phi: &[f64]) -> Vec<f64> {
+/// (constraint index, misfit |φ(p) − v|) at every value constraint, evaluating φ at the points
+/// (constraints outside the mesh are left out). [`Solution::value_misfit`] has the same from the
+/// value rows without a second point location.
+pub fn value_misfits(mesh: &TetMesh, loc: &Locator, cs: &[Constraint], phi: &[f64]) -> Vec<(u32, f64)> {
     cs.iter()
-        .filter_map(|c| c.value.map(|v| (c.pos, v)))
-        .filter_map(|(p, v)| eval(mesh, loc, phi, p).map(|f| (f - v).abs()))
+        .enumerate()
+        .filter_map(|(i, c)| {
+            let v = c.value?;
+            eval(mesh, loc, phi, c.pos).map(|f| (i as u32, (f - v).abs()))
+        })
         .collect()
 }
 

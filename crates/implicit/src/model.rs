@@ -371,13 +371,7 @@ pub fn build(
         let value_misfit: Vec<(u32, f64)> = if sol.value_misfit.len() == n_values {
             sol.value_misfit.clone()
         } else {
-            cs.iter()
-                .enumerate()
-                .filter_map(|(i, c)| {
-                    let v = c.value?;
-                    dsi::eval(&mesh, &loc, &sol.phi, c.pos).map(|f| (i as u32, (f - v).abs()))
-                })
-                .collect()
+            dsi::value_misfits(&mesh, &loc, &cs, &sol.phi)
         };
         let mis: Vec<f64> = value_misfit.iter().map(|&(_, e)| e).collect();
         let (mean, max) = stats(&mis);
@@ -428,7 +422,8 @@ impl Model {
 
     /// Misfit |φ − v| at the value constraints (mean, max), in φ units.
     pub fn misfit(&self, loc: &Locator) -> (f64, f64) {
-        stats(&dsi::value_misfits(&self.mesh, loc, &self.constraints, &self.phi))
+        let m: Vec<f64> = dsi::value_misfits(&self.mesh, loc, &self.constraints, &self.phi).into_iter().map(|(_, e)| e).collect();
+        stats(&m)
     }
 
     /// Re-interpolation (seed §3): `moves` (constraint index, new world position) and `added`
@@ -478,15 +473,11 @@ impl Model {
             }
         }
         progress(Event::Stage("re-interpolating"));
-        let sol = if cold {
-            dsi::solve(&self.mesh, &loc, &self.constraints, &self.params, None, None, &mut |r, it, res| {
-                progress(Event::Cg { round: r, iterations: it, residual: res })
-            })?
-        } else {
-            dsi::solve_rows(&self.mesh, &rows, &self.params, Some(&self.phi), Some(&active), &mut |r, it, res| {
-                progress(Event::Cg { round: r, iterations: it, residual: res })
-            })?
-        };
+        // Cold: the same rows from φ = 0 and all rows active (the comparison start).
+        let (start, act) = if cold { (None, None) } else { (Some(&self.phi[..]), Some(&active[..])) };
+        let sol = dsi::solve_rows(&self.mesh, &rows, &self.params, start, act, &mut |r, it, res| {
+            progress(Event::Cg { round: r, iterations: it, residual: res })
+        })?;
         self.phi = sol.phi.clone();
         self.active = sol.active.clone();
         Ok(sol)

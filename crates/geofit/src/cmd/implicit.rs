@@ -387,7 +387,10 @@ fn build_model(b: &BuildArgs, config: &Config) -> Result<(Model, BuildReport, Ti
         let input = Input::from_arg(f);
         faults.push(fault::read_fault_obj(&input.read_all()?, f, [0.0; 3]).map_err(|e| lib_err(f, e))?);
     }
-    for (w, n) in [(b.w_value, "--w-value"), (b.w_normal, "--w-normal"), (b.w_rough.unwrap_or(DEFAULT_ROUGHNESS), "--w-rough"), (b.tol, "--tol")] {
+    // Without --w-rough the library derives ϖ_r from the data (DEFAULT_ROUGHNESS only where the
+    // noise cannot be estimated).
+    let rough = b.w_rough.unwrap_or(DEFAULT_ROUGHNESS);
+    for (w, n) in [(b.w_value, "--w-value"), (b.w_normal, "--w-normal"), (rough, "--w-rough"), (b.tol, "--tol")] {
         if !(w >= 0.0 && w.is_finite()) {
             return Err(CliError::usage(format!("{n} must be a finite non-negative number, got {w}")));
         }
@@ -395,7 +398,7 @@ fn build_model(b: &BuildArgs, config: &Config) -> Result<(Model, BuildReport, Ti
     let opt = BuildOptions {
         cell: b.cell,
         coarse: b.coarse,
-        weights: Weights { value: b.w_value, normal: b.w_normal, rough: b.w_rough.unwrap_or(DEFAULT_ROUGHNESS) },
+        weights: Weights { value: b.w_value, normal: b.w_normal, rough },
         auto_rough: b.w_rough.is_none(),
         step: b.step,
         grad: b.grad,
