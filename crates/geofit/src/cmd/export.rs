@@ -12,7 +12,7 @@ use clap::{Args as ClapArgs, ValueEnum};
 use mesh_export::{GltfBuffer, Material, MeshNode, Scene};
 use serde::Serialize;
 
-use crate::cmd::surface::{tessellate, SurfaceFormat, SurfaceOptions};
+use crate::cmd::surface::{tessellate, SurfaceOptions};
 use crate::config::{write_atomic, write_json_report, Config, Input, Output};
 use crate::error::{CliError, CmdResult, Exit};
 
@@ -115,11 +115,6 @@ fn export_tmesh(args: &Args, src: &[u8], name: &str, output: &Output, format: Fo
         return Err(CliError::usage(format!("{name} is a T-mesh: {opt} applies to CityGML input only")));
     }
     let file = tspline::format::read(src).map_err(|e| CliError::unreadable(format!("{name}: {e}")))?;
-    let format = match format {
-        Format::Glb => SurfaceFormat::Glb,
-        Format::Gltf => SurfaceFormat::Gltf,
-        Format::Obj => SurfaceFormat::Obj,
-    };
     tessellate(file, name, output, format, &args.surface, config)
 }
 

@@ -102,15 +102,15 @@ enum Kind {
     Points,
 }
 
+/// Point extensions come first: GDAL has raster drivers for some of them (`.xyz` grids).
 fn kind_by_extension(p: &std::path::Path) -> Option<Kind> {
     let ext = p.extension()?.to_string_lossy().to_ascii_lowercase();
-    Some(match ext.as_str() {
-        "gml" | "citygml" | "xml" => Kind::CityGml,
-        "tmesh" => Kind::TMesh,
-        "las" | "laz" | "xyz" | "csv" | "txt" | "pts" => Kind::Points,
-        "tif" | "tiff" | "nc" | "nc4" | "asc" | "grd" | "dem" | "img" | "vrt" | "bag" | "flt" | "hgt" => Kind::Raster,
-        _ => return None,
-    })
+    match ext.as_str() {
+        "gml" | "citygml" | "xml" => Some(Kind::CityGml),
+        "tmesh" => Some(Kind::TMesh),
+        "las" | "laz" | "xyz" | "csv" | "txt" | "pts" => Some(Kind::Points),
+        _ => raster_io::RasterFormat::from_path(p).map(|_| Kind::Raster),
+    }
 }
 
 /// The first non-blank byte (after a UTF-8 BOM) is `<`.
@@ -139,14 +139,15 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         return tmesh_info(&file, &name, args.json);
     }
     if by_ext.is_none() && !src.is_empty() && !looks_like_xml(&src) {
-        // No telling extension and not XML: a raster GDAL opens, else XYZ text; if neither,
-        // the CityGML reader's error (it names the position) is the one reported.
+        // No telling extension and not XML: a raster GDAL opens, else XYZ text.
         if let Some(r) = raster_from_bytes(&src, input.path()) {
             return raster_info(&r, &name, args.json);
         }
-        if let Ok(cloud) = raster_io::points::read_xyz(&src[..], &name) {
-            return points_info(&cloud, &name, args.json);
-        }
+        return match raster_io::points::read_xyz(&src[..], &name) {
+            Ok(cloud) => points_info(&cloud, &name, args.json),
+            // The XYZ error names file and line; say what else was tried.
+            Err(e) => Err(CliError::unreadable(format!("{e} (read as XYZ text: not XML, and no raster GDAL opens)"))),
+        };
     }
     let located = |e: ReadError| CliError::unreadable(format!("{name}:{e}"));
 
@@ -281,15 +282,12 @@ fn read_raster_path(p: &std::path::Path, name: &str) -> Result<raster_io::Raster
     raster_io::read_raster(p).map_err(|e| CliError::unreadable(format!("{name}: {e}")))
 }
 
-/// A raster GDAL opens from these bytes (through a temporary file for stdin), or None.
+/// A raster GDAL opens from this input (the path, or stdin's bytes spooled), or None.
 fn raster_from_bytes(src: &[u8], path: Option<&std::path::Path>) -> Option<raster_io::Raster> {
-    if let Some(p) = path {
-        return raster_io::read_raster(p).ok();
+    match path {
+        Some(p) => raster_io::read_raster(p).ok(),
+        None => super::rasterize::raster_from_stdin_bytes(src).ok(),
     }
-    let dir = tempfile::tempdir().ok()?;
-    let p = dir.path().join("stdin.raster");
-    std::fs::write(&p, src).ok()?;
-    raster_io::read_raster(&p).ok()
 }
 
 fn json_out<T: Serialize>(report: &T, text: impl FnOnce(&mut dyn Write) -> std::io::Result<()>, json: bool) -> CmdResult {

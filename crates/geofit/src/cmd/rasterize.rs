@@ -130,15 +130,17 @@ pub fn read_raster_arg(arg: &str) -> Result<(Raster, String), CliError> {
     let name = input.display_name();
     match input.path() {
         Some(p) => Ok((raster_io::read_raster(p).map_err(raster_err)?, name)),
-        None => {
-            let bytes = input.read_all()?;
-            let dir = tempfile::tempdir().map_err(|e| CliError::internal(format!("temporary directory: {e}")))?;
-            let p = dir.path().join("stdin.raster");
-            std::fs::write(&p, bytes).map_err(|e| CliError::internal(format!("temporary file: {e}")))?;
-            let r = raster_io::read_raster(&p).map_err(|e| CliError::unreadable(e.to_string().replace(&p.display().to_string(), "<stdin>")))?;
-            Ok((r, name))
-        }
+        None => Ok((raster_from_stdin_bytes(&input.read_all()?)?, name)),
     }
+}
+
+/// A raster from bytes read on stdin: GDAL opens paths, so they are spooled to a temporary file
+/// (errors name `<stdin>`, not the spool file).
+pub fn raster_from_stdin_bytes(bytes: &[u8]) -> Result<Raster, CliError> {
+    let dir = tempfile::tempdir().map_err(|e| CliError::internal(format!("temporary directory: {e}")))?;
+    let p = dir.path().join("stdin.raster");
+    std::fs::write(&p, bytes).map_err(|e| CliError::internal(format!("temporary file: {e}")))?;
+    raster_io::read_raster(&p).map_err(|e| CliError::unreadable(e.to_string().replace(&p.display().to_string(), "<stdin>")))
 }
 
 /// Writes a raster to `-o` (format from the extension; stdout = GeoTIFF bytes).

@@ -12,6 +12,7 @@ use raster_io::MissingCorners;
 use tspline::format::TMeshFile;
 use tspline::PbSpline;
 
+use super::export::Format;
 use super::fit::{read_tmesh_arg, select_device, tspline_err, Device};
 use super::rasterize::read_raster_arg;
 use crate::config::{write_atomic, Config, Output};
@@ -79,14 +80,6 @@ impl SurfaceOptions {
     }
 }
 
-/// Output format of a tessellated surface.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum SurfaceFormat {
-    Glb,
-    Gltf,
-    Obj,
-}
-
 fn ramp(f: f64) -> [f32; 4] {
     // blue (deep) → cyan → green → brown (high)
     let f = f.clamp(0.0, 1.0) as f32;
@@ -115,9 +108,9 @@ fn error_colour(e: f64) -> [f32; 4] {
 pub fn run(args: Args, config: &Config) -> CmdResult {
     let output = Output::from_arg(args.output.as_deref());
     let format = match output.extension().as_deref() {
-        Some("obj") => SurfaceFormat::Obj,
-        Some("gltf") => SurfaceFormat::Gltf,
-        Some("glb") | None => SurfaceFormat::Glb,
+        Some("obj") => Format::Obj,
+        Some("gltf") => Format::Gltf,
+        Some("glb") | None => Format::Glb,
         Some(other) => return Err(CliError::usage(format!("unknown output format .{other} (use .glb, .gltf or .obj)"))),
     };
     let file = read_tmesh_arg(&args.mesh)?;
@@ -125,8 +118,8 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
 }
 
 /// Tessellates `file` (read from `name`) and writes it to `output` as `format`.
-pub fn tessellate(file: TMeshFile, name: &str, output: &Output, format: SurfaceFormat, opts: &SurfaceOptions, config: &Config) -> CmdResult {
-    if format == SurfaceFormat::Obj && output.path().is_none() {
+pub fn tessellate(file: TMeshFile, name: &str, output: &Output, format: Format, opts: &SurfaceOptions, config: &Config) -> CmdResult {
+    if format == Format::Obj && output.path().is_none() {
         return Err(CliError::usage("OBJ output of a surface needs a file (-o OUT.obj): its materials go to OUT.mtl beside it"));
     }
     let g = file.georef.clone();
@@ -246,7 +239,7 @@ pub fn tessellate(file: TMeshFile, name: &str, output: &Output, format: SurfaceF
         e => CliError::internal(format!("surface export: {e}")),
     };
     match format {
-        SurfaceFormat::Obj => {
+        Format::Obj => {
             let path = output.path().expect("checked above: OBJ goes to a file");
             let mtl_path = path.with_extension("mtl");
             let mtl_name = file_name(&mtl_path)?;
@@ -255,8 +248,8 @@ pub fn tessellate(file: TMeshFile, name: &str, output: &Output, format: SurfaceF
             write_atomic(&mtl_path, |w| w.write_all(&mtl).map_err(CliError::io_out))?;
             output.write_bytes(&obj)?;
         }
-        SurfaceFormat::Gltf => output.write_with(|w| mesh_export::write_gltf(&scene, w, mesh_export::GltfBuffer::Embedded).map_err(export_err))?,
-        SurfaceFormat::Glb => output.write_with(|w| mesh_export::write_glb(&scene, w).map_err(export_err))?,
+        Format::Gltf => output.write_with(|w| mesh_export::write_gltf(&scene, w, mesh_export::GltfBuffer::Embedded).map_err(export_err))?,
+        Format::Glb => output.write_with(|w| mesh_export::write_glb(&scene, w).map_err(export_err))?,
     }
     Ok(Exit::Ok)
 }
