@@ -24,29 +24,8 @@ inline uint bucket_of(const grid_t g, double s, double t) {
     return clampidx(t, g.t0, g.dt, g.nt) * g.ns + clampidx(s, g.s0, g.ds, g.ns);
 }
 
-// One degree-K basis function on K+2 knots, half-open [a,b) or (a,b] spans (A1).
-inline double basis(__global const double* kn, uint k, double u, int left) {
-    if (u < kn[0] || u > kn[k + 1]) return 0.0;
-    double n[4];
-    for (uint j = 0; j <= k; j++) {
-        double a = kn[j], b = kn[j + 1];
-        int inside = left ? (a < u && u <= b) : (a <= u && u < b);
-        n[j] = inside ? 1.0 : 0.0;
-    }
-    for (uint r = 1; r <= k; r++) {
-        for (uint j = 0; j + r <= k; j++) {
-            double d1 = kn[j + r] - kn[j];
-            double d2 = kn[j + r + 1] - kn[j + 1];
-            double v = 0.0;
-            if (d1 > 0.0) v += (u - kn[j]) / d1 * n[j];
-            if (d2 > 0.0) v += (kn[j + r + 1] - u) / d2 * n[j + 1];
-            n[j] = v;
-        }
-    }
-    return n[0];
-}
-
-// The same basis from its polynomial pieces: per span 1/width, c0..c3 in x = (u - a)/width.
+// One degree-K basis function on K+2 knots (half-open [a,b) or (a,b] spans, A1) from its
+// polynomial pieces (eval::basis_pieces): per span 1/width, c0..c3 in x = (u - a)/width.
 inline double basis_poly(__global const double* kn, __global const double* pc, uint k, double u, int left) {
     if (u < kn[0] || u > kn[k + 1]) return 0.0;
     for (uint j = 0; j <= k; j++) {

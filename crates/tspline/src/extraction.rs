@@ -573,6 +573,13 @@ mod tests {
             st.extend(m.points.iter().map(|p| [p.s, p.t]));
             let nan = check(&pb, &st, &format!("{degree:?}"));
             assert!(nan > 0 && nan < st.len() / 2);
+            // ... and the element path is what was compared: inside the domain (away from its
+            // borders) nearly every point takes it, not the reference fallback.
+            let inner: Vec<[f64; 2]> = (0..20_000)
+                .map(|_| [b.s_min + b.width() * (0.1 + 0.8 * lcg(&mut seed)), b.t_min + b.height() * (0.1 + 0.8 * lcg(&mut seed))])
+                .collect();
+            let (taken, _) = ex.path_stats(&inner);
+            assert!(taken > 0.9, "{degree:?}: only {taken} of interior points take the element path");
             // merged meshes: a gap, notches and partial borders (A14, A1 on notch edges)
             let a = TMesh::grid(degree, 0.0, 0.0, 4.0, 5, 4);
             let mut c = TMesh::grid(degree, 20.0, 4.0, 4.0, 3, 3);

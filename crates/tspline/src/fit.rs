@@ -151,28 +151,6 @@ pub struct ErrorStats {
     pub over_tolerance: usize,
 }
 
-impl ErrorStats {
-    pub fn from_abs(mut e: Vec<f64>, tol: f64) -> ErrorStats {
-        let n = e.len();
-        if n == 0 {
-            return ErrorStats::default();
-        }
-        let mean = e.iter().sum::<f64>() / n as f64;
-        let var = e.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / n as f64;
-        let rms = (e.iter().map(|v| v * v).sum::<f64>() / n as f64).sqrt();
-        let over = e.iter().filter(|&&v| v > tol).count();
-        let max = e.iter().cloned().fold(0.0, f64::max);
-        let mid = n / 2;
-        let (_, m, _) = e.select_nth_unstable_by(mid, |a, b| a.partial_cmp(b).unwrap());
-        let mut median = *m;
-        if n % 2 == 0 {
-            let lo = e[..mid].iter().cloned().fold(f64::MIN, f64::max);
-            median = 0.5 * (median + lo);
-        }
-        ErrorStats { count: n, mean, sigma: var.sqrt(), median, max, rms, over_tolerance: over }
-    }
-}
-
 /// One row of the per-iteration table (thesis Tables 7.1/7.2 plus max, RMS, time).
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct IterationStats {
@@ -212,20 +190,7 @@ pub struct FitResult {
 /// Builds the PB-spline on the backend (device knot kernel or CPU ray casting).
 pub fn build_pb(mesh: &TMesh, backend: &Backend) -> Result<PbSpline, TsplineError> {
     match backend {
-        Backend::Cpu => {
-            // PbSpline::build's knot inference, with the mesh bounds computed once
-            let active = mesh.active_points();
-            let point_ids: Vec<u32> = (0..mesh.points.len() as u32).filter(|&i| active[i as usize]).collect();
-            let b = mesh.bounds();
-            let knots: Vec<crate::knots::LocalKnots> = point_ids
-                .par_iter()
-                .map(|&i| {
-                    let p = mesh.points[i as usize];
-                    crate::knots::infer_in(mesh, b, p.s, p.t)
-                })
-                .collect();
-            Ok(PbSpline::from_parts(mesh, point_ids, knots))
-        }
+        Backend::Cpu => Ok(PbSpline::build(mesh)),
         Backend::OpenCl(o) => o.build_pbspline(mesh),
     }
 }
@@ -265,18 +230,6 @@ pub fn build_pb_incremental(mesh: &TMesh, old: &PbSpline, split: &[crate::mesh::
         })
         .collect();
     PbSpline::from_parts(mesh, point_ids, knots)
-}
-
-/// Heights at every raster cell (row-major from t = 0).
-pub fn eval_samples(pb: &PbSpline, w: usize, h: usize, backend: &Backend) -> Result<Vec<f64>, TsplineError> {
-    let g = GridSpec { s0: 0.0, t0: 0.0, ds: 1.0, dt: 1.0, ns: w, nt: h };
-    match backend {
-        Backend::Cpu => Ok(pb.eval_grid(&g, true)),
-        Backend::OpenCl(o) => {
-            let sp = o.upload(pb)?;
-            o.eval_grid(&sp, &g)
-        }
-    }
 }
 
 /// The initial mesh (A8): returns it with x = s, y = t, z = mean of the data.
@@ -828,7 +781,7 @@ fn pb_param(pb: &PbSpline, i: usize) -> [f64; 2] {
 }
 
 /// Leaves to refine: the thesis' 3×3 probes plus `over_leaves` (leaves holding valid cells over
-/// the tolerance, from [`error_pass`]).
+/// the tolerance, from [`eval_errors`] + [`summarize`]).
 fn mark_cells(mesh: &TMesh, pb: &PbSpline, samples: &Samples, tol: f64, over_leaves: Vec<CellId>) -> Vec<CellId> {
     let leaves: Vec<CellId> = mesh.leaves().collect();
     let mut marked: Vec<CellId> = leaves
@@ -894,15 +847,6 @@ impl ErrAcc {
 const PASS_BLOCK: usize = 1 << 16;
 /// Cells per dense evaluation call of the error pass (at least 16 per leaf cell).
 const PASS_BLOCK_EVAL: usize = 1 << 22;
-
-/// The error check over EVERY valid cell (A7/A17), streamed in row blocks so no full-raster
-/// surface is ever held: [`eval_errors`] then [`summarize`]. Returns the statistics and the leaf
-/// cells holding a valid cell over the tolerance.
-pub fn error_pass(mesh: &TMesh, pb: &PbSpline, samples: &Samples, tol: f64, backend: &Backend) -> Result<(ErrorStats, Vec<CellId>), TsplineError> {
-    let mut errs = vec![f64::NAN; samples.z.len()];
-    eval_errors(pb, samples, backend, &mut errs)?;
-    Ok(summarize(mesh, pb, samples.width, &errs, tol))
-}
 
 /// |Δz| at every valid cell into `errs` (NaN at no-data cells; +∞ where the surface is
 /// undefined), the surface evaluated in big row blocks (CPU in parallel, or the OpenCL grid

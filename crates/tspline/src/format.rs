@@ -104,9 +104,9 @@ fn esc(s: &str) -> String {
     s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;").replace('"', "&quot;")
 }
 
-/// A T-mesh document: the first element (after the XML declaration, comments and a BOM) is
-/// `<tmesh`. CityGML never starts so, so the sniff cannot take a city model for a T-mesh; commands
-/// that take either (`geofit export`, `geofit info`) use it to choose the reader.
+/// A T-mesh document: the first element (after a BOM, the XML declaration, comments and a
+/// DOCTYPE) is `<tmesh`. CityGML never starts so, so the sniff cannot take a city model for a
+/// T-mesh; commands that take either (`geofit export`, `geofit info`) use it to choose the reader.
 pub fn is_tmesh_document(src: &[u8]) -> bool {
     let mut rest = src.strip_prefix(b"\xEF\xBB\xBF".as_slice()).unwrap_or(src);
     loop {
@@ -116,6 +116,9 @@ pub fn is_tmesh_document(src: &[u8]) -> bool {
             rest.windows(2).position(|w| w == b"?>").map(|i| i + 2)
         } else if rest.starts_with(b"<!--") {
             rest.windows(3).position(|w| w == b"-->").map(|i| i + 3)
+        } else if rest.starts_with(b"<!") {
+            // <!DOCTYPE ...> (no internal subset in a T-mesh file)
+            rest.iter().position(|&b| b == b'>').map(|i| i + 1)
         } else {
             return rest.starts_with(b"<tmesh") && rest.get(6).is_some_and(|b| b.is_ascii_whitespace() || *b == b'>' || *b == b'/');
         };
@@ -354,6 +357,7 @@ mod tests {
     fn tmesh_documents_are_recognised_by_their_root() {
         assert!(is_tmesh_document(b"\xEF\xBB\xBF<?xml version=\"1.0\"?>\n<!-- a > b --><tmesh xmlns=\"urn:geofit:tmesh:1\">"));
         assert!(is_tmesh_document(b"  <tmesh>"));
+        assert!(is_tmesh_document(b"<?xml version=\"1.0\"?><!DOCTYPE tmesh><tmesh degree=\"1\">"));
         assert!(!is_tmesh_document(b"<?xml version=\"1.0\"?><core:CityModel>"));
         assert!(!is_tmesh_document(b"<tmeshes>"));
         assert!(!is_tmesh_document(b"<?xml unterminated"));

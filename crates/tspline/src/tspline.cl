@@ -1,7 +1,7 @@
 // T-spline kernels (spec §6.3/§6.4): surface evaluation, knot derivation, dragging vectors.
 // The CPU twins live in eval.rs / knots.rs / fit.rs and follow the same operation order.
 // Double precision throughout (PoCL supports cl_khr_fp64). Built after common.cl (grid_t,
-// basis, basis_poly, locate).
+// bucket_of, basis_poly, locate).
 
 inline double surface_z(const grid_t g, __global const double* knots, __global const double* poly, __global const double* geom,
                         __global const double* cells, __global const uint* pstart, __global const uint* pitems,
@@ -54,32 +54,6 @@ inline double bipoly4(__global const double* c, double u, double v) {
     double r1 = ((c[7] * u + c[6]) * u + c[5]) * u + c[4];
     double r0 = ((c[3] * u + c[2]) * u + c[1]) * u + c[0];
     return ((r3 * v + r2) * v + r1) * v + r0;
-}
-
-// Height through the element blocks; borders (A1), small denominators and points outside
-// every element take the PB-spline path (surface_z), exactly as on the CPU.
-inline double surface_z_ext(const grid_t g, __global const double* knots, __global const double* poly, __global const double* geom,
-                            __global const double* cells, __global const uint* pstart, __global const uint* pitems,
-                            __global const uint* cstart, __global const uint* citems,
-                            const grid_t eg, const uint stride, __global const double* edata, __global const uint* eflags,
-                            __global const uint* estart, __global const uint* eitems, double s, double t) {
-    uint b = bucket_of(eg, s, t);
-    for (uint q = estart[b]; q < estart[b + 1]; q++) {
-        uint e = eitems[q];
-        __global const double* r = edata + (size_t)stride * e;
-        if (r[0] <= s && s < r[2] && r[1] <= t && t < r[3]) {
-            uint f = eflags[e];
-            if (((f & 1u) && s == r[0]) || ((f & 2u) && t == r[1])) break;
-            double u = (s - r[0]) * r[4];
-            double v = (t - r[1]) * r[5];
-            double num, den;
-            if (g.k == 3) { num = bipoly4(r + 8, u, v); den = bipoly4(r + 24, u, v); }
-            else { num = bipoly(r + 8, 2, u, v); den = bipoly(r + 12, 2, u, v); }
-            if (!(den >= r[6])) break;
-            return num / den;
-        }
-    }
-    return surface_z(g, knots, poly, geom, cells, pstart, pitems, cstart, citems, s, t);
 }
 
 #define EXT_PARAMS __global const double* knots, __global const double* poly, __global const double* geom, \
