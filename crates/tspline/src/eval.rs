@@ -398,23 +398,7 @@ impl PbSpline {
     pub fn eval_grid(&self, g: &GridSpec, parallel: bool) -> Vec<f64> {
         let n = g.ns * g.nt;
         if self.use_extraction(n) {
-            let ex = Extraction::new(self, parallel);
-            let mut out = vec![0.0; n];
-            let row = |(j, o): (usize, &mut [f64])| {
-                let t = g.t0 + j as f64 * g.dt;
-                let mut hint = 0;
-                for (i, z) in o.iter_mut().enumerate() {
-                    *z = ex.z(self, g.s0 + i as f64 * g.ds, t, &mut hint);
-                }
-            };
-            if g.ns > 0 {
-                if parallel {
-                    out.par_chunks_mut(g.ns).enumerate().for_each(row);
-                } else {
-                    out.chunks_mut(g.ns).enumerate().for_each(row);
-                }
-            }
-            return out;
+            return Extraction::new(self, parallel).eval_grid(self, g, parallel);
         }
         let f = |idx: usize| {
             let i = idx % g.ns;

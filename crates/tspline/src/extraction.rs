@@ -30,7 +30,7 @@
 
 use rayon::prelude::*;
 
-use crate::eval::{BucketGrid, PbSpline};
+use crate::eval::{BucketGrid, GridSpec, PbSpline};
 
 /// Element flag: the left edge (s = s₀) may be a border in the A1 sense.
 pub const LEFT_BORDER: u32 = 1;
@@ -250,6 +250,28 @@ impl Extraction {
         }
         // Small, zero or NaN denominators: the reference decides (NaN where Σ w N = 0).
         pb.point(s, t)[2]
+    }
+
+    /// Heights on a regular grid (as [`PbSpline::eval_grid`]), one element hint per row. Callers
+    /// that evaluate many grids on the same geometry (the fit's row-block error pass) build the
+    /// extraction once and call this per block.
+    pub fn eval_grid(&self, pb: &PbSpline, g: &GridSpec, parallel: bool) -> Vec<f64> {
+        let mut out = vec![0.0; g.ns * g.nt];
+        let row = |(j, o): (usize, &mut [f64])| {
+            let t = g.t0 + j as f64 * g.dt;
+            let mut hint = 0;
+            for (i, z) in o.iter_mut().enumerate() {
+                *z = self.z(pb, g.s0 + i as f64 * g.ds, t, &mut hint);
+            }
+        };
+        if g.ns > 0 {
+            if parallel {
+                out.par_chunks_mut(g.ns).enumerate().for_each(row);
+            } else {
+                out.chunks_mut(g.ns).enumerate().for_each(row);
+            }
+        }
+        out
     }
 
     /// Heights at many points, in chunks (each with its own element hint).

@@ -860,11 +860,15 @@ pub fn eval_errors(pb: &PbSpline, samples: &Samples, backend: &Backend, errs: &m
         Backend::OpenCl(o) => Some(o.upload(pb)?),
         Backend::Cpu => None,
     };
+    // CPU: one extraction for all blocks (as the OpenCL upload above), not one per block; each
+    // block still takes the path PbSpline::eval_grid would (same numbers).
+    let ex = (sp.is_none() && pb.use_extraction(br * w)).then(|| crate::extraction::Extraction::new(pb, true));
     for (b, out) in errs.chunks_mut(br * w).enumerate() {
         let j0 = b * br;
         let g = GridSpec { s0: 0.0, t0: j0 as f64, ds: 1.0, dt: 1.0, ns: w, nt: out.len() / w };
-        let z = match (backend, &sp) {
-            (Backend::OpenCl(o), Some(sp)) => o.eval_grid(sp, &g)?,
+        let z = match (backend, &sp, &ex) {
+            (Backend::OpenCl(o), Some(sp), _) => o.eval_grid(sp, &g)?,
+            (_, _, Some(ex)) if pb.use_extraction(out.len()) => ex.eval_grid(pb, &g, true),
             _ => pb.eval_grid(&g, true),
         };
         let d = &samples.z[j0 * w..j0 * w + out.len()];
