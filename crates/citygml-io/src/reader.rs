@@ -6,7 +6,6 @@
 //! XLinks are resolved without keeping the whole document model in memory.
 
 use std::borrow::Cow;
-use std::collections::HashMap;
 use std::ops::Range;
 use std::sync::Arc;
 
@@ -112,13 +111,30 @@ impl Tag<'_> {
 }
 
 fn attr_raw<'t>(e: &'t BytesStart<'_>, local: &[u8]) -> Option<Cow<'t, [u8]>> {
-    find_attr(e.attributes_raw(), local).map(Cow::Borrowed)
+    match find_attr(e.attributes_raw(), local) {
+        AttrScan::Found(v) => Some(Cow::Borrowed(v)),
+        AttrScan::Absent => None,
+        // A malformed attribute before the one asked for: quick-xml's iterator (what the reader
+        // used before the fast scan) skips it and goes on, so an xlink:href after `foo` or
+        // `a=b` is still found.
+        AttrScan::Malformed => e.attributes().with_checks(false).flatten().find(|a| a.key.local_name().as_ref() == local).map(|a| a.value),
+    }
+}
+
+/// Result of [`find_attr`].
+#[derive(Debug, PartialEq, Eq)]
+enum AttrScan<'t> {
+    Found(&'t [u8]),
+    Absent,
+    /// The scan met an attribute without `=` or without a quoted value before finding `local`.
+    Malformed,
 }
 
 /// The raw value of the attribute whose local name is `local` (any prefix), scanning the raw
-/// attribute bytes of a start tag directly (no attribute iterator, no allocation). Like
-/// quick-xml's iterator without checks, it gives up on the first malformed attribute.
-fn find_attr<'t>(raw: &'t [u8], local: &[u8]) -> Option<&'t [u8]> {
+/// attribute bytes of a start tag directly (no attribute iterator, no allocation). Well-formed
+/// tags (all real CityGML) are answered here; on malformed attribute syntax it says so and the
+/// caller falls back to quick-xml's lenient iterator.
+fn find_attr<'t>(raw: &'t [u8], local: &[u8]) -> AttrScan<'t> {
     let n = raw.len();
     let mut i = 0usize;
     loop {
@@ -126,7 +142,7 @@ fn find_attr<'t>(raw: &'t [u8], local: &[u8]) -> Option<&'t [u8]> {
             i += 1;
         }
         if i >= n {
-            return None;
+            return AttrScan::Absent;
         }
         let ks = i;
         while i < n && raw[i] != b'=' && !raw[i].is_ascii_whitespace() {
@@ -137,62 +153,33 @@ fn find_attr<'t>(raw: &'t [u8], local: &[u8]) -> Option<&'t [u8]> {
             i += 1;
         }
         if i >= n || raw[i] != b'=' {
-            return None;
+            return AttrScan::Malformed;
         }
         i += 1;
         while i < n && raw[i].is_ascii_whitespace() {
             i += 1;
         }
-        let q = *raw.get(i)?;
-        if q != b'"' && q != b'\'' {
-            return None;
-        }
+        let q = match raw.get(i) {
+            Some(&q) if q == b'"' || q == b'\'' => q,
+            _ => return AttrScan::Malformed,
+        };
         let vs = i + 1;
-        let ve = vs + memchr::memchr(q, &raw[vs..])?;
+        let Some(len) = memchr::memchr(q, &raw[vs..]) else { return AttrScan::Malformed };
+        let ve = vs + len;
         i = ve + 1;
         let lname = match memchr::memchr(b':', key) {
             Some(c) => &key[c + 1..],
             None => key,
         };
         if lname == local {
-            return Some(&raw[vs..ve]);
+            return AttrScan::Found(&raw[vs..ve]);
         }
     }
 }
 
-/// FxHash (rustc's hasher): the maps here are keyed by short gml:ids from the document
-/// itself, where SipHash's DoS resistance buys nothing and costs a visible share of the parse.
-#[derive(Default, Clone, Copy)]
-pub(crate) struct FxHasher(u64);
-
-impl std::hash::Hasher for FxHasher {
-    #[inline]
-    fn write(&mut self, bytes: &[u8]) {
-        const K: u64 = 0xf1357aea2e62a9c5;
-        let mut h = self.0;
-        let mut c = bytes.chunks_exact(8);
-        for w in &mut c {
-            h = (h.rotate_left(5) ^ u64::from_le_bytes(w.try_into().unwrap())).wrapping_mul(K);
-        }
-        let r = c.remainder();
-        if !r.is_empty() {
-            let mut b = [0u8; 8];
-            b[..r.len()].copy_from_slice(r);
-            h = (h.rotate_left(5) ^ u64::from_le_bytes(b)).wrapping_mul(K);
-        }
-        self.0 = h;
-    }
-    #[inline]
-    fn write_u8(&mut self, i: u8) {
-        self.0 = (self.0.rotate_left(5) ^ i as u64).wrapping_mul(0xf1357aea2e62a9c5);
-    }
-    #[inline]
-    fn finish(&self) -> u64 {
-        self.0.rotate_left(26)
-    }
-}
-
-pub(crate) type FxMap<K, V> = HashMap<K, V, std::hash::BuildHasherDefault<FxHasher>>;
+/// Maps keyed by short gml:ids from the document itself, where SipHash's DoS resistance buys
+/// nothing and costs a visible share of the parse: rustc's FxHash (`rustc-hash`).
+pub(crate) type FxMap<K, V> = rustc_hash::FxHashMap<K, V>;
 
 pub(crate) enum Ev<'a> {
     Start(Tag<'a>),
@@ -1594,7 +1581,22 @@ pub(crate) fn build_index(
 
 #[cfg(test)]
 mod tests {
-    use super::parse_f64;
+    use super::{attr_raw, find_attr, parse_f64, AttrScan};
+    use quick_xml::events::BytesStart;
+
+    #[test]
+    fn attribute_scan_and_its_fallback() {
+        assert_eq!(find_attr(br##" xlink:href="#P1" gml:id='a'"##, b"id"), AttrScan::Found(b"a"));
+        assert_eq!(find_attr(br##" a = "x" "##, b"a"), AttrScan::Found(b"x"));
+        assert_eq!(find_attr(br##" a="x""##, b"b"), AttrScan::Absent);
+        assert_eq!(find_attr(br##" foo xlink:href="#P1""##, b"href"), AttrScan::Malformed);
+        assert_eq!(find_attr(br##" a=b c="x""##, b"c"), AttrScan::Malformed);
+        // The fallback finds what follows a malformed attribute, as quick-xml's iterator did.
+        for tag in [r##"gml:surfaceMember foo xlink:href="#P1""##, r##"gml:surfaceMember a=b xlink:href="#P1""##] {
+            let e = BytesStart::from_content(tag, "gml:surfaceMember".len());
+            assert_eq!(attr_raw(&e, b"href").as_deref(), Some(&b"#P1"[..]), "{tag}");
+        }
+    }
 
     #[test]
     fn fast_float_path_agrees_with_std() {
