@@ -156,6 +156,14 @@ fn bad_inputs_get_clear_messages() {
     assert_eq!(o.status.code(), Some(2));
     let o = common::run(&["fit", asc.to_str().unwrap(), "--max-error", "1", "--degree", "2"], None);
     assert_eq!(o.status.code(), Some(2));
+    // --assembly opencl where it has no effect is a usage error, not silently ignored
+    for extra in [["--method", "drag"], ["--indirect", "--quiet"]] {
+        let mut a = vec!["fit", asc.to_str().unwrap(), "--max-error", "1", "--assembly", "opencl"];
+        a.extend(extra);
+        let o = common::run(&a, None);
+        assert_eq!(o.status.code(), Some(2), "{extra:?}: {}", String::from_utf8_lossy(&o.stderr));
+        assert!(String::from_utf8_lossy(&o.stderr).contains("--assembly opencl applies to"));
+    }
     // all nodata
     let nod = dir.path().join("n.asc");
     std::fs::write(&nod, "ncols 2\nnrows 2\nxllcorner 0\nyllcorner 0\ncellsize 1\nNODATA_value -9999\n-9999 -9999\n-9999 -9999\n").unwrap();

@@ -212,6 +212,16 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     if !(args.overhang >= 0.0 && args.overhang <= 4.0) {
         return Err(CliError::usage(format!("--overhang must be within 0..4, got {}", args.overhang)));
     }
+    if args.assembly == Assembly::Opencl {
+        // The T29 kernel serves the direct least-squares fit only: say so instead of ignoring it,
+        // and fail before reading (and warping) the raster when there is no OpenCL at all.
+        if args.method == MethodArg::Drag || args.indirect {
+            return Err(CliError::usage("--assembly opencl applies to the direct least-squares fit (not --method drag or --indirect)"));
+        }
+        if !ocl::core::get_platform_ids().map(|v| !v.is_empty()).unwrap_or(false) {
+            return Err(CliError::internal("--assembly opencl: no OpenCL platform found (install pocl-opencl-icd, or use --assembly cpu)"));
+        }
+    }
     let t_start = std::time::Instant::now();
     let (raster, name) = read_raster_arg(&args.input)?;
     // Indirect reduction (spec §1, §2.3). A raster not yet warped is warped here with the default
