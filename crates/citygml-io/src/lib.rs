@@ -12,7 +12,8 @@
 //! What the reader understands: the version from the namespaces (never the file name), a UTF-8
 //! BOM, `gml:posList` / `gml:pos` / `gml:coordinates` with srsDimension 2 or 3, interior rings,
 //! `gml:OrientableSurface orientation="-"`, MultiSurface / CompositeSurface / Solid /
-//! CompositeSolid / MultiSolid / TIN, lod0–lod4 properties (CityGML 3.0 `core:lodN…` and
+//! CompositeSolid / MultiSolid (members inline or by `xlink:href`; a member that cannot be read
+//! is listed in [`Geometry::skipped_members`], never dropped silently) / TIN, lod0–lod4 properties (CityGML 3.0 `core:lodN…` and
 //! `core:boundary` included), Building / BuildingPart / Room / installation / boundary surface /
 //! opening nesting, and every other top-level feature as an opaque object with id, type and
 //! envelope. Geometric defects (a ring with 3 positions, an unclosed ring) are kept as written

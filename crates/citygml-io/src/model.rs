@@ -216,6 +216,25 @@ pub struct Geometry {
     /// Span of the GML geometry element (`gml:Solid`, `gml:MultiSurface`, ...), or of the
     /// property element when the whole geometry is an `xlink:href` (then `gml_type` is `xlink`).
     pub span: SourceSpan,
+    /// Members of a CompositeSolid / MultiSolid that are not among the solids of `kind`, in
+    /// document order: an `xlink:href` whose target is not in the document or is not a solid,
+    /// an empty member, or member content the model does not represent. The geometry is then
+    /// incomplete, and says so (the validator reports each), instead of losing a solid silently.
+    /// Always empty for other geometries.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub skipped_members: Vec<SkippedMember>,
+}
+
+/// A member of an aggregate geometry that the model leaves out, and why (see
+/// [`Geometry::skipped_members`]).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct SkippedMember {
+    /// The `xlink:href` as written, when the member is a reference.
+    pub href: Option<String>,
+    /// Why it is not in the geometry, for messages (`points to nothing in the document`, ...).
+    pub reason: String,
+    /// Span of the member element (`gml:solidMember`, or what it contains).
+    pub span: SourceSpan,
 }
 
 impl Geometry {

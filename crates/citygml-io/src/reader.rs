@@ -654,6 +654,7 @@ impl<'a> Parser<'a> {
                             srs_name: None,
                             kind: GeometryKind::Surfaces(vec![ph]),
                             span: self.span(t.start, end),
+                            skipped_members: Vec::new(),
                         });
                     }
                 }
@@ -744,6 +745,7 @@ impl<'a> Parser<'a> {
         let gml_type = t.local_str();
         let property = String::from_utf8_lossy(name_at(self.src, prop_start)).into_owned();
         let start = t.start;
+        let mut skipped_members = Vec::new();
         let kind = match t.local() {
             b"Solid" => {
                 let (e, i) = self.parse_solid(&t)?;
@@ -751,30 +753,7 @@ impl<'a> Parser<'a> {
             }
             b"CompositeSolid" | b"MultiSolid" => {
                 let mut solids = Vec::new();
-                loop {
-                    match self.next()? {
-                        Ev::Start(c) => {
-                            if c.ns == Ns::Gml && matches!(c.local(), b"solidMember" | b"solidMembers") {
-                                loop {
-                                    match self.next()? {
-                                        Ev::Start(s) if s.is_gml(b"Solid") => solids.push(self.parse_solid(&s)?),
-                                        Ev::Start(s) => {
-                                            self.skip(&s)?;
-                                        }
-                                        Ev::End { .. } => break,
-                                        Ev::Eof => return Err(self.unclosed(c.raw.name().as_ref(), c.start)),
-                                        _ => {}
-                                    }
-                                }
-                            } else {
-                                self.skip(&c)?;
-                            }
-                        }
-                        Ev::End { .. } => break,
-                        Ev::Eof => return Err(self.unclosed(t.raw.name().as_ref(), t.start)),
-                        _ => {}
-                    }
-                }
+                self.parse_solid_members(&t, &mut solids, &mut skipped_members)?;
                 GeometryKind::Solids(solids)
             }
             _ => {
@@ -786,11 +765,117 @@ impl<'a> Parser<'a> {
         };
         self.dim_hint = saved_dim;
         let end = self.pos();
-        Ok(Geometry { id, lod, property, gml_type, srs_name, kind, span: self.span(start, end) })
+        Ok(Geometry { id, lod, property, gml_type, srs_name, kind, span: self.span(start, end), skipped_members })
+    }
+
+    /// The members of a `gml:CompositeSolid` / `gml:MultiSolid` whose start tag was just read:
+    /// each `gml:Solid` as parsed, each `solidMember xlink:href` as a placeholder solid (see
+    /// [`Parser::solid_placeholder`]; [`resolve_object`] replaces it by a copy of its target),
+    /// the solids of a nested CompositeSolid / MultiSolid as members of their own; anything
+    /// else goes to `skipped` (never dropped silently).
+    fn parse_solid_members(
+        &mut self,
+        t: &Tag<'a>,
+        solids: &mut Vec<(Shell, Vec<Shell>)>,
+        skipped: &mut Vec<SkippedMember>,
+    ) -> Result<(), ReadError> {
+        let id = t.attr_string(b"id");
+        loop {
+            match self.next()? {
+                Ev::Start(c) => {
+                    if !(c.ns == Ns::Gml && matches!(c.local(), b"solidMember" | b"solidMembers")) {
+                        self.skip(&c)?;
+                        continue;
+                    }
+                    if let Some(href) = c.attr_string(b"href") {
+                        self.skip(&c)?;
+                        let ph = self.solid_placeholder(href, c.start, self.pos());
+                        solids.push(ph);
+                        continue;
+                    }
+                    let before = solids.len() + skipped.len();
+                    loop {
+                        match self.next()? {
+                            Ev::Start(s) if s.is_gml(b"Solid") => {
+                                let solid = self.parse_solid(&s)?;
+                                solids.push(solid);
+                            }
+                            Ev::Start(s) if s.ns == Ns::Gml && matches!(s.local(), b"CompositeSolid" | b"MultiSolid") => {
+                                self.parse_solid_members(&s, solids, skipped)?;
+                            }
+                            Ev::Start(s) => {
+                                let end = self.skip(&s)?;
+                                skipped.push(self.not_a_solid(&s, end));
+                            }
+                            Ev::Empty(s) if s.is_gml(b"Solid") => {
+                                let shell = Shell { id: None, polygons: Vec::new() };
+                                solids.push((shell, Vec::new()));
+                            }
+                            Ev::Empty(s) => {
+                                let end = self.pos();
+                                skipped.push(self.not_a_solid(&s, end));
+                            }
+                            Ev::End { end } => {
+                                if solids.len() + skipped.len() == before {
+                                    skipped.push(SkippedMember {
+                                        href: None,
+                                        reason: format!("gml:{} holds no solid", c.local_str()),
+                                        span: self.span(c.start, end),
+                                    });
+                                }
+                                break;
+                            }
+                            Ev::Eof => return Err(self.unclosed(c.raw.name().as_ref(), c.start)),
+                            Ev::Text { .. } => {}
+                        }
+                    }
+                }
+                Ev::Empty(c) => {
+                    if c.ns == Ns::Gml && matches!(c.local(), b"solidMember" | b"solidMembers") {
+                        let end = self.pos();
+                        if let Some(href) = c.attr_string(b"href") {
+                            let ph = self.solid_placeholder(href, c.start, end);
+                            solids.push(ph);
+                        } else {
+                            skipped.push(SkippedMember {
+                                href: None,
+                                reason: format!("empty gml:{} (no solid, no xlink:href)", c.local_str()),
+                                span: self.span(c.start, end),
+                            });
+                        }
+                    }
+                }
+                Ev::End { end } => {
+                    if let Some(id) = id {
+                        self.local_ids.insert(id, IdEntry { bytes: t.start..end, semantic: self.cur_sem.clone() });
+                    }
+                    return Ok(());
+                }
+                Ev::Eof => return Err(self.unclosed(t.raw.name().as_ref(), t.start)),
+                Ev::Text { .. } => {}
+            }
+        }
+    }
+
+    fn not_a_solid(&self, s: &Tag<'_>, end: usize) -> SkippedMember {
+        SkippedMember {
+            href: None,
+            reason: format!("<{}> is not a solid (not read)", String::from_utf8_lossy(s.raw.name().as_ref())),
+            span: self.span(s.start, end),
+        }
+    }
+
+    /// A solid that stands for a `solidMember xlink:href`: an exterior shell holding one
+    /// placeholder polygon marked by `srs_dimension == 0` (see [`is_solid_placeholder`]).
+    fn solid_placeholder(&mut self, href: String, start: usize, end: usize) -> (Shell, Vec<Shell>) {
+        let mut ph = self.placeholder(href, start, end, false);
+        ph.exterior.srs_dimension = 0;
+        (Shell { id: None, polygons: vec![ph] }, Vec::new())
     }
 
     /// A `gml:Solid` whose start tag was just read → (exterior shell, interior shells).
     fn parse_solid(&mut self, t: &Tag<'a>) -> Result<(Shell, Vec<Shell>), ReadError> {
+        let id = t.attr_string(b"id");
         let mut exterior = Shell { id: None, polygons: Vec::new() };
         let mut interior = Vec::new();
         loop {
@@ -822,7 +907,13 @@ impl<'a> Parser<'a> {
                         }
                     }
                 }
-                Ev::End { .. } => break,
+                Ev::End { end } => {
+                    // A solid can be a CompositeSolid member by reference (`solidMember xlink:href`).
+                    if let Some(id) = id {
+                        self.local_ids.insert(id, IdEntry { bytes: t.start..end, semantic: self.cur_sem.clone() });
+                    }
+                    break;
+                }
                 Ev::Text { .. } => {}
                 Ev::Eof => return Err(self.unclosed(t.raw.name().as_ref(), t.start)),
             }
@@ -1328,6 +1419,35 @@ fn is_placeholder(p: &Polygon) -> bool {
     p.via_xlink.is_some() && p.span.bytes.end == 0
 }
 
+/// A solid standing for a `solidMember xlink:href` (see [`Parser::solid_placeholder`]).
+fn is_solid_placeholder(s: &(Shell, Vec<Shell>)) -> bool {
+    s.1.is_empty() && s.0.polygons.len() == 1 && is_placeholder(&s.0.polygons[0]) && s.0.polygons[0].exterior.srs_dimension == 0
+}
+
+type Solid = (Shell, Vec<Shell>);
+
+fn visit_geoms<'o>(obj: &'o CityObject, f: &mut dyn FnMut(&'o Geometry)) {
+    for g in &obj.geometries {
+        f(g);
+    }
+    for c in &obj.children {
+        visit_geoms(c, f);
+    }
+}
+
+fn visit_geoms_mut(obj: &mut CityObject, f: &mut dyn FnMut(&mut Geometry)) {
+    for g in &mut obj.geometries {
+        f(g);
+    }
+    for c in &mut obj.children {
+        visit_geoms_mut(c, f);
+    }
+}
+
+fn solid_placeholders_in(g: &Geometry) -> bool {
+    matches!(&g.kind, GeometryKind::Solids(v) if v.iter().any(is_solid_placeholder))
+}
+
 fn href_id(href: &str) -> Option<&str> {
     match href.strip_prefix('#') {
         Some(id) => Some(id),
@@ -1385,6 +1505,40 @@ pub(crate) struct Reparse<'s, 'a> {
 }
 
 impl Reparse<'_, '_> {
+    /// The solids of the element at `e` (a Solid, or the members of a CompositeSolid /
+    /// MultiSolid) with the members it skips; `Err(name)` when the element is not a solid.
+    #[allow(clippy::type_complexity)]
+    fn solids(&self, e: &IdEntry) -> Result<Result<(Vec<Solid>, Vec<SkippedMember>), String>, ReadError> {
+        let mut p = Parser::new(self.src, self.lines.clone(), e.bytes.clone(), self.bindings.to_vec());
+        p.cur_sem = e.semantic.clone();
+        loop {
+            match p.next()? {
+                Ev::Start(t) => {
+                    if let Some(d) = t.attr(b"srsDimension").and_then(|v| parse_dim(&v)) {
+                        p.dim_hint = Some(d);
+                    }
+                    let (mut solids, mut skipped) = (Vec::new(), Vec::new());
+                    if t.is_gml(b"Solid") {
+                        solids.push(p.parse_solid(&t)?);
+                    } else if t.ns == Ns::Gml && matches!(t.local(), b"CompositeSolid" | b"MultiSolid") {
+                        p.parse_solid_members(&t, &mut solids, &mut skipped)?;
+                    } else {
+                        return Ok(Err(String::from_utf8_lossy(t.raw.name().as_ref()).into_owned()));
+                    }
+                    return Ok(Ok((solids, skipped)));
+                }
+                Ev::Empty(t) => {
+                    if t.is_gml(b"Solid") {
+                        return Ok(Ok((vec![(Shell { id: None, polygons: Vec::new() }, Vec::new())], Vec::new())));
+                    }
+                    return Ok(Err(String::from_utf8_lossy(t.raw.name().as_ref()).into_owned()));
+                }
+                Ev::Eof => return Ok(Err("nothing".to_string())),
+                _ => {}
+            }
+        }
+    }
+
     fn surfaces(&self, e: &IdEntry) -> Result<Vec<Polygon>, ReadError> {
         let mut p = Parser::new(self.src, self.lines.clone(), e.bytes.clone(), self.bindings.to_vec());
         p.cur_sem = e.semantic.clone();
@@ -1418,6 +1572,53 @@ pub(crate) fn resolve_object(
     global: &mut dyn GlobalIds,
 ) -> Result<Vec<XLinkRef>, ReadError> {
     let mut unresolved = Vec::new();
+    // Phase 0: `solidMember xlink:href`s become copies of the solids they point to (their own
+    // polygon XLinks resolved), or skipped members that say why not.
+    let mut has_solid_refs = false;
+    visit_geoms(obj, &mut |g| has_solid_refs |= solid_placeholders_in(g));
+    if has_solid_refs {
+        let mut resolved: Vec<(Vec<Solid>, Vec<SkippedMember>)> = Vec::new();
+        {
+            let mut by_id: FxMap<&str, &Polygon> = FxMap::default();
+            visit_polys(obj, &mut |p| {
+                if let (false, Some(id)) = (is_placeholder(p), &p.id) {
+                    by_id.insert(id.as_str(), p);
+                }
+            });
+            let mut phs: Vec<&Polygon> = Vec::new();
+            visit_geoms(obj, &mut |g| {
+                if let GeometryKind::Solids(v) = &g.kind {
+                    phs.extend(v.iter().filter(|s| is_solid_placeholder(s)).map(|s| &s.0.polygons[0]));
+                }
+            });
+            let ctx = SolidCtx { by_id: &by_id, local_ids, reparse };
+            for ph in phs {
+                let via = ph.via_xlink.clone().unwrap_or_default();
+                let mut out = (Vec::new(), Vec::new());
+                ctx.resolve_solid(ph.id.as_deref().unwrap_or(""), &via, global, 0, &mut out, &mut unresolved)?;
+                resolved.push(out);
+            }
+        }
+        let mut it = resolved.into_iter();
+        visit_geoms_mut(obj, &mut |g| {
+            if !solid_placeholders_in(g) {
+                return;
+            }
+            let GeometryKind::Solids(v) = &mut g.kind else { return };
+            let old = std::mem::take(v);
+            for s in old {
+                if is_solid_placeholder(&s) {
+                    if let Some((solids, skipped)) = it.next() {
+                        v.extend(solids);
+                        g.skipped_members.extend(skipped);
+                    }
+                } else {
+                    v.push(s);
+                }
+            }
+            g.skipped_members.sort_by_key(|m| m.span.bytes.start);
+        });
+    }
     // Phase 1 (shared borrow): what each placeholder becomes, in visiting order.
     let mut replacements: Vec<Option<Vec<Polygon>>> = Vec::new();
     {
@@ -1460,6 +1661,90 @@ pub(crate) fn resolve_object(
         }
     });
     Ok(unresolved)
+}
+
+/// What resolving a solid XLink needs besides the global index.
+struct SolidCtx<'m, 'o, 'r, 'a> {
+    by_id: &'m FxMap<&'o str, &'o Polygon>,
+    local_ids: &'m FxMap<String, IdEntry>,
+    reparse: &'m Reparse<'r, 'a>,
+}
+
+impl SolidCtx<'_, '_, '_, '_> {
+    /// The solids `href` (a `solidMember xlink:href` at `via`) stands for, appended to `out.0`
+    /// as copies (every polygon's `via_xlink` = `via`, polygon XLinks inside them resolved);
+    /// when there are none, a skipped member saying why goes to `out.1`.
+    #[allow(clippy::too_many_arguments)]
+    fn resolve_solid(
+        &self,
+        href: &str,
+        via: &SourceSpan,
+        global: &mut dyn GlobalIds,
+        depth: usize,
+        out: &mut (Vec<Solid>, Vec<SkippedMember>),
+        unresolved: &mut Vec<XLinkRef>,
+    ) -> Result<(), ReadError> {
+        let skip = |reason: String| SkippedMember { href: Some(href.to_string()), reason, span: via.clone() };
+        let nowhere = |unresolved: &mut Vec<XLinkRef>| {
+            unresolved.push(XLinkRef { href: href.to_string(), span: via.clone() });
+            skip(format!("xlink:href=\"{href}\" points to nothing in the document"))
+        };
+        let Some(id) = href_id(href) else {
+            out.1.push(nowhere(unresolved));
+            return Ok(());
+        };
+        if depth > 8 {
+            out.1.push(skip(format!("xlink:href=\"{href}\": reference cycle")));
+            return Ok(());
+        }
+        let entry = match self.local_ids.get(id) {
+            Some(e) => Some(e.clone()),
+            None => global.lookup(id)?,
+        };
+        let Some(entry) = entry else {
+            out.1.push(nowhere(unresolved));
+            return Ok(());
+        };
+        let (solids, skipped) = match self.reparse.solids(&entry)? {
+            Ok(r) => r,
+            Err(name) => {
+                out.1.push(skip(format!("xlink:href=\"{href}\" points to <{name}>, not a solid")));
+                return Ok(());
+            }
+        };
+        out.1.extend(skipped);
+        for mut s in solids {
+            if is_solid_placeholder(&s) {
+                let ph = &s.0.polygons[0];
+                let inner = ph.id.clone().unwrap_or_default();
+                self.resolve_solid(&inner, via, global, depth + 1, out, unresolved)?;
+                continue;
+            }
+            for shell in std::iter::once(&mut s.0).chain(s.1.iter_mut()) {
+                if shell.polygons.iter().any(is_placeholder) {
+                    let old = std::mem::take(&mut shell.polygons);
+                    for p in old {
+                        if !is_placeholder(&p) {
+                            shell.polygons.push(p);
+                            continue;
+                        }
+                        match resolve_one(&p, self.by_id, self.local_ids, self.reparse, global, 0)? {
+                            Some(r) => shell.polygons.extend(r),
+                            None => unresolved.push(XLinkRef {
+                                href: p.id.clone().unwrap_or_default(),
+                                span: p.via_xlink.clone().unwrap_or_default(),
+                            }),
+                        }
+                    }
+                }
+                for p in &mut shell.polygons {
+                    p.via_xlink = Some(via.clone());
+                }
+            }
+            out.0.push(s);
+        }
+        Ok(())
+    }
 }
 
 fn resolve_one(

@@ -244,3 +244,142 @@ fn mutated_documents_never_panic() {
         let _ = ObjectStream::new(&m).map(|s| s.count());
     }
 }
+
+/// A unit cube `[dx, dx+1] × [0,1]²` as a gml:Solid (faces counter-clockwise seen from outside).
+fn cube_solid(id: &str, dx: f64) -> String {
+    let faces: [[[f64; 3]; 4]; 6] = [
+        [[0., 0., 0.], [0., 1., 0.], [1., 1., 0.], [1., 0., 0.]],
+        [[0., 0., 1.], [1., 0., 1.], [1., 1., 1.], [0., 1., 1.]],
+        [[0., 0., 0.], [1., 0., 0.], [1., 0., 1.], [0., 0., 1.]],
+        [[1., 0., 0.], [1., 1., 0.], [1., 1., 1.], [1., 0., 1.]],
+        [[1., 1., 0.], [0., 1., 0.], [0., 1., 1.], [1., 1., 1.]],
+        [[0., 1., 0.], [0., 0., 0.], [0., 0., 1.], [0., 1., 1.]],
+    ];
+    let mut s = format!("<gml:Solid gml:id=\"{id}\"><gml:exterior><gml:Shell>\n");
+    for (k, f) in faces.iter().enumerate() {
+        let pos: Vec<String> = f.iter().chain(std::iter::once(&f[0])).map(|p| format!("{} {} {}", p[0] + dx, p[1], p[2])).collect();
+        s += &format!(
+            "<gml:surfaceMember><gml:Polygon gml:id=\"{id}-f{k}\"><gml:exterior><gml:LinearRing><gml:posList>{}</gml:posList></gml:LinearRing></gml:exterior></gml:Polygon></gml:surfaceMember>\n",
+            pos.join(" ")
+        );
+    }
+    s + "</gml:Shell></gml:exterior></gml:Solid>"
+}
+
+/// A building whose lod2Solid is a CompositeSolid with the given members, plus a second
+/// top-level building whose lod1Solid defines the cube `B` at x = 1..2.
+fn composite_doc(members: &str) -> String {
+    let body = format!(
+        "<core:cityObjectMember><bldg:Building gml:id=\"b\"><bldg:lod2Solid><gml:CompositeSolid gml:id=\"cs\">\n{members}\n\
+         </gml:CompositeSolid></bldg:lod2Solid></bldg:Building></core:cityObjectMember>\n\
+         <core:cityObjectMember><bldg:Building gml:id=\"other\"><bldg:lod1Solid>{}</bldg:lod1Solid></bldg:Building></core:cityObjectMember>",
+        cube_solid("B", 1.0)
+    );
+    doc("2.0", &body)
+}
+
+fn composite(m: &CityModel) -> &Geometry {
+    &m.objects[0].geometries[0]
+}
+
+#[test]
+fn composite_solid_member_by_xlink_is_a_copy_of_its_target() {
+    let members = format!(
+        "<gml:solidMember>{}</gml:solidMember>\n<gml:solidMember xlink:href=\"#B\"/>\n<gml:solidMember>{}</gml:solidMember>",
+        cube_solid("A", 0.0),
+        cube_solid("C", 2.0)
+    );
+    let src = composite_doc(&members);
+    let m = parse(src.as_bytes()).unwrap();
+    let g = composite(&m);
+    let GeometryKind::Solids(solids) = &g.kind else { panic!("{:?}", g.kind) };
+    assert_eq!(solids.len(), 3, "the XLinked member is kept");
+    assert!(g.skipped_members.is_empty() && m.unresolved_xlinks.is_empty());
+    let b = &solids[1].0.polygons;
+    assert_eq!(b.len(), 6);
+    assert_eq!(b[0].id.as_deref(), Some("B-f0"));
+    assert_eq!(b[0].exterior.points[0], [1.0, 0.0, 0.0]);
+    // Copies: via_xlink is the referencing solidMember, span the definition.
+    let member_line = src.lines().position(|l| l.contains("xlink:href=\"#B\"")).unwrap() + 1;
+    assert!(b.iter().all(|p| p.via_xlink.as_ref().map(|v| v.line) == Some(member_line)));
+    let def_line = src.lines().position(|l| l.contains("gml:id=\"B-f0\"")).unwrap() + 1;
+    assert_eq!(b[0].span.line, def_line);
+    assert!(solids[0].0.polygons.iter().chain(&solids[2].0.polygons).all(|p| p.via_xlink.is_none()));
+    // Each polygon is counted once, where it is defined.
+    assert_eq!(m.all_polygons().len(), 18);
+    assert_eq!(m.objects[0].envelope.max, [3.0, 1.0, 1.0]);
+}
+
+#[test]
+fn composite_solid_xlinks_within_the_object_and_to_xlinked_faces() {
+    // The referenced solid is in the same building (a BuildingPart) and its faces are XLinks
+    // to polygons of the part's MultiSurface: the copy has the polygons, all marked as copies.
+    let faces: String = (0..6).map(|k| format!("<gml:surfaceMember xlink:href=\"#P-f{k}\"/>")).collect();
+    let part_ms = cube_solid("P", 5.0).replace("<gml:Solid gml:id=\"P\"><gml:exterior><gml:Shell>", "<gml:MultiSurface>").replace(
+        "</gml:Shell></gml:exterior></gml:Solid>",
+        "</gml:MultiSurface>",
+    );
+    let body = format!(
+        "<core:cityObjectMember><bldg:Building gml:id=\"b\"><bldg:lod2Solid><gml:CompositeSolid>\n\
+         <gml:solidMember>{a}</gml:solidMember><gml:solidMember xlink:href=\"#PS\"></gml:solidMember>\n\
+         </gml:CompositeSolid></bldg:lod2Solid>\n\
+         <bldg:consistsOfBuildingPart><bldg:BuildingPart gml:id=\"part\"><bldg:lod2MultiSurface>{part_ms}</bldg:lod2MultiSurface>\n\
+         <bldg:lod2Solid><gml:Solid gml:id=\"PS\"><gml:exterior><gml:Shell>{faces}</gml:Shell></gml:exterior></gml:Solid></bldg:lod2Solid>\n\
+         </bldg:BuildingPart></bldg:consistsOfBuildingPart></bldg:Building></core:cityObjectMember>",
+        a = cube_solid("A", 0.0)
+    );
+    let src = doc("2.0", &body);
+    let m = parse(src.as_bytes()).unwrap();
+    let g = composite(&m);
+    let GeometryKind::Solids(solids) = &g.kind else { panic!() };
+    assert_eq!(solids.len(), 2);
+    let p = &solids[1].0.polygons;
+    assert_eq!(p.iter().map(|p| p.id.as_deref().unwrap()).collect::<Vec<_>>(), ["P-f0", "P-f1", "P-f2", "P-f3", "P-f4", "P-f5"]);
+    assert_eq!(p[3].exterior.points[0], [6.0, 0.0, 0.0]);
+    let member_line = src.lines().position(|l| l.contains("xlink:href=\"#PS\"")).unwrap() + 1;
+    assert!(p.iter().all(|p| p.via_xlink.as_ref().unwrap().line == member_line));
+    assert!(m.unresolved_xlinks.is_empty() && g.skipped_members.is_empty());
+    assert_eq!(m.all_polygons().len(), 12);
+}
+
+#[test]
+fn composite_solid_member_referenced_twice_is_kept_twice() {
+    let src = composite_doc("<gml:solidMember xlink:href=\"#B\"/><gml:solidMember xlink:href=\"#B\"/>");
+    let m = parse(src.as_bytes()).unwrap();
+    let GeometryKind::Solids(solids) = &composite(&m).kind else { panic!() };
+    assert_eq!(solids.len(), 2);
+    // The same polygons, each copy marked by its own solidMember.
+    let ids = |k: usize| solids[k].0.polygons.iter().map(|p| (p.id.clone(), p.exterior.points.clone(), p.span.clone())).collect::<Vec<_>>();
+    assert_eq!(ids(0).len(), 6);
+    assert_eq!(ids(0), ids(1));
+    let via = |k: usize| solids[k].0.polygons[0].via_xlink.clone().unwrap().bytes.start;
+    assert!(via(0) < via(1));
+}
+
+#[test]
+fn composite_solid_members_not_read_are_reported_not_dropped() {
+    let members = format!(
+        "<gml:solidMember>{}</gml:solidMember>\n<gml:solidMember xlink:href=\"#nowhere\"/>\n\
+         <gml:solidMember xlink:href=\"#B-f0\"/>\n<gml:solidMember><gml:Polygon gml:id=\"q\"/></gml:solidMember>\n<gml:solidMember/>",
+        cube_solid("A", 0.0)
+    );
+    let src = composite_doc(&members);
+    let line_of = |s: &str| src.lines().position(|l| l.contains(s)).unwrap() + 1;
+    let m = parse(src.as_bytes()).unwrap();
+    let g = composite(&m);
+    let GeometryKind::Solids(solids) = &g.kind else { panic!() };
+    assert_eq!(solids.len(), 1);
+    let sk: Vec<(Option<&str>, &str, usize)> =
+        g.skipped_members.iter().map(|s| (s.href.as_deref(), s.reason.as_str(), s.span.line)).collect();
+    assert_eq!(
+        sk,
+        [
+            (Some("#nowhere"), "xlink:href=\"#nowhere\" points to nothing in the document", line_of("#nowhere")),
+            (Some("#B-f0"), "xlink:href=\"#B-f0\" points to <gml:Polygon>, not a solid", line_of("xlink:href=\"#B-f0\"")),
+            (None, "<gml:Polygon> is not a solid (not read)", line_of("gml:id=\"q\"")),
+            (None, "empty gml:solidMember (no solid, no xlink:href)", line_of("<gml:solidMember/>")),
+        ]
+    );
+    // The unresolvable one is also in the document's list (what `geofit info` reports).
+    assert_eq!(m.unresolved_xlinks.iter().map(|u| u.href.as_str()).collect::<Vec<_>>(), ["#nowhere"]);
+}
