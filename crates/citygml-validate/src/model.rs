@@ -2,7 +2,7 @@
 //! (feature gml:id, primitive gml:id, line:column).
 
 use crate::polygon::PolygonInput;
-use crate::{check_composite_solid, check_solid, check_surfaces, Issue, Options};
+use crate::{check_composite_solid, check_solid, check_surfaces, ErrorCode, Issue, Options};
 use citygml_io::{CityModel, CityObject, Geometry, GeometryKind, Polygon, Shell};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -99,6 +99,31 @@ fn check_geometry(obj: &CityObject, geom: &Geometry, opts: &Options) -> Vec<Find
                 out.push(locate(obj, geom, &shells, is));
             }
         }
+        GeometryKind::Solids(_) if !geom.skipped_members.is_empty() => {
+            // Members the reader could not represent (an XLink to nothing, not to a solid, ...):
+            // each is a finding; the solids that are there are checked one by one, not how they
+            // fit together (501–503 on an incomplete CompositeSolid would be guesses).
+            for m in &geom.skipped_members {
+                let composite = if geom.gml_type == "CompositeSolid" {
+                    "; the other solids of the CompositeSolid are checked one by one, not how they fit together"
+                } else {
+                    ""
+                };
+                out.push(Finding {
+                    feature: obj.id.clone(),
+                    feature_type: obj.kind.clone(),
+                    geometry: geom.property.clone(),
+                    primitive: geom.id.clone(),
+                    code: ErrorCode::InvalidInputFile.code(),
+                    name: ErrorCode::InvalidInputFile.name(),
+                    detail: format!("gml:{} member left out: {}{composite}", geom.gml_type, m.reason),
+                    value: None,
+                    line: m.span.line,
+                    column: m.span.column,
+                });
+            }
+            out.extend(check_solids_one_by_one(obj, geom, opts));
+        }
         GeometryKind::Solids(solids) if geom.gml_type == "CompositeSolid" => {
             // the solids of a CompositeSolid must also fit together (501–503)
             let shells: Vec<Vec<Vec<&Polygon>>> = solids
@@ -115,18 +140,24 @@ fn check_geometry(obj: &CityObject, geom: &Geometry, opts: &Options) -> Vec<Find
                 out.push(f);
             }
         }
-        GeometryKind::Solids(solids) => {
-            for (k, (ext, ints)) in solids.iter().enumerate() {
-                let shells: Vec<Vec<&Polygon>> = std::iter::once(ext).chain(ints.iter()).map(shell_polys).collect();
-                let inp: Vec<Vec<PolygonInput>> = shells.iter().map(|s| to_inputs(s)).collect();
-                for is in check_solid(&inp, opts) {
-                    let mut f = locate(obj, geom, &shells, is);
-                    if solids.len() > 1 {
-                        f.detail = format!("solid {}: {}", k + 1, f.detail);
-                    }
-                    out.push(f);
-                }
+        GeometryKind::Solids(_) => out.extend(check_solids_one_by_one(obj, geom, opts)),
+    }
+    out
+}
+
+/// The solids of a MultiSolid (or of an incomplete CompositeSolid), each on its own.
+fn check_solids_one_by_one(obj: &CityObject, geom: &Geometry, opts: &Options) -> Vec<Finding> {
+    let mut out = Vec::new();
+    let GeometryKind::Solids(solids) = &geom.kind else { return out };
+    for (k, (ext, ints)) in solids.iter().enumerate() {
+        let shells: Vec<Vec<&Polygon>> = std::iter::once(ext).chain(ints.iter()).map(shell_polys).collect();
+        let inp: Vec<Vec<PolygonInput>> = shells.iter().map(|s| to_inputs(s)).collect();
+        for is in check_solid(&inp, opts) {
+            let mut f = locate(obj, geom, &shells, is);
+            if solids.len() > 1 {
+                f.detail = format!("solid {}: {}", k + 1, f.detail);
             }
+            out.push(f);
         }
     }
     out

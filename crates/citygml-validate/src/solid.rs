@@ -199,16 +199,43 @@ pub fn check_composite_solid(solids: &[Vec<Vec<PolygonInput>>], opts: &Options) 
     if !out.is_empty() {
         return out;
     }
-    let extent = exts[0].points.iter().map(|p| p.norm()).fold(0.0, f64::max);
+    // The tolerances scale with the largest coordinate of any solid (in the common frame), not
+    // of the first one only: a small first solid must not make them too tight for the others.
+    let extent = exts.iter().flat_map(|m| m.points.iter()).map(|p| p.norm()).fold(0.0, f64::max);
     let (eps, touch) = contact_eps(opts, extent);
-    let trees: Vec<_> = exts.iter().map(|m| tri_tree(m, touch)).collect();
-    let cents: Vec<Vec<V3>> = exts.iter().map(|m| samples(m, touch)).collect();
+    // Bounding boxes grown by the contact tolerance: two solids whose boxes are apart can
+    // neither cross, nor share a face, nor hold one another, so the pair tests (triangle pairs,
+    // winding numbers) run only for pairs whose boxes meet.
+    let boxes: Vec<([f64; 3], [f64; 3])> = exts.iter().map(|m| bbox(&m.points, touch)).collect();
+    let overlap = |a: usize, b: usize| (0..3).all(|i| boxes[a].0[i] <= boxes[b].1[i] && boxes[b].0[i] <= boxes[a].1[i]);
+    let in_box = |p: &V3, k: usize| (0..3).all(|i| p[i] >= boxes[k].0[i] && p[i] <= boxes[k].1[i]);
+    let mut trees: Vec<Option<TriTree>> = (0..exts.len()).map(|_| None).collect();
+    let mut cents: Vec<Option<Vec<V3>>> = (0..exts.len()).map(|_| None).collect();
     let mut adjacent = crate::shell::Dsu::new(exts.len());
     for a in 0..exts.len() {
         for b in a + 1..exts.len() {
-            let m = meet(&exts[a], &trees[a], &exts[b], &trees[b], eps, touch);
+            if !overlap(a, b) {
+                continue;
+            }
+            for k in [a, b] {
+                if trees[k].is_none() {
+                    trees[k] = Some(tri_tree(&exts[k], touch));
+                    cents[k] = Some(samples(&exts[k], touch));
+                }
+            }
+            let (ta, tb) = (trees[a].as_ref().unwrap(), trees[b].as_ref().unwrap());
+            let m = meet(&exts[a], ta, &exts[b], tb, eps, touch);
             // 501: crossing surfaces, or a point just inside one solid that is inside the other
-            let inside = |x: usize, y: usize| cents[x].iter().find(|p| winding_number(&exts[y].points, &exts[y].triangles, p).abs() > 0.5).copied();
+            // (only points inside the other's box can be inside it)
+            let inside = |x: usize, y: usize| {
+                cents[x]
+                    .as_ref()
+                    .unwrap()
+                    .iter()
+                    .filter(|p| in_box(p, y))
+                    .find(|p| winding_number(&exts[y].points, &exts[y].triangles, p).abs() > 0.5)
+                    .copied()
+            };
             if let Some(p) = m.crossing.or_else(|| inside(b, a)).or_else(|| inside(a, b)) {
                 out.push((
                     b,
@@ -233,6 +260,19 @@ pub fn check_composite_solid(solids: &[Vec<Vec<PolygonInput>>], opts: &Options) 
         }
     }
     out
+}
+
+/// Axis-aligned box of `ps`, grown by `grow` on every side.
+fn bbox(ps: &[V3], grow: f64) -> ([f64; 3], [f64; 3]) {
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for p in ps {
+        for i in 0..3 {
+            lo[i] = lo[i].min(p[i]);
+            hi[i] = hi[i].max(p[i]);
+        }
+    }
+    (lo.map(|v| v - grow), hi.map(|v| v + grow))
 }
 
 fn vertex_key(ps: &[V3], opts: &Options) -> Vec<[i64; 3]> {

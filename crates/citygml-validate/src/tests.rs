@@ -279,3 +279,96 @@ fn composite_solid_50x() {
     let c = codes(&[a.clone(), scaled(&a, 1., [1., 0., 0.])[1..].to_vec()]);
     assert_eq!(c, vec![302]);
 }
+
+/// A CityGML 2.0 document: a building whose lod2Solid is a CompositeSolid with `members`, and
+/// a second building whose lod1Solid defines the unit cube `B` at x = 1..2 (faces from `cube`).
+fn composite_doc(members: &str) -> String {
+    let solid = |id: &str, dx: f64| {
+        let mut s = format!("<gml:Solid gml:id=\"{id}\"><gml:exterior><gml:Shell>\n");
+        for f in cube() {
+            let pos: Vec<String> = f.iter().map(|p| format!("{} {} {}", p[0] + dx, p[1], p[2])).collect();
+            s += &format!(
+                "<gml:surfaceMember><gml:Polygon><gml:exterior><gml:LinearRing><gml:posList>{}</gml:posList></gml:LinearRing></gml:exterior></gml:Polygon></gml:surfaceMember>\n",
+                pos.join(" ")
+            );
+        }
+        s + "</gml:Shell></gml:exterior></gml:Solid>"
+    };
+    let members = members.replace("{A}", &solid("A", 0.0)).replace("{C}", &solid("C", 2.0)).replace("{D}", &solid("D", 0.0));
+    format!(
+        "<?xml version=\"1.0\"?>\n<core:CityModel xmlns:core=\"http://www.opengis.net/citygml/2.0\" \
+         xmlns:bldg=\"http://www.opengis.net/citygml/building/2.0\" xmlns:gml=\"http://www.opengis.net/gml\" \
+         xmlns:xlink=\"http://www.w3.org/1999/xlink\">\n\
+         <core:cityObjectMember><bldg:Building gml:id=\"b\"><bldg:lod2Solid><gml:CompositeSolid gml:id=\"cs\">\n{members}\n\
+         </gml:CompositeSolid></bldg:lod2Solid></bldg:Building></core:cityObjectMember>\n\
+         <core:cityObjectMember><bldg:Building gml:id=\"other\"><bldg:lod1Solid>{}</bldg:lod1Solid></bldg:Building></core:cityObjectMember>\n\
+         </core:CityModel>\n",
+        solid("B", 1.0)
+    )
+}
+
+fn doc_findings(members: &str) -> Vec<crate::Finding> {
+    let src = composite_doc(members);
+    let m = citygml_io::parse(src.as_bytes()).unwrap();
+    crate::validate_model(&m, &Options::default())
+}
+
+fn doc_codes(members: &str) -> Vec<u16> {
+    doc_findings(members).iter().map(|f| f.code).collect()
+}
+
+#[test]
+fn composite_solid_members_by_xlink() {
+    // A | B | C in a row, B only by XLink to a solid of another building: connected, valid.
+    let row = "<gml:solidMember>{A}</gml:solidMember>\n<gml:solidMember xlink:href=\"#B\"/>\n<gml:solidMember>{C}</gml:solidMember>";
+    assert_eq!(doc_codes(row), Vec::<u16>::new());
+    // Without B, A and C share nothing: 503 (the XLinked member is what connects them).
+    let apart = "<gml:solidMember>{A}</gml:solidMember>\n<gml:solidMember>{C}</gml:solidMember>";
+    assert_eq!(doc_codes(apart), vec![503]);
+    // The same solid referenced twice, and a solid defined inline and referenced again: 502.
+    assert_eq!(doc_codes("<gml:solidMember xlink:href=\"#B\"/><gml:solidMember xlink:href=\"#B\"/>"), vec![502]);
+    assert_eq!(doc_codes("<gml:solidMember>{A}</gml:solidMember>\n<gml:solidMember xlink:href=\"#A\"/>"), vec![502]);
+}
+
+#[test]
+fn composite_solid_member_that_cannot_be_read_is_a_finding() {
+    let members = "<gml:solidMember>{A}</gml:solidMember>\n<gml:solidMember xlink:href=\"#nowhere\"/>\n<gml:solidMember>{C}</gml:solidMember>";
+    let f = doc_findings(members);
+    // 901 names the href and where it is; A and C are still checked (each valid on its own),
+    // but not how they fit together (no 503 from the missing link).
+    assert_eq!(f.iter().map(|f| f.code).collect::<Vec<_>>(), vec![901], "{f:?}");
+    assert!(f[0].detail.contains("xlink:href=\"#nowhere\" points to nothing in the document"), "{}", f[0].detail);
+    let line = composite_doc(members).lines().position(|l| l.contains("#nowhere")).unwrap() + 1;
+    assert_eq!((f[0].line, f[0].primitive.as_deref(), f[0].feature.as_deref()), (line, Some("cs"), Some("b")));
+    // A member that is no solid at all is reported the same way.
+    let f = doc_findings("<gml:solidMember>{A}</gml:solidMember>\n<gml:solidMember><gml:Polygon/></gml:solidMember>");
+    assert_eq!(f.iter().map(|f| f.code).collect::<Vec<_>>(), vec![901]);
+    assert!(f[0].detail.contains("<gml:Polygon> is not a solid"), "{}", f[0].detail);
+}
+
+#[test]
+fn composite_solid_tolerance_and_box_filter() {
+    let o = Options::default();
+    let codes = |solids: &[Vec<Vec<P>>]| -> Vec<u16> {
+        let inps: Vec<Vec<Vec<PolygonInput>>> = solids.iter().map(|s| vec![inp(s)]).collect();
+        check_composite_solid(&inps, &o).iter().map(|(_, i)| i.code.code()).collect()
+    };
+    let a = cube();
+    let boxed = |lo: P, hi: P| -> Vec<Vec<P>> {
+        a.iter().map(|f| f.iter().map(|p| [0, 1, 2].map(|i| lo[i] + p[i] * (hi[i] - lo[i]))).collect()).collect()
+    };
+    // A unit cube, a 5 km bar against it, and a cube 1 µm off the bar's far end: the contact
+    // tolerance follows the largest coordinate of all solids (5 km: ~5 µm), not the first
+    // solid's (~2 m: ~2 nm, which would call the last cube disconnected, 503).
+    let bar = boxed([1., 0., 0.], [5001., 1., 1.]);
+    let last = boxed([5001.000001, 0., 0.], [5002., 1., 1.]);
+    assert_eq!(codes(&[a.clone(), bar.clone(), last.clone()]), Vec::<u16>::new());
+    assert_eq!(codes(&[a.clone(), bar, boxed([5001.001, 0., 0.], [5002., 1., 1.])]), vec![503], "1 mm apart is apart");
+    // Many solids in a row: only neighbours' boxes meet; all connected.
+    let row: Vec<Vec<Vec<P>>> = (0..40).map(|k| scaled(&a, 1., [k as f64, 0., 0.])).collect();
+    assert_eq!(codes(&row), Vec::<u16>::new());
+    // One inside another far down the list is still found (its box is inside the other's).
+    let mut r2 = row.clone();
+    r2.push(scaled(&a, 0.5, [20.25, 0.25, 0.25]));
+    assert_eq!(codes(&r2), vec![501]);
+}
