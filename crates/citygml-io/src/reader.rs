@@ -361,6 +361,32 @@ pub(crate) struct Parser<'a> {
     /// Reused buffer for a posList's points: the ring gets an exact-size copy (a capacity
     /// guessed from the text length would leave ~30 % slack in every ring of a big model).
     scratch: Vec<Point3>,
+    /// The namespaces of the last few prefixes looked up ([`prefix_key`] → Ns), emptied when a
+    /// binding is declared or goes out of scope. A document root declares a dozen or more
+    /// prefixes, most of the same length (`gml`, `app`, `dem`, ...): searching the bindings
+    /// byte by byte for every tag was the largest part of [`Parser::next`].
+    ns_cache: [(u64, Ns); 4],
+    ns_cache_next: usize,
+    /// Reused buffer the polygons of a geometry or shell are collected in; the geometry gets
+    /// an exact-size copy. A Polygon is ~340 bytes: growing each geometry's own Vec by doubling
+    /// and shrinking it to fit moved every polygon two or three times and made large
+    /// allocations that keep glibc consolidating its free lists.
+    polys: Vec<Polygon>,
+}
+
+const NS_CACHE_EMPTY: [(u64, Ns); 4] = [(u64::MAX, Ns::Other); 4];
+
+/// A prefix of up to 7 bytes as one integer (length in the top byte), None if longer.
+#[inline]
+fn prefix_key(p: &[u8]) -> Option<u64> {
+    if p.len() > 7 {
+        return None;
+    }
+    let mut k = (p.len() as u64) << 56;
+    for (i, &b) in p.iter().enumerate() {
+        k |= (b as u64) << (8 * i);
+    }
+    Some(k)
 }
 
 static XMLNS: std::sync::LazyLock<memchr::memmem::Finder<'static>> =
@@ -389,6 +415,9 @@ impl<'a> Parser<'a> {
             limit: range.end,
             next_xmlns: 0,
             scratch: Vec::new(),
+            ns_cache: NS_CACHE_EMPTY,
+            ns_cache_next: 0,
+            polys: Vec::new(),
         }
     }
 
@@ -465,6 +494,7 @@ impl<'a> Parser<'a> {
                     PrefixDeclaration::Named(p) => p.to_vec(),
                 };
                 self.bindings.push(Binding { prefix, ns: classify_ns(&a.value), uri: a.value.to_vec(), depth });
+                self.ns_cache = NS_CACHE_EMPTY;
             }
         }
     }
@@ -488,13 +518,29 @@ impl<'a> Parser<'a> {
             .unwrap_or_default()
     }
 
-    fn resolve(&self, qname: &[u8]) -> Ns {
-        self.binding_of(qname).map(|b| b.ns).unwrap_or(Ns::Other)
+    fn resolve(&mut self, qname: &[u8]) -> Ns {
+        let prefix = match memchr::memchr(b':', qname) {
+            Some(i) => &qname[..i],
+            None => &b""[..],
+        };
+        let Some(k) = prefix_key(prefix) else {
+            return self.binding_of(qname).map(|b| b.ns).unwrap_or(Ns::Other);
+        };
+        for &(ck, ns) in &self.ns_cache {
+            if ck == k {
+                return ns;
+            }
+        }
+        let ns = self.binding_of(qname).map(|b| b.ns).unwrap_or(Ns::Other);
+        self.ns_cache[self.ns_cache_next] = (k, ns);
+        self.ns_cache_next = (self.ns_cache_next + 1) % self.ns_cache.len();
+        ns
     }
 
     fn pop_bindings(&mut self) {
         while self.bindings.last().is_some_and(|b| b.depth > self.depth) {
             self.bindings.pop();
+            self.ns_cache = NS_CACHE_EMPTY;
         }
     }
 
@@ -757,9 +803,11 @@ impl<'a> Parser<'a> {
                 GeometryKind::Solids(solids)
             }
             _ => {
-                let mut v = Vec::new();
-                self.collect_element(t, false, Some(prop_start), &mut v)?;
-                v.shrink_to_fit(); // a Polygon is ~340 bytes: no doubling slack in big models
+                let mut buf = std::mem::take(&mut self.polys);
+                let mark = buf.len();
+                self.collect_element(t, false, Some(prop_start), &mut buf)?;
+                let v = buf.drain(mark..).collect(); // exact size
+                self.polys = buf;
                 GeometryKind::Surfaces(v)
             }
         };
@@ -883,10 +931,11 @@ impl<'a> Parser<'a> {
                 Ev::Start(c) => {
                     let is_ext = c.is_gml(b"exterior");
                     if is_ext || c.is_gml(b"interior") {
-                        let mut polys = Vec::new();
-                        let id = self.collect_prop(c, false, &mut polys)?;
-                        polys.shrink_to_fit();
-                        let shell = Shell { id, polygons: polys };
+                        let mut buf = std::mem::take(&mut self.polys);
+                        let mark = buf.len();
+                        let id = self.collect_prop(c, false, &mut buf)?;
+                        let shell = Shell { id, polygons: buf.drain(mark..).collect() };
+                        self.polys = buf;
                         if is_ext {
                             exterior = shell;
                         } else {
@@ -1866,7 +1915,7 @@ pub(crate) fn build_index(
 
 #[cfg(test)]
 mod tests {
-    use super::{attr_raw, find_attr, parse_f64, AttrScan};
+    use super::{attr_raw, find_attr, number_at, parse_f64, AttrScan};
     use quick_xml::events::BytesStart;
 
     #[test]
@@ -1903,6 +1952,36 @@ mod tests {
             let digits = (x >> 56) as usize % 9;
             let s = format!("{int}.{:0width$}", frac % 10u64.pow(digits as u32), width = digits);
             assert_eq!(parse_f64(s.as_bytes()), s.parse::<f64>().ok(), "{s}");
+        }
+        // The plain-decimal fast path at its limits: significands around 2^53, up to 19 digits,
+        // up to 23 decimals, signs, leading zeros (each either exact or handed to fast-float2).
+        let edge = [
+            "9007199254740992", "9007199254740993", "900719925474099.3", "-9007199254740.992", "0.9007199254740993",
+            "1234567890123456789", "12345678901234567890", "0.0000000000000000000001", "0.00000000000000000000001",
+            "-0", "+0.", "-.5", "007.250", "4503599627370497.5", "1.7976931348623157", "-", "+", "-.", "1.-2",
+        ];
+        for c in edge {
+            assert_eq!(parse_f64(c.as_bytes()).map(f64::to_bits), c.parse::<f64>().ok().map(f64::to_bits), "{c}");
+        }
+        for _ in 0..200_000 {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            let digits = 1 + (x >> 59) as usize % 19;
+            let m = x % 10u64.pow(digits as u32);
+            let frac = (x >> 32) as usize % (digits + 5);
+            let sign = if x & 1 == 1 { "-" } else { "" };
+            let t = format!("{m:0digits$}");
+            let s = if frac >= t.len() {
+                format!("{sign}0.{:0>frac$}", t)
+            } else {
+                format!("{sign}{}.{}", &t[..t.len() - frac], &t[t.len() - frac..])
+            };
+            assert_eq!(parse_f64(s.as_bytes()).map(f64::to_bits), s.parse::<f64>().ok().map(f64::to_bits), "{s}");
+            // in a coordinate list, followed by whitespace
+            let list = format!("{s} 1");
+            let (v, len) = number_at(list.as_bytes(), 0).ok().unwrap();
+            assert_eq!((v.to_bits(), len), (s.parse::<f64>().unwrap().to_bits(), s.len()), "{s}");
         }
         for bad in ["", "-", ".", "abc", "1.2.3", "1,5", "nan"] {
             assert_eq!(parse_f64(bad.as_bytes()).map(|v| v.is_finite()), bad.parse::<f64>().ok().map(|v| v.is_finite()), "{bad}");
