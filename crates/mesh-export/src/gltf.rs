@@ -13,9 +13,10 @@
 //!   `UNSIGNED_INT`; only materials that are used are written (no "unused object" notes).
 //!
 //! Known reader limitation: MeshLab / pymeshlab (seen with 2025.7) mis-read `LINES` primitives
-//! as triangles and may crash on them; the files are valid (Khronos validator, `gltf` crate,
-//! three.js). Scenes meant for MeshLab should keep line sets out or use OBJ, whose `l` records
-//! MeshLab and FreeCAD skip.
+//! as unindexed triangles over their vertices (stray triangles; the files are valid: Khronos
+//! validator, `gltf` crate, three.js). It crashed when the vertex count was not a multiple of 3,
+//! so line sets are padded to one with unreferenced repeats of their last vertex. Scenes meant
+//! for MeshLab should keep line sets out or use OBJ, whose `l` records MeshLab and FreeCAD skip.
 //!
 //! [`MeshNode`]: crate::MeshNode
 //! [`TriangleMesh`]: crate::TriangleMesh
@@ -285,11 +286,17 @@ impl Builder {
             primitives.push(p);
         }
         for l in n.lines.iter().filter(|l| !l.indices.is_empty()) {
+            // MeshLab reads a LINES primitive as unindexed triangles over its POSITION accessor
+            // and reads past the end when the vertex count is not a multiple of 3 (crash): pad
+            // with repeats of the last vertex, which no index refers to (valid glTF).
+            let pad = (3 - l.positions.len() % 3) % 3;
+            let positions: Vec<[f64; 3]> = l.positions.iter().chain(std::iter::repeat_n(l.positions.last().unwrap_or(&[0.0; 3]), pad)).copied().collect();
+            let colors: Option<Vec<[f32; 4]>> = l.colors.as_ref().map(|c| c.iter().chain(std::iter::repeat_n(c.last().unwrap_or(&[0.0; 4]), pad)).copied().collect());
             let p = self.primitive(
-                &l.positions,
+                &positions,
                 &l.indices,
                 None,
-                l.colors.as_deref(),
+                colors.as_deref(),
                 l.material,
                 json::mesh::Mode::Lines,
             );
