@@ -35,6 +35,10 @@
 //!   change — are re-evaluated; "tolerance reached" is declared only after a fresh check of
 //!   every cell. Knots are re-inferred only for points whose support meets a split cell.
 //!   The OpenCL model-matrix rows (T29) are in `ocl_fit` (kernel + CPU twin).
+//! - **Coarsening** (`crate::coarsen`, our extension of §3.9): after the tolerance is reached
+//!   (least squares on a raster), splits that were not needed are merged back in rounds, each
+//!   kept only when every valid cell stays within the tolerance; `coarsen: false` keeps the
+//!   loop's mesh. The local update also handles points removed since the previous state.
 //! - **Indirect reduction** ([`fit_points`]): the original raster cells mapped forward into the
 //!   warped frame are the data (scattered least squares, the tolerance checked at every point,
 //!   no 3×3 probes against the resampled raster), so the splat's resampling error and the
@@ -131,11 +135,14 @@ pub struct FitOptions {
     /// Least squares: compute the model-matrix rows of global assemblies with the OpenCL kernel
     /// (`ocl_fit`, spec T29) instead of the CPU twin.
     pub opencl_assembly: bool,
+    /// Least squares on a raster: after the tolerance is reached, merge back the splits it did
+    /// not need (`crate::coarsen`).
+    pub coarsen: bool,
 }
 
 impl FitOptions {
     pub fn new(degree: Degree, max_error: f64) -> FitOptions {
-        FitOptions { degree, max_error, max_points: None, max_iterations: 100, method: Method::Lsq, overhang: 0.25, initial_cells: 4, drag_steps: 40, local_updates: true, opencl_assembly: false }
+        FitOptions { degree, max_error, max_points: None, max_iterations: 100, method: Method::Lsq, overhang: 0.25, initial_cells: 4, drag_steps: 40, local_updates: true, opencl_assembly: false, coarsen: true }
     }
 }
 
@@ -158,6 +165,8 @@ pub struct IterationStats {
     pub control_points: usize,
     pub cells: usize,
     pub refined_cells: usize,
+    /// Cells merged back by a coarsening round (0 in the refinement iterations).
+    pub merged_cells: usize,
     #[serde(flatten)]
     pub error: ErrorStats,
     pub seconds: f64,
@@ -381,6 +390,19 @@ pub fn fit_lsq(mesh: &TMesh, pb: &PbSpline, samples: &Samples) -> Result<Vec<f64
 /// equations from them (the matrix is never stored whole).
 pub fn fit_lsq_with(mesh: &TMesh, pb: &PbSpline, samples: &Samples, asm: Option<&crate::ocl_fit::OclModel>) -> Result<Vec<f64>, TsplineError> {
     fit_lsq_local(mesh, pb, samples, None, None, None, asm)
+}
+
+/// [`fit_lsq`] of the points marked `free` (the others held) on the cells of `region`.
+pub(crate) fn fit_lsq_region(mesh: &TMesh, pb: &PbSpline, samples: &Samples, free: &[bool], region: &Region) -> Result<Vec<f64>, TsplineError> {
+    fit_lsq_local(mesh, pb, samples, None, Some(free), Some(region), None)
+}
+
+/// Writes fitted heights (PB order) into the mesh and the PB-spline.
+pub(crate) fn set_z(mesh: &mut TMesh, pb: &mut PbSpline, z: &[f64]) {
+    for (i, &pid) in pb.point_ids.iter().enumerate() {
+        mesh.points[pid as usize].z = z[i];
+        pb.geom[i][2] = z[i];
+    }
 }
 
 /// Scattered data in parameter units: positions and values (indirect reduction: the ORIGINAL
@@ -882,7 +904,7 @@ pub fn eval_errors(pb: &PbSpline, samples: &Samples, backend: &Backend, errs: &m
 }
 
 /// [`eval_errors`] restricted to the cells of `region` (PB-spline path, point by point).
-fn eval_errors_region(pb: &PbSpline, samples: &Samples, region: &Region, errs: &mut [f64]) {
+pub(crate) fn eval_errors_region(pb: &PbSpline, samples: &Samples, region: &Region, errs: &mut [f64]) {
     let w = samples.width;
     let sub = (PASS_BLOCK / w.max(1)).max(1);
     errs.par_chunks_mut(sub * w).enumerate().for_each(|(b, out)| {
@@ -1019,7 +1041,7 @@ const LOCAL_SHARE: f64 = 0.2;
 /// point whose support overlaps theirs are re-solved with the others held; the surface changes
 /// only inside the supports of the re-solved points, so only those cells are re-checked.
 /// Returns None when the change is too large for that to pay (the iteration goes global).
-fn local_update(old: &PbSpline, new: &PbSpline, n_points: usize, w: usize, h: usize) -> Option<(Vec<bool>, Region)> {
+pub(crate) fn local_update(old: &PbSpline, new: &PbSpline, n_points: usize, w: usize, h: usize) -> Option<(Vec<bool>, Region)> {
     let n = new.knots.len();
     let mut old_of = vec![u32::MAX; n_points];
     for (i, &pid) in old.point_ids.iter().enumerate() {
@@ -1031,11 +1053,23 @@ fn local_update(old: &PbSpline, new: &PbSpline, n_points: usize, w: usize, h: us
             o == u32::MAX || old.knots[o as usize] != new.knots[i] || old.geom[o as usize][3] != new.geom[i][3]
         })
         .collect();
-    let nu = changed.iter().filter(|&&c| c).count();
+    // points of `old` gone from `new` (coarsening): the surface changes over their old supports
+    let mut in_new = vec![false; n_points];
+    for &pid in &new.point_ids {
+        in_new[pid as usize] = true;
+    }
+    let k = new.degree.k();
+    let removed: Vec<(f64, f64, f64, f64)> = (0..old.knots.len())
+        .filter(|&o| !in_new[old.point_ids[o] as usize])
+        .map(|o| {
+            let a = &old.knots[o];
+            (a[0], a[k + 1], a[5], a[5 + k + 1])
+        })
+        .collect();
+    let nu = changed.iter().filter(|&&c| c).count() + removed.len();
     if nu == 0 || nu as f64 > LOCAL_SHARE * n as f64 {
         return None;
     }
-    let k = new.degree.k();
     let supp = |i: usize| {
         let a = &new.knots[i];
         (a[0], a[k + 1], a[5], a[5 + k + 1])
@@ -1071,6 +1105,9 @@ fn local_update(old: &PbSpline, new: &PbSpline, n_points: usize, w: usize, h: us
     let mut region = Region::new(w, h);
     for i in (0..n).filter(|&i| free[i]) {
         let (s0, s1, t0, t1) = supp(i);
+        region.add_rect(s0, s1, t0, t1);
+    }
+    for &(s0, s1, t0, t1) in &removed {
         region.add_rect(s0, s1, t0, t1);
     }
     if region.len() * 2 > w * h {
@@ -1221,6 +1258,7 @@ fn fit_impl(
                 control_points: pb.point_ids.len(),
                 cells: mesh.leaf_count(),
                 refined_cells: refined,
+                merged_cells: 0,
                 error: err.clone(),
                 seconds: t0.elapsed().as_secs_f64(),
                 seconds_build: t_build,
@@ -1262,6 +1300,7 @@ fn fit_impl(
             control_points: pb.point_ids.len(),
             cells: mesh.leaf_count(),
             refined_cells: refined,
+                merged_cells: 0,
             error: err.clone(),
             seconds: t0.elapsed().as_secs_f64(),
             seconds_build: t_build,
@@ -1271,6 +1310,24 @@ fn fit_impl(
         progress(&st);
         iterations.push(st);
         if err.over_tolerance == 0 {
+            if opts.coarsen && opts.method == Method::Lsq {
+                let before = mesh.clone();
+                let c = crate::coarsen::coarsen(mesh, pb, samples, opts, backend, &mut errs, it + 1, progress)?;
+                mesh = c.mesh;
+                if !c.rounds.is_empty() {
+                    // the tolerance is declared only on a fresh check of every cell
+                    eval_errors(&c.pb, samples, backend, &mut errs)?;
+                    let (fresh, _) = summarize(&mesh, &c.pb, w, &errs, opts.max_error);
+                    if fresh.over_tolerance > 0 {
+                        // cannot happen when the checks above are sound; keep the guarantee anyway
+                        return Ok(FitResult { mesh: before, iterations, stop: StopReason::ToleranceReached });
+                    }
+                    iterations.extend(c.rounds);
+                    if let Some(last) = iterations.last_mut() {
+                        last.error = fresh;
+                    }
+                }
+            }
             return Ok(FitResult { mesh, iterations, stop: StopReason::ToleranceReached });
         }
         if it >= opts.max_iterations {

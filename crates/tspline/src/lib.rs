@@ -6,7 +6,8 @@
 //! - [`ocl_eval`]: the same evaluation and the knot derivation as OpenCL kernels.
 //! - [`rtree_pages`]: the thesis' Nearest-X int8 page encoding (Tables 5.2, 6.3).
 //! - [`format`]: the T-mesh file format (`xsd/tmesh.xsd`).
-//! - [`fit`]: adaptive approximation (Alg. 3) with sparse least squares or dragging.
+//! - [`fit`]: adaptive approximation (Alg. 3) with sparse least squares or dragging;
+//!   `coarsen`: merging back the splits the tolerance did not need.
 //!
 //! Where the spec's ambiguities are decided (doc comments there): A1, A2, A15 in [`eval`];
 //! A7–A12, A17, A19 in [`fit`]; A13, A14, A22 in [`mesh`]; A16 (formats: GDAL rasters in, the
@@ -23,6 +24,7 @@ pub mod eval;
 pub mod extraction;
 pub mod fit;
 pub mod format;
+mod coarsen;
 pub mod knots;
 pub mod mesh;
 mod ocl_device;

@@ -26,7 +26,9 @@ Example:
 The T-mesh starts as a few square cells covering the data plus 25 % overhang; every iteration
 fits the control-point heights (least squares over all valid cells, or dragging), evaluates the
 surface at every valid cell, and splits cells whose 3x3 probes or cells miss --max-error (rule 2
-and 1:2 balance repaired). The fit ends when every valid cell is within --max-error (exit 0), or
+and 1:2 balance repaired). Once every cell is within --max-error, least squares merges back the
+splits that were not needed (--no-coarsen keeps the loop's mesh). The fit ends when every valid
+cell is within --max-error (exit 0), or
 with exit 1 and the error reached when --max-points, --max-iterations or the minimum cell size
 (one raster cell) stops it first. The output stores the data mask (and the CRS) for `geofit eval`.";
 
@@ -105,6 +107,11 @@ pub struct Args {
     /// kernel; the host accumulates the normal equations from its rows block by block).
     #[arg(long, value_enum, default_value_t = Assembly::Cpu)]
     pub assembly: Assembly,
+    /// Keep the mesh the refinement loop ends with: no coarsening pass (least squares on a
+    /// raster merges back, after the tolerance is reached, the splits it did not need; every
+    /// valid cell stays within --max-error).
+    #[arg(long)]
+    pub no_coarsen: bool,
     /// Write a JSON report (options, per-iteration table, stop reason) to this path.
     #[arg(long)]
     pub report: Option<String>,
@@ -223,6 +230,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         }
     }
     let t_start = std::time::Instant::now();
+    super::rasterize::gdal_notices(config);
     let (raster, name) = read_raster_arg(&args.input)?;
     // Indirect reduction (spec §1, §2.3). A raster not yet warped is warped here with the default
     // parameters and the fit works on its ORIGINAL cells mapped forward into the warped frame
@@ -322,6 +330,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     opts.max_iterations = args.max_iterations;
     opts.overhang = args.overhang;
     opts.opencl_assembly = args.assembly == Assembly::Opencl;
+    opts.coarsen = !args.no_coarsen;
     opts.method = match args.method {
         MethodArg::Lsq => Method::Lsq,
         MethodArg::Drag => Method::Drag,
@@ -329,10 +338,11 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     let progress = config.progress("fit", args.max_iterations as u64);
     let e = args.max_error;
     let mut cb = |st: &IterationStats| {
+        let stage = if st.merged_cells > 0 { format!("coarsening ({} cells merged)", st.merged_cells) } else { "iteration".into() };
         progress.set(
             st.iteration as u64,
             &format!(
-                "iteration {}: {} control points, max {:.4}, mean {:.4}, RMS {:.4}, {} cells over {} ({:.2} s: build {:.2}, optimise {:.2}, check {:.2})",
+                "{stage} {}: {} control points, max {:.4}, mean {:.4}, RMS {:.4}, {} cells over {} ({:.2} s: build {:.2}, optimise {:.2}, check {:.2})",
                 st.iteration,
                 st.control_points,
                 st.error.max,
