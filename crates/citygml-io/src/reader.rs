@@ -430,6 +430,7 @@ impl<'a> Parser<'a> {
         self.base + self.r.buffer_position() as usize
     }
 
+    #[cold]
     pub fn err(&self, at: usize, message: impl Into<String>) -> ReadError {
         let (line, column) = self.lines.line_col(at);
         ReadError { line, column, byte: at, message: message.into() }
@@ -439,6 +440,7 @@ impl<'a> Parser<'a> {
         self.lines.span(start, end)
     }
 
+    #[cold]
     fn xml_err(&self, e: quick_xml::Error) -> ReadError {
         use quick_xml::errors::{IllFormedError, SyntaxError};
         let at = self.base + self.r.error_position() as usize;
@@ -463,6 +465,7 @@ impl<'a> Parser<'a> {
         self.err(at, msg)
     }
 
+    #[cold]
     fn unclosed(&self, what: &[u8], start: usize) -> ReadError {
         let (l, c) = self.lines.line_col(start);
         self.err(
@@ -544,6 +547,10 @@ impl<'a> Parser<'a> {
         }
     }
 
+    /// Inlined into its dozen callers: the event comes back in registers, not through a
+    /// ~120-byte Result in memory read right after the call (that store/load round trip was
+    /// the hottest spot of parse_object in perf); the error paths stay out of line (#[cold]).
+    #[inline(always)]
     pub fn next(&mut self) -> Result<Ev<'a>, ReadError> {
         loop {
             let start = self.pos();
