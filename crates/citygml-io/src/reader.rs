@@ -1852,11 +1852,18 @@ pub(crate) fn finish_envelopes(obj: &mut CityObject) {
         finish_envelopes(c);
         env.merge(&c.envelope);
     }
+    // Plain comparisons instead of Envelope::add_point's f64::min/max, in locals: the same
+    // result (a NaN never wins a comparison, as f64::min ignores it; the reader rejects
+    // non-finite coordinates anyway) in straight min/max instructions.
+    let (mut lo, mut hi) = (env.min, env.max);
     let mut add_shell = |polys: &[Polygon]| {
         for p in polys {
             for r in std::iter::once(&p.exterior).chain(p.interiors.iter()) {
                 for q in &r.points {
-                    env.add_point(q);
+                    for i in 0..3 {
+                        lo[i] = if q[i] < lo[i] { q[i] } else { lo[i] };
+                        hi[i] = if q[i] > hi[i] { q[i] } else { hi[i] };
+                    }
                 }
             }
         }
@@ -1880,6 +1887,8 @@ pub(crate) fn finish_envelopes(obj: &mut CityObject) {
             }
         }
     }
+    env.min = lo;
+    env.max = hi;
     if !env.is_empty() {
         obj.envelope = env;
     }
