@@ -17,13 +17,14 @@
 //! never tried again, and the round refits until no cell is over; a round that keeps no merge
 //! ends the pass. Every kept state passes the tolerance at every valid cell (cells outside the
 //! re-solved supports keep their surface, so their old errors stay valid), and the result gets
-//! a fresh check of every cell at the end.
+//! a fresh check of every cell at the end. Indirect reduction (scattered points) uses the same
+//! rounds with the filter on the resampled grid and a global refit and check of every point.
 
 use std::collections::HashSet;
 use std::time::Instant;
 
 use crate::eval::PbSpline;
-use crate::fit::{self, Backend, ErrorStats, FitOptions, IterationStats, Samples};
+use crate::fit::{self, Backend, ErrorStats, FitOptions, IterationStats, Samples, Scattered};
 use crate::mesh::{CellId, Rect, TMesh};
 use crate::TsplineError;
 
@@ -87,10 +88,12 @@ fn distance(a: Rect, b: Rect) -> f64 {
 /// Greedy coarsening of a fit that reached the tolerance (module doc). `pb` is the PB-spline
 /// of `mesh` with the fitted z, `errs` its |Δz| per raster cell (kept up to date);
 /// `first_round` numbers the statistics rows after the loop's iterations.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn coarsen(
     mesh: TMesh,
     pb: PbSpline,
     samples: &Samples,
+    pts: Option<&Scattered>,
     opts: &FitOptions,
     backend: &Backend,
     errs: &mut [f64],
@@ -99,7 +102,6 @@ pub(crate) fn coarsen(
 ) -> Result<Coarsened, TsplineError> {
     let tol = opts.max_error;
     let reach = (opts.degree.k() + 1) as f64;
-    let (w, h) = (samples.width, samples.height);
     let mut best = mesh;
     let mut best_pb = pb;
     let mut failed: HashSet<CellId> = HashSet::new();
@@ -141,7 +143,7 @@ pub(crate) fn coarsen(
                 p.z = q.z;
             }
             let rects: Vec<Rect> = merged.iter().map(|&c| m.cells[c as usize].rect).collect();
-            let (pb_m, err, over) = refit(&mut m, &best_pb, &rects, samples, backend, &mut round_errs, w, h, tol)?;
+            let (pb_m, err, over) = refit(&mut m, &best_pb, &rects, samples, pts, backend, &mut round_errs, tol)?;
             if err.over_tolerance == 0 {
                 break Some((pb_m, err));
             }
@@ -195,26 +197,40 @@ pub(crate) fn coarsen(
     Ok(Coarsened { mesh: best, pb: best_pb, rounds })
 }
 
-/// Refit after merges: knots re-inferred where a changed cell meets a support, least squares
-/// local when the change is small (the loop's `local_update`), errors re-checked where the
-/// surface can have changed. Writes z into `m`; returns the PB-spline, the statistics and the
-/// leaves holding cells over the tolerance.
+/// Refit after merges: knots re-inferred where a changed cell meets a support; on a raster the
+/// least squares is local when the change is small (the loop's `local_update`) and the errors
+/// are re-checked where the surface can have changed; scattered data (indirect reduction) are
+/// refitted and checked globally, as in the loop. Writes z into `m`; returns the PB-spline, the
+/// statistics and the leaves holding cells (points) over the tolerance.
 #[allow(clippy::too_many_arguments)]
 fn refit(
     m: &mut TMesh,
     old: &PbSpline,
     changed: &[Rect],
     samples: &Samples,
+    pts: Option<&Scattered>,
     backend: &Backend,
     errs: &mut [f64],
-    w: usize,
-    h: usize,
     tol: f64,
 ) -> Result<(PbSpline, ErrorStats, Vec<CellId>), TsplineError> {
+    let (w, h) = (samples.width, samples.height);
     let mut pb = match backend {
         Backend::Cpu => fit::build_pb_incremental(m, old, changed),
         _ => fit::build_pb(m, backend)?,
     };
+    if let Some(p) = pts {
+        let z = fit::fit_lsq_local(m, &pb, samples, Some(p), None, None, None)?;
+        fit::set_z(m, &mut pb, &z);
+        let zs = match backend {
+            Backend::OpenCl(o) => o.eval_points(&o.upload(&pb)?, &p.st)?,
+            Backend::Cpu => pb.eval_z(&p.st, true),
+        };
+        for ((e, zk), dk) in errs.iter_mut().zip(&zs).zip(&p.z) {
+            *e = if zk.is_nan() { f64::INFINITY } else { (zk - dk).abs() };
+        }
+        let (err, over) = fit::summarize_at(m, &pb, &|q| (p.st[q][0], p.st[q][1]), errs, tol);
+        return Ok((pb, err, over));
+    }
     match fit::local_update(old, &pb, m.points.len(), w, h) {
         Some((free, region)) => {
             let z = fit::fit_lsq_region(m, &pb, samples, &free, &region)?;
