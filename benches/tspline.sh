@@ -112,17 +112,18 @@ echo "T-mesh binary bytes = 48 per control point (s t x y z w as f64) + 16 per c
 echo "TIN bytes = 24 per vertex + 12 per triangle. Kilauea's nodata cells are filled with the nearest"
 echo "valid value for the TIN (delatin needs a full grid); the T-spline fit leaves them out."
 echo
-echo 'Overhang (`--overhang`, default 0.25 of the extent per side) at 0.05 instead:'
+echo 'What the passes of the fit contribute: the default, without the coarsening pass (`--no-coarsen`),'
+echo 'and with the overhang (`--overhang`, default 0.25 of the extent per side) at 0.05:'
 echo
-echo '| raster | E | degree | control points, overhang 0.25 | control points, overhang 0.05 |'
-echo '|---|---|---|---|---|'
-for spec in "gmt_tut_bathy.nc 10" "gmt_Kilauea.utm.nc 5"; do
+echo '| raster | E | degree | control points (default) | `--no-coarsen` | `--overhang 0.05` |'
+echo '|---|---|---|---|---|---|'
+for spec in "gmt_tut_bathy.nc 10" "gmt_Kilauea.utm.nc 5" "gmt_Kilauea.utm.nc 20"; do
   set -- $spec
   f="$SHARED/fixtures/terrain/$1"; e=$2
   [ -f "$f" ] || continue
   for d in 1 3; do
-    a=$(fit_row "$f" "$e" "$d" | cut -d'|' -f1); b=$(fit_row "$f" "$e" "$d" --overhang 0.05 | cut -d'|' -f1)
-    echo "| $1 | $e | $d | $a | $b |"
+    a=$(fit_row "$f" "$e" "$d" | cut -d'|' -f1); b=$(fit_row "$f" "$e" "$d" --no-coarsen | cut -d'|' -f1); c=$(fit_row "$f" "$e" "$d" --overhang 0.05 | cut -d'|' -f1)
+    echo "| $1 | $e | $d | $a | $b | $c |"
   done
 done
 echo
@@ -203,7 +204,8 @@ esac
 {
 echo "# T-spline benchmark"
 echo
-echo "Machine: $(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | xargs); $(date -u +%Y-%m-%d)"
+echo "Each section states the machine, date and load it was measured at (\`benches/tspline.sh BIN eval|fit|scale\`"
+echo "re-measures one section)."
 echo
 eval_section
 fit_section
