@@ -514,3 +514,26 @@ fn composite_solid_codes_501_502_503_on_generated_solids() {
     let (code, c, r) = generated_codes(d, "multisolid.gml", &doc);
     assert_eq!((code, c), (0, BTreeSet::new()), "{}", r["geometry"]["findings"]);
 }
+
+/// A Solid face given as `xlink:href` to nothing: the solid is open (its shell checks say so)
+/// and a 901 names the dangling href at its line; a valid cube reports nothing.
+#[test]
+fn dangling_face_xlink_is_a_finding_with_its_href_and_line() {
+    let dir = common::tempdir();
+    let d = dir.path();
+    let full = solid_xml(&[cube_faces([0., 0., 0.], 4.)], "SOL");
+    let (code, c, _) = generated_codes(d, "cube.gml", &building_doc(&full));
+    assert_eq!((code, c.len()), (0, 0), "the complete cube is valid");
+    // replace the last face by a reference that resolves nowhere
+    let last = full.rfind("<gml:surfaceMember>").unwrap();
+    let end = full[last..].find("</gml:surfaceMember>").unwrap() + last + "</gml:surfaceMember>".len();
+    let broken = format!("{}<gml:surfaceMember xlink:href=\"#nowhere\"/>{}", &full[..last], &full[end..]);
+    let doc = building_doc(&broken).replacen("xmlns:gml=", "xmlns:xlink=\"http://www.w3.org/1999/xlink\" xmlns:gml=", 1);
+    let (code, c, r) = generated_codes(d, "dangling.gml", &doc);
+    assert_eq!(code, 1, "{r}");
+    assert!(c.contains(&901), "{r}");
+    let line = doc.lines().position(|l| l.contains("#nowhere")).unwrap() + 1;
+    let f = r["geometry"]["findings"].as_array().unwrap().iter().find(|f| f["code"] == 901).unwrap();
+    assert_eq!(f["line"].as_u64(), Some(line as u64), "{f}");
+    assert!(f["detail"].as_str().unwrap().contains("#nowhere"), "{f}");
+}

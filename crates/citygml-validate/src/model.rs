@@ -191,5 +191,33 @@ pub fn sort_findings(all: &mut Vec<Finding>) {
 
 /// Validates a whole model (see [`validate_objects`]).
 pub fn validate_model(model: &CityModel, opts: &Options) -> Vec<Finding> {
-    validate_objects(&model.objects, opts)
+    let mut out = validate_objects(&model.objects, opts);
+    add_unresolved_xlinks(&mut out, &model.unresolved_xlinks);
+    sort_findings(&mut out);
+    out
+}
+
+/// One 901 finding per `xlink:href` that points to nothing in the document (the geometry it
+/// should bring in is missing, so a solid that lists it is open for that reason), unless the
+/// same place already has a 901 (a CompositeSolid member left out names its href itself).
+pub fn add_unresolved_xlinks(findings: &mut Vec<Finding>, refs: &[citygml_io::XLinkRef]) {
+    let code = ErrorCode::InvalidInputFile;
+    for r in refs {
+        let (line, column) = (r.span.line, r.span.column);
+        if findings.iter().any(|f| f.code == code.code() && f.line == line && f.column == column) {
+            continue;
+        }
+        findings.push(Finding {
+            feature: None,
+            feature_type: String::new(),
+            geometry: String::new(),
+            primitive: None,
+            code: code.code(),
+            name: code.name(),
+            detail: format!("xlink:href=\"{}\" points to nothing in the document", r.href),
+            value: None,
+            line,
+            column,
+        });
+    }
 }

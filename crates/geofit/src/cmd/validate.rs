@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use citygml_io::ObjectStream;
 use citygml_validate::xsd::{sniff_version, wrapper_for, Schema, XsdErrorKind, XsdFinding};
-use citygml_validate::{sort_findings, validate_objects, Finding, Options};
+use citygml_validate::{add_unresolved_xlinks, sort_findings, validate_objects, Finding, Options};
 use clap::Args as ClapArgs;
 use serde::Serialize;
 
@@ -244,13 +244,13 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
 
 fn check_geometry(bytes: &[u8], name: &str, opts: &Options, config: &Config) -> Result<GeometryReport, CliError> {
     let unreadable = |e: citygml_io::ReadError| CliError::unreadable(format!("{name}:{e}"));
-    let stream = ObjectStream::new(bytes).map_err(unreadable)?;
+    let mut stream = ObjectStream::new(bytes).map_err(unreadable)?;
     let progress = config.progress("validate", 0);
     let mut findings = Vec::new();
     let mut batch = Vec::new();
     let mut features = 0usize;
     // Objects are read one by one and checked in parallel batches: memory stays bounded.
-    for obj in stream {
+    for obj in stream.by_ref() {
         batch.push(obj.map_err(unreadable)?);
         if batch.len() == 256 {
             features += batch.len();
@@ -261,6 +261,7 @@ fn check_geometry(bytes: &[u8], name: &str, opts: &Options, config: &Config) -> 
     }
     features += batch.len();
     findings.extend(validate_objects(&batch, opts));
+    add_unresolved_xlinks(&mut findings, stream.unresolved_xlinks());
     sort_findings(&mut findings);
     progress.finish(&format!("{features} features checked"));
     Ok(GeometryReport { checked: true, options: *opts, features, valid: Some(findings.is_empty()), findings })
