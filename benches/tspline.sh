@@ -190,6 +190,13 @@ if a < 0:
     out = old.rstrip("\n") + "\n\n" + new
 else:
     b = old.find("\n## ", a + 3)
+    section = old[a:b + 1] if b >= 0 else old[a:]
+    # the hand-written "Reading ..." paragraphs are not generated: keep them, and say so, since
+    # they were written against the figures just replaced
+    kept = [p for p in section.split("\n\n") if p.startswith("Reading")]
+    if kept:
+        new = new.rstrip("\n") + "\n\n" + "\n\n".join(k.strip("\n") for k in kept) + "\n\n"
+        print(f"tspline bench: kept {len(kept)} 'Reading' paragraph(s) of '{head}' in {res}: check them against the new figures", file=sys.stderr)
     out = old[:a] + new + (old[b + 1:] if b >= 0 else "")
 open(res, "w").write(out)
 PY
