@@ -213,37 +213,20 @@ fn refit(
     errs: &mut [f64],
     tol: f64,
 ) -> Result<(PbSpline, ErrorStats, Vec<CellId>), TsplineError> {
-    let (w, h) = (samples.width, samples.height);
     let mut pb = match backend {
         Backend::Cpu => fit::build_pb_incremental(m, old, changed),
         _ => fit::build_pb(m, backend)?,
     };
-    if let Some(p) = pts {
-        let z = fit::fit_lsq_local(m, &pb, samples, Some(p), None, None, None)?;
-        fit::set_z(m, &mut pb, &z);
-        let zs = match backend {
-            Backend::OpenCl(o) => o.eval_points(&o.upload(&pb)?, &p.st)?,
-            Backend::Cpu => pb.eval_z(&p.st, true),
-        };
-        for ((e, zk), dk) in errs.iter_mut().zip(&zs).zip(&p.z) {
-            *e = if zk.is_nan() { f64::INFINITY } else { (zk - dk).abs() };
-        }
-        let (err, over) = fit::summarize_at(m, &pb, &|q| (p.st[q][0], p.st[q][1]), errs, tol);
-        return Ok((pb, err, over));
-    }
-    match fit::local_update(old, &pb, m.points.len(), w, h) {
-        Some((free, region)) => {
-            let z = fit::fit_lsq_region(m, &pb, samples, &free, &region)?;
-            fit::set_z(m, &mut pb, &z);
-            fit::eval_errors_region(&pb, samples, &region, errs);
-        }
-        None => {
-            let z = fit::fit_lsq(m, &pb, samples)?;
-            fit::set_z(m, &mut pb, &z);
-            fit::eval_errors(&pb, samples, backend, errs)?;
-        }
-    }
-    let (err, over) = fit::summarize(m, &pb, w, errs, tol);
+    let local = match pts {
+        None => fit::local_update(old, &pb, m.points.len(), samples.width, samples.height),
+        Some(_) => None,
+    };
+    let z = match &local {
+        Some((free, region)) => fit::fit_lsq_region(m, &pb, samples, free, region)?,
+        None => fit::fit_lsq_local(m, &pb, samples, pts, None, None, None)?,
+    };
+    fit::set_z(m, &mut pb, &z);
+    let (err, over) = fit::check(m, &pb, samples, pts, local.as_ref().map(|(_, r)| r), backend, errs, tol)?;
     Ok((pb, err, over))
 }
 

@@ -1177,6 +1177,35 @@ pub fn fit_points(
     fit_impl(grid, Some(pts), opts, backend, progress)
 }
 
+/// |Δz| of the surface into `errs` and its statistics with the leaves over the tolerance: at
+/// every point (scattered data), at the raster cells of `region` (a local update: the others
+/// keep their errors), or at every valid raster cell.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn check(
+    mesh: &TMesh,
+    pb: &PbSpline,
+    samples: &Samples,
+    pts: Option<&Scattered>,
+    region: Option<&Region>,
+    backend: &Backend,
+    errs: &mut [f64],
+    tol: f64,
+) -> Result<(ErrorStats, Vec<CellId>), TsplineError> {
+    if let Some(p) = pts {
+        let z = match backend {
+            Backend::OpenCl(o) => o.eval_points(&o.upload(pb)?, &p.st)?,
+            Backend::Cpu => pb.eval_z(&p.st, true),
+        };
+        errs.par_iter_mut().zip(&z).zip(&p.z).for_each(|((e, zk), dk)| *e = if zk.is_nan() { f64::INFINITY } else { (zk - dk).abs() });
+        return Ok(summarize_at(mesh, pb, &|q| (p.st[q][0], p.st[q][1]), errs, tol));
+    }
+    match region {
+        Some(r) => eval_errors_region(pb, samples, r, errs),
+        None => eval_errors(pb, samples, backend, errs)?,
+    }
+    Ok(summarize(mesh, pb, samples.width, errs, tol))
+}
+
 fn fit_impl(
     samples: &Samples,
     pts: Option<&Scattered>,
@@ -1219,64 +1248,13 @@ fn fit_impl(
             (Method::Lsq, None) => fit_lsq_local(&mesh, &pb, samples, pts, None, None, asm.as_ref())?,
             (Method::Drag, _) => fit_drag(&pb, samples, opts.drag_steps, 0.01 * opts.max_error, backend)?,
         };
-        for (i, &pid) in pb.point_ids.iter().enumerate() {
-            mesh.points[pid as usize].z = z[i];
-            pb.geom[i][2] = z[i];
-        }
+        set_z(&mut mesh, &mut pb, &z);
         let t_opt = t0.elapsed().as_secs_f64();
-        if let Some(p) = pts {
-            let z = match backend {
-                Backend::OpenCl(o) => o.eval_points(&o.upload(&pb)?, &p.st)?,
-                Backend::Cpu => pb.eval_z(&p.st, true),
-            };
-            errs.par_iter_mut().zip(&z).zip(&p.z).for_each(|((e, zk), dk)| *e = if zk.is_nan() { f64::INFINITY } else { (zk - dk).abs() });
-            let (err, over_leaves) = summarize_at(&mesh, &pb, &|q| (p.st[q][0], p.st[q][1]), &errs, opts.max_error);
-            let t_check = t0.elapsed().as_secs_f64();
-            let st = IterationStats {
-                iteration: it,
-                control_points: pb.point_ids.len(),
-                cells: mesh.leaf_count(),
-                refined_cells: refined,
-                merged_cells: 0,
-                error: err.clone(),
-                seconds: t0.elapsed().as_secs_f64(),
-                seconds_build: t_build,
-                seconds_optimise: t_opt - t_build,
-                seconds_check: t_check - t_opt,
-            };
-            progress(&st);
-            iterations.push(st);
-            if err.over_tolerance == 0 {
-                if opts.coarsen && opts.method == Method::Lsq {
-                    let c = crate::coarsen::coarsen(mesh, pb, samples, Some(p), opts, backend, &mut errs, it + 1, progress)?;
-                    mesh = c.mesh;
-                    iterations.extend(c.rounds);
-                }
-                return Ok(FitResult { mesh, iterations, stop: StopReason::ToleranceReached });
-            }
-            if it >= opts.max_iterations {
-                return Ok(FitResult { mesh, iterations, stop: StopReason::MaxIterations });
-            }
-            match refine(&mesh, &pb, opts, over_leaves, &err)? {
-                Refined::Stop(stop) => return Ok(FitResult { mesh, iterations, stop }),
-                Refined::Next(next, n_split) => {
-                    refined = n_split;
-                    split_rects = mesh.leaves().filter(|&c| !next.cells[c as usize].is_leaf()).map(|c| mesh.cells[c as usize].rect).collect();
-                    mesh = next;
-                    prev = Some(pb);
-                }
-            }
-            continue;
-        }
-        match &local {
-            Some((_, region)) => eval_errors_region(&pb, samples, region, &mut errs),
-            None => eval_errors(&pb, samples, backend, &mut errs)?,
-        }
-        let (mut err, mut over_leaves) = summarize(&mesh, &pb, w, &errs, opts.max_error);
-        if err.over_tolerance == 0 && local.is_some() {
+        let region = local.as_ref().map(|(_, r)| r);
+        let (mut err, mut over_leaves) = check(&mesh, &pb, samples, pts, region, backend, &mut errs, opts.max_error)?;
+        if err.over_tolerance == 0 && region.is_some() {
             // the tolerance is declared only on a fresh check of every cell
-            eval_errors(&pb, samples, backend, &mut errs)?;
-            (err, over_leaves) = summarize(&mesh, &pb, w, &errs, opts.max_error);
+            (err, over_leaves) = check(&mesh, &pb, samples, pts, None, backend, &mut errs, opts.max_error)?;
         }
         let t_check = t0.elapsed().as_secs_f64();
         let st = IterationStats {
@@ -1284,7 +1262,7 @@ fn fit_impl(
             control_points: pb.point_ids.len(),
             cells: mesh.leaf_count(),
             refined_cells: refined,
-                merged_cells: 0,
+            merged_cells: 0,
             error: err.clone(),
             seconds: t0.elapsed().as_secs_f64(),
             seconds_build: t_build,
@@ -1296,12 +1274,11 @@ fn fit_impl(
         if err.over_tolerance == 0 {
             if opts.coarsen && opts.method == Method::Lsq {
                 let before = mesh.clone();
-                let c = crate::coarsen::coarsen(mesh, pb, samples, None, opts, backend, &mut errs, it + 1, progress)?;
+                let c = crate::coarsen::coarsen(mesh, pb, samples, pts, opts, backend, &mut errs, it + 1, progress)?;
                 mesh = c.mesh;
                 if !c.rounds.is_empty() {
-                    // the tolerance is declared only on a fresh check of every cell
-                    eval_errors(&c.pb, samples, backend, &mut errs)?;
-                    let (fresh, _) = summarize(&mesh, &c.pb, w, &errs, opts.max_error);
+                    // the tolerance is declared only on a fresh check of every cell (point)
+                    let (fresh, _) = check(&mesh, &c.pb, samples, pts, None, backend, &mut errs, opts.max_error)?;
                     if fresh.over_tolerance > 0 {
                         // cannot happen when the checks above are sound; keep the guarantee anyway
                         return Ok(FitResult { mesh: before, iterations, stop: StopReason::ToleranceReached });
