@@ -698,14 +698,20 @@ impl<'a> Parser<'a> {
                     let lod = lod_of(l).filter(|_| surfacey(l));
                     if let (Some(lod), Some(href)) = (lod, lod.and_then(|_| t.attr_string(b"href"))) {
                         let end = self.pos();
-                        let ph = self.placeholder(href, t.start, end, false);
+                        // a solid property (`lodNSolid`) becomes the solid it points to (resolved
+                        // with the solidMember references), anything else the surfaces
+                        let kind = if memchr::memmem::find(l, b"Solid").is_some() {
+                            GeometryKind::Solids(vec![self.solid_placeholder(href, t.start, end)])
+                        } else {
+                            GeometryKind::Surfaces(vec![self.placeholder(href, t.start, end, false)])
+                        };
                         obj.geometries.push(Geometry {
                             id: None,
                             lod: Some(lod),
                             property: t.local_str(),
                             gml_type: "xlink".to_string(),
                             srs_name: None,
-                            kind: GeometryKind::Surfaces(vec![ph]),
+                            kind,
                             span: self.span(t.start, end),
                             skipped_members: Vec::new(),
                         });
@@ -1633,7 +1639,9 @@ pub(crate) fn resolve_object(
     let mut has_solid_refs = false;
     visit_geoms(obj, &mut |g| has_solid_refs |= solid_placeholders_in(g));
     if has_solid_refs {
-        let mut resolved: Vec<(Vec<Solid>, Vec<SkippedMember>)> = Vec::new();
+        // per placeholder: its solids and skipped members, and the element name of its target
+        // (a whole `lodNSolid xlink:href` geometry takes the target's type)
+        let mut resolved: Vec<((Vec<Solid>, Vec<SkippedMember>), Option<String>)> = Vec::new();
         {
             let mut by_id: FxMap<&str, &Polygon> = FxMap::default();
             visit_polys(obj, &mut |p| {
@@ -1651,8 +1659,17 @@ pub(crate) fn resolve_object(
             for ph in phs {
                 let via = ph.via_xlink.clone().unwrap_or_default();
                 let mut out = (Vec::new(), Vec::new());
-                ctx.resolve_solid(ph.id.as_deref().unwrap_or(""), &via, global, 0, &mut out, &mut unresolved)?;
-                resolved.push(out);
+                let href = ph.id.as_deref().unwrap_or("");
+                ctx.resolve_solid(href, &via, global, 0, &mut out, &mut unresolved)?;
+                let target = match href_id(href) {
+                    Some(id) => match local_ids.get(id) {
+                        Some(e) => Some(e.clone()),
+                        None => global.lookup(id)?,
+                    },
+                    None => None,
+                };
+                let name = target.map(|e| String::from_utf8_lossy(name_at(reparse.src, e.bytes.start)).into_owned());
+                resolved.push((out, name));
             }
         }
         let mut it = resolved.into_iter();
@@ -1662,17 +1679,29 @@ pub(crate) fn resolve_object(
             }
             let GeometryKind::Solids(v) = &mut g.kind else { return };
             let old = std::mem::take(v);
+            let mut target = None;
             for s in old {
                 if is_solid_placeholder(&s) {
-                    if let Some((solids, skipped)) = it.next() {
+                    if let Some(((solids, skipped), name)) = it.next() {
                         v.extend(solids);
                         g.skipped_members.extend(skipped);
+                        target = target.or(name);
                     }
                 } else {
                     v.push(s);
                 }
             }
             g.skipped_members.sort_by_key(|m| m.span.bytes.start);
+            if g.gml_type == "xlink" {
+                // `<bldg:lod2Solid xlink:href="#s"/>`: the geometry is what it points to
+                if let Some(name) = target.filter(|_| !v.is_empty()) {
+                    g.gml_type = name;
+                }
+                if g.gml_type == "Solid" && v.len() == 1 && g.skipped_members.is_empty() {
+                    let (exterior, interior) = v.pop().unwrap();
+                    g.kind = GeometryKind::Solid { exterior, interior };
+                }
+            }
         });
     }
     // Phase 1 (shared borrow): what each placeholder becomes, in visiting order.

@@ -383,3 +383,36 @@ fn composite_solid_members_not_read_are_reported_not_dropped() {
     // The unresolvable one is also in the document's list (what `geofit info` reports).
     assert_eq!(m.unresolved_xlinks.iter().map(|u| u.href.as_str()).collect::<Vec<_>>(), ["#nowhere"]);
 }
+
+/// `<bldg:lod2Solid xlink:href="#S"/>` (a whole geometry by reference, here into another
+/// building): the geometry is the Solid it points to, faces marked as copies, counted once;
+/// a reference to nothing is a skipped member and an unresolved XLink, not a silent gap.
+#[test]
+fn whole_solid_by_xlink_is_the_solid_it_points_to() {
+    for version in ["2.0", "3.0"] {
+        let body = format!(
+            "<core:cityObjectMember><bldg:Building gml:id=\"a\"><bldg:lod2Solid>{}</bldg:lod2Solid></bldg:Building></core:cityObjectMember>\n\
+             <core:cityObjectMember><bldg:Building gml:id=\"b\"><bldg:lod2Solid xlink:href=\"#B\"/></bldg:Building></core:cityObjectMember>",
+            cube_solid("B", 1.0)
+        );
+        let src = doc(version, &body);
+        let m = parse(src.as_bytes()).unwrap();
+        let g = &m.objects[1].geometries[0];
+        assert_eq!((g.lod, g.property.as_str(), g.gml_type.as_str()), (Some(2), "lod2Solid", "Solid"), "{version}");
+        let GeometryKind::Solid { exterior, interior } = &g.kind else { panic!("{version}: not a solid: {:?}", g.kind) };
+        assert!(interior.is_empty());
+        assert_eq!(exterior.polygons.len(), 6);
+        let line = src.lines().position(|l| l.contains("xlink:href=\"#B\"")).unwrap() + 1;
+        assert!(exterior.polygons.iter().all(|p| p.via_xlink.as_ref().is_some_and(|v| v.line == line)));
+        assert_eq!(m.all_polygons().len(), 6, "{version}: faces counted once, where defined");
+        assert!(m.unresolved_xlinks.is_empty() && g.skipped_members.is_empty());
+
+        let broken = src.replace("xlink:href=\"#B\"", "xlink:href=\"#nowhere\"");
+        let m = parse(broken.as_bytes()).unwrap();
+        let g = &m.objects[1].geometries[0];
+        assert_eq!(m.unresolved_xlinks.len(), 1);
+        assert_eq!(m.unresolved_xlinks[0].href, "#nowhere");
+        assert_eq!(g.skipped_members.len(), 1, "{version}");
+        assert!(g.skipped_members[0].reason.contains("#nowhere"));
+    }
+}

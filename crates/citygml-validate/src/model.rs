@@ -116,7 +116,11 @@ fn check_geometry(obj: &CityObject, geom: &Geometry, opts: &Options) -> Vec<Find
                     primitive: geom.id.clone(),
                     code: ErrorCode::InvalidInputFile.code(),
                     name: ErrorCode::InvalidInputFile.name(),
-                    detail: format!("gml:{} member left out: {}{composite}", geom.gml_type, m.reason),
+                    detail: if geom.gml_type == "xlink" {
+                        format!("the geometry {} refers to is left out: {}", geom.property, m.reason)
+                    } else {
+                        format!("gml:{} member left out: {}{composite}", geom.gml_type, m.reason)
+                    },
                     value: None,
                     line: m.span.line,
                     column: m.span.column,

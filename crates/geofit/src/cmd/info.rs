@@ -171,9 +171,17 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
                 let key = g.lod.map(|l| format!("lod{l}")).unwrap_or_else(|| "none".into());
                 let lc = lods.entry(key).or_default();
                 lc.geometries += 1;
+                // solids are counted where they are defined too: a copy reached by reference
+                // (`lod2Solid` / `solidMember` xlink:href) has every face marked with that one
+                // reference (NRW solids, whose faces point into the boundary surfaces one by
+                // one, are definitions)
+                let copy = |sh: &citygml_io::Shell| {
+                    let v = sh.polygons.first().and_then(|p| p.via_xlink.as_ref());
+                    sh.polygons.len() > 1 && v.is_some() && sh.polygons.iter().all(|p| p.via_xlink.as_ref() == v)
+                };
                 solids += match &g.kind {
-                    citygml_io::GeometryKind::Solid { .. } => 1,
-                    citygml_io::GeometryKind::Solids(v) => v.len(),
+                    citygml_io::GeometryKind::Solid { exterior, .. } => usize::from(!copy(exterior)),
+                    citygml_io::GeometryKind::Solids(v) => v.iter().filter(|s| !copy(&s.0)).count(),
                     citygml_io::GeometryKind::Surfaces(_) => 0,
                 };
                 let tin = matches!(g.gml_type.as_str(), "TriangulatedSurface" | "Tin");
