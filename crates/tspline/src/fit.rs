@@ -1276,17 +1276,22 @@ fn fit_impl(
                 let before = mesh.clone();
                 let c = crate::coarsen::coarsen(mesh, pb, samples, pts, opts, backend, &mut errs, it + 1, progress)?;
                 mesh = c.mesh;
-                if !c.rounds.is_empty() {
-                    // the tolerance is declared only on a fresh check of every cell (point)
-                    let (fresh, _) = check(&mesh, &c.pb, samples, pts, None, backend, &mut errs, opts.max_error)?;
-                    if fresh.over_tolerance > 0 {
-                        // cannot happen when the checks above are sound; keep the guarantee anyway
-                        return Ok(FitResult { mesh: before, iterations, stop: StopReason::ToleranceReached });
+                // the tolerance is declared only on a fresh check of every cell (scattered data:
+                // every round coarsen::refit kept was already checked at every point)
+                let fresh = match pts {
+                    None if !c.rounds.is_empty() => {
+                        let (fresh, _) = check(&mesh, &c.pb, samples, None, None, backend, &mut errs, opts.max_error)?;
+                        if fresh.over_tolerance > 0 {
+                            // cannot happen when the checks above are sound; keep the guarantee anyway
+                            return Ok(FitResult { mesh: before, iterations, stop: StopReason::ToleranceReached });
+                        }
+                        Some(fresh)
                     }
-                    iterations.extend(c.rounds);
-                    if let Some(last) = iterations.last_mut() {
-                        last.error = fresh;
-                    }
+                    _ => None,
+                };
+                iterations.extend(c.rounds);
+                if let (Some(fresh), Some(last)) = (fresh, iterations.last_mut()) {
+                    last.error = fresh;
                 }
             }
             return Ok(FitResult { mesh, iterations, stop: StopReason::ToleranceReached });
