@@ -537,3 +537,50 @@ fn dangling_face_xlink_is_a_finding_with_its_href_and_line() {
     assert_eq!(f["line"].as_u64(), Some(line as u64), "{f}");
     assert!(f["detail"].as_str().unwrap().contains("#nowhere"), "{f}");
 }
+
+/// A whole geometry given by reference (`<bldg:lod2Solid xlink:href="#SOL"/>`, the solid
+/// defined in another building; a generic object's `gen:lod2Geometry` pointing at it): the
+/// referencing object gets the same solid findings as when the open cube is written inline
+/// (the report lists a defect at its place once); a reference to nothing is a 901 naming the
+/// href at its line.
+#[test]
+fn whole_geometry_by_xlink_is_checked_as_its_target() {
+    let dir = common::tempdir();
+    let d = dir.path();
+    let mut open = cube_faces([0., 0., 0.], 4.);
+    open.pop();
+    let open = solid_xml(&[open], "SOL");
+    let object_codes = |doc: &str, k: usize| -> BTreeSet<u64> {
+        let m = citygml_io::parse(doc.as_bytes()).unwrap();
+        let opts = citygml_validate::Options::default();
+        citygml_validate::validate_object(&m.objects[k], &opts).iter().map(|f| u64::from(f.code)).collect()
+    };
+    let inline_doc = building_doc(&open);
+    let inline = object_codes(&inline_doc, 0);
+    assert!(!inline.is_empty() && !inline.contains(&901), "the open cube has solid findings: {inline:?}");
+    let (_, inline_doc_codes, _) = generated_codes(d, "inline.gml", &inline_doc);
+    let referenced = |prop: &str| {
+        inline_doc
+            .replacen("xmlns:gml=", "xmlns:xlink=\"http://www.w3.org/1999/xlink\" xmlns:gen=\"http://www.opengis.net/citygml/generics/2.0\" xmlns:gml=", 1)
+            .replace("</core:CityModel>", &format!("<core:cityObjectMember>\n<{prop}>\n</core:cityObjectMember>\n</core:CityModel>"))
+    };
+    for (name, prop) in [
+        ("lod2solid", "bldg:Building gml:id=\"R\"><bldg:lod2Solid xlink:href=\"#SOL\"/></bldg:Building"),
+        ("generic", "gen:GenericCityObject gml:id=\"G\"><gen:lod2Geometry xlink:href=\"#SOL\"/></gen:GenericCityObject"),
+    ] {
+        let doc = referenced(prop);
+        assert_eq!(object_codes(&doc, 1), inline, "{name}: the referencing object");
+        assert_eq!(object_codes(&doc, 0), inline, "{name}: the defining one, as before");
+        let (_, c, r) = generated_codes(d, &format!("{name}.gml"), &doc);
+        assert_eq!(c, inline_doc_codes, "{name}: {}", r["geometry"]["findings"]);
+
+        let doc = doc.replace("xlink:href=\"#SOL\"", "xlink:href=\"#nowhere\"");
+        let (code, _, r) = generated_codes(d, &format!("{name}_dangling.gml"), &doc);
+        assert_eq!(code, 1, "{r}");
+        let line = doc.lines().position(|l| l.contains("#nowhere")).unwrap() + 1;
+        let f: Vec<&Value> = r["geometry"]["findings"].as_array().unwrap().iter().filter(|f| f["code"] == 901).collect();
+        assert_eq!(f.len(), 1, "{name}: {f:?}");
+        assert_eq!(f[0]["line"].as_u64(), Some(line as u64), "{name}: {}", f[0]);
+        assert!(f[0]["detail"].as_str().unwrap().contains("#nowhere"), "{name}: {}", f[0]);
+    }
+}

@@ -1506,6 +1506,15 @@ fn visit_geoms_mut(obj: &mut CityObject, f: &mut dyn FnMut(&mut Geometry)) {
     }
 }
 
+/// The one placeholder of a whole surface-type geometry given by reference
+/// (`<bldg:lod2MultiSurface xlink:href="#ms"/>`), before it is resolved.
+fn whole_surface_ref(g: &Geometry) -> Option<&Polygon> {
+    match &g.kind {
+        GeometryKind::Surfaces(v) if g.gml_type == "xlink" && v.len() == 1 && is_placeholder(&v[0]) => Some(&v[0]),
+        _ => None,
+    }
+}
+
 fn solid_placeholders_in(g: &Geometry) -> bool {
     matches!(&g.kind, GeometryKind::Solids(v) if v.iter().any(is_solid_placeholder))
 }
@@ -1634,6 +1643,64 @@ pub(crate) fn resolve_object(
     global: &mut dyn GlobalIds,
 ) -> Result<Vec<XLinkRef>, ReadError> {
     let mut unresolved = Vec::new();
+    // Phase -1: a whole surface-type geometry property by reference (`<bldg:lod2MultiSurface
+    // xlink:href="#ms"/>`, read as one polygon placeholder) becomes what its target is: a solid
+    // placeholder for a Solid/CompositeSolid/MultiSolid (resolved below with the solidMember
+    // references), the surfaces of a surface geometry (named after it), and for anything else
+    // a skipped member instead of the polygons it happens to contain. A target that does not
+    // exist stays a placeholder: the polygon phase reports it as an unresolved XLink.
+    let mut whole: Vec<Option<String>> = Vec::new();
+    {
+        let mut by_id: rustc_hash::FxHashSet<&str> = Default::default();
+        visit_polys(obj, &mut |p| {
+            if let (false, Some(id)) = (is_placeholder(p), &p.id) {
+                by_id.insert(id.as_str());
+            }
+        });
+        let mut hrefs: Vec<&str> = Vec::new();
+        visit_geoms(obj, &mut |g| {
+            if let Some(ph) = whole_surface_ref(g) {
+                hrefs.push(ph.id.as_deref().unwrap_or(""));
+            }
+        });
+        for href in hrefs {
+            let name = match href_id(href) {
+                Some(id) if by_id.contains(id) => Some("Polygon".to_string()),
+                Some(id) => match local_ids.get(id) {
+                    Some(e) => Some(e.clone()),
+                    None => global.lookup(id)?,
+                }
+                .map(|e| String::from_utf8_lossy(name_at(reparse.src, e.bytes.start)).into_owned()),
+                None => None,
+            };
+            whole.push(name);
+        }
+    }
+    if !whole.is_empty() {
+        let mut it = whole.into_iter();
+        visit_geoms_mut(obj, &mut |g| {
+            if whole_surface_ref(g).is_none() {
+                return;
+            }
+            let Some(Some(name)) = it.next() else { return };
+            let GeometryKind::Surfaces(v) = &mut g.kind else { return };
+            if matches!(name.as_str(), "Solid" | "CompositeSolid" | "MultiSolid") {
+                let mut ph = v.pop().unwrap();
+                ph.exterior.srs_dimension = 0;
+                g.kind = GeometryKind::Solids(vec![(Shell { id: None, polygons: vec![ph] }, Vec::new())]);
+            } else if is_surface_like(name.as_bytes()) {
+                g.gml_type = name;
+            } else {
+                let ph = v.pop().unwrap();
+                let href = ph.id.unwrap_or_default();
+                g.skipped_members.push(SkippedMember {
+                    reason: format!("xlink:href=\"{href}\" points to <{name}>, not a geometry"),
+                    href: Some(href),
+                    span: ph.via_xlink.unwrap_or_default(),
+                });
+            }
+        });
+    }
     // Phase 0: `solidMember xlink:href`s become copies of the solids they point to (their own
     // polygon XLinks resolved), or skipped members that say why not.
     let mut has_solid_refs = false;

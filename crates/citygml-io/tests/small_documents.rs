@@ -416,3 +416,62 @@ fn whole_solid_by_xlink_is_the_solid_it_points_to() {
         assert!(g.skipped_members[0].reason.contains("#nowhere"));
     }
 }
+
+/// A whole surface geometry by reference (`lod2MultiSurface xlink:href`, CityGML 3.0
+/// `core:lod2MultiSurface`): it comes back as what it points to, with the referencing
+/// property's lod and name, copies marked via_xlink and counted once: a MultiSurface or a
+/// Polygon as surfaces named after the target, a gml:Solid as a Solid; a reference to a city
+/// object (not a geometry) is a skipped member, not the object's polygons.
+#[test]
+fn whole_surface_geometry_by_xlink_is_what_it_points_to() {
+    for (version, p) in [("2.0", "bldg"), ("3.0", "core")] {
+        let body = format!(
+            "<core:cityObjectMember><bldg:Building gml:id=\"b\">\n\
+             <{p}:lod2MultiSurface xlink:href=\"#MS\"/>\n\
+             <{p}:lod1MultiSurface xlink:href=\"#B-f0\"/>\n\
+             <{p}:lod3MultiSurface xlink:href=\"#B\"/>\n\
+             <{p}:lod4MultiSurface xlink:href=\"#a\"/>\n\
+             </bldg:Building></core:cityObjectMember>\n\
+             <core:cityObjectMember><bldg:Building gml:id=\"a\"><bldg:lod2Solid>{}</bldg:lod2Solid>\n\
+             <{p}:lod2MultiSurface><gml:MultiSurface gml:id=\"MS\">\
+             <gml:surfaceMember><gml:Polygon><gml:exterior><gml:LinearRing><gml:posList>{SQUARE}</gml:posList></gml:LinearRing></gml:exterior></gml:Polygon></gml:surfaceMember>\
+             <gml:surfaceMember><gml:Polygon><gml:exterior><gml:LinearRing><gml:posList>{SQUARE}</gml:posList></gml:LinearRing></gml:exterior></gml:Polygon></gml:surfaceMember>\
+             </gml:MultiSurface></{p}:lod2MultiSurface></bldg:Building></core:cityObjectMember>",
+            cube_solid("B", 5.0)
+        );
+        let src = doc(version, &body);
+        let line = |href: &str| src.lines().position(|l| l.contains(&format!("xlink:href=\"{href}\""))).unwrap() + 1;
+        let m = parse(src.as_bytes()).unwrap();
+        let gs = &m.objects[0].geometries;
+        assert_eq!(gs.len(), 4, "{version}");
+        let head: Vec<_> = gs.iter().map(|g| (g.lod, g.property.as_str())).collect();
+        assert_eq!(
+            head,
+            [(Some(2), "lod2MultiSurface"), (Some(1), "lod1MultiSurface"), (Some(3), "lod3MultiSurface"), (Some(4), "lod4MultiSurface")],
+            "{version}"
+        );
+        let GeometryKind::Surfaces(ms) = &gs[0].kind else { panic!("{version}: {:?}", gs[0].kind) };
+        assert_eq!((gs[0].gml_type.as_str(), ms.len()), ("MultiSurface", 2), "{version}");
+        assert!(ms.iter().all(|p| p.via_xlink.as_ref().is_some_and(|v| v.line == line("#MS"))));
+        let GeometryKind::Surfaces(poly) = &gs[1].kind else { panic!("{version}: {:?}", gs[1].kind) };
+        assert_eq!((gs[1].gml_type.as_str(), poly.len()), ("Polygon", 1), "{version}");
+        assert_eq!(poly[0].via_xlink.as_ref().map(|v| v.line), Some(line("#B-f0")));
+        let GeometryKind::Solid { exterior, interior } = &gs[2].kind else { panic!("{version}: not a solid: {:?}", gs[2].kind) };
+        assert_eq!((gs[2].gml_type.as_str(), exterior.polygons.len(), interior.len()), ("Solid", 6, 0), "{version}");
+        assert!(exterior.polygons.iter().all(|p| p.via_xlink.as_ref().is_some_and(|v| v.line == line("#B"))));
+        // the Building is not a geometry (the id tables hold geometries only): an unresolved
+        // XLink with its href and line, not the building's 8 polygons
+        assert_eq!(gs[3].polygons().len(), 0, "{version}");
+        let u: Vec<_> = m.unresolved_xlinks.iter().map(|u| (u.href.as_str(), u.span.line)).collect();
+        assert_eq!(u, [("#a", line("#a"))], "{version}");
+        assert!(gs.iter().all(|g| g.skipped_members.is_empty()));
+        assert_eq!(m.all_polygons().len(), 8, "{version}: each polygon counted once, where defined");
+
+        // a reference to nothing: an unresolved XLink with the href and its line
+        let broken = src.replace("xlink:href=\"#MS\"", "xlink:href=\"#nowhere\"");
+        let m = parse(broken.as_bytes()).unwrap();
+        let u: Vec<_> = m.unresolved_xlinks.iter().map(|u| (u.href.as_str(), u.span.line)).collect();
+        assert_eq!(u, [("#nowhere", line("#MS")), ("#a", line("#a"))], "{version}");
+        assert_eq!(m.objects[0].geometries[0].polygons().len(), 0);
+    }
+}
