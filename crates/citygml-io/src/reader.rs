@@ -1488,6 +1488,9 @@ fn is_solid_placeholder(s: &(Shell, Vec<Shell>)) -> bool {
 
 type Solid = (Shell, Vec<Shell>);
 
+/// What one solid XLink stands for: its solids and the members left out.
+type ResolvedSolids = (Vec<Solid>, Vec<SkippedMember>);
+
 fn visit_geoms<'o>(obj: &'o CityObject, f: &mut dyn FnMut(&'o Geometry)) {
     for g in &obj.geometries {
         f(g);
@@ -1708,7 +1711,7 @@ pub(crate) fn resolve_object(
     if has_solid_refs {
         // per placeholder: its solids and skipped members, and the element name of its target
         // (a whole `lodNSolid xlink:href` geometry takes the target's type)
-        let mut resolved: Vec<((Vec<Solid>, Vec<SkippedMember>), Option<String>)> = Vec::new();
+        let mut resolved: Vec<(ResolvedSolids, Option<String>)> = Vec::new();
         {
             let mut by_id: FxMap<&str, &Polygon> = FxMap::default();
             visit_polys(obj, &mut |p| {
