@@ -320,6 +320,13 @@ fn lod_of(local: &[u8]) -> Option<u8> {
     }
 }
 
+/// The LoD of a geometry property name (`lod2Solid`, `lod1MultiSurface`, `lod0FootPrint`, ...),
+/// None for other `lodN…` properties (`lod2TerrainIntersection` curves, ...).
+fn by_reference_lod(l: &[u8]) -> Option<u8> {
+    let geometry = [&b"Solid"[..], b"Surface", b"Geometry", b"FootPrint", b"RoofEdge"].iter().any(|k| memchr::memmem::find(l, k).is_some());
+    lod_of(l).filter(|_| geometry)
+}
+
 /// Local name of the element whose `<` is at `start`.
 fn name_at(src: &[u8], start: usize) -> &[u8] {
     let s = &src[start + 1..];
@@ -674,6 +681,13 @@ impl<'a> Parser<'a> {
                             } else if !stack.is_empty() && is_nested_object(l) {
                                 let child = self.parse_object(t)?;
                                 obj.children.push(child);
+                            } else if by_reference_lod(l).is_some() && t.attr(b"href").is_some() {
+                                // the same reference written with an end tag
+                                // (`<bldg:lod2Solid xlink:href="#s"></bldg:lod2Solid>`)
+                                let end = self.skip(&t)?;
+                                if let Some(g) = self.geometry_by_reference(&t, end) {
+                                    obj.geometries.push(g);
+                                }
                             } else {
                                 stack.push((t.start, lod_of(l)));
                             }
@@ -689,32 +703,9 @@ impl<'a> Parser<'a> {
                 }
                 Ev::Empty(t) => {
                     // `<bldg:lod2Solid xlink:href="#solid"/>`: a whole geometry by reference.
-                    let l = t.local();
-                    let surfacey = |l: &[u8]| {
-                        [&b"Solid"[..], b"Surface", b"Geometry", b"FootPrint", b"RoofEdge"]
-                            .iter()
-                            .any(|k| memchr::memmem::find(l, k).is_some())
-                    };
-                    let lod = lod_of(l).filter(|_| surfacey(l));
-                    if let (Some(lod), Some(href)) = (lod, lod.and_then(|_| t.attr_string(b"href"))) {
-                        let end = self.pos();
-                        // a solid property (`lodNSolid`) becomes the solid it points to (resolved
-                        // with the solidMember references), anything else the surfaces
-                        let kind = if memchr::memmem::find(l, b"Solid").is_some() {
-                            GeometryKind::Solids(vec![self.solid_placeholder(href, t.start, end)])
-                        } else {
-                            GeometryKind::Surfaces(vec![self.placeholder(href, t.start, end, false)])
-                        };
-                        obj.geometries.push(Geometry {
-                            id: None,
-                            lod: Some(lod),
-                            property: t.local_str(),
-                            gml_type: "xlink".to_string(),
-                            srs_name: None,
-                            kind,
-                            span: self.span(t.start, end),
-                            skipped_members: Vec::new(),
-                        });
+                    let end = self.pos();
+                    if let Some(g) = self.geometry_by_reference(&t, end) {
+                        obj.geometries.push(g);
                     }
                 }
                 Ev::End { end } => {
@@ -733,6 +724,31 @@ impl<'a> Parser<'a> {
 
     /// `gml:boundedBy/gml:Envelope` → envelope (None when absent or not finite, e.g. the NaN
     /// heights of empty NRW tiles).
+    /// A `lodN…` geometry property that is only an `xlink:href` (ending at `end`): a
+    /// placeholder geometry resolved with the other XLinks (a solid property (`lodNSolid`)
+    /// becomes the solid it points to, resolved with the solidMember references; anything
+    /// else the geometry it points to), or None for other properties.
+    fn geometry_by_reference(&mut self, t: &Tag<'_>, end: usize) -> Option<Geometry> {
+        let l = t.local();
+        let lod = by_reference_lod(l)?;
+        let href = t.attr_string(b"href")?;
+        let kind = if memchr::memmem::find(l, b"Solid").is_some() {
+            GeometryKind::Solids(vec![self.solid_placeholder(href, t.start, end)])
+        } else {
+            GeometryKind::Surfaces(vec![self.placeholder(href, t.start, end, false)])
+        };
+        Some(Geometry {
+            id: None,
+            lod: Some(lod),
+            property: t.local_str(),
+            gml_type: "xlink".to_string(),
+            srs_name: None,
+            kind,
+            span: self.span(t.start, end),
+            skipped_members: Vec::new(),
+        })
+    }
+
     pub fn parse_bounded_by(&mut self, t: &Tag<'_>) -> Result<Option<Envelope>, ReadError> {
         let mut corners: Vec<Vec<f64>> = Vec::new();
         let mut ok = true;

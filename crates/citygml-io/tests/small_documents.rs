@@ -407,6 +407,12 @@ fn whole_solid_by_xlink_is_the_solid_it_points_to() {
         assert_eq!(m.all_polygons().len(), 6, "{version}: faces counted once, where defined");
         assert!(m.unresolved_xlinks.is_empty() && g.skipped_members.is_empty());
 
+        // the same reference written with an end tag
+        let long = src.replace("xlink:href=\"#B\"/>", "xlink:href=\"#B\"></bldg:lod2Solid>");
+        assert_ne!(long, src);
+        let m2 = parse(long.as_bytes()).unwrap();
+        let g2 = &m2.objects[1].geometries[0];
+        assert!(matches!(&g2.kind, GeometryKind::Solid { exterior, .. } if exterior.polygons.len() == 6), "{version}: end-tag form");
         let broken = src.replace("xlink:href=\"#B\"", "xlink:href=\"#nowhere\"");
         let m = parse(broken.as_bytes()).unwrap();
         let g = &m.objects[1].geometries[0];
