@@ -206,9 +206,10 @@ pub fn validate_model(model: &CityModel, opts: &Options) -> Vec<Finding> {
 /// same place already has a 901 (a CompositeSolid member left out names its href itself).
 pub fn add_unresolved_xlinks(findings: &mut Vec<Finding>, refs: &[citygml_io::XLinkRef]) {
     let code = ErrorCode::InvalidInputFile;
+    let mut at: std::collections::HashSet<(usize, usize)> = findings.iter().filter(|f| f.code == code.code()).map(|f| (f.line, f.column)).collect();
     for r in refs {
         let (line, column) = (r.span.line, r.span.column);
-        if findings.iter().any(|f| f.code == code.code() && f.line == line && f.column == column) {
+        if !at.insert((line, column)) {
             continue;
         }
         findings.push(Finding {

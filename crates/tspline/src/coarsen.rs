@@ -106,6 +106,8 @@ pub(crate) fn coarsen(
     let mut best_pb = pb;
     let mut failed: HashSet<CellId> = HashSet::new();
     let mut rounds = Vec::new();
+    // the errors of a round's tries (one buffer: a raster's |Δz| per cell can be 10⁸ values)
+    let mut round_errs = errs.to_vec();
     for _ in 0..MAX_ROUNDS {
         let t0 = Instant::now();
         let cand: Vec<CellId> = {
@@ -133,7 +135,7 @@ pub(crate) fn coarsen(
         m.repair(1.0, &mut geom);
         let mut merged: Vec<CellId> = cand.iter().copied().filter(|&c| m.cells[c as usize].is_leaf()).collect();
         let merged_any = !merged.is_empty();
-        let mut round_errs = errs.to_vec();
+        round_errs.copy_from_slice(errs);
         let kept = loop {
             if merged.is_empty() {
                 break None;

@@ -1273,22 +1273,21 @@ fn fit_impl(
         iterations.push(st);
         if err.over_tolerance == 0 {
             if opts.coarsen && opts.method == Method::Lsq {
-                let before = mesh.clone();
+                // rasters: the pre-coarsening mesh is the fallback of the fresh check below
+                let before = pts.is_none().then(|| mesh.clone());
                 let c = crate::coarsen::coarsen(mesh, pb, samples, pts, opts, backend, &mut errs, it + 1, progress)?;
                 mesh = c.mesh;
                 // the tolerance is declared only on a fresh check of every cell (scattered data:
                 // every round coarsen::refit kept was already checked at every point)
-                let fresh = match pts {
-                    None if !c.rounds.is_empty() => {
-                        let (fresh, _) = check(&mesh, &c.pb, samples, None, None, backend, &mut errs, opts.max_error)?;
-                        if fresh.over_tolerance > 0 {
-                            // cannot happen when the checks above are sound; keep the guarantee anyway
-                            return Ok(FitResult { mesh: before, iterations, stop: StopReason::ToleranceReached });
-                        }
-                        Some(fresh)
+                let mut fresh = None;
+                if let (Some(before), false) = (before, c.rounds.is_empty()) {
+                    let (f, _) = check(&mesh, &c.pb, samples, None, None, backend, &mut errs, opts.max_error)?;
+                    if f.over_tolerance > 0 {
+                        // cannot happen when the checks above are sound; keep the guarantee anyway
+                        return Ok(FitResult { mesh: before, iterations, stop: StopReason::ToleranceReached });
                     }
-                    _ => None,
-                };
+                    fresh = Some(f);
+                }
                 iterations.extend(c.rounds);
                 if let (Some(fresh), Some(last)) = (fresh, iterations.last_mut()) {
                     last.error = fresh;

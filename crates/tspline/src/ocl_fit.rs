@@ -207,17 +207,16 @@ mod tests {
         }
     }
 
+    /// The device, or None with a printed skip where there is no OpenCL.
+    fn device() -> Option<OclModel> {
+        OclModel::new().map_err(|e| eprintln!("skipped: {e}")).ok()
+    }
+
     /// Least squares with the kernel's rows gives the CPU assembly's solution (to rounding of
     /// the summation order), on a raster with holes.
     #[test]
     fn opencl_assembly_solves_like_the_cpu() {
-        let o = match OclModel::new() {
-            Ok(o) => o,
-            Err(e) => {
-                eprintln!("skipped: {e}");
-                return;
-            }
-        };
+        let Some(o) = device() else { return };
         for degree in [Degree::Linear, Degree::Cubic] {
             let mut m = mesh(degree);
             for p in &mut m.points {
@@ -243,13 +242,7 @@ mod tests {
     /// on interior points, mesh lines, T-junction edges, the domain border and outside.
     #[test]
     fn opencl_rows_match_cpu_twin() {
-        let o = match OclModel::new() {
-            Ok(o) => o,
-            Err(e) => {
-                eprintln!("skipped: {e}");
-                return;
-            }
-        };
+        let Some(o) = device() else { return };
         for degree in [Degree::Linear, Degree::Cubic] {
             let pb = PbSpline::build(&mesh(degree));
             // steps of 0.5 hit mesh lines, T-junction edges and the border exactly
