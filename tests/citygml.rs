@@ -258,3 +258,30 @@ fn bad_input_gives_one_line_with_position() {
     let nan = format!("{}0 0 zero{}", &good[..text_start], &good[text_end..]);
     expect_error(d, "nan.gml", nan.as_bytes(), 3, line, col + (text_start - at) + 4, "'zero' is not a number");
 }
+
+/// Solids are counted where they are defined: a `lod2Solid xlink:href` copy is not a second
+/// solid, whatever its number of faces (a one-face solid used to be counted twice), and a face
+/// XLink to a city object is reported with what the id names.
+#[test]
+fn info_counts_a_referenced_solid_once() {
+    let face = "<gml:surfaceMember><gml:Polygon gml:id=\"f\"><gml:exterior><gml:LinearRing><gml:posList>\
+                0 0 0 1 0 0 1 1 0 0 1 0 0 0 0</gml:posList></gml:LinearRing></gml:exterior></gml:Polygon></gml:surfaceMember>";
+    let doc = format!(
+        "<?xml version=\"1.0\"?>\n<core:CityModel xmlns:core=\"http://www.opengis.net/citygml/2.0\" \
+         xmlns:bldg=\"http://www.opengis.net/citygml/building/2.0\" xmlns:gml=\"http://www.opengis.net/gml\" \
+         xmlns:xlink=\"http://www.w3.org/1999/xlink\">\n\
+         <core:cityObjectMember><bldg:Building gml:id=\"a\"><bldg:lod2Solid><gml:Solid gml:id=\"S\"><gml:exterior><gml:Shell>\
+         {face}</gml:Shell></gml:exterior></gml:Solid></bldg:lod2Solid></bldg:Building></core:cityObjectMember>\n\
+         <core:cityObjectMember><bldg:Building gml:id=\"b\"><bldg:lod2Solid xlink:href=\"#S\"/></bldg:Building></core:cityObjectMember>\n\
+         <core:cityObjectMember><bldg:Building gml:id=\"c\"><bldg:lod2MultiSurface><gml:MultiSurface>\
+         <gml:surfaceMember xlink:href=\"#a\"/></gml:MultiSurface></bldg:lod2MultiSurface></bldg:Building></core:cityObjectMember>\n\
+         </core:CityModel>\n"
+    );
+    let dir = common::tempdir();
+    let p = dir.path().join("ref.gml");
+    std::fs::write(&p, &doc).unwrap();
+    let (code, v, stderr) = info_json(&p);
+    assert_eq!((v["solids"].as_u64(), v["polygons"].as_u64()), (Some(1), Some(1)), "{v}");
+    assert_eq!(code, 1, "the reference to a building is a finding: {stderr}");
+    assert!(stderr.contains(&format!("{}:5:", p.display())) && stderr.contains("xlink:href=\"#a\" points to <Building>, not a geometry"), "{stderr}");
+}

@@ -48,26 +48,46 @@ fn tokenize(src: &[u8]) -> usize {
     n
 }
 
-/// The ceiling plus the one thing every reader must do on top: turn each coordinate text into
-/// numbers (every whitespace-separated token of every text event through `fast-float2`, the
-/// parser `citygml_io` uses; `numbers-std` uses `str::parse::<f64>`).
+/// The ceiling plus the one thing every reader must do on top: turn each coordinate into a
+/// number. Only the text of the coordinate elements (`posList`, `pos`, `coordinates`,
+/// `lowerCorner`, `upperCorner`) is decoded, token by token in place with `fast-float2` (the
+/// parser `citygml_io` uses), so this is the floor of any reader that decodes the coordinates
+/// it must give (envelopes and geometry need them all); `numbers-std` uses `str::parse::<f64>`.
 fn tokenize_numbers_fast(src: &[u8]) -> usize {
     let mut r = Reader::from_reader(src);
     r.config_mut().trim_text(false);
     let mut n = 0usize;
     let mut acc = 0.0f64;
+    let mut coords = false;
     loop {
         match r.read_event() {
             Ok(Event::Eof) => break,
-            Ok(Event::Text(t)) => {
-                for tok in t.split(|b| b.is_ascii_whitespace()).filter(|t| !t.is_empty()) {
-                    if let Ok(x) = fast_float2::parse::<f64, _>(tok) {
-                        acc += x;
-                        n += 1;
+            Ok(Event::Start(e)) => {
+                coords = matches!(e.local_name().as_ref(), b"posList" | b"pos" | b"coordinates" | b"lowerCorner" | b"upperCorner");
+                n += 1;
+            }
+            Ok(Event::Text(t)) if coords => {
+                let b: &[u8] = &t;
+                let mut i = 0;
+                while i < b.len() {
+                    if b[i].is_ascii_whitespace() {
+                        i += 1;
+                        continue;
+                    }
+                    match fast_float2::parse_partial::<f64, _>(&b[i..]) {
+                        Ok((x, used)) => {
+                            acc += x;
+                            n += 1;
+                            i += used.max(1);
+                        }
+                        Err(_) => i += 1,
                     }
                 }
             }
-            Ok(_) => n += 1,
+            Ok(_) => {
+                coords = false;
+                n += 1
+            }
             Err(e) => panic!("{e}"),
         }
     }

@@ -184,6 +184,12 @@ pub struct Polygon {
 pub struct Shell {
     pub id: Option<String>,
     pub polygons: Vec<Polygon>,
+    /// `Some(span of the referencing element)` when this shell belongs to a solid reached
+    /// through an `xlink:href` (`gml:solidMember`, a whole `lodNSolid` by reference): a copy of
+    /// the solid defined elsewhere, so counts of solids skip it. Faces that are XLinks of their
+    /// own (NRW solids point into the boundary surfaces face by face) do not make a shell a copy.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub via_xlink: Option<SourceSpan>,
 }
 
 /// A geometry primitive or aggregate as found under a `lodN…` property. Polygons appear where
@@ -313,11 +319,31 @@ pub struct CityModel {
     pub unresolved_xlinks: Vec<XLinkRef>,
 }
 
-/// An `xlink:href` as written in the document and where.
+/// An `xlink:href` on a geometry property that could not be resolved, as written and where.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize)]
 pub struct XLinkRef {
     pub href: String,
     pub span: SourceSpan,
+    /// gml:id and type of the innermost city object holding the reference (for reports).
+    pub feature: Option<String>,
+    pub feature_type: String,
+    /// The element the id belongs to when it exists but is not a geometry (`bldg:Building`,
+    /// ...); `None` when no element of the document has that gml:id.
+    pub target: Option<String>,
+}
+
+impl XLinkRef {
+    /// A reference at `span` whose owner and target are not known yet.
+    pub fn at(href: String, span: SourceSpan) -> XLinkRef {
+        XLinkRef { href, span, feature: None, feature_type: String::new(), target: None }
+    }
+    /// Why the reference brings nothing in, for messages.
+    pub fn reason(&self) -> String {
+        match &self.target {
+            Some(t) => format!("xlink:href=\"{}\" points to <{t}>, not a geometry", self.href),
+            None => format!("xlink:href=\"{}\" points to nothing in the document", self.href),
+        }
+    }
 }
 
 impl CityModel {

@@ -323,8 +323,8 @@ fn lod_of(local: &[u8]) -> Option<u8> {
 /// The LoD of a geometry property name (`lod2Solid`, `lod1MultiSurface`, `lod0FootPrint`, ...),
 /// None for other `lodN…` properties (`lod2TerrainIntersection` curves, ...).
 fn by_reference_lod(l: &[u8]) -> Option<u8> {
-    let geometry = [&b"Solid"[..], b"Surface", b"Geometry", b"FootPrint", b"RoofEdge"].iter().any(|k| memchr::memmem::find(l, k).is_some());
-    lod_of(l).filter(|_| geometry)
+    // called for every element: the cheap lodN test first, the name search only on a hit
+    lod_of(l).filter(|_| [&b"Solid"[..], b"Surface", b"Geometry", b"FootPrint", b"RoofEdge"].iter().any(|k| memchr::memmem::find(l, k).is_some()))
 }
 
 /// Local name of the element whose `<` is at `start`.
@@ -885,7 +885,7 @@ impl<'a> Parser<'a> {
                                 skipped.push(self.not_a_solid(&s, end));
                             }
                             Ev::Empty(s) if s.is_gml(b"Solid") => {
-                                let shell = Shell { id: None, polygons: Vec::new() };
+                                let shell = Shell { id: None, polygons: Vec::new(), via_xlink: None };
                                 solids.push((shell, Vec::new()));
                             }
                             Ev::Empty(s) => {
@@ -947,13 +947,13 @@ impl<'a> Parser<'a> {
     fn solid_placeholder(&mut self, href: String, start: usize, end: usize) -> (Shell, Vec<Shell>) {
         let mut ph = self.placeholder(href, start, end, false);
         ph.exterior.srs_dimension = 0;
-        (Shell { id: None, polygons: vec![ph] }, Vec::new())
+        (Shell { id: None, polygons: vec![ph], via_xlink: None }, Vec::new())
     }
 
     /// A `gml:Solid` whose start tag was just read → (exterior shell, interior shells).
     fn parse_solid(&mut self, t: &Tag<'a>) -> Result<(Shell, Vec<Shell>), ReadError> {
         let id = t.attr_string(b"id");
-        let mut exterior = Shell { id: None, polygons: Vec::new() };
+        let mut exterior = Shell { id: None, polygons: Vec::new(), via_xlink: None };
         let mut interior = Vec::new();
         loop {
             match self.next()? {
@@ -963,7 +963,7 @@ impl<'a> Parser<'a> {
                         let mut buf = std::mem::take(&mut self.polys);
                         let mark = buf.len();
                         let id = self.collect_prop(c, false, &mut buf)?;
-                        let shell = Shell { id, polygons: buf.drain(mark..).collect() };
+                        let shell = Shell { id, polygons: buf.drain(mark..).collect(), via_xlink: None };
                         self.polys = buf;
                         if is_ext {
                             exterior = shell;
@@ -977,7 +977,7 @@ impl<'a> Parser<'a> {
                 Ev::Empty(c) => {
                     if let Some(href) = c.attr_string(b"href") {
                         let ph = self.placeholder(href, c.start, self.pos(), false);
-                        let shell = Shell { id: None, polygons: vec![ph] };
+                        let shell = Shell { id: None, polygons: vec![ph], via_xlink: None };
                         if c.is_gml(b"exterior") {
                             exterior = shell;
                         } else {
@@ -1619,7 +1619,7 @@ impl Reparse<'_, '_> {
                 }
                 Ev::Empty(t) => {
                     if t.is_gml(b"Solid") {
-                        return Ok(Ok((vec![(Shell { id: None, polygons: Vec::new() }, Vec::new())], Vec::new())));
+                        return Ok(Ok((vec![(Shell { id: None, polygons: Vec::new(), via_xlink: None }, Vec::new())], Vec::new())));
                     }
                     return Ok(Err(String::from_utf8_lossy(t.raw.name().as_ref()).into_owned()));
                 }
@@ -1706,7 +1706,7 @@ pub(crate) fn resolve_object(
             if matches!(name.as_str(), "Solid" | "CompositeSolid" | "MultiSolid") {
                 let mut ph = v.pop().unwrap();
                 ph.exterior.srs_dimension = 0;
-                g.kind = GeometryKind::Solids(vec![(Shell { id: None, polygons: vec![ph] }, Vec::new())]);
+                g.kind = GeometryKind::Solids(vec![(Shell { id: None, polygons: vec![ph], via_xlink: None }, Vec::new())]);
             } else if is_surface_like(name.as_bytes()) {
                 g.gml_type = name;
             } else {
@@ -1805,10 +1805,7 @@ pub(crate) fn resolve_object(
         for ph in phs {
             let r = resolve_one(ph, &by_id, local_ids, reparse, global, 0)?;
             if r.is_none() {
-                unresolved.push(XLinkRef {
-                    href: ph.id.clone().unwrap_or_default(),
-                    span: ph.via_xlink.clone().unwrap_or_default(),
-                });
+                unresolved.push(XLinkRef::at(ph.id.clone().unwrap_or_default(), ph.via_xlink.clone().unwrap_or_default()));
             }
             replacements.push(r);
         }
@@ -1831,7 +1828,30 @@ pub(crate) fn resolve_object(
             }
         }
     });
+    // Each reference says where it sits (the innermost object holding it) and, when its id
+    // names an element that is not a geometry (a city object, an appearance...), what that is.
+    for u in &mut unresolved {
+        if let Some(o) = innermost_at(obj, u.span.bytes.start) {
+            u.feature = o.id.clone();
+            u.feature_type = o.kind.clone();
+        }
+        if let Some(id) = href_id(&u.href) {
+            let e = match local_ids.get(id) {
+                Some(e) => Some(e.clone()),
+                None => global.lookup(id)?,
+            };
+            u.target = e.map(|e| String::from_utf8_lossy(name_at(reparse.src, e.bytes.start)).into_owned());
+        }
+    }
     Ok(unresolved)
+}
+
+/// The deepest object of `obj` (itself included) whose element holds byte `at`.
+fn innermost_at(obj: &CityObject, at: usize) -> Option<&CityObject> {
+    if !obj.span.bytes.contains(&at) {
+        return None;
+    }
+    obj.children.iter().find_map(|c| innermost_at(c, at)).or(Some(obj))
 }
 
 /// What resolving a solid XLink needs besides the global index.
@@ -1857,7 +1877,7 @@ impl SolidCtx<'_, '_, '_, '_> {
     ) -> Result<(), ReadError> {
         let skip = |reason: String| SkippedMember { href: Some(href.to_string()), reason, span: via.clone() };
         let nowhere = |unresolved: &mut Vec<XLinkRef>| {
-            unresolved.push(XLinkRef { href: href.to_string(), span: via.clone() });
+            unresolved.push(XLinkRef::at(href.to_string(), via.clone()));
             skip(format!("xlink:href=\"{href}\" points to nothing in the document"))
         };
         let Some(id) = href_id(href) else {
@@ -1901,16 +1921,14 @@ impl SolidCtx<'_, '_, '_, '_> {
                         }
                         match resolve_one(&p, self.by_id, self.local_ids, self.reparse, global, 0)? {
                             Some(r) => shell.polygons.extend(r),
-                            None => unresolved.push(XLinkRef {
-                                href: p.id.clone().unwrap_or_default(),
-                                span: p.via_xlink.clone().unwrap_or_default(),
-                            }),
+                            None => unresolved.push(XLinkRef::at(p.id.clone().unwrap_or_default(), p.via_xlink.clone().unwrap_or_default())),
                         }
                     }
                 }
                 for p in &mut shell.polygons {
                     p.via_xlink = Some(via.clone());
                 }
+                shell.via_xlink = Some(via.clone());
             }
             out.0.push(s);
         }
@@ -1946,6 +1964,9 @@ fn resolve_one(
         None => global.lookup(id)?,
     };
     let Some(entry) = entry else { return Ok(None) };
+    if !is_surface_like(name_at(reparse.src, entry.bytes.start)) {
+        return Ok(None); // an id'd element that is not a geometry (the global index holds all ids)
+    }
     let mut out = Vec::new();
     for p in reparse.surfaces(&entry)? {
         if is_placeholder(&p) {
@@ -2010,7 +2031,9 @@ pub(crate) fn finish_envelopes(obj: &mut CityObject) {
 }
 
 /// A first pass over the whole document: every id'd surface element with its span and owner
-/// semantics. Built only when an XLink points outside its own top-level object.
+/// semantics, and every other id'd element (so a reference to a city object can say what it
+/// points to; where an id repeats, a geometry wins). Built only when an XLink points outside
+/// its own top-level object.
 pub(crate) fn build_index(
     src: &[u8],
     lines: &Arc<LineIndex>,
@@ -2018,25 +2041,36 @@ pub(crate) fn build_index(
 ) -> Result<FxMap<String, IdEntry>, ReadError> {
     let mut p = Parser::new(src, lines.clone(), range, Vec::new());
     let mut map = FxMap::default();
-    // (start, id if surface element, thematic semantic if thematic surface)
-    let mut stack: Vec<(usize, Option<String>, Option<Owner>)> = Vec::new();
+    // (start, id, whether a surface element, thematic semantic if thematic surface)
+    let mut stack: Vec<(usize, Option<String>, bool, Option<Owner>)> = Vec::new();
+    let other = |map: &mut FxMap<String, IdEntry>, id: String, bytes: Range<usize>| {
+        map.entry(id).or_insert(IdEntry { bytes, semantic: None });
+    };
     loop {
         match p.next()? {
             Ev::Start(t) => {
                 let l = t.local();
-                let id = if t.ns == Ns::Gml && is_surface_like(l) { t.attr_string(b"id") } else { None };
+                let geometry = t.ns == Ns::Gml && is_surface_like(l);
+                let id = t.attr_string(b"id");
                 let sem = match t.ns {
-                    Ns::CityGml(..) => surface_type(l).map(|s| (s, t.attr_string(b"id"))),
+                    Ns::CityGml(..) => surface_type(l).map(|s| (s, id.clone())),
                     _ => None,
                 };
-                stack.push((t.start, id, sem));
+                stack.push((t.start, id, geometry, sem));
             }
-            Ev::End { end } => {
-                if let Some((start, Some(id), _)) = stack.pop() {
-                    let semantic = stack.iter().rev().find_map(|s| s.2.clone());
-                    map.insert(id, IdEntry { bytes: start..end, semantic });
+            Ev::Empty(t) => {
+                if let Some(id) = t.attr_string(b"id") {
+                    other(&mut map, id, t.start..p.pos());
                 }
             }
+            Ev::End { end } => match stack.pop() {
+                Some((start, Some(id), true, _)) => {
+                    let semantic = stack.iter().rev().find_map(|s| s.3.clone());
+                    map.insert(id, IdEntry { bytes: start..end, semantic });
+                }
+                Some((start, Some(id), false, _)) => other(&mut map, id, start..end),
+                _ => {}
+            },
             Ev::Eof => break,
             _ => {}
         }

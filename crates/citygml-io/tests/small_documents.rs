@@ -354,6 +354,38 @@ fn composite_solid_member_referenced_twice_is_kept_twice() {
     assert_eq!(ids(0), ids(1));
     let via = |k: usize| solids[k].0.polygons[0].via_xlink.clone().unwrap().bytes.start;
     assert!(via(0) < via(1));
+    // the shells say they are copies (counts of solids skip them); the definition does not
+    assert!(solids.iter().all(|s| s.0.via_xlink.as_ref().is_some_and(|v| v.bytes.start == s.0.polygons[0].via_xlink.as_ref().unwrap().bytes.start)));
+    let GeometryKind::Solid { exterior, .. } = &m.objects[1].geometries[0].kind else { panic!() };
+    assert!(exterior.via_xlink.is_none());
+}
+
+/// A surface XLink whose id names a city object (not a geometry) brings nothing in and says
+/// what it points to, under the innermost object holding the reference (here a WallSurface of
+/// another building); one whose id names nothing says so, with the same owner.
+#[test]
+fn xlink_to_a_city_object_says_what_it_points_to() {
+    let body = r##"<core:cityObjectMember><bldg:Building gml:id="a"/></core:cityObjectMember>
+<core:cityObjectMember><bldg:Building gml:id="b"><bldg:boundedBy><bldg:WallSurface gml:id="w">
+<bldg:lod2MultiSurface><gml:MultiSurface><gml:surfaceMember xlink:href="#a"/>
+<gml:surfaceMember xlink:href="#gone"/></gml:MultiSurface></bldg:lod2MultiSurface>
+</bldg:WallSurface></bldg:boundedBy></bldg:Building></core:cityObjectMember>"##;
+    let src = doc("2.0", body);
+    let line_of = |s: &str| src.lines().position(|l| l.contains(s)).unwrap() + 1;
+    let m = parse(src.as_bytes()).unwrap();
+    let got: Vec<(&str, Option<&str>, &str, Option<&str>, usize, String)> = m
+        .unresolved_xlinks
+        .iter()
+        .map(|u| (u.href.as_str(), u.feature.as_deref(), u.feature_type.as_str(), u.target.as_deref(), u.span.line, u.reason()))
+        .collect();
+    assert_eq!(
+        got,
+        [
+            ("#a", Some("w"), "WallSurface", Some("Building"), line_of("#a\""), "xlink:href=\"#a\" points to <Building>, not a geometry".to_string()),
+            ("#gone", Some("w"), "WallSurface", None, line_of("#gone"), "xlink:href=\"#gone\" points to nothing in the document".to_string()),
+        ]
+    );
+    assert!(m.all_polygons().is_empty(), "the building's polygons must not come in");
 }
 
 #[test]
@@ -404,6 +436,7 @@ fn whole_solid_by_xlink_is_the_solid_it_points_to() {
         assert_eq!(exterior.polygons.len(), 6);
         let line = src.lines().position(|l| l.contains("xlink:href=\"#B\"")).unwrap() + 1;
         assert!(exterior.polygons.iter().all(|p| p.via_xlink.as_ref().is_some_and(|v| v.line == line)));
+        assert!(exterior.via_xlink.as_ref().is_some_and(|v| v.line == line), "{version}: the shell is marked a copy");
         assert_eq!(m.all_polygons().len(), 6, "{version}: faces counted once, where defined");
         assert!(m.unresolved_xlinks.is_empty() && g.skipped_members.is_empty());
 
@@ -465,19 +498,20 @@ fn whole_surface_geometry_by_xlink_is_what_it_points_to() {
         let GeometryKind::Solid { exterior, interior } = &gs[2].kind else { panic!("{version}: not a solid: {:?}", gs[2].kind) };
         assert_eq!((gs[2].gml_type.as_str(), exterior.polygons.len(), interior.len()), ("Solid", 6, 0), "{version}");
         assert!(exterior.polygons.iter().all(|p| p.via_xlink.as_ref().is_some_and(|v| v.line == line("#B"))));
-        // the Building is not a geometry (the id tables hold geometries only): an unresolved
-        // XLink with its href and line, not the building's 8 polygons
+        // the Building is not a geometry: a skipped member that says what the id names, with
+        // the href and line, not the building's 8 polygons
         assert_eq!(gs[3].polygons().len(), 0, "{version}");
-        let u: Vec<_> = m.unresolved_xlinks.iter().map(|u| (u.href.as_str(), u.span.line)).collect();
-        assert_eq!(u, [("#a", line("#a"))], "{version}");
-        assert!(gs.iter().all(|g| g.skipped_members.is_empty()));
+        assert!(m.unresolved_xlinks.is_empty(), "{version}");
+        let sk: Vec<_> = gs[3].skipped_members.iter().map(|s| (s.href.as_deref(), s.reason.as_str(), s.span.line)).collect();
+        assert_eq!(sk, [(Some("#a"), "xlink:href=\"#a\" points to <Building>, not a geometry", line("#a"))], "{version}");
+        assert!(gs[..3].iter().all(|g| g.skipped_members.is_empty()));
         assert_eq!(m.all_polygons().len(), 8, "{version}: each polygon counted once, where defined");
 
         // a reference to nothing: an unresolved XLink with the href and its line
         let broken = src.replace("xlink:href=\"#MS\"", "xlink:href=\"#nowhere\"");
         let m = parse(broken.as_bytes()).unwrap();
         let u: Vec<_> = m.unresolved_xlinks.iter().map(|u| (u.href.as_str(), u.span.line)).collect();
-        assert_eq!(u, [("#nowhere", line("#MS")), ("#a", line("#a"))], "{version}");
+        assert_eq!(u, [("#nowhere", line("#MS"))], "{version}");
         assert_eq!(m.objects[0].geometries[0].polygons().len(), 0);
     }
 }

@@ -201,9 +201,10 @@ pub fn validate_model(model: &CityModel, opts: &Options) -> Vec<Finding> {
     out
 }
 
-/// One 901 finding per `xlink:href` that points to nothing in the document (the geometry it
-/// should bring in is missing, so a solid that lists it is open for that reason), unless the
-/// same place already has a 901 (a CompositeSolid member left out names its href itself).
+/// One 901 finding per `xlink:href` that brings no geometry in (its id names nothing in the
+/// document, or an element that is not a geometry; a solid that lists it is open for that
+/// reason), under the object that holds it, unless the same place already has a 901 (a
+/// CompositeSolid member left out names its href itself).
 pub fn add_unresolved_xlinks(findings: &mut Vec<Finding>, refs: &[citygml_io::XLinkRef]) {
     let code = ErrorCode::InvalidInputFile;
     let mut at: std::collections::HashSet<(usize, usize)> = findings.iter().filter(|f| f.code == code.code()).map(|f| (f.line, f.column)).collect();
@@ -213,13 +214,13 @@ pub fn add_unresolved_xlinks(findings: &mut Vec<Finding>, refs: &[citygml_io::XL
             continue;
         }
         findings.push(Finding {
-            feature: None,
-            feature_type: String::new(),
+            feature: r.feature.clone(),
+            feature_type: r.feature_type.clone(),
             geometry: String::new(),
             primitive: None,
             code: code.code(),
             name: code.name(),
-            detail: format!("xlink:href=\"{}\" points to nothing in the document", r.href),
+            detail: r.reason(),
             value: None,
             line,
             column,

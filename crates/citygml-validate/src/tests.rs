@@ -330,6 +330,22 @@ fn composite_solid_members_by_xlink() {
     assert_eq!(doc_codes("<gml:solidMember>{A}</gml:solidMember>\n<gml:solidMember xlink:href=\"#A\"/>"), vec![502]);
 }
 
+/// A face XLink to a city object (not a geometry) is a 901 under the object holding it, with
+/// what the id names.
+#[test]
+fn face_xlink_to_a_city_object_is_a_901_of_its_feature() {
+    let members = "<gml:solidMember>{A}</gml:solidMember>\n<gml:solidMember><gml:Solid gml:id=\"X\"><gml:exterior><gml:Shell>\n\
+                   <gml:surfaceMember xlink:href=\"#other\"/></gml:Shell></gml:exterior></gml:Solid></gml:solidMember>";
+    let f = doc_findings(members);
+    let x: Vec<_> = f.iter().filter(|f| f.code == 901).collect();
+    assert_eq!(x.len(), 1, "{f:?}");
+    let line = composite_doc(members).lines().position(|l| l.contains("#other")).unwrap() + 1;
+    assert_eq!(
+        (x[0].feature.as_deref(), x[0].feature_type.as_str(), x[0].detail.as_str(), x[0].line),
+        (Some("b"), "Building", "xlink:href=\"#other\" points to <Building>, not a geometry", line)
+    );
+}
+
 #[test]
 fn composite_solid_member_that_cannot_be_read_is_a_finding() {
     let members = "<gml:solidMember>{A}</gml:solidMember>\n<gml:solidMember xlink:href=\"#nowhere\"/>\n<gml:solidMember>{C}</gml:solidMember>";

@@ -460,7 +460,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
 
     let mut findings = std::mem::take(&mut b.skipped);
     for u in &model.unresolved_xlinks {
-        findings.push(format!("{name}:{}:{}: xlink:href=\"{}\" points to nothing in the document", u.span.line, u.span.column, u.href));
+        findings.push(format!("{name}:{}:{}: {}", u.span.line, u.span.column, u.reason()));
     }
     if scene.nodes.is_empty() {
         findings.push(match args.lod {

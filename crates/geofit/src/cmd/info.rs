@@ -172,13 +172,9 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
                 let lc = lods.entry(key).or_default();
                 lc.geometries += 1;
                 // solids are counted where they are defined too: a copy reached by reference
-                // (`lod2Solid` / `solidMember` xlink:href) has every face marked with that one
-                // reference (NRW solids, whose faces point into the boundary surfaces one by
-                // one, are definitions)
-                let copy = |sh: &citygml_io::Shell| {
-                    let v = sh.polygons.first().and_then(|p| p.via_xlink.as_ref());
-                    sh.polygons.len() > 1 && v.is_some() && sh.polygons.iter().all(|p| p.via_xlink.as_ref() == v)
-                };
+                // (`lod2Solid` / `solidMember` xlink:href) is marked so by the reader (NRW
+                // solids, whose faces point into the boundary surfaces one by one, are definitions)
+                let copy = |sh: &citygml_io::Shell| sh.via_xlink.is_some();
                 solids += match &g.kind {
                     citygml_io::GeometryKind::Solid { exterior, .. } => usize::from(!copy(exterior)),
                     citygml_io::GeometryKind::Solids(v) => v.iter().filter(|s| !copy(&s.0)).count(),
@@ -215,10 +211,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         xlinks += hrefs.len();
     }
     for u in stream.unresolved_xlinks() {
-        findings.push(format!(
-            "{name}:{}:{}: xlink:href=\"{}\" points to nothing in the document",
-            u.span.line, u.span.column, u.href
-        ));
+        findings.push(format!("{name}:{}:{}: {}", u.span.line, u.span.column, u.reason()));
     }
     let report = InfoReport {
         file: name.clone(),
