@@ -164,6 +164,14 @@ fn bad_inputs_get_clear_messages() {
         assert_eq!(o.status.code(), Some(2), "{extra:?}: {}", String::from_utf8_lossy(&o.stderr));
         assert!(String::from_utf8_lossy(&o.stderr).contains("--assembly opencl applies to"));
     }
+    // warp options where no warp is built are usage errors too
+    for extra in [&["--warp-spacing", "8"][..], &["--indirect", "--warp-spacing", "8"], &["--warp", "full"]] {
+        let mut a = vec!["fit", asc.to_str().unwrap(), "--max-error", "1"];
+        a.extend(extra);
+        let o = common::run(&a, None);
+        assert_eq!(o.status.code(), Some(2), "{extra:?}: {}", String::from_utf8_lossy(&o.stderr));
+        assert!(String::from_utf8_lossy(&o.stderr).contains("needs --indirect"), "{extra:?}");
+    }
     // all nodata
     let nod = dir.path().join("n.asc");
     std::fs::write(&nod, "ncols 2\nnrows 2\nxllcorner 0\nyllcorner 0\ncellsize 1\nNODATA_value -9999\n-9999 -9999\n-9999 -9999\n").unwrap();

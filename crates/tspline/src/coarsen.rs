@@ -106,8 +106,9 @@ pub(crate) fn coarsen(
     let mut best_pb = pb;
     let mut failed: HashSet<CellId> = HashSet::new();
     let mut rounds = Vec::new();
-    // the errors of a round's tries (one buffer: a raster's |Δz| per cell can be 10⁸ values)
-    let mut round_errs = errs.to_vec();
+    // what a try overwrote in `errs`, to put back when it fails (a raster's |Δz| per cell can
+    // be 10⁸ values: a local try saves only the cells it re-checks)
+    let mut undo = Undo::default();
     for _ in 0..MAX_ROUNDS {
         let t0 = Instant::now();
         let cand: Vec<CellId> = {
@@ -135,7 +136,6 @@ pub(crate) fn coarsen(
         m.repair(1.0, &mut geom);
         let mut merged: Vec<CellId> = cand.iter().copied().filter(|&c| m.cells[c as usize].is_leaf()).collect();
         let merged_any = !merged.is_empty();
-        round_errs.copy_from_slice(errs);
         let kept = loop {
             if merged.is_empty() {
                 break None;
@@ -145,10 +145,11 @@ pub(crate) fn coarsen(
                 p.z = q.z;
             }
             let rects: Vec<Rect> = merged.iter().map(|&c| m.cells[c as usize].rect).collect();
-            let (pb_m, err, over) = refit(&mut m, &best_pb, &rects, samples, pts, backend, &mut round_errs, tol)?;
+            let (pb_m, err, over) = refit(&mut m, &best_pb, &rects, samples, pts, backend, errs, &mut undo, tol)?;
             if err.over_tolerance == 0 {
                 break Some((pb_m, err));
             }
+            undo.restore(errs);
             // split back the merges that can reach a cell over the tolerance
             let over_rects: Vec<Rect> = over.iter().map(|&c| m.cells[c as usize].rect).collect();
             let mut bad: Vec<CellId> = merged
@@ -170,7 +171,6 @@ pub(crate) fn coarsen(
             }
             m.repair(1.0, &mut geom);
             merged.retain(|&c| m.cells[c as usize].is_leaf());
-            round_errs.copy_from_slice(errs);
         };
         let Some((pb_m, err)) = kept else {
             if merged_any {
@@ -178,7 +178,6 @@ pub(crate) fn coarsen(
             }
             break; // nothing the rules allow: the next round would be the same
         };
-        errs.copy_from_slice(&round_errs);
         let st = IterationStats {
             iteration: first_round + rounds.len(),
             control_points: pb_m.point_ids.len(),
@@ -199,11 +198,48 @@ pub(crate) fn coarsen(
     Ok(Coarsened { mesh: best, pb: best_pb, rounds })
 }
 
+/// The values of `errs` a try is about to overwrite: the cells of its local region (in the
+/// region's row order), or all of them for a global re-check (that buffer is kept for reuse).
+#[derive(Default)]
+struct Undo {
+    /// The local try's region (`None`: `saved` holds every cell).
+    region: Option<fit::Region>,
+    saved: Vec<f64>,
+}
+
+impl Undo {
+    fn save(&mut self, region: Option<fit::Region>, errs: &[f64]) {
+        self.saved.clear();
+        match &region {
+            Some(r) => {
+                self.saved.reserve(r.len());
+                r.for_rows(0, r.rows(), |q| self.saved.push(errs[q]));
+            }
+            None => self.saved.extend_from_slice(errs),
+        }
+        self.region = region;
+    }
+
+    fn restore(&self, errs: &mut [f64]) {
+        match &self.region {
+            Some(r) => {
+                let mut k = 0;
+                r.for_rows(0, r.rows(), |q| {
+                    errs[q] = self.saved[k];
+                    k += 1;
+                });
+            }
+            None => errs.copy_from_slice(&self.saved),
+        }
+    }
+}
+
 /// Refit after merges: knots re-inferred where a changed cell meets a support; on a raster the
 /// least squares is local when the change is small (the loop's `local_update`) and the errors
 /// are re-checked where the surface can have changed; scattered data (indirect reduction) are
 /// refitted and checked globally, as in the loop. Writes z into `m`; returns the PB-spline, the
-/// statistics and the leaves holding cells (points) over the tolerance.
+/// statistics and the leaves holding cells (points) over the tolerance; what the check
+/// overwrote in `errs` goes to `undo`.
 #[allow(clippy::too_many_arguments)]
 fn refit(
     m: &mut TMesh,
@@ -213,6 +249,7 @@ fn refit(
     pts: Option<&Scattered>,
     backend: &Backend,
     errs: &mut [f64],
+    undo: &mut Undo,
     tol: f64,
 ) -> Result<(PbSpline, ErrorStats, Vec<CellId>), TsplineError> {
     let mut pb = match backend {
@@ -228,7 +265,9 @@ fn refit(
         None => fit::fit_lsq_local(m, &pb, samples, pts, None, None, None)?,
     };
     fit::set_z(m, &mut pb, &z);
-    let (err, over) = fit::check(m, &pb, samples, pts, local.as_ref().map(|(_, r)| r), backend, errs, tol)?;
+    let region = local.map(|(_, r)| r);
+    undo.save(region, errs);
+    let (err, over) = fit::check(m, &pb, samples, pts, undo.region.as_ref(), backend, errs, tol)?;
     Ok((pb, err, over))
 }
 

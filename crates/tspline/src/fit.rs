@@ -461,11 +461,15 @@ impl Region {
     pub fn len(&self) -> usize {
         self.count
     }
+    /// Rows of the raster the set is over.
+    pub(crate) fn rows(&self) -> usize {
+        self.h
+    }
     pub fn is_empty(&self) -> bool {
         self.count == 0
     }
     /// Calls `f(q)` for the cells of rows j0..j1 in the set, in order (skips empty words).
-    fn for_rows(&self, j0: usize, j1: usize, mut f: impl FnMut(usize)) {
+    pub(crate) fn for_rows(&self, j0: usize, j1: usize, mut f: impl FnMut(usize)) {
         let (q0, q1) = (j0 * self.w, j1 * self.w);
         let mut q = q0;
         while q < q1 {

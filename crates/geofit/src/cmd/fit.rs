@@ -219,6 +219,13 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     if !(args.overhang >= 0.0 && args.overhang <= 4.0) {
         return Err(CliError::usage(format!("--overhang must be within 0..4, got {}", args.overhang)));
     }
+    // The warp options shape the warp `--indirect` builds: say so instead of ignoring them.
+    if args.warp_spacing.is_some() && !(args.indirect && args.warp == WarpMode::Full) {
+        return Err(CliError::usage("--warp-spacing sets the landmark spacing of the local warp: it needs --indirect --warp full"));
+    }
+    if args.warp == WarpMode::Full && !args.indirect {
+        return Err(CliError::usage("--warp full chooses the warp of the indirect reduction: it needs --indirect"));
+    }
     if args.assembly == Assembly::Opencl {
         // The T29 kernel serves the direct least-squares fit only: say so instead of ignoring it,
         // and fail before reading (and warping) the raster when there is no OpenCL at all.
@@ -245,6 +252,9 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
                 config.notice(&format!(
                     "notice: {name} is already warped: fitting its resampled, filled cells (the tolerance holds in the warped frame); pass the original raster for a fit to the original cells"
                 ));
+                if args.warp_spacing.is_some() || args.warp == WarpMode::Full {
+                    config.notice(&format!("notice: {name} carries its own warp: --warp / --warp-spacing are not used"));
+                }
                 (raster, Some(f), None)
             }
             Err(_) => {
