@@ -226,23 +226,9 @@ fn is_polygon_like(local: &[u8]) -> bool {
     matches!(local, b"Polygon" | b"PolygonPatch" | b"Triangle" | b"Rectangle")
 }
 
+/// Elements that hold surfaces: the geometries plus the polygon-like patches inside them.
 fn is_surface_like(local: &[u8]) -> bool {
-    is_polygon_like(local)
-        || matches!(
-            local,
-            b"MultiSurface"
-                | b"CompositeSurface"
-                | b"OrientableSurface"
-                | b"Surface"
-                | b"TriangulatedSurface"
-                | b"Tin"
-                | b"Shell"
-                | b"Solid"
-                | b"CompositeSolid"
-                | b"MultiSolid"
-                | b"MultiGeometry"
-                | b"GeometricComplex"
-        )
+    is_geometry(local) || is_polygon_like(local)
 }
 
 /// City objects that nest inside other city objects (parts, rooms, installations, boundary

@@ -228,9 +228,16 @@ impl Progress {
 
 /// Writes a JSON report to `path` atomically (`--report PATH`), or to stdout for `-`.
 pub fn write_json_report<T: serde::Serialize>(path: &str, report: &T) -> Result<(), CliError> {
-    let out = Output::from_arg(Some(path));
-    out.write_with(|w| {
-        serde_json::to_writer_pretty(&mut *w, report).map_err(|e| CliError::internal(e.to_string()))?;
-        w.write_all(b"\n").map_err(CliError::io_out)
-    })
+    Output::from_arg(Some(path)).write_with(|w| write_json(w, report))
+}
+
+/// The report of a report-only command on stdout: as JSON with `--json`, else as the text
+/// `text` writes.
+pub fn print_report<T: serde::Serialize>(json: bool, report: &T, text: impl FnOnce(&mut dyn Write) -> io::Result<()>) -> Result<(), CliError> {
+    Output::Stdout.write_with(|w| if json { write_json(w, report) } else { text(w).map_err(CliError::io_out) })
+}
+
+fn write_json<T: serde::Serialize>(w: &mut dyn Write, report: &T) -> Result<(), CliError> {
+    serde_json::to_writer_pretty(&mut *w, report).map_err(|e| CliError::internal(e.to_string()))?;
+    w.write_all(b"\n").map_err(CliError::io_out)
 }

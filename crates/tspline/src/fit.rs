@@ -1321,10 +1321,7 @@ mod tests {
     use super::*;
     use crate::mesh::Rect;
 
-    fn lcg(seed: &mut u64) -> f64 {
-        *seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-        (*seed >> 11) as f64 / (1u64 << 53) as f64
-    }
+    use crate::testing::lcg;
 
     fn sample(pb: &PbSpline, w: usize, h: usize) -> Samples {
         let g = GridSpec { s0: 0.0, t0: 0.0, ds: 1.0, dt: 1.0, ns: w, nt: h };

@@ -31,6 +31,8 @@ mod ocl_device;
 pub mod ocl_eval;
 pub mod ocl_fit;
 pub mod rtree_pages;
+#[cfg(test)]
+mod testing;
 
 pub use eval::{GridSpec, PbSpline};
 pub use mesh::{CellId, ControlPoint, Degree, PointId, Rect, TMesh};

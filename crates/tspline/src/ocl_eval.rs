@@ -251,26 +251,9 @@ mod tests {
     use super::*;
     use crate::mesh::{Degree, Rect, TMesh};
 
-    fn lcg(seed: &mut u64) -> f64 {
-        *seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-        (*seed >> 11) as f64 / (1u64 << 53) as f64
-    }
+    use crate::testing::lcg;
 
-    /// A refined, repaired mesh with wavy heights.
-    fn refined(degree: Degree) -> TMesh {
-        let mut m = TMesh::grid(degree, 0.0, 0.0, 16.0, 6, 5);
-        let mut g = |s: f64, t: f64| (s, t, (s * 0.1).sin() * 10.0 + t);
-        for (s, t) in [(40.0, 40.0), (41.0, 41.0), (70.0, 20.0), (10.0, 70.0), (44.0, 38.0)] {
-            let c = m.leaves_in(Rect::new(s, t, s, t))[0];
-            m.split(c, &mut g);
-        }
-        m.repair(1.0, &mut g);
-        for p in &mut m.points {
-            p.z = (p.s * 0.1).sin() * 10.0 + p.t * 0.3 + (p.t * 0.05).cos();
-            p.w = 1.0 + 0.1 * (p.s * 0.37).sin().abs();
-        }
-        m
-    }
+    use crate::testing::refined_mesh as refined;
 
     /// Spec acceptance: OpenCL and CPU agree to 1e-12 (f64) on 10^6 random points of a refined
     /// mesh. OpenCL is forced: a missing platform fails this test instead of falling back.

@@ -161,10 +161,7 @@ mod tests {
     use super::*;
     use crate::mesh::{Degree, Rect, TMesh};
 
-    fn lcg(seed: &mut u64) -> f64 {
-        *seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-        (*seed >> 11) as f64 / (1u64 << 53) as f64
-    }
+    use crate::testing::lcg;
 
     /// A refined mesh with T-junctions and non-unit weights (the rational form matters).
     fn mesh(degree: Degree) -> TMesh {

@@ -12,7 +12,7 @@ use raster_io::Raster;
 use raster_proc::diff::{class_map_rgba, compare_with_map, histogram_rgba, DiffOptions, DiffReport, DEFAULT_CLASS_BOUNDS};
 
 use super::rasterize::{gdal_notices, proc_err, read_raster_arg};
-use crate::config::{write_json_report, Config, Output};
+use crate::config::{print_report, write_json_report, Config, Output};
 use crate::error::{CliError, CmdResult, Exit};
 
 const EXAMPLE: &str = "\
@@ -124,14 +124,8 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     if let Some(p) = &args.report {
         write_json_report(p, &report)?;
     }
-    let out = Output::Stdout;
-    if args.json {
-        out.write_with(|w| {
-            serde_json::to_writer_pretty(&mut *w, &report).map_err(|e| CliError::internal(e.to_string()))?;
-            w.write_all(b"\n").map_err(CliError::io_out)
-        })?;
-    } else if args.report.as_deref() != Some("-") {
-        out.write_with(|w| print_text(w, &report).map_err(CliError::io_out))?;
+    if args.json || args.report.as_deref() != Some("-") {
+        print_report(args.json, &report, |w| print_text(w, &report))?;
     }
     if args.check && report.over_tolerance > 0 {
         eprintln!(

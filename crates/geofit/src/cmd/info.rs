@@ -12,7 +12,7 @@ use citygml_io::{CityObject, Envelope, ObjectStream, ReadError};
 use clap::Args as ClapArgs;
 use serde::Serialize;
 
-use crate::config::{Config, Input, Output};
+use crate::config::{print_report, Config, Input};
 use crate::error::{CliError, CmdResult, Exit};
 
 const EXAMPLE: &str = "\
@@ -231,14 +231,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         xlinks_resolved: xlinks,
         unresolved_xlinks: stream.unresolved_xlinks().len(),
     };
-    Output::Stdout.write_with(|w| {
-        if args.json {
-            serde_json::to_writer_pretty(&mut *w, &report).map_err(|e| CliError::internal(e.to_string()))?;
-            writeln!(w).map_err(CliError::io_out)
-        } else {
-            write_text(w, &report).map_err(CliError::io_out)
-        }
-    })?;
+    print_report(args.json, &report, |w| write_text(w, &report))?;
     for f in &findings {
         eprintln!("{f}");
     }
@@ -292,14 +285,7 @@ fn raster_from_bytes(src: &[u8], path: Option<&std::path::Path>) -> Option<raste
 }
 
 fn json_out<T: Serialize>(report: &T, text: impl FnOnce(&mut dyn Write) -> std::io::Result<()>, json: bool) -> CmdResult {
-    Output::Stdout.write_with(|w| {
-        if json {
-            serde_json::to_writer_pretty(&mut *w, report).map_err(|e| CliError::internal(e.to_string()))?;
-            writeln!(w).map_err(CliError::io_out)
-        } else {
-            text(w).map_err(CliError::io_out)
-        }
-    })?;
+    print_report(json, report, text)?;
     Ok(Exit::Ok)
 }
 

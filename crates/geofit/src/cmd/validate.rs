@@ -10,7 +10,7 @@ use citygml_validate::{add_unresolved_xlinks, sort_findings, validate_objects, F
 use clap::Args as ClapArgs;
 use serde::Serialize;
 
-use crate::config::{Config, Input, Output};
+use crate::config::{print_report, Config, Input};
 use crate::error::{CliError, CmdResult, Exit};
 
 const EXAMPLE: &str = "\
@@ -230,15 +230,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         xsd,
         geometry,
     };
-    let out = Output::Stdout;
-    out.write_with(|w| {
-        if args.json {
-            serde_json::to_writer_pretty(&mut *w, &report).map_err(|e| CliError::internal(e.to_string()))?;
-            writeln!(w).map_err(CliError::io_out)
-        } else {
-            write_text(w, &report).map_err(CliError::io_out)
-        }
-    })?;
+    print_report(args.json, &report, |w| write_text(w, &report))?;
     Ok(if report.valid { Exit::Ok } else { Exit::Findings })
 }
 
