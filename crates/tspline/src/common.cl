@@ -40,6 +40,21 @@ inline double basis_poly(__global const double* kn, __global const double* pc, u
     return 0.0;
 }
 
+// w_i N_i(s, t) of point pi at a located (s, t), 0 where its blending function is zero (outside
+// its support included): the one candidate test of surface_z (tspline.cl) and model_rows
+// (fit.cl), as PbSpline::weighted_bases on the CPU (same tests, same operation order).
+inline double weighted_basis(__global const double* knots, __global const double* poly, __global const double* geom,
+                             uint k, uint pi, double s, double t, int ls, int lt) {
+    __global const double* kn = knots + 10 * (size_t)pi;
+    if (s < kn[0] || s > kn[k + 1] || t < kn[5] || t > kn[5 + k + 1]) return 0.0;
+    __global const double* pc = poly + 40 * (size_t)pi;
+    double bs = basis_poly(kn, pc, k, s, ls);
+    if (bs == 0.0) return 0.0;
+    double bt = basis_poly(kn + 5, pc + 20, k, t, lt);
+    if (bt == 0.0) return 0.0;
+    return geom[4 * (size_t)pi + 3] * bs * bt;
+}
+
 // Domain test with the A1 border rule (see PbSpline::locate): returns 0 outside; may move
 // (s, t) inwards for cubic borders and sets the left-limit flags for linear upper borders.
 inline int locate(const grid_t g, __global const double* cells, __global const uint* cstart,

@@ -296,24 +296,8 @@ impl PbSpline {
     pub fn for_each_basis(&self, s: f64, t: f64, scratch: &mut Vec<(u32, f64)>, mut f: impl FnMut(u32, f64)) -> bool {
         scratch.clear();
         let Some((s, t, ls, lt)) = self.locate(s, t) else { return false };
-        let k = self.degree.k();
-        let b = self.bucket(s, t);
         let mut den = 0.0;
-        for &pi in &self.pt_items[self.pt_start[b] as usize..self.pt_start[b + 1] as usize] {
-            let kn = &self.knots[pi as usize];
-            if s < kn[0] || s > kn[k + 1] || t < kn[5] || t > kn[5 + k + 1] {
-                continue;
-            }
-            let pc = &self.poly[pi as usize];
-            let bs = basis_poly(&kn[0..5], &pc[..20], k, s, ls);
-            if bs == 0.0 {
-                continue;
-            }
-            let bt = basis_poly(&kn[5..10], &pc[20..], k, t, lt);
-            if bt == 0.0 {
-                continue;
-            }
-            let wn = self.geom[pi as usize][3] * bs * bt;
+        for (pi, wn) in self.weighted_bases(s, t, ls, lt) {
             den += wn;
             scratch.push((pi, wn));
         }
@@ -331,19 +315,9 @@ impl PbSpline {
     pub fn point(&self, s: f64, t: f64) -> [f64; 3] {
         let nan = [f64::NAN; 3];
         let Some((s, t, ls, lt)) = self.locate(s, t) else { return nan };
-        let k = self.degree.k();
-        let b = self.bucket(s, t);
         let (mut x, mut y, mut z, mut den) = (0.0, 0.0, 0.0, 0.0);
-        for &pi in &self.pt_items[self.pt_start[b] as usize..self.pt_start[b + 1] as usize] {
-            let kn = &self.knots[pi as usize];
-            if s < kn[0] || s > kn[k + 1] || t < kn[5] || t > kn[5 + k + 1] {
-                continue;
-            }
-            let pc = &self.poly[pi as usize];
-            let bs = basis_poly(&kn[0..5], &pc[..20], k, s, ls);
-            let bt = basis_poly(&kn[5..10], &pc[20..], k, t, lt);
+        for (pi, wn) in self.weighted_bases(s, t, ls, lt) {
             let g = &self.geom[pi as usize];
-            let wn = g[3] * bs * bt;
             x += wn * g[0];
             y += wn * g[1];
             z += wn * g[2];
@@ -358,15 +332,34 @@ impl PbSpline {
     /// The unnormalised Σ w_i N_i at (s, t) (partition-of-unity checks), NaN outside.
     pub fn weight_sum(&self, s: f64, t: f64) -> f64 {
         let Some((s, t, ls, lt)) = self.locate(s, t) else { return f64::NAN };
+        self.weighted_bases(s, t, ls, lt).fold(0.0, |den, (_, wn)| den + wn)
+    }
+
+    /// (PB index, w_i N_i(s, t)) of the points of the bucket of (s, t) whose blending function
+    /// is non-zero there ((s, t) as [`PbSpline::locate`] returned it): the one loop behind
+    /// [`PbSpline::point`], [`PbSpline::weight_sum`] and [`PbSpline::for_each_basis`], mirrored
+    /// by `weighted_basis` in common.cl (same tests, same operation order). Zero terms are
+    /// left out: adding them changes no sum.
+    #[inline]
+    fn weighted_bases(&self, s: f64, t: f64, ls: bool, lt: bool) -> impl Iterator<Item = (u32, f64)> + '_ {
         let k = self.degree.k();
         let b = self.bucket(s, t);
-        let mut den = 0.0;
-        for &pi in &self.pt_items[self.pt_start[b] as usize..self.pt_start[b + 1] as usize] {
+        self.pt_items[self.pt_start[b] as usize..self.pt_start[b + 1] as usize].iter().filter_map(move |&pi| {
             let kn = &self.knots[pi as usize];
+            if s < kn[0] || s > kn[k + 1] || t < kn[5] || t > kn[5 + k + 1] {
+                return None;
+            }
             let pc = &self.poly[pi as usize];
-            den += self.geom[pi as usize][3] * basis_poly(&kn[0..5], &pc[..20], k, s, ls) * basis_poly(&kn[5..10], &pc[20..], k, t, lt);
-        }
-        den
+            let bs = basis_poly(&kn[0..5], &pc[..20], k, s, ls);
+            if bs == 0.0 {
+                return None;
+            }
+            let bt = basis_poly(&kn[5..10], &pc[20..], k, t, lt);
+            if bt == 0.0 {
+                return None;
+            }
+            Some((pi, self.geom[pi as usize][3] * bs * bt))
+        })
     }
 
     /// Whether dense evaluation of `n` points goes through the element extraction: building it

@@ -36,14 +36,8 @@ __kernel void model_rows(
     __global double* rv = val + (size_t)r * MAXNZ;
     for (uint q = pstart[b]; q < pstart[b + 1]; q++) {
         uint pi = pitems[q];
-        __global const double* kn = knots + 10 * (size_t)pi;
-        if (s < kn[0] || s > kn[k + 1] || t < kn[5] || t > kn[5 + k + 1]) continue;
-        __global const double* pc = poly + 40 * (size_t)pi;
-        double bs = basis_poly(kn, pc, k, s, ls);
-        if (bs == 0.0) continue;
-        double bt = basis_poly(kn + 5, pc + 20, k, t, lt);
-        if (bt == 0.0) continue;
-        double wn = geom[4 * (size_t)pi + 3] * bs * bt;
+        double wn = weighted_basis(knots, poly, geom, k, pi, s, t, ls, lt);
+        if (wn == 0.0) continue;
         den += wn;
         if (m == MAXNZ) {
             count[r] = MAXNZ + 1;

@@ -13,13 +13,9 @@ inline double surface_z(const grid_t g, __global const double* knots, __global c
     double z = 0.0, den = 0.0;
     for (uint q = pstart[b]; q < pstart[b + 1]; q++) {
         uint pi = pitems[q];
-        __global const double* kn = knots + 10 * (size_t)pi;
-        if (s < kn[0] || s > kn[k + 1] || t < kn[5] || t > kn[5 + k + 1]) continue;
-        __global const double* pc = poly + 40 * (size_t)pi;
-        double bs = basis_poly(kn, pc, k, s, ls);
-        double bt = basis_poly(kn + 5, pc + 20, k, t, lt);
+        double wn = weighted_basis(knots, poly, geom, k, pi, s, t, ls, lt);
+        if (wn == 0.0) continue;
         __global const double* gm = geom + 4 * (size_t)pi;
-        double wn = gm[3] * bs * bt;
         z += wn * gm[2];
         den += wn;
     }
