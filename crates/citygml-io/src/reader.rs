@@ -1280,32 +1280,12 @@ impl<'a> Parser<'a> {
     /// is parsed in place from the buffer): returns the complete positions and the number of
     /// values read (a count that is not a multiple of `d` is the caller's error to report).
     fn pos_list(&mut self, r: Range<usize>, d: u8) -> Result<(Vec<Point3>, usize), ReadError> {
-        let src = self.src;
-        let s = &src[r.clone()];
         let mut pts = std::mem::take(&mut self.scratch);
         pts.clear();
         let mut cur = [0.0f64; 3];
-        let mut k = 0usize;
-        let mut n = 0usize;
-        let mut i = 0usize;
+        let (mut k, mut n) = (0usize, 0usize);
         let d = d as usize;
-        loop {
-            while i < s.len() && is_ws(s[i]) {
-                i += 1;
-            }
-            if i >= s.len() {
-                break;
-            }
-            let x = match number_at(s, i) {
-                Ok((x, len)) => {
-                    i += len;
-                    x
-                }
-                Err(bad) => {
-                    self.scratch = pts;
-                    return Err(self.number_err(r.start + i, bad, "gml:posList"));
-                }
-            };
+        let read = self.each_number(r, "gml:posList", |x| {
             cur[k] = x;
             k += 1;
             n += 1;
@@ -1316,10 +1296,10 @@ impl<'a> Parser<'a> {
                 pts.push(cur);
                 k = 0;
             }
-        }
-        let out = pts.as_slice().to_vec();
+        });
+        let out = read.map(|()| (pts.as_slice().to_vec(), n));
         self.scratch = pts;
-        Ok((out, n))
+        out
     }
 
     fn number_err(&self, at: usize, bad: NumErr<'_>, what: &str) -> ReadError {
@@ -1334,19 +1314,27 @@ impl<'a> Parser<'a> {
 
     /// Whitespace-separated numbers of `src[r]`; a bad token is an error at its own position.
     fn numbers(&self, r: Range<usize>, what: &str) -> Result<Vec<f64>, ReadError> {
-        let s = &self.src[r.clone()];
         let mut v = Vec::with_capacity(3);
+        self.each_number(r, what, |x| v.push(x))?;
+        Ok(v)
+    }
+
+    /// Calls `f` with each whitespace-separated number of `src[r]` in order, parsed in place
+    /// from the buffer; a bad token is an error at its own position (`what` names the element).
+    #[inline]
+    fn each_number(&self, r: Range<usize>, what: &str, mut f: impl FnMut(f64)) -> Result<(), ReadError> {
+        let s = &self.src[r.clone()];
         let mut i = 0usize;
         loop {
             while i < s.len() && is_ws(s[i]) {
                 i += 1;
             }
             if i >= s.len() {
-                return Ok(v);
+                return Ok(());
             }
             match number_at(s, i) {
                 Ok((x, len)) => {
-                    v.push(x);
+                    f(x);
                     i += len;
                 }
                 Err(bad) => return Err(self.number_err(r.start + i, bad, what)),
