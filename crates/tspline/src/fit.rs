@@ -736,11 +736,12 @@ pub fn fit_drag(pb: &PbSpline, samples: &Samples, steps: usize, threshold: f64, 
     let (wm, hm) = ((samples.width - 1) as f64, (samples.height - 1) as f64);
     let refz: Vec<f64> = params.iter().map(|p| filled.bilinear(p[0].clamp(0.0, wm), p[1].clamp(0.0, hm))).collect();
     let mut pb = pb.clone();
-    let dev = match backend {
-        Backend::OpenCl(o) => Some((o, o.upload(&pb)?)),
+    // the PB-spline buffers only: every step replaces the geometry, which would drop an
+    // element extraction before its first use
+    let mut dev = match backend {
+        Backend::OpenCl(o) => Some((o, o.upload_pb(&pb)?)),
         Backend::Cpu => None,
     };
-    let mut dev = dev;
     let mut prev_max = f64::INFINITY;
     for _ in 0..steps {
         let delta: Vec<f64> = match &mut dev {

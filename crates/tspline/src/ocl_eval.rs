@@ -115,8 +115,9 @@ impl OclEvaluator {
         Ok(sp)
     }
 
-    /// The PB-spline buffers only (reference kernels, knot derivation).
-    fn upload_pb(&self, pb: &PbSpline) -> Result<OclSpline, TsplineError> {
+    /// The PB-spline buffers only (reference kernels, knot derivation, dragging): for callers
+    /// that change the geometry before evaluating, which drops the extraction anyway.
+    pub fn upload_pb(&self, pb: &PbSpline) -> Result<OclSpline, TsplineError> {
         let g = pb.grid;
         Ok(OclSpline {
             bufs: PbBuffers::upload(&self.dev, pb)?,
