@@ -13,7 +13,7 @@ export GEOFIT_SHARED := $(SHARED)
 APT_PACKAGES := pkg-config libgdal-dev gdal-bin libproj-dev proj-bin ocl-icd-opencl-dev \
   pocl-opencl-icd clinfo libxml2-utils libxml2-dev libclang-dev python3-numpy freecad-python3 nodejs time
 # Python packages for independent checks and reference tools.
-PIP_PACKAGES := numpy scipy lxml pymeshlab trimesh loopstructural pydelatin
+PIP_PACKAGES := numpy scipy lxml pymeshlab trimesh loopstructural pydelatin pymartini
 # npm: the Khronos glTF validator. It is a library: tests run it through the small CLI
 # tests/scripts/gltf_validator.js, which finds the package in $(NPM_PREFIX) (no PATH wrapper).
 NPM_PREFIX := $(HOME)/.cache/geofit/npm
@@ -35,7 +35,7 @@ setup-apt:
 	else echo "setup: Debian packages present"; fi
 
 setup-pip:
-	@python3 -c "import numpy, scipy, lxml, pymeshlab, trimesh, pydelatin, LoopStructural" 2>/dev/null \
+	@python3 -c "import numpy, scipy, lxml, pymeshlab, trimesh, pydelatin, pymartini, LoopStructural" 2>/dev/null \
 	  && echo "setup: Python packages present" \
 	  || { echo "setup: installing Python packages: $(PIP_PACKAGES)"; \
 	       python3 -m pip --version >/dev/null 2>&1 || { SUDO=""; [ "$$(id -u)" = 0 ] || SUDO=sudo; \

@@ -3,7 +3,7 @@
 #  1. evaluation throughput, 10^7 points of a cubic mesh with ~10^5 control points:
 #     PoCL vs single-thread CPU vs rayon CPU, with the flop count per point;
 #  2. control points a fit needs for max error E vs the vertices of a Garland-Heckbert TIN
-#     (pydelatin) for the same E, stored bytes, run time and peak memory of both; direct vs
+#     (pydelatin) and a restricted quadtree TIN (pymartini) for the same E, stored bytes, run time and peak memory of both; direct vs
 #     indirect reduction on rotated channel-like bathymetry;
 #  3. scale: Kilauea resampled up (gdalwarp -ts, bilinear) to 10^7, 3*10^7 and 10^8 cells
 #     (TSPLINE_SCALE="1e7 3e7 1e8", the default), fitted to E = 2 m, degree 1, with
@@ -91,6 +91,7 @@ fit_row() { # file E degree [extra fit options...] -> "cps | file/binary bytes |
   echo "$cps | $(stat -c %s "$T/m.tmesh") / $((cps * 48 + cells * 16)) | $secs | $((kib / 1024)) | $rc"
 }
 fit_section() {
+LATTICE=()
 echo "## Fit vs TIN for the same maximum error"
 echo
 echo "Machine: $(nproc) cores; $(date -u +%Y-%m-%d); load average before: $(cut -d' ' -f1-3 /proc/loadavg)"
@@ -103,10 +104,25 @@ for spec in "gmt_tut_bathy.nc 10" "gmt_tut_bathy.nc 50" "gmt_Kilauea.utm.nc 5" "
   [ -f "$f" ] || { echo "| $1 | missing |"; continue; }
   tin=$(python3 benches/tspline_tin.py "$f" "$e" 2>/dev/null || echo '{}')
   tv=$(echo "$tin" | python3 -c "import json,sys;r=json.load(sys.stdin);print(' | '.join(str(r.get(k,'-')) for k in ['vertices','bytes','seconds','peak_rss_mib']))")
+  cps=""
   for d in 1 3; do
-    echo "| $(basename "$f") | $e | $d | $(fit_row "$f" "$e" "$d") | $tv |"
+    row=$(fit_row "$f" "$e" "$d")
+    echo "| $(basename "$f") | $e | $d | $row | $tv |"
+    cps="$cps${cps:+ / }$(echo "$row" | cut -d'|' -f1 | tr -d ' ')"
   done
+  rtin=$(python3 benches/tspline_rtin.py "$f" "$e" 2>/dev/null || echo '{}')
+  LATTICE+=("| $1 | $e | $cps | $(echo "$tin" | python3 -c "import json,sys;print(json.load(sys.stdin).get('vertices','-'))") | $(echo "$rtin" | python3 -c "import json,sys;r=json.load(sys.stdin);print(' | '.join(str(r.get(k,'-')) for k in ['vertices','max_error_reached','cells_over','vertices_within_e','threshold_within_e']))") |")
 done
+echo
+echo 'The lattice-bound comparator: a restricted quadtree TIN (RTIN, PyPI `pymartini`: right triangles from'
+echo 'binary splits of the square, vertices on the dyadic lattice like the T-mesh'"'"'s; `benches/tspline_rtin.py`).'
+echo "Martini's threshold is a hierarchical bound, not the mesh's error, so the script rasterises each mesh"
+echo 'and reports its real max |Δz| and cells over E, and the vertices at the largest threshold whose mesh does'
+echo 'stay within E (bisection):'
+echo
+echo '| raster | E | T-spline control points (degree 1 / 3) | TIN (delatin) vertices | RTIN vertices at threshold E | RTIN real max abs dz | RTIN cells over E | RTIN vertices within E | RTIN threshold for that |'
+echo '|---|---|---|---|---|---|---|---|---|'
+printf '%s\n' "${LATTICE[@]}"
 echo
 echo "T-mesh binary bytes = 48 per control point (s t x y z w as f64) + 16 per cell (4 x u32);"
 echo "TIN bytes = 24 per vertex + 12 per triangle. Kilauea's nodata cells are filled with the nearest"
