@@ -36,23 +36,39 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     // One line per subcommand; keep alphabetical. Each `cmd::<name>` module has `Args` and `run`.
+    /// Least-squares adjustment of a popa3d model: Gauss–Helmert, datum, statistics, blunders.
+    Adjust(cmd::adjust::Args),
+    /// CityGML buildings to a normalized popa3d model with conditions from their semantics.
+    Citygml2popa3d(cmd::citygml2popa3d::Args),
+    /// Compare two rasters: |dz| statistics, error classes, error-class map PNG.
+    Diff(cmd::diff::Args),
+    /// Evaluate a T-mesh surface on a raster grid (GeoTIFF, netCDF, ASCII grid).
+    Eval(cmd::eval::Args),
+    /// Export CityGML buildings (or a T-mesh surface) as triangle meshes: glb, glTF or OBJ (+MTL).
+    Export(cmd::export::Args),
+    /// Fit a T-spline surface (T-mesh) to a raster within a maximum error.
+    Fit(cmd::fit::Args),
+    /// CityGML → popa3d → adjustment → CityGML in one step, for buildings that fail planarity.
+    Heal(cmd::heal::Args),
     /// Implicit surfaces by DSI on adaptive tetrahedral meshes.
     Implicit(cmd::implicit::Args),
-    Heal(cmd::heal::Args),
-    Observe(cmd::observe::Args),
-    Popa3d2citygml(cmd::popa3d2citygml::Args),
-    Adjust(cmd::adjust::Args),
-    Diff(cmd::diff::Args),
-    Eval(cmd::eval::Args),
-    Export(cmd::export::Args),
-    Fit(cmd::fit::Args),
-    Surface(cmd::surface::Args),
-    Citygml2popa3d(cmd::citygml2popa3d::Args),
+    /// Summarise a CityGML file (or a T-mesh, raster or point file): counts, extent, CRS.
     Info(cmd::info::Args),
+    /// An OBJ sketch of rooms to a popa3d model with sketch priors, plus measured distances (CSV).
     Obj2popa3d(cmd::obj2popa3d::Args),
+    /// Attach measured distances (CSV) to a popa3d model, for the next adjustment.
+    Observe(cmd::observe::Args),
+    /// Write an (adjusted) popa3d model back into the original CityGML file.
+    Popa3d2citygml(cmd::popa3d2citygml::Args),
+    /// Grid scattered points (XYZ/CSV, LAS/LAZ) into a raster: Gauss splat or TIN-linear.
     Rasterize(cmd::rasterize::Args),
+    /// Tessellate a T-mesh surface to glb/gltf/obj (height or error colours, T-mesh lines).
+    Surface(cmd::surface::Args),
+    /// Map a warped raster back onto its original grid (field read from the raster itself).
     Unwarp(cmd::unwarp::Args),
+    /// Validate CityGML: XSD schema (libxml2) and geometry (val3dity/QIE codes).
     Validate(cmd::validate::Args),
+    /// Rotate and warp a raster to fill a rectangle (indirect reduction); the field travels inside it.
     Warp(cmd::warp::Args),
 }
 
