@@ -39,4 +39,43 @@ for f in "$SHARED"/fixtures/citygml/nrw/*.gml; do
   echo "$line"
   echo "$line" >> "$res"
 done
+
+# Scaling in the number of buildings: the largest tile repeated k times, every copy with its own
+# gml:ids (suffix _c, XLinks renamed with them) and shifted 2 km east, so the copies are distinct
+# buildings side by side, as in a real tile of k times the size.
+big=$(ls -S "$SHARED"/fixtures/citygml/nrw/*.gml | head -1)
+{
+  echo
+  echo "## Scaling with the number of buildings ($(basename "$big" .gml) repeated, ids renamed, copies shifted 2 km)"
+  echo
+  echo "| copies | size MB | buildings | citygml2popa3d s | heal s | peak RSS MB (heal) |"
+  echo "|---|---|---|---|---|---|"
+} >> "$res"
+for k in 5 10 20; do
+  python3 - "$big" "$OUT/x$k.gml" "$k" <<'PY'
+import re, sys
+s = open(sys.argv[1], "rb").read()
+a = s.index(b"<core:cityObjectMember>")
+b = s.rindex(b"</core:cityObjectMember>") + len(b"</core:cityObjectMember>")
+def shift(t, dx):
+    def f(m):
+        v = m.group(2).split()
+        return m.group(1) + b" ".join(b"%.3f" % (float(x) + dx) if i % 3 == 0 else x for i, x in enumerate(v)) + b"<"
+    return re.sub(rb"(<gml:posList[^>]*>)([^<]*)<", f, t)
+parts = []
+for c in range(int(sys.argv[3])):
+    t = re.sub(rb'gml:id="([^"]+)"', lambda m: b'gml:id="' + m.group(1) + b"_%d" % c + b'"', s[a:b])
+    t = re.sub(rb'xlink:href="#([^"]+)"', lambda m: b'xlink:href="#' + m.group(1) + b"_%d" % c + b'"', t)
+    parts.append(shift(t, 2000.0 * c))
+open(sys.argv[2], "wb").write(s[:a] + b"".join(parts) + s[b:])
+PY
+  /usr/bin/time -f "%e %M" -o "$OUT/t" "$BIN" -q citygml2popa3d "$OUT/x$k.gml" -o "$OUT/o.popa3d" --report "$OUT/r.json" 2>/dev/null || true
+  read -r tc _ < <(tail -n 1 "$OUT/t")
+  /usr/bin/time -f "%e %M" -o "$OUT/t" "$BIN" -q heal "$OUT/x$k.gml" -o "$OUT/h.gml" 2>/dev/null || true
+  read -r th mh < <(tail -n 1 "$OUT/t")
+  n=$(python3 -c "import json;r=json.load(open('$OUT/r.json'));print(r['converted'] + len(r['rejected']))")
+  line="| $k | $(python3 -c "print(round($(stat -c %s "$OUT/x$k.gml")/1e6, 1))") | $n | $tc | $th | $((mh / 1024)) |"
+  echo "$line"
+  echo "$line" >> "$res"
+done
 echo "wrote $res"

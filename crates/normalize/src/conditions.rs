@@ -141,14 +141,35 @@ fn is_opening(s: Option<&str>) -> bool {
 }
 
 /// Generates the conditions of the CityGML use case (spec §8.2) for one object and appends them to
-/// the model. Node positions must be computable (normalization guarantees it).
+/// the model. Node positions must be computable (normalization guarantees it); an object with a
+/// node whose planes do not meet in a point gets none. For many objects of one model use
+/// [`semantic_many`].
 pub fn semantic(m: &mut Popa3d, r: &Ranges, o: &ConditionOptions) -> ConditionCounts {
+    semantic_many(m, std::slice::from_ref(r), o).pop().unwrap_or_default()
+}
+
+/// [`semantic`] for several objects of one model (each given by its element ranges), in order.
+/// The incidence and the node positions (a plane intersection per node) are built once: built
+/// per object they cost O(model) each, which made converting a tile quadratic in its buildings
+/// (an NRW tile repeated 20×: 12 s). Only observations are added, so both stay valid throughout.
+pub fn semantic_many(m: &mut Popa3d, rs: &[Ranges], o: &ConditionOptions) -> Vec<ConditionCounts> {
     let inc = Incidence::new(m);
-    let pos = match m.node_positions(&inc) {
-        Ok(p) => p,
-        Err(_) => return ConditionCounts::default(),
-    };
-    let area = face_areas(m, &inc, &pos, &r.faces);
+    let pos: Vec<Option<[f64; 3]>> = (0..m.nodes.len()).map(|i| m.node_position(&inc, NodeId::from(i)).ok()).collect();
+    let xyz: Vec<[f64; 3]> = pos.iter().map(|p| p.unwrap_or([f64::NAN; 3])).collect();
+    rs.iter()
+        .map(|r| {
+            let computable = r.faces.clone().all(|f| inc.face_half_edges[f].iter().all(|&h| pos[m.half_edge_start(h).idx()].is_some()));
+            if computable {
+                semantic_with(m, r, o, &inc, &xyz)
+            } else {
+                ConditionCounts::default()
+            }
+        })
+        .collect()
+}
+
+fn semantic_with(m: &mut Popa3d, r: &Ranges, o: &ConditionOptions, inc: &Incidence, pos: &[[f64; 3]]) -> ConditionCounts {
+    let area = face_areas(m, inc, pos, &r.faces);
     let mut c = ConditionCounts::default();
     let mut out: Vec<Observation> = Vec::new();
     // Largest face per normal, per plane.

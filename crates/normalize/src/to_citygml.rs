@@ -24,7 +24,7 @@
 use citygml_io::{CityModel, CityObject, Edit, Polygon, Ring};
 use popa3d_model::{FaceId, Incidence, NodeId, Popa3d, VertexSource};
 use serde::Serialize;
-use std::collections::{BTreeMap, HashMap, HashSet};
+use std::collections::{BTreeMap, BTreeSet, HashMap, HashSet};
 
 /// Options of [`to_citygml`].
 #[derive(Debug, Clone, Serialize)]
@@ -204,6 +204,44 @@ fn ring_len(r: &Ring) -> usize {
 
 /// Write the adjusted model back into its template. Returns the new document and a report.
 pub fn to_citygml(model: &Popa3d, template: &[u8], city: &CityModel, opts: &BackOptions) -> Result<(Vec<u8>, BackReport), BackError> {
+    to_citygml_with(model, template, &Template::new(city), opts, true)
+}
+
+/// The template's polygons by gml:id (with the thematic surface that owns each), the XLinks
+/// to each and the document order: what [`to_citygml_with`] looks up. Built once per template,
+/// so writing many models back into one document (`geofit heal` checks every building on its
+/// own) does not scan the whole document per model.
+pub struct Template<'a> {
+    polys: HashMap<String, PolyInfo<'a>>,
+    refs: HashMap<String, Vec<std::ops::Range<usize>>>,
+    doc_order: Vec<String>,
+    /// Polygon ids per thematic surface (keyed by the surface's start byte).
+    surface_polys: HashMap<usize, (&'a CityObject, Vec<String>)>,
+}
+
+impl<'a> Template<'a> {
+    pub fn new(city: &'a CityModel) -> Template<'a> {
+        let mut polys: HashMap<String, PolyInfo> = HashMap::new();
+        let mut refs: HashMap<String, Vec<std::ops::Range<usize>>> = HashMap::new();
+        let mut doc_order: Vec<String> = Vec::new();
+        for o in &city.objects {
+            collect_polys(o, None, &mut polys, &mut refs, &mut doc_order);
+        }
+        let mut surface_polys: HashMap<usize, (&CityObject, Vec<String>)> = HashMap::new();
+        for id in &doc_order {
+            if let Some(s) = polys[id].surface {
+                surface_polys.entry(s.span.bytes.start).or_insert((s, Vec::new())).1.push(id.clone());
+            }
+        }
+        Template { polys, refs, doc_order, surface_polys }
+    }
+}
+
+/// [`to_citygml`] against a prepared [`Template`] of `template`'s document; with `write` false
+/// the edits are checked but no document is produced (the returned bytes are empty): a dry run
+/// for the report.
+pub fn to_citygml_with(model: &Popa3d, template: &[u8], tpl: &Template, opts: &BackOptions, write: bool) -> Result<(Vec<u8>, BackReport), BackError> {
+    let (polys, refs, doc_order) = (&tpl.polys, &tpl.refs, &tpl.doc_order);
     let mut m = model.clone();
     // 1. Make near-coplanar planes on one normal exactly coplanar.
     let mut by_normal: BTreeMap<u32, Vec<usize>> = BTreeMap::new();
@@ -228,13 +266,7 @@ pub fn to_citygml(model: &Popa3d, template: &[u8], city: &CityModel, opts: &Back
             }
         }
     }
-    // Template polygons (needed first: the original vertices anchor ill-conditioned nodes).
-    let mut polys: HashMap<String, PolyInfo> = HashMap::new();
-    let mut refs: HashMap<String, Vec<std::ops::Range<usize>>> = HashMap::new();
-    let mut doc_order: Vec<String> = Vec::new();
-    for o in &city.objects {
-        collect_polys(o, None, &mut polys, &mut refs, &mut doc_order);
-    }
+    // Template polygons (`tpl`, needed first: the original vertices anchor ill-conditioned nodes).
     // 2. Node positions: the plane intersection (spec T 2.3/T 2.4). When the adjustment made a
     //    node's planes (nearly) linearly dependent — e.g. two faces meeting at a slight kink became
     //    parallel, spec §7.4 GA01/GA02 "can fail after adjustment" — the intersection is a line or
@@ -511,20 +543,14 @@ pub fn to_citygml(model: &Popa3d, template: &[u8], city: &CityModel, opts: &Back
         }
     }
 
-    // Surfaces that lose every polygon.
-    let mut surface_polys: HashMap<usize, (&CityObject, Vec<String>)> = HashMap::new();
-    for (id, pi) in &polys {
-        if let Some(s) = pi.surface {
-            surface_polys.entry(s.span.bytes.start).or_insert((s, Vec::new())).1.push(id.clone());
-        }
-    }
+    // Surfaces that lose every polygon (only a surface holding a polygon that went can).
+    let surface_polys = &tpl.surface_polys;
     let gone = |id: &String| removed.contains(id) || merged_away.contains_key(id);
     let mut edits: Vec<Edit> = Vec::new();
     let mut emptied: HashSet<usize> = HashSet::new();
     let mut inserts: BTreeMap<usize, Vec<u8>> = BTreeMap::new();
-    let mut surf_keys: Vec<&usize> = surface_polys.keys().collect();
-    surf_keys.sort();
-    for k in surf_keys {
+    let surf_keys: BTreeSet<usize> = mapped.iter().filter(|id| gone(id)).filter_map(|id| polys[id].surface.map(|s| s.span.bytes.start)).collect();
+    for k in &surf_keys {
         let (s, ids) = &surface_polys[k];
         if ids.iter().all(gone) && !citygml_io::SurfaceType::from_local_name(&s.kind).is_some_and(|t| t.is_opening()) {
             let Some(r) = enclosing(template, s.span.bytes.start, s.span.bytes.end) else { continue };
@@ -593,8 +619,9 @@ pub fn to_citygml(model: &Popa3d, template: &[u8], city: &CityModel, opts: &Back
     for (at, bytes) in inserts {
         edits.push(Edit { bytes: at..at, replacement: bytes });
     }
-    let mut out = Vec::with_capacity(template.len());
-    citygml_io::write_with_edits(template, &edits, &mut out).map_err(|e| BackError::Write(e.to_string()))?;
+    let mut out = Vec::with_capacity(if write { template.len() } else { 0 });
+    let sink: &mut dyn std::io::Write = if write { &mut out } else { &mut std::io::sink() };
+    citygml_io::write_with_edits(template, &edits, sink).map_err(|e| BackError::Write(e.to_string()))?;
     report.removed_degenerate.sort();
     report.removed_surfaces.sort();
     Ok((out, report))

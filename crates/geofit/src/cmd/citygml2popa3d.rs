@@ -149,6 +149,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     let progress = config.progress("citygml2popa3d", units.len() as u64);
     let mut rejected = Vec::new();
     let mut reports = Vec::new();
+    let mut all_ranges = Vec::new();
     for (i, b) in units.iter().enumerate() {
         let bid = b.id.clone().unwrap_or_else(|| format!("Building@{}:{}", b.span.line, b.span.column));
         progress.set(i as u64 + 1, &bid);
@@ -168,10 +169,16 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
                     normals: before.2..model.normals.len(),
                     parameters: before.3..model.parameters.len(),
                 };
-                let cc = if args.no_conditions { ConditionCounts::default() } else { conditions::semantic(&mut model, &ranges, &copt) };
-                reports.push(BuildingReport { id: bid, counts: n.counts, conditions: cc, notices: n.notices });
+                all_ranges.push(ranges);
+                reports.push(BuildingReport { id: bid, counts: n.counts, conditions: ConditionCounts::default(), notices: n.notices });
             }
             Err(r) => rejected.push(with_building(r, &bid)),
+        }
+    }
+    // conditions once all buildings are in: the incidence and node positions are built once
+    if !args.no_conditions {
+        for (r, cc) in reports.iter_mut().zip(conditions::semantic_many(&mut model, &all_ranges, &copt)) {
+            r.conditions = cc;
         }
     }
     progress.finish(&format!("{} converted, {} rejected", reports.len(), rejected.len()));

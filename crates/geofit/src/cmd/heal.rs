@@ -9,7 +9,7 @@ use crate::config::{write_json_report, Config, Input, Output};
 use crate::error::{CliError, CmdResult, Exit};
 use adjust::popa3d::{adjust_model, DatumChoice, ModelOptions};
 use normalize::conditions::{self, ConditionOptions, Ranges};
-use normalize::to_citygml::{to_citygml, BackReport};
+use normalize::to_citygml::{to_citygml_with, BackReport, Template};
 use normalize::Tolerances;
 use popa3d_model::{Popa3d, SourceDocument};
 
@@ -79,21 +79,23 @@ struct Report {
     back: BackReport,
 }
 
-fn convert(city: &citygml_io::CityModel, b: &citygml_io::CityObject, model: &mut Popa3d, a: &Args) -> Result<(), String> {
+/// One building into `model` (normalized, no conditions yet): its element ranges.
+fn convert(city: &citygml_io::CityModel, b: &citygml_io::CityObject, model: &mut Popa3d, a: &Args) -> Result<Ranges, String> {
     let tol = Tolerances { snap: a.snap, planarity: a.planarity, ..Tolerances::default() };
-    let copt = ConditionOptions { parallel_deg: a.angle, orthogonal_deg: a.angle, epsilon: a.epsilon, ..ConditionOptions::default() };
     let _ = city;
     let soup = normalize::citygml::building_soup(b, a.lod).map_err(|r| r.to_string())?;
     let before = (model.faces.len(), model.planes.len(), model.normals.len(), model.parameters.len());
     normalize::normalize_into(model, &soup, &tol).map_err(|r| r.to_string())?;
-    let ranges = Ranges {
+    Ok(Ranges {
         faces: before.0..model.faces.len(),
         planes: before.1..model.planes.len(),
         normals: before.2..model.normals.len(),
         parameters: before.3..model.parameters.len(),
-    };
-    conditions::semantic(model, &ranges, &copt);
-    Ok(())
+    })
+}
+
+fn condition_options(a: &Args) -> ConditionOptions {
+    ConditionOptions { parallel_deg: a.angle, orthogonal_deg: a.angle, epsilon: a.epsilon, ..ConditionOptions::default() }
 }
 
 fn model_opts() -> ModelOptions {
@@ -117,6 +119,8 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         return Err(CliError::findings(format!("{name}: no Building or BuildingPart with geometry")));
     }
     let back_opts = super::popa3d2citygml::back_options(1e-3, 1e-6, 1e-6, args.no_merge)?;
+    // the document's polygons indexed once, for every building's dry run and the final write
+    let template = Template::new(&city);
     let progress = config.progress("heal", units.len() as u64);
     // Pass 1: each building alone (convert, adjust, back-transform dry run): keep the good ones.
     let mut good: Vec<usize> = Vec::new();
@@ -126,8 +130,11 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         progress.set(i as u64 + 1, &bid);
         let mut m = Popa3d::new(origin);
         let res = convert(&city, b, &mut m, &args)
+            .map(|r| {
+                conditions::semantic(&mut m, &r, &condition_options(&args));
+            })
             .and_then(|_| adjust_model(&mut m, &model_opts()).map(|_| ()).map_err(|e| e.to_string()))
-            .and_then(|_| to_citygml(&m, &bytes, &city, &back_opts).map_err(|e| e.to_string()))
+            .and_then(|_| to_citygml_with(&m, &bytes, &template, &back_opts, false).map_err(|e| e.to_string()))
             .and_then(|(_, r)| if r.max_move > args.max_move { Err(format!("a vertex would move {:.3} m (> --max-move {})", r.max_move, args.max_move)) } else { Ok(()) });
         match res {
             Ok(()) => good.push(i),
@@ -139,14 +146,17 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     let mut model = Popa3d::new(origin);
     model.srs_name = city.srs_name.clone();
     model.source = Some(SourceDocument { format: "citygml".into(), file: name.clone() });
+    let mut ranges = Vec::with_capacity(good.len());
     for &i in &good {
-        convert(&city, units[i], &mut model, &args).map_err(|e| CliError::internal(format!("{name}: second conversion failed: {e}")))?;
+        ranges.push(convert(&city, units[i], &mut model, &args).map_err(|e| CliError::internal(format!("{name}: second conversion failed: {e}")))?);
     }
+    // conditions once all are in (the incidence and node positions are built once)
+    conditions::semantic_many(&mut model, &ranges, &condition_options(&args));
     let (out, back) = if good.is_empty() {
         (bytes.clone(), BackReport::default())
     } else {
         adjust_model(&mut model, &model_opts()).map_err(|e| CliError::internal(format!("{name}: {e}")))?;
-        to_citygml(&model, &bytes, &city, &back_opts).map_err(|e| super::popa3d2citygml::back_error(&name, e))?
+        to_citygml_with(&model, &bytes, &template, &back_opts, true).map_err(|e| super::popa3d2citygml::back_error(&name, e))?
     };
     if !config.quiet {
         super::popa3d2citygml::print_back(&back);
