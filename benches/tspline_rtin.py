@@ -14,31 +14,24 @@ threshold_within_e.
 usage: tspline_rtin.py RASTER E
 """
 import json
-import subprocess
+import os
 import sys
 import time
 
 import numpy as np
 from pymartini import Martini
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from terrain_grid import load_filled  # noqa: E402
+
 path, e = sys.argv[1], float(sys.argv[2])
-info = json.loads(subprocess.run(["gdalinfo", "-json", path], check=True, capture_output=True).stdout)
-w, h = info["size"]
-nodata = info["bands"][0].get("noDataValue")
-xyz = subprocess.run(["gdal_translate", "-q", "-of", "XYZ", path, "/vsistdout/"], check=True, capture_output=True).stdout
-v = np.loadtxt(xyz.decode().splitlines(), usecols=2, dtype=np.float64)
-ok = np.isfinite(v)
-if nodata is not None:
-    ok &= v != float(nodata)
-if (~ok).any():
-    from scipy import ndimage
-    _, (ii, jj) = ndimage.distance_transform_edt(~ok.reshape(h, w), return_indices=True)
-    v = v.reshape(h, w)[ii, jj].reshape(-1)
+full, ok, _ = load_filled(path)
+h, w = full.shape
 n = 2
 while n + 1 < max(w, h):
     n *= 2
 size = n + 1
-grid = np.pad(v.reshape(h, w), ((0, size - h), (0, size - w)), mode="edge").astype(np.float32)
+grid = np.pad(full, ((0, size - h), (0, size - w)), mode="edge").astype(np.float32)
 
 
 def mesh_error(vertices, triangles):
@@ -57,7 +50,7 @@ def mesh_error(vertices, triangles):
         inside = (l0 >= -1e-9) & (l1 >= -1e-9) & (l2 >= -1e-9)
         z = [float(grid[int(q[k, 1]), int(q[k, 0])]) for k in range(3)]
         surf[Y[inside], X[inside]] = (l0 * z[0] + l1 * z[1] + l2 * z[2])[inside]
-    err = np.abs(surf - grid)[:h, :w][ok.reshape(h, w)]
+    err = np.abs(surf - grid)[:h, :w][ok]
     return float(err.max()), int((err > e).sum())
 
 
