@@ -283,5 +283,5 @@ fn info_counts_a_referenced_solid_once() {
     let (code, v, stderr) = info_json(&p);
     assert_eq!((v["solids"].as_u64(), v["polygons"].as_u64()), (Some(1), Some(1)), "{v}");
     assert_eq!(code, 1, "the reference to a building is a finding: {stderr}");
-    assert!(stderr.contains(&format!("{}:5:", p.display())) && stderr.contains("xlink:href=\"#a\" points to <Building>, not a geometry"), "{stderr}");
+    assert!(stderr.contains(&format!("{}:5:", p.display())) && stderr.contains("xlink:href=\"#a\" points to <bldg:Building>, not a geometry"), "{stderr}");
 }

@@ -327,8 +327,8 @@ pub struct XLinkRef {
     /// gml:id and type of the innermost city object holding the reference (for reports).
     pub feature: Option<String>,
     pub feature_type: String,
-    /// The element the id belongs to when it exists but is not a geometry (`bldg:Building`,
-    /// ...); `None` when no element of the document has that gml:id.
+    /// The element (qualified name as written) the id belongs to when it exists but is not a
+    /// geometry (`bldg:Building`, ...); `None` when no element of the document has that gml:id.
     pub target: Option<String>,
 }
 

@@ -313,11 +313,16 @@ fn by_reference_lod(l: &[u8]) -> Option<u8> {
     lod_of(l).filter(|_| [&b"Solid"[..], b"Surface", b"Geometry", b"FootPrint", b"RoofEdge"].iter().any(|k| memchr::memmem::find(l, k).is_some()))
 }
 
-/// Local name of the element whose `<` is at `start`.
-fn name_at(src: &[u8], start: usize) -> &[u8] {
+/// Qualified name (as written, prefix included) of the element whose `<` is at `start`.
+fn qname_at(src: &[u8], start: usize) -> &[u8] {
     let s = &src[start + 1..];
     let end = s.iter().position(|b| b.is_ascii_whitespace() || *b == b'>' || *b == b'/').unwrap_or(s.len());
-    let q = &s[..end];
+    &s[..end]
+}
+
+/// Local name of the element whose `<` is at `start`.
+fn name_at(src: &[u8], start: usize) -> &[u8] {
+    let q = qname_at(src, start);
     match memchr::memchr(b':', q) {
         Some(i) => &q[i + 1..],
         None => q,
@@ -1642,7 +1647,7 @@ pub(crate) fn resolve_object(
     // references), the surfaces of a surface geometry (named after it), and for anything else
     // a skipped member instead of the polygons it happens to contain. A target that does not
     // exist stays a placeholder: the polygon phase reports it as an unresolved XLink.
-    let mut whole: Vec<Option<String>> = Vec::new();
+    let mut whole: Vec<Option<(String, String)>> = Vec::new();
     {
         let mut by_id: rustc_hash::FxHashSet<&str> = Default::default();
         visit_polys(obj, &mut |p| {
@@ -1657,13 +1662,17 @@ pub(crate) fn resolve_object(
             }
         });
         for href in hrefs {
+            // (local name, qualified name for messages) of the target
             let name = match href_id(href) {
-                Some(id) if by_id.contains(id) => Some("Polygon".to_string()),
+                Some(id) if by_id.contains(id) => Some(("Polygon".to_string(), "gml:Polygon".to_string())),
                 Some(id) => match local_ids.get(id) {
                     Some(e) => Some(e.clone()),
                     None => global.lookup(id)?,
                 }
-                .map(|e| String::from_utf8_lossy(name_at(reparse.src, e.bytes.start)).into_owned()),
+                .map(|e| {
+                    let at = e.bytes.start;
+                    (String::from_utf8_lossy(name_at(reparse.src, at)).into_owned(), String::from_utf8_lossy(qname_at(reparse.src, at)).into_owned())
+                }),
                 None => None,
             };
             whole.push(name);
@@ -1675,7 +1684,7 @@ pub(crate) fn resolve_object(
             if whole_surface_ref(g).is_none() {
                 return;
             }
-            let Some(Some(name)) = it.next() else { return };
+            let Some(Some((name, qname))) = it.next() else { return };
             let GeometryKind::Surfaces(v) = &mut g.kind else { return };
             if matches!(name.as_str(), "Solid" | "CompositeSolid" | "MultiSolid") {
                 let mut ph = v.pop().unwrap();
@@ -1687,7 +1696,7 @@ pub(crate) fn resolve_object(
                 let ph = v.pop().unwrap();
                 let href = ph.id.unwrap_or_default();
                 g.skipped_members.push(SkippedMember {
-                    reason: format!("xlink:href=\"{href}\" points to <{name}>, not a geometry"),
+                    reason: format!("xlink:href=\"{href}\" points to <{qname}>, not a geometry"),
                     href: Some(href),
                     span: ph.via_xlink.unwrap_or_default(),
                 });
@@ -1814,7 +1823,7 @@ pub(crate) fn resolve_object(
                 Some(e) => Some(e.clone()),
                 None => global.lookup(id)?,
             };
-            u.target = e.map(|e| String::from_utf8_lossy(name_at(reparse.src, e.bytes.start)).into_owned());
+            u.target = e.map(|e| String::from_utf8_lossy(qname_at(reparse.src, e.bytes.start)).into_owned());
         }
     }
     Ok(unresolved)

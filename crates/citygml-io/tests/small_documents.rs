@@ -381,7 +381,7 @@ fn xlink_to_a_city_object_says_what_it_points_to() {
     assert_eq!(
         got,
         [
-            ("#a", Some("w"), "WallSurface", Some("Building"), line_of("#a\""), "xlink:href=\"#a\" points to <Building>, not a geometry".to_string()),
+            ("#a", Some("w"), "WallSurface", Some("bldg:Building"), line_of("#a\""), "xlink:href=\"#a\" points to <bldg:Building>, not a geometry".to_string()),
             ("#gone", Some("w"), "WallSurface", None, line_of("#gone"), "xlink:href=\"#gone\" points to nothing in the document".to_string()),
         ]
     );
@@ -503,7 +503,7 @@ fn whole_surface_geometry_by_xlink_is_what_it_points_to() {
         assert_eq!(gs[3].polygons().len(), 0, "{version}");
         assert!(m.unresolved_xlinks.is_empty(), "{version}");
         let sk: Vec<_> = gs[3].skipped_members.iter().map(|s| (s.href.as_deref(), s.reason.as_str(), s.span.line)).collect();
-        assert_eq!(sk, [(Some("#a"), "xlink:href=\"#a\" points to <Building>, not a geometry", line("#a"))], "{version}");
+        assert_eq!(sk, [(Some("#a"), "xlink:href=\"#a\" points to <bldg:Building>, not a geometry", line("#a"))], "{version}");
         assert!(gs[..3].iter().all(|g| g.skipped_members.is_empty()));
         assert_eq!(m.all_polygons().len(), 8, "{version}: each polygon counted once, where defined");
 

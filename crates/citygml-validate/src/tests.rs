@@ -342,7 +342,7 @@ fn face_xlink_to_a_city_object_is_a_901_of_its_feature() {
     let line = composite_doc(members).lines().position(|l| l.contains("#other")).unwrap() + 1;
     assert_eq!(
         (x[0].feature.as_deref(), x[0].feature_type.as_str(), x[0].detail.as_str(), x[0].line),
-        (Some("b"), "Building", "xlink:href=\"#other\" points to <Building>, not a geometry", line)
+        (Some("b"), "Building", "xlink:href=\"#other\" points to <bldg:Building>, not a geometry", line)
     );
 }
 
