@@ -713,8 +713,6 @@ impl<'a> Parser<'a> {
         Ok(obj)
     }
 
-    /// `gml:boundedBy/gml:Envelope` → envelope (None when absent or not finite, e.g. the NaN
-    /// heights of empty NRW tiles).
     /// A `lodN…` geometry property that is only an `xlink:href` (ending at `end`): a
     /// placeholder geometry resolved with the other XLinks (a solid property (`lodNSolid`)
     /// becomes the solid it points to, resolved with the solidMember references; anything
@@ -740,6 +738,8 @@ impl<'a> Parser<'a> {
         })
     }
 
+    /// `gml:boundedBy/gml:Envelope` → envelope (None when absent or not finite, e.g. the NaN
+    /// heights of empty NRW tiles).
     pub fn parse_bounded_by(&mut self, t: &Tag<'_>) -> Result<Option<Envelope>, ReadError> {
         let mut corners: Vec<Vec<f64>> = Vec::new();
         let mut ok = true;
@@ -1566,6 +1566,15 @@ pub(crate) trait GlobalIds {
     fn lookup(&mut self, id: &str) -> Result<Option<IdEntry>, ReadError>;
 }
 
+/// The element `id` names: the current object's own id'd aggregates first, then the document's
+/// index (built on first use).
+fn find_id(local_ids: &FxMap<String, IdEntry>, global: &mut dyn GlobalIds, id: &str) -> Result<Option<IdEntry>, ReadError> {
+    match local_ids.get(id) {
+        Some(e) => Ok(Some(e.clone())),
+        None => global.lookup(id),
+    }
+}
+
 /// Context to re-parse an id'd element from its own bytes.
 pub(crate) struct Reparse<'s, 'a> {
     pub src: &'a [u8],
@@ -1665,11 +1674,7 @@ pub(crate) fn resolve_object(
             // (local name, qualified name for messages) of the target
             let name = match href_id(href) {
                 Some(id) if by_id.contains(id) => Some(("Polygon".to_string(), "gml:Polygon".to_string())),
-                Some(id) => match local_ids.get(id) {
-                    Some(e) => Some(e.clone()),
-                    None => global.lookup(id)?,
-                }
-                .map(|e| {
+                Some(id) => find_id(local_ids, global, id)?.map(|e| {
                     let at = e.bytes.start;
                     (String::from_utf8_lossy(name_at(reparse.src, at)).into_owned(), String::from_utf8_lossy(qname_at(reparse.src, at)).into_owned())
                 }),
@@ -1731,10 +1736,7 @@ pub(crate) fn resolve_object(
                 let href = ph.id.as_deref().unwrap_or("");
                 ctx.resolve_solid(href, &via, global, 0, &mut out, &mut unresolved)?;
                 let target = match href_id(href) {
-                    Some(id) => match local_ids.get(id) {
-                        Some(e) => Some(e.clone()),
-                        None => global.lookup(id)?,
-                    },
+                    Some(id) => find_id(local_ids, global, id)?,
                     None => None,
                 };
                 let name = target.map(|e| String::from_utf8_lossy(name_at(reparse.src, e.bytes.start)).into_owned());
@@ -1819,11 +1821,7 @@ pub(crate) fn resolve_object(
             u.feature_type = o.kind.clone();
         }
         if let Some(id) = href_id(&u.href) {
-            let e = match local_ids.get(id) {
-                Some(e) => Some(e.clone()),
-                None => global.lookup(id)?,
-            };
-            u.target = e.map(|e| String::from_utf8_lossy(qname_at(reparse.src, e.bytes.start)).into_owned());
+            u.target = find_id(local_ids, global, id)?.map(|e| String::from_utf8_lossy(qname_at(reparse.src, e.bytes.start)).into_owned());
         }
     }
     Ok(unresolved)
@@ -1871,10 +1869,7 @@ impl SolidCtx<'_, '_, '_, '_> {
             out.1.push(skip(format!("xlink:href=\"{href}\": reference cycle")));
             return Ok(());
         }
-        let entry = match self.local_ids.get(id) {
-            Some(e) => Some(e.clone()),
-            None => global.lookup(id)?,
-        };
+        let entry = find_id(self.local_ids, global, id)?;
         let Some(entry) = entry else {
             out.1.push(nowhere(unresolved));
             return Ok(());
@@ -1942,11 +1937,7 @@ fn resolve_one(
     if depth > 8 {
         return Ok(None); // reference cycle
     }
-    let entry = match local_ids.get(id) {
-        Some(e) => Some(e.clone()),
-        None => global.lookup(id)?,
-    };
-    let Some(entry) = entry else { return Ok(None) };
+    let Some(entry) = find_id(local_ids, global, id)? else { return Ok(None) };
     if !is_surface_like(name_at(reparse.src, entry.bytes.start)) {
         return Ok(None); // an id'd element that is not a geometry (the global index holds all ids)
     }
@@ -2042,7 +2033,10 @@ pub(crate) fn build_index(
                 stack.push((t.start, id, geometry, sem));
             }
             Ev::Empty(t) => {
-                if let Some(id) = t.attr_string(b"id") {
+                // an empty geometry (`<gml:Polygon gml:id="q"/>`) brings nothing in: left out,
+                // so a reference to it stays unresolved as before
+                let geometry = t.ns == Ns::Gml && is_surface_like(t.local());
+                if let (false, Some(id)) = (geometry, t.attr_string(b"id")) {
                     other(&mut map, id, t.start..p.pos());
                 }
             }

@@ -361,14 +361,15 @@ fn composite_solid_member_referenced_twice_is_kept_twice() {
 }
 
 /// A surface XLink whose id names a city object (not a geometry) brings nothing in and says
-/// what it points to, under the innermost object holding the reference (here a WallSurface of
+/// what it points to (an empty polygon in another building is not a target either), under the innermost object holding the reference (here a WallSurface of
 /// another building); one whose id names nothing says so, with the same owner.
 #[test]
 fn xlink_to_a_city_object_says_what_it_points_to() {
     let body = r##"<core:cityObjectMember><bldg:Building gml:id="a"/></core:cityObjectMember>
+<core:cityObjectMember><bldg:Building gml:id="e"><bldg:lod2MultiSurface><gml:MultiSurface><gml:surfaceMember><gml:Polygon gml:id="empty"/></gml:surfaceMember></gml:MultiSurface></bldg:lod2MultiSurface></bldg:Building></core:cityObjectMember>
 <core:cityObjectMember><bldg:Building gml:id="b"><bldg:boundedBy><bldg:WallSurface gml:id="w">
 <bldg:lod2MultiSurface><gml:MultiSurface><gml:surfaceMember xlink:href="#a"/>
-<gml:surfaceMember xlink:href="#gone"/></gml:MultiSurface></bldg:lod2MultiSurface>
+<gml:surfaceMember xlink:href="#gone"/><gml:surfaceMember xlink:href="#empty"/></gml:MultiSurface></bldg:lod2MultiSurface>
 </bldg:WallSurface></bldg:boundedBy></bldg:Building></core:cityObjectMember>"##;
     let src = doc("2.0", body);
     let line_of = |s: &str| src.lines().position(|l| l.contains(s)).unwrap() + 1;
@@ -383,6 +384,8 @@ fn xlink_to_a_city_object_says_what_it_points_to() {
         [
             ("#a", Some("w"), "WallSurface", Some("bldg:Building"), line_of("#a\""), "xlink:href=\"#a\" points to <bldg:Building>, not a geometry".to_string()),
             ("#gone", Some("w"), "WallSurface", None, line_of("#gone"), "xlink:href=\"#gone\" points to nothing in the document".to_string()),
+            // an empty polygon brings nothing in either: unresolved, not silently "resolved"
+            ("#empty", Some("w"), "WallSurface", None, line_of("#gone"), "xlink:href=\"#empty\" points to nothing in the document".to_string()),
         ]
     );
     assert!(m.all_polygons().is_empty(), "the building's polygons must not come in");

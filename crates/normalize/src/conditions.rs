@@ -154,13 +154,13 @@ pub fn semantic(m: &mut Popa3d, r: &Ranges, o: &ConditionOptions) -> ConditionCo
 /// (an NRW tile repeated 20×: 12 s). Only observations are added, so both stay valid throughout.
 pub fn semantic_many(m: &mut Popa3d, rs: &[Ranges], o: &ConditionOptions) -> Vec<ConditionCounts> {
     let inc = Incidence::new(m);
-    let pos: Vec<Option<[f64; 3]>> = (0..m.nodes.len()).map(|i| m.node_position(&inc, NodeId::from(i)).ok()).collect();
-    let xyz: Vec<[f64; 3]> = pos.iter().map(|p| p.unwrap_or([f64::NAN; 3])).collect();
+    // NaN where a node's planes do not meet in a point
+    let pos: Vec<[f64; 3]> = (0..m.nodes.len()).map(|i| m.node_position(&inc, NodeId::from(i)).unwrap_or([f64::NAN; 3])).collect();
     rs.iter()
         .map(|r| {
-            let computable = r.faces.clone().all(|f| inc.face_half_edges[f].iter().all(|&h| pos[m.half_edge_start(h).idx()].is_some()));
+            let computable = r.faces.clone().all(|f| inc.face_half_edges[f].iter().all(|&h| !pos[m.half_edge_start(h).idx()][0].is_nan()));
             if computable {
-                semantic_with(m, r, o, &inc, &xyz)
+                semantic_with(m, r, o, &inc, &pos)
             } else {
                 ConditionCounts::default()
             }

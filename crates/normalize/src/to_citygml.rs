@@ -204,14 +204,15 @@ fn ring_len(r: &Ring) -> usize {
 
 /// Write the adjusted model back into its template. Returns the new document and a report.
 pub fn to_citygml(model: &Popa3d, template: &[u8], city: &CityModel, opts: &BackOptions) -> Result<(Vec<u8>, BackReport), BackError> {
-    to_citygml_with(model, template, &Template::new(city), opts, true)
+    to_citygml_with(model, &Template::new(template, city), opts, true)
 }
 
-/// The template's polygons by gml:id (with the thematic surface that owns each), the XLinks
-/// to each and the document order: what [`to_citygml_with`] looks up. Built once per template,
-/// so writing many models back into one document (`geofit heal` checks every building on its
-/// own) does not scan the whole document per model.
+/// The template document (its bytes and the model read from them) with its polygons by gml:id
+/// (and the thematic surface that owns each), the XLinks to each and the document order: what
+/// [`to_citygml_with`] looks up. Built once per template, so writing many models back into one
+/// document (`geofit heal` checks every building on its own) does not scan it per model.
 pub struct Template<'a> {
+    bytes: &'a [u8],
     polys: HashMap<String, PolyInfo<'a>>,
     refs: HashMap<String, Vec<std::ops::Range<usize>>>,
     doc_order: Vec<String>,
@@ -220,7 +221,8 @@ pub struct Template<'a> {
 }
 
 impl<'a> Template<'a> {
-    pub fn new(city: &'a CityModel) -> Template<'a> {
+    /// `city` must be the model read from `bytes`.
+    pub fn new(bytes: &'a [u8], city: &'a CityModel) -> Template<'a> {
         let mut polys: HashMap<String, PolyInfo> = HashMap::new();
         let mut refs: HashMap<String, Vec<std::ops::Range<usize>>> = HashMap::new();
         let mut doc_order: Vec<String> = Vec::new();
@@ -233,15 +235,14 @@ impl<'a> Template<'a> {
                 surface_polys.entry(s.span.bytes.start).or_insert((s, Vec::new())).1.push(id.clone());
             }
         }
-        Template { polys, refs, doc_order, surface_polys }
+        Template { bytes, polys, refs, doc_order, surface_polys }
     }
 }
 
-/// [`to_citygml`] against a prepared [`Template`] of `template`'s document; with `write` false
-/// the edits are checked but no document is produced (the returned bytes are empty): a dry run
-/// for the report.
-pub fn to_citygml_with(model: &Popa3d, template: &[u8], tpl: &Template, opts: &BackOptions, write: bool) -> Result<(Vec<u8>, BackReport), BackError> {
-    let (polys, refs, doc_order) = (&tpl.polys, &tpl.refs, &tpl.doc_order);
+/// [`to_citygml`] against a prepared [`Template`]; with `write` false the edits are checked
+/// but no document is produced (the returned bytes are empty): a dry run for the report.
+pub fn to_citygml_with(model: &Popa3d, tpl: &Template, opts: &BackOptions, write: bool) -> Result<(Vec<u8>, BackReport), BackError> {
+    let (template, polys, refs, doc_order) = (tpl.bytes, &tpl.polys, &tpl.refs, &tpl.doc_order);
     let mut m = model.clone();
     // 1. Make near-coplanar planes on one normal exactly coplanar.
     let mut by_normal: BTreeMap<u32, Vec<usize>> = BTreeMap::new();

@@ -80,9 +80,8 @@ struct Report {
 }
 
 /// One building into `model` (normalized, no conditions yet): its element ranges.
-fn convert(city: &citygml_io::CityModel, b: &citygml_io::CityObject, model: &mut Popa3d, a: &Args) -> Result<Ranges, String> {
+fn convert(b: &citygml_io::CityObject, model: &mut Popa3d, a: &Args) -> Result<Ranges, String> {
     let tol = Tolerances { snap: a.snap, planarity: a.planarity, ..Tolerances::default() };
-    let _ = city;
     let soup = normalize::citygml::building_soup(b, a.lod).map_err(|r| r.to_string())?;
     let before = (model.faces.len(), model.planes.len(), model.normals.len(), model.parameters.len());
     normalize::normalize_into(model, &soup, &tol).map_err(|r| r.to_string())?;
@@ -120,7 +119,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     }
     let back_opts = super::popa3d2citygml::back_options(1e-3, 1e-6, 1e-6, args.no_merge)?;
     // the document's polygons indexed once, for every building's dry run and the final write
-    let template = Template::new(&city);
+    let template = Template::new(&bytes, &city);
     let progress = config.progress("heal", units.len() as u64);
     // Pass 1: each building alone (convert, adjust, back-transform dry run): keep the good ones.
     let mut good: Vec<usize> = Vec::new();
@@ -129,12 +128,12 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         let bid = b.id.clone().unwrap_or_else(|| format!("Building@{}:{}", b.span.line, b.span.column));
         progress.set(i as u64 + 1, &bid);
         let mut m = Popa3d::new(origin);
-        let res = convert(&city, b, &mut m, &args)
+        let res = convert(b, &mut m, &args)
             .map(|r| {
                 conditions::semantic(&mut m, &r, &condition_options(&args));
             })
             .and_then(|_| adjust_model(&mut m, &model_opts()).map(|_| ()).map_err(|e| e.to_string()))
-            .and_then(|_| to_citygml_with(&m, &bytes, &template, &back_opts, false).map_err(|e| e.to_string()))
+            .and_then(|_| to_citygml_with(&m, &template, &back_opts, false).map_err(|e| e.to_string()))
             .and_then(|(_, r)| if r.max_move > args.max_move { Err(format!("a vertex would move {:.3} m (> --max-move {})", r.max_move, args.max_move)) } else { Ok(()) });
         match res {
             Ok(()) => good.push(i),
@@ -148,7 +147,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     model.source = Some(SourceDocument { format: "citygml".into(), file: name.clone() });
     let mut ranges = Vec::with_capacity(good.len());
     for &i in &good {
-        ranges.push(convert(&city, units[i], &mut model, &args).map_err(|e| CliError::internal(format!("{name}: second conversion failed: {e}")))?);
+        ranges.push(convert(units[i], &mut model, &args).map_err(|e| CliError::internal(format!("{name}: second conversion failed: {e}")))?);
     }
     // conditions once all are in (the incidence and node positions are built once)
     conditions::semantic_many(&mut model, &ranges, &condition_options(&args));
@@ -156,7 +155,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         (bytes.clone(), BackReport::default())
     } else {
         adjust_model(&mut model, &model_opts()).map_err(|e| CliError::internal(format!("{name}: {e}")))?;
-        to_citygml_with(&model, &bytes, &template, &back_opts, true).map_err(|e| super::popa3d2citygml::back_error(&name, e))?
+        to_citygml_with(&model, &template, &back_opts, true).map_err(|e| super::popa3d2citygml::back_error(&name, e))?
     };
     if !config.quiet {
         super::popa3d2citygml::print_back(&back);
