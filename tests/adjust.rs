@@ -142,47 +142,7 @@ fn observe_then_readjust_reduces_unmeasured_priors() {
     assert!(j3["max_plane_shift"].as_f64().unwrap() < 1e-8, "{}", j3["max_plane_shift"]);
 }
 
-/// `geofit heal` on the NRW tiles: healed buildings are planar to 1 mm, no new validation error
-/// code, vertex moves reported and ≤ 5 cm.
-#[test]
-fn heal_nrw_tiles() {
-    let tiles = ["LoD2_32_324_5729_1_NW.gml", "LoD2_32_330_5731_1_NW.gml", "LoD2_32_327_5723_1_NW.gml", "LoD2_32_338_5724_1_NW.gml"];
-    let dir = common::tempdir();
-    for t in tiles {
-        let Some(src) = common::fixture(&format!("citygml/nrw/{t}")) else { continue };
-        let out = dir.path().join(t);
-        let rep = dir.path().join(format!("{t}.json"));
-        let h = run(&["heal", "-q", src.to_str().unwrap(), "-o", out.to_str().unwrap(), "--report", rep.to_str().unwrap()], None);
-        assert!(code(&h) == 0 || code(&h) == 1, "{}", String::from_utf8_lossy(&h.stderr));
-        let r: Value = serde_json::from_slice(&std::fs::read(&rep).unwrap()).unwrap();
-        let healed = r["healed"].as_u64().unwrap();
-        let total = r["buildings"].as_u64().unwrap();
-        assert!(healed * 2 >= total, "{t}: only {healed}/{total} healed");
-        let max_move = r["back"]["max_move"].as_f64().unwrap();
-        eprintln!("{t}: healed {healed}/{total}, vertex moves: largest {max_move:.4} m, mean {:.4} m", r["back"]["mean_move"].as_f64().unwrap());
-        assert!(max_move <= 0.05);
-        let skipped: Vec<String> = r["skipped"].as_array().unwrap().iter().map(|s| s["building"].as_str().unwrap().to_string()).collect();
-        let chk = gml_check(&out);
-        for (id, p) in chk["polygons"].as_object().unwrap() {
-            let b = p["building"].as_str().unwrap_or("");
-            if !skipped.iter().any(|s| s == b) {
-                assert!(p["planarity"].as_f64().unwrap() <= 1e-3, "{t}: polygon {id} of {b} is {} m off its plane", p["planarity"]);
-            }
-        }
-        let codes = |f: &Path| -> std::collections::BTreeSet<i64> {
-            let v = run(&["validate", "-q", "--json", f.to_str().unwrap()], None);
-            let j: Value = serde_json::from_slice(&v.stdout).unwrap_or(Value::Null);
-            let mut s: std::collections::BTreeSet<i64> =
-                j["geometry"]["findings"].as_array().map(|a| a.iter().filter_map(|x| x["code"].as_i64()).collect()).unwrap_or_default();
-            if j["xsd"]["valid"] == Value::Bool(false) {
-                s.insert(-1);
-            }
-            s
-        };
-        let (ci, co) = (codes(&src), codes(&out));
-        assert!(co.is_subset(&ci), "{t}: new validation codes {:?} (input {:?})", co.difference(&ci).collect::<Vec<_>>(), ci);
-    }
-}
+// `geofit heal` is tested in tests/heal.rs (before/after invariants on every fixture).
 
 // ------------------------------------------------------------------------------------------
 // Bad input: a message naming the element, a non-zero exit, never NaN.

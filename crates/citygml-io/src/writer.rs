@@ -78,9 +78,26 @@ pub fn format_coordinates(ring: &Ring, points: &[Point3]) -> String {
 /// keep its number of positions; a posList/coordinates ring may change it (a `count`
 /// attribute on the posList, rare in CityGML, is not updated).
 pub fn ring_edits(ring: &Ring, points: &[Point3]) -> Result<Vec<Edit>, WriteError> {
+    ring_edits_with(ring, points, |_, _, v| format!("{}", v + 0.0))
+}
+
+/// [`ring_edits`] with the text of each value chosen by `value(point index, coordinate index,
+/// value)`: a writer that keeps the input's number of decimals, or its unchanged tokens.
+pub fn ring_edits_with(ring: &Ring, points: &[Point3], value: impl Fn(usize, usize, f64) -> String) -> Result<Vec<Edit>, WriteError> {
     if points.iter().flatten().any(|v| !v.is_finite()) {
         return Err(WriteError::Coordinates("a new coordinate is not finite".into()));
     }
+    let dim = ring.srs_dimension as usize;
+    let point_text = |i: usize, p: &Point3, sep: char| -> String {
+        let mut s = String::new();
+        for (c, v) in p.iter().take(dim).enumerate() {
+            if c > 0 {
+                s.push(sep);
+            }
+            s.push_str(&value(i, c, *v));
+        }
+        s
+    };
     match ring.encoding {
         CoordEncoding::Pos => {
             if points.len() != ring.pos_spans.len() {
@@ -94,16 +111,14 @@ pub fn ring_edits(ring: &Ring, points: &[Point3]) -> Result<Vec<Edit>, WriteErro
                 .pos_spans
                 .iter()
                 .zip(points)
-                .map(|(sp, p)| {
-                    let mut s = String::new();
-                    push_point(&mut s, p, ring.srs_dimension, ' ');
-                    Edit { bytes: sp.bytes.clone(), replacement: s.into_bytes() }
-                })
+                .enumerate()
+                .map(|(i, (sp, p))| Edit { bytes: sp.bytes.clone(), replacement: point_text(i, p, ' ').into_bytes() })
                 .collect())
         }
-        _ => Ok(vec![Edit {
-            bytes: ring.text_span.bytes.clone(),
-            replacement: format_coordinates(ring, points).into_bytes(),
-        }]),
+        CoordEncoding::PosList | CoordEncoding::Coordinates => {
+            let value_sep = if ring.encoding == CoordEncoding::Coordinates { ',' } else { ' ' };
+            let text: Vec<String> = points.iter().enumerate().map(|(i, p)| point_text(i, p, value_sep)).collect();
+            Ok(vec![Edit { bytes: ring.text_span.bytes.clone(), replacement: text.join(" ").into_bytes() }])
+        }
     }
 }

@@ -44,7 +44,8 @@ impl Snapper {
         for dx in -1..=1 {
             for dy in -1..=1 {
                 for dz in -1..=1 {
-                    if let Some(ids) = self.grid.get(&(cx + dx, cy + dy, cz + dz)) {
+                    // wrapping: a cell index of an absurd coordinate (1e308) saturates at i64::MAX
+                    if let Some(ids) = self.grid.get(&(cx.wrapping_add(dx), cy.wrapping_add(dy), cz.wrapping_add(dz))) {
                         for &id in ids {
                             let d2 = (self.points[id as usize] - q).norm_squared();
                             let hit = if self.tol > 0.0 { d2 <= tol2 } else { d2 == 0.0 };

@@ -16,7 +16,7 @@ pub mod tritri;
 pub mod xsd;
 
 pub use codes::ErrorCode;
-pub use model::{add_unresolved_xlinks, sort_findings, validate_model, validate_object, validate_objects, Finding};
+pub use model::{add_unresolved_xlinks, sort_findings, validate_model, validate_object, validate_objects, validate_objects_only, Finding};
 pub use polygon::PolygonInput;
 
 /// Tolerances, with val3dity's defaults.

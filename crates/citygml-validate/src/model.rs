@@ -178,6 +178,15 @@ pub fn validate_object(top: &CityObject, opts: &Options) -> Vec<Finding> {
     v
 }
 
+/// Validates the geometries of exactly these objects (no walking into their children): one
+/// conversion unit of a tool that changes geometry building by building (`geofit heal`
+/// compares a unit's findings before and after).
+pub fn validate_objects_only(objects: &[&CityObject], opts: &Options) -> Vec<Finding> {
+    let mut v: Vec<Finding> = objects.iter().flat_map(|o| o.geometries.iter().flat_map(|g| check_geometry(o, g, opts))).collect();
+    sort_findings(&mut v);
+    v
+}
+
 /// Validates top-level objects in parallel; findings come back sorted by position in the
 /// document (see [`sort_findings`]).
 pub fn validate_objects(objects: &[CityObject], opts: &Options) -> Vec<Finding> {

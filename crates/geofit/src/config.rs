@@ -89,6 +89,22 @@ impl Output {
         }
     }
 
+    /// Checks before the work starts that a file output can be created: its directory exists.
+    pub fn check_target(&self) -> Result<(), CliError> {
+        let Output::Path(p) = self else { return Ok(()) };
+        let dir = match p.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d,
+            _ => Path::new("."),
+        };
+        if !dir.is_dir() {
+            return Err(CliError::usage(format!("-o {}: the directory {} does not exist", p.display(), dir.display())));
+        }
+        if p.is_dir() {
+            return Err(CliError::usage(format!("-o {}: is a directory", p.display())));
+        }
+        Ok(())
+    }
+
     /// The lower-case file extension, used to pick a format (`out.glb` → `glb`).
     pub fn extension(&self) -> Option<String> {
         self.path()

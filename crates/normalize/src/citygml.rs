@@ -32,8 +32,9 @@ pub fn local_origin(model: &CityModel) -> [f64; 3] {
     [0, 1, 2].map(|k| ((e.min[k] + e.max[k]) / 2.0).floor())
 }
 
-/// The objects of a building that belong to it and not to a nested BuildingPart.
-fn own_objects(b: &CityObject) -> Vec<&CityObject> {
+/// The objects of a building that belong to it and not to a nested BuildingPart (the building
+/// first): what one conversion unit reads, validates and writes.
+pub fn own_objects(b: &CityObject) -> Vec<&CityObject> {
     let mut out = vec![b];
     for c in &b.children {
         if !is_building(c) {
@@ -51,6 +52,16 @@ fn own_objects_rec(o: &CityObject) -> Vec<&CityObject> {
         }
     }
     out
+}
+
+/// The provenance key of a polygon: its gml:id, or `@line:column` of its `<gml:Polygon>` start
+/// tag when it has none (unique in the document and found again from the same template by
+/// `to_citygml`, so polygons without ids — common in real city models — can be written back).
+pub fn polygon_key(p: &Polygon) -> String {
+    match &p.id {
+        Some(id) => id.clone(),
+        None => format!("@{}:{}", p.span.line, p.span.column),
+    }
 }
 
 /// Whether a building object has geometry of its own (else it is only a container of parts).
@@ -115,7 +126,7 @@ pub fn building_soup(b: &CityObject, max_lod: u8) -> Result<Soup, Rejection> {
         multisurface_only: solid_geom.is_none(),
     };
     for (n, p) in polys.iter().enumerate() {
-        let pid = p.id.clone().unwrap_or_else(|| format!("#{n}"));
+        let pid = polygon_key(p);
         let mut rings = Vec::new();
         let mut srcs = Vec::new();
         for (ri, r) in std::iter::once(&p.exterior).chain(p.interiors.iter()).enumerate() {

@@ -17,9 +17,12 @@
 //!    of them (document order); the openings (windows, doors) of a thematic surface that lost all its
 //!    polygons to the merge are moved to the surface that keeps the merged polygon.
 //!
-//! Limitations (stated, not hidden): polygons without gml:id (`#n` provenance) cannot be mapped
-//! back and are reported as a provenance mismatch; merged polygons are written as `gml:posList`
-//! rings.
+//! Polygons without gml:id are addressed by the line and column of their start tag
+//! ([`crate::citygml::polygon_key`]). Rewritten numbers keep the text of the input where the
+//! value did not change at the input's number of decimals, and are otherwise written with the
+//! ring's number of decimals (or `BackOptions::precision`). Deleted elements take their now
+//! blank lines with them. Limitation (stated, not hidden): merged polygons are written as
+//! `gml:posList` rings.
 
 use citygml_io::{CityModel, CityObject, Edit, Polygon, Ring};
 use popa3d_model::{FaceId, Incidence, NodeId, Popa3d, VertexSource};
@@ -37,11 +40,13 @@ pub struct BackOptions {
     pub area_tolerance: f64,
     /// Merge touching coplanar polygons of the same semantic type.
     pub merge: bool,
+    /// Decimals of rewritten coordinates; `None`: the input ring's own number of decimals.
+    pub precision: Option<usize>,
 }
 
 impl Default for BackOptions {
     fn default() -> Self {
-        BackOptions { coplanar_tolerance: 1e-3, collapse_tolerance: 1e-6, area_tolerance: 1e-6, merge: true }
+        BackOptions { coplanar_tolerance: 1e-3, collapse_tolerance: 1e-6, area_tolerance: 1e-6, merge: true, precision: None }
     }
 }
 
@@ -64,6 +69,8 @@ pub struct BackReport {
     pub vertices_written: usize,
     /// Template vertices without a popa3d node (merged by the normalization's snap).
     pub vertices_dropped: usize,
+    /// Largest vertex move per building (gml:id of the Building/BuildingPart, m).
+    pub max_move_by_building: BTreeMap<String, f64>,
 }
 
 /// Why the model cannot be written back into the template.
@@ -78,6 +85,8 @@ pub enum BackError {
 }
 
 type P3 = [f64; 3];
+/// A rewritten ring: each point with its index in the template ring.
+type IndexedRing = Vec<(P3, usize)>;
 
 fn sub(a: P3, b: P3) -> P3 {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
@@ -89,6 +98,21 @@ fn dist(a: P3, b: P3) -> f64 {
 fn newell_area(pts: &[P3]) -> f64 {
     let n = popa3d_model::topology::newell(pts);
     0.5 * (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt()
+}
+
+/// Remove consecutive duplicates (cyclically) within `tol`, keeping the input index of each kept
+/// point.
+fn collapse_indexed(pts: Vec<(P3, usize)>, tol: f64) -> Vec<(P3, usize)> {
+    let mut out: Vec<(P3, usize)> = Vec::with_capacity(pts.len());
+    for p in pts {
+        if out.last().is_none_or(|q| dist(q.0, p.0) > tol) {
+            out.push(p);
+        }
+    }
+    while out.len() > 1 && dist(out[0].0, out.last().unwrap().0) <= tol {
+        out.pop();
+    }
+    out
 }
 
 /// Remove consecutive duplicates (cyclically) within `tol`.
@@ -105,33 +129,70 @@ fn collapse(pts: Vec<P3>, tol: f64) -> Vec<P3> {
     out
 }
 
-/// The enclosing element of a span: from the `<` of the nearest start tag before `span.start`
-/// to the `>` of the nearest end tag after `span.end` (whitespace-only gaps assumed, as in GML
-/// property wrappers like `<gml:interior>` or `<bldg:opening>`).
+/// The enclosing element of a span: from the `<` of the start tag right before `start` to the
+/// `>` of the end tag right after `end`, with only whitespace and comments between (GML property
+/// wrappers like `<gml:interior>`, `<bldg:opening>` or `<gml:surfaceMember>`). `None` when text
+/// or another element stands between.
 fn enclosing(src: &[u8], start: usize, end: usize) -> Option<std::ops::Range<usize>> {
     let mut s = start;
-    while s > 0 {
-        s -= 1;
-        if src[s] == b'<' {
-            break;
+    loop {
+        while s > 0 && src[s - 1].is_ascii_whitespace() {
+            s -= 1;
         }
-        if !src[s].is_ascii_whitespace() && src[s] != b'>' {
-            // text between: not a pure wrapper
+        if s >= 3 && &src[s - 3..s] == b"-->" {
+            s = memrfind(&src[..s - 3], b"<!--")?;
+            continue;
         }
+        break;
     }
-    if src.get(s) != Some(&b'<') || src.get(s + 1) == Some(&b'/') {
+    if s == 0 || src[s - 1] != b'>' || (s >= 2 && src[s - 2] == b'/') {
         return None;
     }
-    // `s` is the start of the previous tag; it must be a start tag that ends right before `start`
+    let open = src[..s].iter().rposition(|&c| c == b'<')?;
+    if matches!(src.get(open + 1), Some(b'/') | Some(b'!') | Some(b'?')) {
+        return None;
+    }
     let mut e = end;
-    while e < src.len() && src[e].is_ascii_whitespace() {
-        e += 1;
+    loop {
+        while e < src.len() && src[e].is_ascii_whitespace() {
+            e += 1;
+        }
+        if src[e..].starts_with(b"<!--") {
+            e += find(&src[e..], b"-->")? + 3;
+            continue;
+        }
+        break;
     }
     if src.get(e) != Some(&b'<') || src.get(e + 1) != Some(&b'/') {
         return None;
     }
     let close = src[e..].iter().position(|&c| c == b'>')? + e + 1;
-    Some(s..close)
+    Some(open..close)
+}
+
+fn find(hay: &[u8], needle: &[u8]) -> Option<usize> {
+    hay.windows(needle.len()).position(|w| w == needle)
+}
+
+fn memrfind(hay: &[u8], needle: &[u8]) -> Option<usize> {
+    hay.windows(needle.len()).rposition(|w| w == needle)
+}
+
+/// What to delete for an XLink reference to a removed polygon: the referencing property itself,
+/// or, when it is the `baseSurface` of a `gml:OrientableSurface`, the member property holding
+/// that OrientableSurface (an OrientableSurface without base surface is not schema-valid).
+fn xlink_deletion(src: &[u8], r: std::ops::Range<usize>) -> std::ops::Range<usize> {
+    let Some(parent) = enclosing(src, r.start, r.end) else { return r };
+    if !src[parent.start..].starts_with(b"<") || !element_name(src, parent.start).ends_with("OrientableSurface") {
+        return r;
+    }
+    enclosing(src, parent.start, parent.end).unwrap_or(parent)
+}
+
+/// The qualified name of the element whose start tag begins at `at`.
+fn element_name(src: &[u8], at: usize) -> String {
+    let tag: Vec<u8> = src[at + 1..].iter().take_while(|c| !c.is_ascii_whitespace() && **c != b'>' && **c != b'/').copied().collect();
+    String::from_utf8_lossy(&tag).into_owned()
 }
 
 /// Namespace prefix of the element starting at `at` (`<gml:Polygon` → `gml:`; none → empty).
@@ -144,15 +205,74 @@ fn prefix_at(src: &[u8], at: usize) -> String {
     }
 }
 
-fn fmt_points(pts: &[P3], dim: u8) -> String {
-    use std::fmt::Write as _;
+/// A whole `gml:Polygon` in the prefix, ids and number format of the template polygon `kp`
+/// it replaces, with `outer` and `holes` as posList rings.
+fn polygon_text(template: &[u8], kp: &Polygon, outer: &[P3], holes: &[Vec<P3>], precision: Option<usize>) -> String {
+    let px = prefix_at(template, kp.span.bytes.start);
+    let dim = kp.exterior.srs_dimension.max(3);
+    let text = RingText::of(template, &kp.exterior, precision);
+    let id_attr = |id: Option<&String>| id.map(|i| format!(" {px}id=\"{i}\"")).unwrap_or_default();
+    let ring = |r: &[P3], id: Option<&String>| format!("<{px}LinearRing{}><{px}posList srsDimension=\"{dim}\">{}</{px}posList></{px}LinearRing>", id_attr(id), fmt_points(r, &[], dim, &text));
+    let mut t = format!("<{px}Polygon{}><{px}exterior>{}</{px}exterior>", id_attr(kp.id.as_ref()), ring(outer, kp.exterior.id.as_ref()));
+    for (k, h) in holes.iter().enumerate() {
+        t.push_str(&format!("<{px}interior>{}</{px}interior>", ring(h, kp.interiors.get(k).and_then(|r| r.id.as_ref()))));
+    }
+    t.push_str(&format!("</{px}Polygon>"));
+    t
+}
+
+/// Polygons without a face of their own (absorbed by normalization into a coplanar neighbour's
+/// face), grouped by the polygon whose face holds all their remaining vertices; a face of the
+/// same semantic type is preferred. Host polygons in document order.
+fn absorbed_polygons(
+    m: &Popa3d,
+    inc: &Incidence,
+    pos: &[P3],
+    mapped: &[String],
+    face_of: &HashMap<String, FaceId>,
+    vmap: &HashMap<(String, u32, u32), NodeId>,
+    polys: &HashMap<String, PolyInfo>,
+) -> Vec<(String, Vec<String>)> {
+    let mut nodes_of: HashMap<&String, BTreeSet<NodeId>> = HashMap::new();
+    for ((p, _, _), n) in vmap {
+        nodes_of.entry(p).or_default().insert(*n);
+    }
+    let mut hosts: BTreeMap<usize, (String, Vec<String>)> = BTreeMap::new();
+    let rank: HashMap<&String, usize> = mapped.iter().enumerate().map(|(i, id)| (id, i)).collect();
+    for q in mapped.iter().filter(|q| !face_of.contains_key(*q)) {
+        let Some(nodes) = nodes_of.get(q) else { continue };
+        let Some(first) = nodes.iter().next() else { continue };
+        let sem = polys[q].poly.semantic;
+        let host = inc
+            .node_faces(m, *first)
+            .into_iter()
+            .filter_map(|f| m.face(f).source.as_ref().map(|s| (f, s.polygon.clone())))
+            .filter(|(_, p)| polys.contains_key(p))
+            .filter(|(f, _)| {
+                let on: BTreeSet<NodeId> = m.face_loops(inc, *f, pos).unwrap_or_default().into_iter().flatten().collect();
+                nodes.is_subset(&on)
+            })
+            .max_by_key(|(_, p)| polys[p].poly.semantic == sem);
+        if let Some((_, p)) = host {
+            let r = rank.get(&p).copied().unwrap_or(usize::MAX);
+            hosts.entry(r).or_insert_with(|| (p, Vec::new())).1.push(q.clone());
+        }
+    }
+    hosts.into_values().collect()
+}
+
+/// A closed posList text of `pts` (the first point repeated at the end); `src[k]` is the input
+/// index of point k in the ring `text` was read from, when it has one.
+fn fmt_points(pts: &[P3], src: &[Option<usize>], dim: u8, text: &RingText) -> String {
     let mut s = String::new();
-    for (i, p) in pts.iter().chain(std::iter::once(&pts[0])).enumerate() {
+    let n = pts.len();
+    for i in 0..=n {
+        let (p, at) = (&pts[i % n], src.get(i % n).copied().flatten());
         for (k, v) in p.iter().take(dim as usize).enumerate() {
             if i > 0 || k > 0 {
                 s.push(' ');
             }
-            let _ = write!(s, "{}", v + 0.0);
+            s.push_str(&text.value(at, k, *v));
         }
     }
     s
@@ -162,26 +282,129 @@ struct PolyInfo<'a> {
     poly: &'a Polygon,
     /// Thematic surface (boundary surface / opening) owning the polygon.
     surface: Option<&'a CityObject>,
+    /// The nearest Building / BuildingPart holding the polygon.
+    building: Option<&'a CityObject>,
 }
 
-fn collect_polys<'a>(o: &'a CityObject, surface: Option<&'a CityObject>, out: &mut HashMap<String, PolyInfo<'a>>, refs: &mut HashMap<String, Vec<std::ops::Range<usize>>>, order: &mut Vec<String>) {
+/// Where the polygons of a template go while it is indexed.
+#[derive(Default)]
+struct PolyIndex<'a> {
+    polys: HashMap<String, PolyInfo<'a>>,
+    refs: HashMap<String, Vec<XLinkUse>>,
+    order: Vec<String>,
+}
+
+/// One XLink reference to a polygon: the referencing property's bytes and the start byte of the
+/// Building / BuildingPart holding it (its identity).
+#[derive(Clone)]
+struct XLinkUse {
+    bytes: std::ops::Range<usize>,
+    building: Option<usize>,
+}
+
+fn collect_polys<'a>(o: &'a CityObject, surface: Option<&'a CityObject>, building: Option<&'a CityObject>, ix: &mut PolyIndex<'a>) {
     let surf = if citygml_io::SurfaceType::from_local_name(&o.kind).is_some() { Some(o) } else { surface };
+    let building = if o.kind == "Building" || o.kind == "BuildingPart" { Some(o) } else { building };
     for g in &o.geometries {
         for p in g.polygons() {
-            let Some(id) = &p.id else { continue };
-            match &p.via_xlink {
-                Some(r) => refs.entry(id.clone()).or_default().push(r.bytes.clone()),
-                None => {
-                    if !out.contains_key(id) {
-                        order.push(id.clone());
+            match (&p.via_xlink, &p.id) {
+                (Some(r), Some(id)) => ix.refs.entry(id.clone()).or_default().push(XLinkUse { bytes: r.bytes.clone(), building: building.map(|b| b.span.bytes.start) }),
+                (Some(_), None) => {}
+                (None, _) => {
+                    let key = crate::citygml::polygon_key(p);
+                    if !ix.polys.contains_key(&key) {
+                        ix.order.push(key.clone());
                     }
-                    out.insert(id.clone(), PolyInfo { poly: p, surface: surf });
+                    ix.polys.insert(key, PolyInfo { poly: p, surface: surf, building });
                 }
             }
         }
     }
     for c in &o.children {
-        collect_polys(c, surf, out, refs, order);
+        collect_polys(c, surf, building, ix);
+    }
+}
+
+/// The gml:id of a building (or its position when it has none), as reports name it.
+fn building_name(b: Option<&CityObject>) -> String {
+    match b {
+        Some(b) => b.id.clone().unwrap_or_else(|| format!("{}@{}:{}", b.kind, b.span.line, b.span.column)),
+        None => "(no building)".into(),
+    }
+}
+
+/// Widens a deletion to whole lines when it is alone on its lines (only whitespace before it
+/// on its first line and after it on its last), so removed elements leave no blank lines.
+fn whole_lines(src: &[u8], r: std::ops::Range<usize>) -> std::ops::Range<usize> {
+    let mut s = r.start;
+    while s > 0 && (src[s - 1] == b' ' || src[s - 1] == b'\t') {
+        s -= 1;
+    }
+    let mut e = r.end;
+    while e < src.len() && (src[e] == b' ' || src[e] == b'\t' || src[e] == b'\r') {
+        e += 1;
+    }
+    let line_start = s == 0 || src[s - 1] == b'\n';
+    if line_start && e < src.len() && src[e] == b'\n' {
+        s..e + 1
+    } else {
+        r
+    }
+}
+
+/// Number of decimals of a plain decimal number token (`12.345` → 3, `12` → 0); `None` for
+/// exponent notation or anything else.
+fn decimals(tok: &str) -> Option<usize> {
+    let t = tok.strip_prefix(['-', '+']).unwrap_or(tok);
+    let (int, frac) = t.split_once('.').unwrap_or((t, ""));
+    if int.bytes().all(|c| c.is_ascii_digit()) && frac.bytes().all(|c| c.is_ascii_digit()) && !(int.is_empty() && frac.is_empty()) {
+        Some(frac.len())
+    } else {
+        None
+    }
+}
+
+/// How rewritten coordinates of one ring are spelled: the input's tokens (one per value, in
+/// order) and the ring's number of decimals.
+struct RingText<'t> {
+    tokens: Vec<&'t str>,
+    /// Values per position in the input text.
+    dim: usize,
+    decimals: Option<usize>,
+}
+
+impl<'t> RingText<'t> {
+    fn of(src: &'t [u8], r: &Ring, precision: Option<usize>) -> RingText<'t> {
+        let spans: Vec<std::ops::Range<usize>> = match r.encoding {
+            citygml_io::CoordEncoding::Pos => r.pos_spans.iter().map(|s| s.bytes.clone()).collect(),
+            _ => vec![r.text_span.bytes.clone()],
+        };
+        let mut tokens = Vec::new();
+        for sp in spans {
+            let text = std::str::from_utf8(src.get(sp).unwrap_or_default()).unwrap_or("");
+            tokens.extend(text.split(|c: char| c.is_ascii_whitespace() || c == ',').filter(|t| !t.is_empty()));
+        }
+        let decimals = precision.or_else(|| tokens.iter().map(|t| decimals(t)).try_fold(0usize, |a, d| d.map(|d| a.max(d))));
+        RingText { tokens, dim: r.srs_dimension.max(1) as usize, decimals }
+    }
+
+    /// The text of value `c` of point `p` (an index into the input ring, `None` for a new
+    /// point): the input's own token when the value is unchanged at its number of decimals.
+    fn value(&self, p: Option<usize>, c: usize, v: f64) -> String {
+        if let Some(tok) = p.filter(|_| c < self.dim).and_then(|p| self.tokens.get(p * self.dim + c)) {
+            if let (Some(d), Ok(old)) = (decimals(tok), tok.parse::<f64>()) {
+                if format!("{:.*}", d, v).parse::<f64>().ok() == Some(old) {
+                    return tok.to_string();
+                }
+            }
+        }
+        match self.decimals {
+            Some(d) => {
+                let t = format!("{:.*}", d, v);
+                if t.parse::<f64>().ok() == Some(0.0) { format!("{:.*}", d, 0.0) } else { t }
+            }
+            None => format!("{}", v + 0.0),
+        }
     }
 }
 
@@ -204,44 +427,57 @@ fn ring_len(r: &Ring) -> usize {
 
 /// Write the adjusted model back into its template. Returns the new document and a report.
 pub fn to_citygml(model: &Popa3d, template: &[u8], city: &CityModel, opts: &BackOptions) -> Result<(Vec<u8>, BackReport), BackError> {
-    to_citygml_with(model, &Template::new(template, city), opts, true)
+    to_citygml_with(model, &Template::new(template, city), opts)
 }
 
-/// The template document (its bytes and the model read from them) with its polygons by gml:id
-/// (and the thematic surface that owns each), the XLinks to each and the document order: what
-/// [`to_citygml_with`] looks up. Built once per template, so writing many models back into one
-/// document (`geofit heal` checks every building on its own) does not scan it per model.
+/// The template document (its bytes and the model read from them) with its polygons by key
+/// (gml:id or position, [`crate::citygml::polygon_key`]; with the thematic surface and building
+/// that own each), the XLinks to each and the document order: what [`back_edits`] looks up.
+/// Built once per template, so writing many models back into one document (`geofit heal`
+/// writes every building on its own) does not scan it per model.
 pub struct Template<'a> {
     bytes: &'a [u8],
     polys: HashMap<String, PolyInfo<'a>>,
-    refs: HashMap<String, Vec<std::ops::Range<usize>>>,
+    refs: HashMap<String, Vec<XLinkUse>>,
     doc_order: Vec<String>,
-    /// Polygon ids per thematic surface (keyed by the surface's start byte).
+    /// Polygon keys per thematic surface (keyed by the surface's start byte).
     surface_polys: HashMap<usize, (&'a CityObject, Vec<String>)>,
 }
 
 impl<'a> Template<'a> {
     /// `city` must be the model read from `bytes`.
     pub fn new(bytes: &'a [u8], city: &'a CityModel) -> Template<'a> {
-        let mut polys: HashMap<String, PolyInfo> = HashMap::new();
-        let mut refs: HashMap<String, Vec<std::ops::Range<usize>>> = HashMap::new();
-        let mut doc_order: Vec<String> = Vec::new();
+        let mut ix = PolyIndex::default();
         for o in &city.objects {
-            collect_polys(o, None, &mut polys, &mut refs, &mut doc_order);
+            collect_polys(o, None, None, &mut ix);
         }
         let mut surface_polys: HashMap<usize, (&CityObject, Vec<String>)> = HashMap::new();
-        for id in &doc_order {
-            if let Some(s) = polys[id].surface {
+        for id in &ix.order {
+            if let Some(s) = ix.polys[id].surface {
                 surface_polys.entry(s.span.bytes.start).or_insert((s, Vec::new())).1.push(id.clone());
             }
         }
-        Template { bytes, polys, refs, doc_order, surface_polys }
+        Template { bytes, polys: ix.polys, refs: ix.refs, doc_order: ix.order, surface_polys }
+    }
+
+    /// The template with `edits` applied (they must not overlap).
+    pub fn apply(&self, edits: &[Edit]) -> Result<Vec<u8>, BackError> {
+        let mut out = Vec::with_capacity(self.bytes.len());
+        citygml_io::write_with_edits(self.bytes, edits, &mut out).map_err(|e| BackError::Write(e.to_string()))?;
+        Ok(out)
     }
 }
 
-/// [`to_citygml`] against a prepared [`Template`]; with `write` false the edits are checked
-/// but no document is produced (the returned bytes are empty): a dry run for the report.
-pub fn to_citygml_with(model: &Popa3d, tpl: &Template, opts: &BackOptions, write: bool) -> Result<(Vec<u8>, BackReport), BackError> {
+/// [`back_edits`] applied to the template: the new document and the report.
+pub fn to_citygml_with(model: &Popa3d, tpl: &Template, opts: &BackOptions) -> Result<(Vec<u8>, BackReport), BackError> {
+    let (edits, report) = back_edits(model, tpl, opts)?;
+    Ok((tpl.apply(&edits)?, report))
+}
+
+/// The edits that write the adjusted model back into its template, and the report. Edits touch
+/// only the polygons the model maps to (and XLinks to polygons it removes), so the edits of
+/// models of different buildings can be applied together or left out one building at a time.
+pub fn back_edits(model: &Popa3d, tpl: &Template, opts: &BackOptions) -> Result<(Vec<Edit>, BackReport), BackError> {
     let (template, polys, refs, doc_order) = (tpl.bytes, &tpl.polys, &tpl.refs, &tpl.doc_order);
     let mut m = model.clone();
     // 1. Make near-coplanar planes on one normal exactly coplanar.
@@ -346,11 +582,12 @@ pub fn to_citygml_with(model: &Popa3d, tpl: &Template, opts: &BackOptions, write
     let mapped_set: HashSet<&String> = vmap.keys().map(|k| &k.0).collect();
     let mapped: Vec<String> = doc_order.iter().filter(|id| mapped_set.contains(id)).cloned().collect();
     let mut report = BackReport { polygons_mapped: mapped.len(), ..Default::default() };
-    // New rings per mapped polygon.
-    let mut new_rings: HashMap<String, Vec<Option<Vec<P3>>>> = HashMap::new();
+    // New rings per mapped polygon, each point with its index in the template ring.
+    let mut new_rings: HashMap<String, Vec<Option<IndexedRing>>> = HashMap::new();
     let (mut moves, mut nmoves, mut maxmove) = (0.0, 0usize, 0.0f64);
     for id in &mapped {
         let p = polys[id].poly;
+        let bname = building_name(polys[id].building);
         let mut rings = Vec::new();
         for (ri, r) in std::iter::once(&p.exterior).chain(p.interiors.iter()).enumerate() {
             let n = ring_len(r);
@@ -364,13 +601,19 @@ pub fn to_citygml_with(model: &Popa3d, tpl: &Template, opts: &BackOptions, write
                 };
                 let q = pos[node.idx()];
                 let d = dist(q, r.points[k]);
+                if !d.is_finite() {
+                    return Err(BackError::Geometry { element: format!("polygon `{id}` of {bname}"), message: format!("vertex {k} of ring {ri} would move by {d} m (a coordinate is not finite or out of range)") });
+                }
                 moves += d;
                 nmoves += 1;
                 maxmove = maxmove.max(d);
-                pts.push(q);
+                let e = report.max_move_by_building.entry(bname.clone()).or_insert(0.0);
+                *e = e.max(d);
+                pts.push((q, k));
             }
-            let c = collapse(pts, opts.collapse_tolerance);
-            rings.push(if c.len() >= 3 && newell_area(&c) >= opts.area_tolerance { Some(c) } else { None });
+            let c = collapse_indexed(pts, opts.collapse_tolerance);
+            let area_ok = c.len() >= 3 && newell_area(&c.iter().map(|x| x.0).collect::<Vec<_>>()) >= opts.area_tolerance;
+            rings.push(if area_ok { Some(c) } else { None });
         }
         new_rings.insert(id.clone(), rings);
     }
@@ -395,6 +638,41 @@ pub fn to_citygml_with(model: &Popa3d, tpl: &Template, opts: &BackOptions, write
     }
     let mut replaced: HashMap<String, String> = HashMap::new(); // kept id → new polygon text
     let mut merged_away: HashMap<String, String> = HashMap::new(); // removed id → kept id
+    // Polygons that normalization merged into the face of another polygon (GA01 repair, spec
+    // §7.4: coplanar neighbours whose common edge left a node without three planes) have
+    // vertices in the model but no face of their own. Writing them vertex by vertex would drop
+    // them as degenerate and lose their surface; instead the host face is written whole into its
+    // own polygon and they are merged away into it.
+    // Polygons referenced (XLink) from outside their own building: removing or merging them
+    // would change another building, so they keep their own polygon.
+    let external: HashSet<&String> = mapped
+        .iter()
+        .filter(|id| {
+            let own = polys[*id].building.map(|b| b.span.bytes.start);
+            refs.get(*id).is_some_and(|rs| rs.iter().any(|r| r.building != own))
+        })
+        .collect();
+    for (host, guests) in absorbed_polygons(&m, &inc, &pos, &mapped, &face_of, &vmap, polys) {
+        if guests.iter().any(|g| external.contains(g)) {
+            continue;
+        }
+        let f = face_of[&host];
+        let Some(loops) = m.face_loops(&inc, f, &pos) else { continue };
+        let mut rings: Vec<Vec<P3>> = loops.iter().map(|l| collapse(l.iter().map(|n| pos[n.idx()]).collect(), opts.collapse_tolerance)).collect();
+        if rings.is_empty() || rings[0].len() < 3 {
+            continue;
+        }
+        let outer = rings.remove(0);
+        rings.retain(|r| r.len() >= 3 && newell_area(r) >= opts.area_tolerance);
+        replaced.insert(host.clone(), polygon_text(template, polys[&host].poly, &outer, &rings, opts.precision));
+        removed.remove(&host);
+        for g in &guests {
+            removed.remove(g);
+            merged_away.insert(g.clone(), host.clone());
+        }
+        report.removed_degenerate.retain(|r| r != &host && !guests.contains(r));
+        report.merged.push((host, guests));
+    }
     if opts.merge {
         // canonical nodes by position
         let mut canon: Vec<usize> = (0..pos.len()).collect();
@@ -419,7 +697,7 @@ pub fn to_citygml_with(model: &Popa3d, tpl: &Template, opts: &BackOptions, write
         }
         let mut groups: BTreeMap<(usize, String, String, i8, Option<usize>), Vec<String>> = BTreeMap::new();
         for id in &mapped {
-            if removed.contains(id) {
+            if removed.contains(id) || external.contains(id) || merged_away.contains_key(id) {
                 continue;
             }
             let (Some(&f), Some(sem)) = (face_of.get(id), polys[id].poly.semantic) else { continue };
@@ -525,19 +803,17 @@ pub fn to_citygml_with(model: &Popa3d, tpl: &Template, opts: &BackOptions, write
                 let imax = (0..loops.len()).max_by(|&a, &b| newell_area(&loops[a]).total_cmp(&newell_area(&loops[b]))).unwrap();
                 let outer = loops.remove(imax);
                 let kept = ids[members[0]].clone();
-                let kp = polys[&kept].poly;
-                let at = kp.span.bytes.start;
-                let px = prefix_at(template, at);
-                let dim = kp.exterior.srs_dimension.max(3);
-                let mut t = format!("<{px}Polygon {px}id=\"{kept}\"><{px}exterior><{px}LinearRing><{px}posList srsDimension=\"{dim}\">{}</{px}posList></{px}LinearRing></{px}exterior>", fmt_points(&outer, dim));
-                for h in &loops {
-                    t.push_str(&format!("<{px}interior><{px}LinearRing><{px}posList srsDimension=\"{dim}\">{}</{px}posList></{px}LinearRing></{px}interior>", fmt_points(h, dim)));
-                }
-                t.push_str(&format!("</{px}Polygon>"));
+                let t = polygon_text(template, polys[&kept].poly, &outer, &loops, opts.precision);
                 replaced.insert(kept.clone(), t);
                 let others: Vec<String> = members[1..].iter().map(|&k| ids[k].clone()).collect();
                 for o in &others {
                     merged_away.insert(o.clone(), kept.clone());
+                    replaced.remove(o);
+                }
+                for target in merged_away.values_mut() {
+                    if others.contains(target) {
+                        *target = kept.clone();
+                    }
                 }
                 report.merged.push((kept, others));
             }
@@ -547,6 +823,9 @@ pub fn to_citygml_with(model: &Popa3d, tpl: &Template, opts: &BackOptions, write
     // Surfaces that lose every polygon (only a surface holding a polygon that went can).
     let surface_polys = &tpl.surface_polys;
     let gone = |id: &String| removed.contains(id) || merged_away.contains_key(id);
+    if let Some(id) = mapped.iter().find(|id| gone(id) && external.contains(id)) {
+        return Err(BackError::Geometry { element: format!("polygon `{id}` of {}", building_name(polys[id].building)), message: "would lose its area but is referenced (XLink) from another building".into() });
+    }
     let mut edits: Vec<Edit> = Vec::new();
     let mut emptied: HashSet<usize> = HashSet::new();
     let mut inserts: BTreeMap<usize, Vec<u8>> = BTreeMap::new();
@@ -581,7 +860,7 @@ pub fn to_citygml_with(model: &Popa3d, tpl: &Template, opts: &BackOptions, write
                 edits.push(Edit { bytes: span, replacement: vec![] });
             }
             for r in id_refs {
-                edits.push(Edit { bytes: r, replacement: vec![] });
+                edits.push(Edit { bytes: xlink_deletion(template, r.bytes), replacement: vec![] });
             }
             continue;
         }
@@ -596,15 +875,21 @@ pub fn to_citygml_with(model: &Popa3d, tpl: &Template, opts: &BackOptions, write
         for (ri, r) in std::iter::once(&p.exterior).chain(p.interiors.iter()).enumerate() {
             match &rings[ri] {
                 Some(pts) => {
-                    let mut closed = pts.clone();
-                    closed.push(pts[0]);
-                    if r.encoding == citygml_io::CoordEncoding::Pos && closed.len() != r.pos_spans.len() {
+                    let text = RingText::of(template, r, opts.precision);
+                    let (xyz, src): (Vec<P3>, Vec<Option<usize>>) = pts.iter().map(|&(q, k)| (q, Some(k))).unzip();
+                    let dim = r.srs_dimension.max(3);
+                    if r.encoding == citygml_io::CoordEncoding::Pos && pts.len() + 1 != r.pos_spans.len() {
                         let px = prefix_at(template, r.span.bytes.start);
-                        let dim = r.srs_dimension.max(3);
-                        let t = format!("<{px}LinearRing><{px}posList srsDimension=\"{dim}\">{}</{px}posList></{px}LinearRing>", fmt_points(pts, dim));
+                        let id_attr = r.id.as_ref().map(|i| format!(" {px}id=\"{i}\"")).unwrap_or_default();
+                        let t = format!("<{px}LinearRing{id_attr}><{px}posList srsDimension=\"{dim}\">{}</{px}posList></{px}LinearRing>", fmt_points(&xyz, &src, dim, &text));
                         edits.push(Edit { bytes: r.span.bytes.clone(), replacement: t.into_bytes() });
                     } else {
-                        let e = citygml_io::writer::ring_edits(r, &closed).map_err(|e| BackError::Write(format!("polygon `{id}` ring {ri}: {e}")))?;
+                        let mut closed = xyz.clone();
+                        closed.push(xyz[0]);
+                        let mut at = src.clone();
+                        at.push(src[0]);
+                        let e = citygml_io::writer::ring_edits_with(r, &closed, |i, c, v| text.value(at[i], c, v))
+                            .map_err(|e| BackError::Write(format!("polygon `{id}` ring {ri}: {e}")))?;
                         edits.extend(e);
                     }
                 }
@@ -620,10 +905,12 @@ pub fn to_citygml_with(model: &Popa3d, tpl: &Template, opts: &BackOptions, write
     for (at, bytes) in inserts {
         edits.push(Edit { bytes: at..at, replacement: bytes });
     }
-    let mut out = Vec::with_capacity(if write { template.len() } else { 0 });
-    let sink: &mut dyn std::io::Write = if write { &mut out } else { &mut std::io::sink() };
-    citygml_io::write_with_edits(template, &edits, sink).map_err(|e| BackError::Write(e.to_string()))?;
+    for e in &mut edits {
+        if e.replacement.is_empty() {
+            e.bytes = whole_lines(template, e.bytes.clone());
+        }
+    }
     report.removed_degenerate.sort();
     report.removed_surfaces.sort();
-    Ok((out, report))
+    Ok((edits, report))
 }

@@ -20,7 +20,10 @@ normal closer than --coplanar-tolerance become one plane; polygons that lost the
 with every reference to them; touching coplanar polygons of the same semantic type are merged and
 the openings of a surface left empty move to the surface keeping the merged polygon (--no-merge
 keeps every polygon). A template that does not match the provenance is an error naming the node
-and polygon.";
+and polygon. A vertex that would move further than --max-move metres (or by a non-finite amount)
+is an error naming the buildings (exit 1, nothing written): an adjustment that moved a building
+that far is not a correction. Unchanged numbers keep their text; new ones get the input ring's
+number of decimals (or --precision).";
 
 #[derive(ClapArgs, Debug)]
 #[command(after_help = AFTER_HELP)]
@@ -45,6 +48,12 @@ pub struct Args {
     /// Do not merge coplanar polygons.
     #[arg(long)]
     pub no_merge: bool,
+    /// Largest vertex move accepted (m); a larger one is an error naming the buildings.
+    #[arg(long, default_value_t = 0.05)]
+    pub max_move: f64,
+    /// Decimals of rewritten coordinates (default: those of the input ring).
+    #[arg(long)]
+    pub precision: Option<usize>,
     /// Write a JSON report (removed, merged, vertex moves) to this path (`-` = stdout).
     #[arg(long)]
     pub report: Option<String>,
@@ -58,19 +67,30 @@ struct Report<'a> {
     result: &'a BackReport,
 }
 
-pub(crate) fn back_options(coplanar: f64, collapse: f64, area: f64, no_merge: bool) -> Result<BackOptions, CliError> {
-    require_positive(&[("coplanar-tolerance", coplanar), ("collapse-tolerance", collapse), ("area-tolerance", area)])?;
-    Ok(BackOptions { coplanar_tolerance: coplanar, collapse_tolerance: collapse, area_tolerance: area, merge: !no_merge })
+fn back_options(a: &Args) -> Result<BackOptions, CliError> {
+    require_positive(&[("coplanar-tolerance", a.coplanar_tolerance), ("collapse-tolerance", a.collapse_tolerance), ("area-tolerance", a.area_tolerance), ("max-move", a.max_move)])?;
+    Ok(BackOptions { coplanar_tolerance: a.coplanar_tolerance, collapse_tolerance: a.collapse_tolerance, area_tolerance: a.area_tolerance, merge: !a.no_merge, precision: a.precision })
 }
 
-pub(crate) fn back_error(template: &str, e: BackError) -> CliError {
+/// The buildings moved further than `limit`, worst first (at most five named).
+fn too_far(r: &BackReport, limit: f64) -> Option<String> {
+    let mut far: Vec<(&String, f64)> = r.max_move_by_building.iter().filter(|(_, &m)| m > limit).map(|(b, &m)| (b, m)).collect();
+    if far.is_empty() {
+        return None;
+    }
+    far.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let named: Vec<String> = far.iter().take(5).map(|(b, m)| format!("{b} ({m:.3} m)")).collect();
+    Some(format!("{} building(s) would move further than --max-move {limit} m: {}{}", far.len(), named.join(", "), if far.len() > 5 { ", ..." } else { "" }))
+}
+
+fn back_error(template: &str, e: BackError) -> CliError {
     match e {
         BackError::Write(_) => CliError::internal(format!("{template}: {e}")),
         _ => CliError::findings(format!("{template}: {e}")),
     }
 }
 
-pub(crate) fn print_back(r: &BackReport) {
+fn print_back(r: &BackReport) {
     eprintln!(
         "popa3d2citygml: {} polygons mapped, {} removed (no area), {} merge(s), {} surface(s) removed, {} opening(s) moved; vertex moves: largest {:.6} m, mean {:.6} m over {} vertices",
         r.polygons_mapped,
@@ -85,7 +105,9 @@ pub(crate) fn print_back(r: &BackReport) {
 }
 
 pub fn run(args: Args, config: &Config) -> CmdResult {
-    let opts = back_options(args.coplanar_tolerance, args.collapse_tolerance, args.area_tolerance, args.no_merge)?;
+    let opts = back_options(&args)?;
+    let output = Output::from_arg(args.output.as_deref());
+    output.check_target()?;
     let input = Input::from_arg(&args.input);
     let name = input.display_name();
     let bytes = input.read_all()?;
@@ -98,7 +120,10 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     if !config.quiet {
         print_back(&report);
     }
-    Output::from_arg(args.output.as_deref()).write_bytes(&out)?;
+    if let Some(why) = too_far(&report, args.max_move) {
+        return Err(CliError::findings(format!("{tname}: {why}; nothing written")));
+    }
+    output.write_bytes(&out)?;
     if let Some(p) = &args.report {
         write_json_report(p, &Report { template: tname, options: &opts, result: &report })?;
     }
