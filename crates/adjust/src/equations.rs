@@ -224,6 +224,25 @@ equation! {
     }
 }
 
+/// Soft-datum offset of a plane at a fixed reference point c (PlaneOffsetObs): slots [n(3), d],
+/// obs [l]. l + v = d − ⟨n, c⟩, the signed distance of the plane from c along its normal (sign
+/// reversed). Unlike the identity observation of d (spec §4.7 item 2, whose "drawback is that these
+/// values depend on the datum"), it does not change when the model origin moves, as long as c is a
+/// point of the plane's own geometry (see [`crate::popa3d::plane_reference_points`]): d and ⟨n, c⟩
+/// change by the same ⟨n, t⟩, so a rotating normal pivots the plane about c, not about the origin.
+pub struct PlaneOffset {
+    /// The reference point c (model coordinates, constant during the adjustment).
+    pub c: [f64; 3],
+}
+impl Equation for PlaneOffset {
+    fn kind(&self) -> &str {
+        "PlaneOffsetObs"
+    }
+    fn eval<D: Scalar>(&self, x: &[D], l: &[D]) -> D {
+        x[3] - (x[0] * self.c[0] + x[1] * self.c[1] + x[2] * self.c[2]) - l[0]
+    }
+}
+
 /// Standard rotation matrix of a (unit) quaternion (spec §4.2, corrected T 3.13/3.35).
 pub fn rotation<D: Scalar>(q: &[D; 4]) -> [[D; 3]; 3] {
     let (q0, q1, q2, q3) = (q[0], q[1], q[2], q[3]);
@@ -375,6 +394,7 @@ mod tests {
         check(&NormNvRestriction, &n(&e), &[]);
         check(&NormQ, &[0.9, 0.1, -0.2, 0.3], &[]);
         check(&Levelled, &[0.01], &[]);
+        check(&PlaneOffset { c: [120.0, -35.5, 7.25] }, &a, &[-2.0]);
         let q = unit([0.9, 0.02, -0.01]);
         let setup = [q[0], q[1], q[2], 0.3, 1.0, 2.0, 0.5];
         check(&PointOnPlanePolar { ih: 1.5, class: "PointOnFace" }, &[setup.to_vec(), a.clone()].concat(), &[123.4, 97.0, 4.2]);

@@ -23,7 +23,11 @@ use std::collections::BTreeMap;
 pub enum DatumChoice {
     /// Inner constraints over the object geometry (plane d's and normal parameters).
     Free,
-    /// Identity observations on every object unknown that has none yet.
+    /// Weak observations of every object unknown that has none yet: identity observations of the
+    /// normal parameters, and for every plane its offset at its reference point
+    /// ([`plane_reference_points`]) instead of the identity observation of d (spec §4.7 item 2
+    /// names the drawback of the latter: "these values depend on the datum", i.e. a rotating normal
+    /// with d held pivots the plane about the model origin). See [`crate::equations::PlaneOffset`].
     Soft,
     /// Fix a minimal set of object unknowns (chosen automatically: d's first, then parameters).
     Hard,
@@ -33,7 +37,7 @@ pub enum DatumChoice {
 #[derive(Clone, Debug)]
 pub struct ModelOptions {
     pub datum: DatumChoice,
-    /// σ of added soft-datum identity observations of plane distances (m).
+    /// σ of added soft-datum observations of plane offsets at their reference points (m).
     pub soft_sigma_d: f64,
     /// σ of added soft-datum identity observations of normal parameters.
     pub soft_sigma_param: f64,
@@ -109,8 +113,113 @@ pub struct Report {
     pub per_type: BTreeMap<String, TypeStats>,
     /// Sorted by normalised residual, largest first.
     pub observations: Vec<ObsReport>,
-    /// Largest change of a plane distance (m) by this adjustment.
+    /// Largest movement of a plane by this adjustment (m), measured along its normal at the points
+    /// of its own geometry: |Δd − ⟨Δn, x⟩| maximised over the plane's nodes x (positions before
+    /// the adjustment; the reference point of [`plane_reference_points`] for a plane without
+    /// nodes). Independent of the model origin, unlike |Δd| (a 1 mrad rotation changes d by 0.5 m
+    /// at 500 m from the origin), and it sees rotations: the value at the reference point alone is
+    /// ~0 when a plane only pivots about it, since the centroid is a mean of the nodes the maximum
+    /// over the nodes is never smaller.
     pub max_plane_shift: f64,
+    /// The plane that moved by `max_plane_shift`, if the model has planes.
+    pub max_plane_shift_at: Option<PlaneShift>,
+}
+
+/// Where a plane moved (see [`Report::max_plane_shift`]).
+#[derive(Clone, Debug, Serialize)]
+pub struct PlaneShift {
+    pub plane: u32,
+    /// Movement along the normal (m) at `at`.
+    pub shift: f64,
+    /// Where on the plane it moved most (a node position before the adjustment), in source
+    /// coordinates (model origin added).
+    pub at: [f64; 3],
+    /// The first face on this plane, with its source polygon and the building / room it bounds.
+    pub face: Option<u32>,
+    pub polygon: Option<String>,
+    pub solid: Option<String>,
+}
+
+impl std::fmt::Display for PlaneShift {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "plane {}", self.plane)?;
+        let mut what = Vec::new();
+        if let Some(x) = self.face {
+            what.push(format!("face {x}"));
+        }
+        if let Some(x) = &self.polygon {
+            what.push(format!("polygon {x}"));
+        }
+        if let Some(x) = &self.solid {
+            what.push(format!("of {x}"));
+        }
+        if !what.is_empty() {
+            write!(f, " ({})", what.join(", "))?;
+        }
+        let c = self.at;
+        write!(f, " at ({:.3}, {:.3}, {:.3})", c[0], c[1], c[2])
+    }
+}
+
+/// Reference point of every plane, in model coordinates: the centroid of the positions of the
+/// nodes on its faces (spec §2.3 node points), so it moves with the geometry when the model origin
+/// moves. A plane without a computable node falls back to its foot point n·d/‖n‖² (which does
+/// depend on the origin). Planes, normals and parameters must be valid references.
+pub fn plane_reference_points(m: &Popa3d, inc: &Incidence) -> Vec<[f64; 3]> {
+    reference_points_of(m, &plane_node_points(m, inc))
+}
+
+/// The positions of the nodes on every plane's faces (model coordinates; nodes without three
+/// independent planes are left out).
+pub fn plane_node_points(m: &Popa3d, inc: &Incidence) -> Vec<Vec<[f64; 3]>> {
+    let np = m.planes.len();
+    let mut pts = vec![Vec::new(); np];
+    for i in 0..m.nodes.len() {
+        let planes = inc.node_planes(m, pm::NodeId::from(i));
+        if planes.iter().any(|q| q.idx() >= np) {
+            continue;
+        }
+        let Some(x) = m.intersect_planes(&planes) else { continue };
+        if !x.iter().all(|v| v.is_finite()) {
+            continue;
+        }
+        for q in planes {
+            pts[q.idx()].push(x);
+        }
+    }
+    pts
+}
+
+fn reference_points_of(m: &Popa3d, pts: &[Vec<[f64; 3]>]) -> Vec<[f64; 3]> {
+    pts.iter()
+        .enumerate()
+        .map(|(i, xs)| {
+            if !xs.is_empty() {
+                let s = xs.iter().fold([0.0; 3], |a, x| [a[0] + x[0], a[1] + x[1], a[2] + x[2]]);
+                s.map(|v| v / xs.len() as f64)
+            } else {
+                let pv = m.plane_value(pm::PlaneId::from(i));
+                let nn = dot3(&pv.n, &pv.n);
+                if nn > 0.0 {
+                    pv.n.map(|v| v * pv.d / nn)
+                } else {
+                    [0.0; 3]
+                }
+            }
+        })
+        .collect()
+}
+
+fn dot3(a: &[f64; 3], b: &[f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// The slots [n(3), d] of a plane (its signed normal from the shared parameters, and its d).
+fn plane_slots_of(m: &Popa3d, params: &[UnknownId], pd: &[UnknownId], p: pm::PlaneId) -> Vec<Slot> {
+    let pl = m.plane(p);
+    let mut s: Vec<Slot> = m.normal(pl.normal).comps.iter().map(|(q, sg)| Slot { unknown: params[q.idx()], sign: pl.sign.f64() * sg.f64() }).collect();
+    s.push(pd[p.idx()].into());
+    s
 }
 
 struct Net<'a> {
@@ -131,9 +240,7 @@ impl<'a> Net<'a> {
         self.normal_slots(pl.normal, pl.sign.f64())
     }
     fn plane_slots(&self, p: pm::PlaneId) -> Vec<Slot> {
-        let mut s = self.plane_normal(p);
-        s.push(self.pd[p.idx()].into());
-        s
+        plane_slots_of(self.m, &self.par, &self.pd, p)
     }
     fn check<T>(&self, what: &str, id: usize, len: usize, el: &str) -> Result<(), ModelError> {
         if id >= len {
@@ -201,6 +308,8 @@ impl Equation for FixTo {
 struct ObsOrigin2 {
     obs: usize,
     component: &'static str,
+    /// Report class when it is not the document observation's class (PlaneOffsetObs).
+    class: Option<&'static str>,
 }
 
 /// The engine problem built from a model, with the bookkeeping to write results back.
@@ -209,6 +318,10 @@ pub struct Mapped {
     pub object_unknowns: Vec<UnknownId>,
     origins: Vec<ObsOrigin2>,
     cond_obs: Vec<usize>,
+    /// [`plane_reference_points`] at the starting values.
+    pub reference_points: Vec<[f64; 3]>,
+    /// [`plane_node_points`] at the starting values.
+    node_points: Vec<Vec<[f64; 3]>>,
     plane_d: Vec<UnknownId>,
     params: Vec<UnknownId>,
     fixed: Vec<[UnknownId; 3]>,
@@ -235,12 +348,33 @@ pub fn map_model(m: &Popa3d) -> Result<Mapped, ModelError> {
         }
     }
     let net = Net { m, inc: Incidence::new(m), pd: pd.clone(), par: par.clone(), fp: fp.clone(), sq: sq.clone() };
+    let node_points = plane_node_points(m, &net.inc);
+    let reference_points = reference_points_of(m, &node_points);
+    // The document's soft-datum values of the normal parameters (citygml2popa3d writes them next to
+    // the plane ones): with them a datum observation of d becomes the observed plane's offset at
+    // the reference point, see the PlaneD arm below.
+    let mut datum_param: Vec<Option<f64>> = vec![None; m.parameters.len()];
+    for ob in &m.observations {
+        if let (ObsOrigin::Datum, ObsKind::ParameterObs { unknown: pm::Unknown::Param(q), l }) = (ob.origin, &ob.kind) {
+            if let Some(v) = datum_param.get_mut(q.idx()) {
+                *v = Some(l.value);
+            }
+        }
+    }
+    let observed_normal = |q: pm::PlaneId| -> [f64; 3] {
+        let pl = m.plane(q);
+        let c = m.normal(pl.normal).comps;
+        std::array::from_fn(|k| {
+            let (par_id, sg) = c[k];
+            pl.sign.f64() * sg.f64() * datum_param[par_id.idx()].unwrap_or(m.parameter(par_id).value)
+        })
+    };
     let object_unknowns: Vec<UnknownId> = pd.iter().chain(par.iter()).copied().collect();
     let mut origins: Vec<ObsOrigin2> = Vec::new();
     let mut cond_obs: Vec<usize> = Vec::new();
     let add_obs = |p: &mut Problem, origins: &mut Vec<ObsOrigin2>, el: &str, i: usize, comp: &'static str, v: f64, s: f64| -> Result<crate::ObsId, ModelError> {
         let o = p.add_observation(format!("{el}{}", if comp.is_empty() { String::new() } else { format!(" {comp}") }), v, s)?;
-        origins.push(ObsOrigin2 { obs: i, component: comp });
+        origins.push(ObsOrigin2 { obs: i, component: comp, class: None });
         Ok(o)
     };
     for (i, ob) in m.observations.iter().enumerate() {
@@ -356,6 +490,19 @@ pub fn map_model(m: &Popa3d) -> Result<Mapped, ModelError> {
                 let u = net.unknown(unknown, el)?;
                 p.add_restriction(el, FixTo(*value), vec![u.into()])?;
             }
+            // A soft-datum identity observation of a plane distance in the document (origin
+            // "datum", as citygml2popa3d writes them) is taken as what it stands for, the plane
+            // where it was: l = d_obs − ⟨n_obs, c⟩ observes d − ⟨n, c⟩ at the plane's reference
+            // point c. The identity form would pivot the plane about the model origin whenever
+            // its normal rotates (spec §4.7: "these values depend on the datum").
+            ObsKind::ParameterObs { unknown: pm::Unknown::PlaneD(q), l } if ob.origin == ObsOrigin::Datum && q.idx() < m.planes.len() => {
+                let c = reference_points[q.idx()];
+                let o = add_obs(&mut p, &mut origins, el, i, "", l.value - dot3(&observed_normal(*q), &c), l.sigma)?;
+                if let Some(last) = origins.last_mut() {
+                    last.class = Some("PlaneOffsetObs");
+                }
+                p.add_condition(el, PlaneOffset { c }, net.plane_slots(*q), vec![o])?;
+            }
             ObsKind::ParameterObs { unknown, l } => {
                 let u = net.unknown(unknown, el)?;
                 let o = add_obs(&mut p, &mut origins, el, i, "", l.value, l.sigma)?;
@@ -374,7 +521,7 @@ pub fn map_model(m: &Popa3d) -> Result<Mapped, ModelError> {
             }
         }
     }
-    Ok(Mapped { problem: p, object_unknowns, origins, cond_obs, plane_d: pd, params: par, fixed: fp, setups: sq })
+    Ok(Mapped { problem: p, object_unknowns, origins, cond_obs, reference_points, node_points, plane_d: pd, params: par, fixed: fp, setups: sq })
 }
 
 /// Starting values of every set-up by the spec's grid search (§4.4, P11) over its face pointings
@@ -457,12 +604,25 @@ pub fn adjust_model(m: &mut Popa3d, opts: &ModelOptions) -> Result<Report, Model
                     }
                 }
             }
-            for (k, &u) in mapped.object_unknowns.clone().iter().enumerate() {
+            // Planes: their offset at the reference point (origin-invariant, see DatumChoice::Soft).
+            for i in 0..mapped.plane_d.len() {
+                if has[mapped.plane_d[i].0] {
+                    continue;
+                }
+                let c = mapped.reference_points[i];
+                let pv = m.plane_value(pm::PlaneId::from(i));
+                let name = format!("soft datum: plane {i} offset at its reference point");
+                let o = mapped.problem.add_observation(name.clone(), pv.d - dot3(&pv.n, &c), opts.soft_sigma_d)?;
+                let x = plane_slots_of(m, &mapped.params, &mapped.plane_d, pm::PlaneId::from(i));
+                mapped.problem.add_condition(name, PlaneOffset { c }, x, vec![o])?;
+                mapped.origins.push(ObsOrigin2 { obs: usize::MAX, component: "", class: Some("PlaneOffsetObs") });
+                mapped.cond_obs.push(usize::MAX);
+            }
+            // Normal parameters: identity observations (they do not depend on the origin).
+            for &u in &mapped.params.clone() {
                 if !has[u.0] {
-                    let s = if k < mapped.plane_d.len() { opts.soft_sigma_d } else { opts.soft_sigma_param };
-                    let o = mapped.problem.add_identity_observation(u, s)?;
-                    mapped.origins.push(ObsOrigin2 { obs: usize::MAX, component: "" });
-                    let _ = o;
+                    mapped.problem.add_identity_observation(u, opts.soft_sigma_param)?;
+                    mapped.origins.push(ObsOrigin2 { obs: usize::MAX, component: "", class: None });
                     mapped.cond_obs.push(usize::MAX);
                 }
             }
@@ -477,14 +637,14 @@ pub fn adjust_model(m: &mut Popa3d, opts: &ModelOptions) -> Result<Report, Model
     };
     let sol = adjust(&mapped.problem, &eng)?;
     // Write back.
-    let mut max_shift = 0.0f64;
+    let before: Vec<pm::geometry::PlaneValue> = (0..m.planes.len()).map(|i| m.plane_value(pm::PlaneId::from(i))).collect();
     for (i, &u) in mapped.plane_d.iter().enumerate() {
-        max_shift = max_shift.max((m.planes[i].d - sol.x[u.0]).abs());
         m.planes[i].d = sol.x[u.0];
     }
     for (i, &u) in mapped.params.iter().enumerate() {
         m.parameters[i].value = sol.x[u.0];
     }
+    let shift_at = largest_plane_shift(m, &before, &mapped.node_points, &mapped.reference_points);
     for (i, t) in mapped.fixed.iter().enumerate() {
         for k in 0..3 {
             m.fixed_points[i].t[k] = sol.x[t[k].0];
@@ -495,19 +655,60 @@ pub fn adjust_model(m: &mut Popa3d, opts: &ModelOptions) -> Result<Report, Model
             m.setups[i].q[k] = sol.x[q[k].0];
         }
     }
-    Ok(build_report(m, &mapped, &sol, &misclosures, datum_name, max_shift))
+    Ok(build_report(m, &mapped, &sol, &misclosures, datum_name, shift_at))
 }
 
-fn build_report(m: &Popa3d, mapped: &Mapped, sol: &Solution, misclosures: &[f64], datum: &str, max_shift: f64) -> Report {
+/// The plane that moved most (see [`Report::max_plane_shift`]): |Δd − ⟨Δn, x⟩| (m) over the
+/// plane's nodes x (its reference point when it has none), from the values before (`before`) and
+/// now (`m`).
+fn largest_plane_shift(m: &Popa3d, before: &[pm::geometry::PlaneValue], nodes: &[Vec<[f64; 3]>], refs: &[[f64; 3]]) -> Option<PlaneShift> {
+    let mut best: Option<(usize, f64, [f64; 3])> = None;
+    for (i, b) in before.iter().enumerate() {
+        let a = m.plane_value(pm::PlaneId::from(i));
+        let dn = [a.n[0] - b.n[0], a.n[1] - b.n[1], a.n[2] - b.n[2]];
+        let xs: &[[f64; 3]] = if nodes[i].is_empty() { std::slice::from_ref(&refs[i]) } else { &nodes[i] };
+        for x in xs {
+            let s = ((a.d - b.d) - dot3(&dn, x)).abs();
+            // NaN counts as the largest shift, so a broken solution cannot hide behind it.
+            if best.is_none_or(|(_, w, _)| s > w || (s.is_nan() && !w.is_nan())) {
+                best = Some((i, s, *x));
+            }
+        }
+    }
+    let (i, shift, c) = best?;
+    let face = m.faces.iter().position(|f| f.plane.idx() == i);
+    let (polygon, solid) = match face {
+        Some(f) => {
+            let fc = &m.faces[f];
+            let solid = [fc.front, fc.back]
+                .iter()
+                .filter_map(|s| m.solids.get(s.idx()))
+                .find(|s| s.kind != pm::SolidKind::Exterior)
+                .and_then(|s| s.name.clone());
+            (fc.source.as_ref().map(|s| s.polygon.clone()), solid)
+        }
+        None => (None, None),
+    };
+    Some(PlaneShift {
+        plane: i as u32,
+        shift,
+        at: [c[0] + m.origin[0], c[1] + m.origin[1], c[2] + m.origin[2]],
+        face: face.map(|f| f as u32),
+        polygon,
+        solid,
+    })
+}
+
+fn build_report(m: &Popa3d, mapped: &Mapped, sol: &Solution, misclosures: &[f64], datum: &str, shift_at: Option<PlaneShift>) -> Report {
     let p = &mapped.problem;
     let mut obs: Vec<ObsReport> = Vec::with_capacity(sol.obs.len());
     for (k, r) in sol.obs.iter().enumerate() {
         let o = &mapped.origins[k];
         let (class, origin, label) = if o.obs == usize::MAX {
-            ("ParameterObs".to_string(), "datum".to_string(), Some(p.observation_name(crate::ObsId(k)).to_string()))
+            (o.class.unwrap_or("ParameterObs").to_string(), "datum".to_string(), Some(p.observation_name(crate::ObsId(k)).to_string()))
         } else {
             let ob = &m.observations[o.obs];
-            (ob.kind.class_name().to_string(), ob.origin.as_str().to_string(), ob.label.clone())
+            (o.class.unwrap_or(ob.kind.class_name()).to_string(), ob.origin.as_str().to_string(), ob.label.clone())
         };
         obs.push(ObsReport {
             observation: if o.obs == usize::MAX { u32::MAX } else { o.obs as u32 },
@@ -568,6 +769,127 @@ fn build_report(m: &Popa3d, mapped: &Mapped, sol: &Solution, misclosures: &[f64]
         not_yet_measured,
         per_type,
         observations: sorted,
-        max_plane_shift: max_shift,
+        max_plane_shift: shift_at.as_ref().map_or(0.0, |s| s.shift),
+        max_plane_shift_at: shift_at,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use pm::{FaceId, Measured, NormalId, ObsOrigin, Observation};
+
+    /// A one-room sketch whose east wall is 0.95° off orthogonal to the south wall:
+    /// x = 0 (west), y = 0 (south), y = 6 (north), the east wall from x = 8 (y = 0) to x = 8.1
+    /// (y = 6), floor z = 0, ceiling z = 3. Unit-norm restrictions on every normal and one
+    /// orthogonality condition (south ⟂ east) that forces the east and south walls to rotate.
+    fn skewed_room() -> Popa3d {
+        let obj = "\
+v 0 0 0\nv 8 0 0\nv 8.1 6 0\nv 0 6 0\nv 0 0 3\nv 8 0 3\nv 8.1 6 3\nv 0 6 3
+f 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\nf 3 4 8 7\nf 4 1 5 8\n";
+        let soup = normalize::obj::read_sketch(obj.as_bytes(), "room.obj").unwrap();
+        let mut m = Popa3d::new([0.0; 3]);
+        normalize::normalize_into(&mut m, &soup, &normalize::Tolerances::default()).unwrap();
+        for n in 0..m.normals.len() {
+            m.add_observation(Observation::new(ObsKind::NormNV { normal: NormalId::from(n), sigma: None }, ObsOrigin::Consistency));
+        }
+        let face = |want: [f64; 3]| {
+            (0..m.faces.len())
+                .map(FaceId::from)
+                .find(|&f| {
+                    let n = m.face_plane_value(f).n;
+                    n[0] * want[0] + n[1] * want[1] + n[2] * want[2] > 0.99
+                })
+                .unwrap()
+        };
+        let (south, east) = (face([0.0, -1.0, 0.0]), face([1.0, 0.0, 0.0]));
+        m.add_observation(Observation::new(ObsKind::ConstraintFaceFace { a: south, b: east, l: Measured::new(0.0, 1e-6) }, ObsOrigin::Semantic));
+        m
+    }
+
+    /// The same geometry in coordinates shifted by t: x' = x + t, so d' = d + ⟨n, t⟩ (also in
+    /// observations of d).
+    fn shifted(m: &Popa3d, t: [f64; 3]) -> Popa3d {
+        let mut s = m.clone();
+        let dt = |i: usize| dot3(&m.plane_value(pm::PlaneId::from(i)).n, &t);
+        for (i, p) in s.planes.iter_mut().enumerate() {
+            p.d += dt(i);
+        }
+        for ob in &mut s.observations {
+            if let ObsKind::ParameterObs { unknown: pm::Unknown::PlaneD(q), l } = &mut ob.kind {
+                l.value += dt(q.idx());
+            }
+        }
+        for k in 0..3 {
+            s.origin[k] -= t[k];
+        }
+        s
+    }
+
+    fn positions(m: &Popa3d) -> Vec<[f64; 3]> {
+        m.node_positions(&Incidence::new(m)).unwrap()
+    }
+
+    /// Adjusts the room at its origin and shifted by t; returns the largest node move at the
+    /// origin, the largest disagreement of the node positions (m) and both reports.
+    fn adjust_at_two_origins(m0: &Popa3d, opts: &ModelOptions) -> (f64, f64, Report, Report) {
+        let t = [10_000.0, 10_000.0, 100.0];
+        let before = positions(m0);
+        let mut a = m0.clone();
+        let ra = adjust_model(&mut a, opts).unwrap();
+        let mut b = shifted(m0, t);
+        for (p, q) in before.iter().zip(&positions(&b)) {
+            for k in 0..3 {
+                assert!((q[k] - t[k] - p[k]).abs() < 1e-9, "the shifted copy is the same geometry");
+            }
+        }
+        let rb = adjust_model(&mut b, opts).unwrap();
+        let (pa, pb) = (positions(&a), positions(&b));
+        let moved = before.iter().zip(&pa).map(|(p, q)| (0..3).map(|k| (p[k] - q[k]).powi(2)).sum::<f64>().sqrt()).fold(0.0, f64::max);
+        let mut worst = 0.0f64;
+        for (p, q) in pa.iter().zip(&pb) {
+            for k in 0..3 {
+                worst = worst.max((q[k] - t[k] - p[k]).abs());
+            }
+        }
+        eprintln!("largest node move {moved:.6} m, disagreement between the origins {worst:.3e} m, max_plane_shift {:.6} / {:.6} m", ra.max_plane_shift, rb.max_plane_shift);
+        (moved, worst, ra, rb)
+    }
+
+    /// Issue 18: with the soft datum the adjusted geometry must not depend on where the model
+    /// origin is. Independent truth: the adjusted node positions of the same room adjusted at
+    /// origin O and at O − (10 km, 10 km, 100 m) agree after undoing the shift. (With the former
+    /// identity observations of d they differed by 85 m.)
+    #[test]
+    fn soft_datum_is_origin_invariant() {
+        let opts = ModelOptions { datum: DatumChoice::Soft, ..ModelOptions::default() };
+        let (moved, worst, ra, rb) = adjust_at_two_origins(&skewed_room(), &opts);
+        // The condition really rotated the walls (the test is not vacuous).
+        assert!(moved > 0.01, "largest node move {moved} m");
+        assert!(worst < 1e-6, "node positions differ by {worst} m between the two origins (largest move {moved} m)");
+        assert!(ra.per_type.contains_key("PlaneOffsetObs") && ra.per_type.contains_key("ParameterObs"), "{:?}", ra.per_type.keys());
+        // The reported movement is the origin-independent one, and about the node moves.
+        assert!((ra.max_plane_shift - rb.max_plane_shift).abs() < 1e-6, "{} vs {}", ra.max_plane_shift, rb.max_plane_shift);
+        assert!(ra.max_plane_shift > 0.001 && ra.max_plane_shift < moved + 1e-9, "{} vs node move {moved}", ra.max_plane_shift);
+    }
+
+    /// The same for the soft datum written into the document (citygml2popa3d's identity
+    /// observations of every d and normal parameter, origin "datum") under the default free datum,
+    /// the README pipe's set-up.
+    #[test]
+    fn document_datum_observations_are_origin_invariant() {
+        let mut m = skewed_room();
+        for i in 0..m.planes.len() {
+            let l = Measured::new(m.planes[i].d, 0.1);
+            m.add_observation(Observation::new(ObsKind::ParameterObs { unknown: pm::Unknown::PlaneD(pm::PlaneId::from(i)), l }, ObsOrigin::Datum));
+        }
+        for i in 0..m.parameters.len() {
+            let l = Measured::new(m.parameters[i].value, 0.05);
+            m.add_observation(Observation::new(ObsKind::ParameterObs { unknown: pm::Unknown::Param(pm::ParamId::from(i)), l }, ObsOrigin::Datum));
+        }
+        let (moved, worst, ra, _) = adjust_at_two_origins(&m, &ModelOptions::default());
+        assert!(moved > 0.01, "largest node move {moved} m");
+        assert!(worst < 1e-6, "node positions differ by {worst} m between the two origins (largest move {moved} m)");
+        assert_eq!(ra.per_type["PlaneOffsetObs"].count, m.planes.len());
     }
 }
