@@ -100,14 +100,66 @@ fn adjust_report_statistics() {
     let b = run(&["adjust", "-", "-o", dir.path().join("x.popa3d").to_str().unwrap(), "--report", rep.to_str().unwrap()], Some(&a.stdout));
     ok(&b);
     let err = String::from_utf8_lossy(&b.stderr);
-    assert!(err.contains("σ̂0") && err.contains("largest suspect"), "{err}");
+    assert!(err.contains("σ̂0") && err.contains("largest suspect") && err.contains("largest plane movement"), "{err}");
+    // vᵀPv is below the lower χ² bound here (the generated conditions are consistent): explained,
+    // not "FAILED"; and stderr stays short without --verbose (no observation table).
+    assert!(err.contains("below the lower bound") && !err.contains("FAILED"), "{err}");
+    assert!(!err.contains("EV %") && err.lines().count() <= 8, "{err}");
     let r: Value = serde_json::from_slice(&std::fs::read(&rep).unwrap()).unwrap();
+    assert_eq!(r["global_test"]["verdict"], "below_lower");
+    assert!(r["max_plane_shift_at"]["polygon"].is_string(), "{}", r["max_plane_shift_at"]);
     let red = r["redundancy"].as_f64().unwrap();
     assert!(red > 0.0);
     assert!((r["redundancy_sum"].as_f64().unwrap() - red).abs() < 1e-6);
     let w: Vec<f64> = r["observations"].as_array().unwrap().iter().map(|o| o["normalised"].as_f64().unwrap()).collect();
     assert!(w.windows(2).all(|p| p[0] >= p[1]));
     assert!(r["sigma0"].as_f64().unwrap().is_finite());
+    // --verbose: the per-type statistics and the observation table.
+    let v = run(&["adjust", "-", "-o", dir.path().join("y.popa3d").to_str().unwrap(), "--verbose", "--rows", "5"], Some(&a.stdout));
+    ok(&v);
+    let err = String::from_utf8_lossy(&v.stderr);
+    assert!(err.contains("EV %") && err.contains("mean EV") && err.contains("PlaneOffsetObs"), "{err}");
+}
+
+/// --max-shift: a plane moving more than allowed (metres, along its normal at its nodes) stops
+/// the command before anything is written, naming the plane, face and polygon.
+#[test]
+fn max_shift_refuses_to_write() {
+    let a = run(&["citygml2popa3d", "-q", three_storey().to_str().unwrap()], None);
+    ok(&a);
+    let dir = common::tempdir();
+    let out = dir.path().join("x.popa3d");
+    let b = run(&["adjust", "-q", "-", "-o", out.to_str().unwrap(), "--max-shift", "0.001"], Some(&a.stdout));
+    assert_eq!(code(&b), 1);
+    let err = String::from_utf8_lossy(&b.stderr);
+    assert!(err.contains("--max-shift") && err.contains("plane") && err.contains("face") && err.contains("polygon"), "{err}");
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(!out.exists() && b.stdout.is_empty());
+    // The storey offsets are 6 cm: the default (1 m) lets them through.
+    ok(&run(&["adjust", "-q", "-", "-o", out.to_str().unwrap()], Some(&a.stdout)));
+    assert!(out.exists());
+}
+
+/// Issue 18, the README pipe on a real NRW tile (origin = envelope centre, buildings up to ~500 m
+/// away): the datum observations citygml2popa3d writes pivot planes about their own geometry, not
+/// about the origin, so no vertex moves by more than a metre (it was 32 m, σ̂0 2.94). Independent
+/// measure: the vertex moves popa3d2citygml computes against the template.
+#[test]
+fn nrw_tile_pipe_moves_little() {
+    let Some(tile) = common::fixture("citygml/nrw/LoD2_32_332_5729_1_NW.gml") else { return };
+    let dir = common::tempdir();
+    let (rep, back) = (dir.path().join("r.json"), dir.path().join("back.json"));
+    let a = run(&["citygml2popa3d", "-q", tile.to_str().unwrap()], None);
+    ok(&a);
+    let b = run(&["adjust", "-q", "-", "--report", rep.to_str().unwrap()], Some(&a.stdout));
+    ok(&b);
+    let c = run(&["popa3d2citygml", "-q", "-", "--template", tile.to_str().unwrap(), "-o", dir.path().join("out.gml").to_str().unwrap(), "--report", back.to_str().unwrap()], Some(&b.stdout));
+    ok(&c);
+    let r: Value = serde_json::from_slice(&std::fs::read(&rep).unwrap()).unwrap();
+    let k: Value = serde_json::from_slice(&std::fs::read(&back).unwrap()).unwrap();
+    let (sigma0, shift, moved) = (r["sigma0"].as_f64().unwrap(), r["max_plane_shift"].as_f64().unwrap(), k["max_move"].as_f64().unwrap());
+    eprintln!("σ̂0 {sigma0:.4}, max plane shift {shift:.4} m, largest vertex move {moved:.4} m");
+    assert!(sigma0 < 1.0 && shift < 1.0 && moved < 1.0, "σ̂0 {sigma0}, max plane shift {shift} m, largest vertex move {moved} m");
 }
 
 /// Incremental work (spec P20): sketch → adjust (priors control) → observe → adjust again: fewer

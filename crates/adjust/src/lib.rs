@@ -31,7 +31,7 @@ pub mod stats;
 
 pub use ad::{DynEquation, Equation, Scalar};
 pub use problem::{ConditionId, ObsId, Problem, Slot, UnknownId};
-pub use solve::{adjust, Datum, GlobalTest, ObsResult, Options, Solution};
+pub use solve::{adjust, Datum, GlobalTest, GlobalVerdict, ObsResult, Options, Solution};
 
 /// Everything that can go wrong in an adjustment; each message names the offending element.
 #[derive(Debug, thiserror::Error, Clone, PartialEq)]

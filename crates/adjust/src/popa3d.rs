@@ -820,9 +820,7 @@ f 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\nf 3 4 8 7\nf 4 1 5 8\n";
                 l.value += dt(q.idx());
             }
         }
-        for k in 0..3 {
-            s.origin[k] -= t[k];
-        }
+        s.origin = std::array::from_fn(|k| m.origin[k] - t[k]);
         s
     }
 
@@ -871,6 +869,19 @@ f 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\nf 3 4 8 7\nf 4 1 5 8\n";
         // The reported movement is the origin-independent one, and about the node moves.
         assert!((ra.max_plane_shift - rb.max_plane_shift).abs() < 1e-6, "{} vs {}", ra.max_plane_shift, rb.max_plane_shift);
         assert!(ra.max_plane_shift > 0.001 && ra.max_plane_shift < moved + 1e-9, "{} vs node move {moved}", ra.max_plane_shift);
+    }
+
+    /// Observations that fit exactly (no condition to meet) put vᵀPv = 0 below the lower χ²
+    /// bound: the verdict says so instead of a failure.
+    #[test]
+    fn perfect_input_is_below_the_lower_bound() {
+        let mut m = skewed_room();
+        m.observations.retain(|o| !matches!(o.kind, ObsKind::ConstraintFaceFace { .. }));
+        let r = adjust_model(&mut m, &ModelOptions { datum: DatumChoice::Soft, ..ModelOptions::default() }).unwrap();
+        let g = r.global_test.expect("redundancy from the unit-norm restrictions");
+        assert!(g.statistic < 1e-12 && !g.passed, "{g:?}");
+        assert_eq!(g.verdict, crate::GlobalVerdict::BelowLower);
+        assert!(r.max_plane_shift < 1e-9, "{}", r.max_plane_shift);
     }
 
     /// The same for the soft datum written into the document (citygml2popa3d's identity

@@ -110,7 +110,32 @@ pub struct GlobalTest {
     pub dof: usize,
     pub lower: f64,
     pub upper: f64,
+    /// lower ≤ statistic ≤ upper (two-sided; see `verdict` for which side failed).
     pub passed: bool,
+    pub verdict: GlobalVerdict,
+}
+
+/// Which way the global test went. Only `AboveUpper` is a failure of the data: `BelowLower` means
+/// the observations fit better than their σ claim (σ too pessimistic, or the conditions are met
+/// exactly, e.g. generated from the same geometry), which is no reason to distrust the result.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum GlobalVerdict {
+    Passed,
+    BelowLower,
+    AboveUpper,
+}
+
+impl GlobalVerdict {
+    pub fn of(statistic: f64, lower: f64, upper: f64) -> Self {
+        if statistic > upper || statistic.is_nan() {
+            GlobalVerdict::AboveUpper
+        } else if statistic < lower {
+            GlobalVerdict::BelowLower
+        } else {
+            GlobalVerdict::Passed
+        }
+    }
 }
 
 /// Result of [`adjust`].
@@ -509,7 +534,7 @@ pub fn adjust(problem: &Problem, opts: &Options) -> Result<Solution, AdjustError
         let t = vtpv; // already divided by σ0² through Q_ll = C_ll/σ0²
         let lower = chi2_quantile(opts.alpha_global / 2.0, redundancy as f64);
         let upper = chi2_quantile(1.0 - opts.alpha_global / 2.0, redundancy as f64);
-        Some(GlobalTest { statistic: t, dof: redundancy, lower, upper, passed: t >= lower && t <= upper })
+        Some(GlobalTest { statistic: t, dof: redundancy, lower, upper, passed: t >= lower && t <= upper, verdict: GlobalVerdict::of(t, lower, upper) })
     } else {
         None
     };

@@ -7,6 +7,7 @@ use crate::cmd::args::require_positive;
 use crate::config::{write_json_report, Config, Input, Output};
 use crate::error::{CliError, CmdResult, Exit};
 use adjust::popa3d::{adjust_model, DatumChoice, ModelError, ModelOptions, ObsReport, Report};
+use adjust::{GlobalTest, GlobalVerdict};
 
 const AFTER_HELP: &str = "\
 Example:
@@ -19,14 +20,25 @@ unknowns are written back, the observations stay as measured. Running it again a
 observe` added measurements starts from the last solution.
 
 Datum: `free` = inner constraints over the object geometry (hunting blunders strains nothing),
-`soft` = weak identity observations of every plane distance / normal parameter that has none,
-`hard` = a minimal set of plane distances and normal parameters is fixed.
+`soft` = weak observations of every plane / normal parameter that has none: the plane's offset at
+its own reference point (the centroid of its nodes; σ --soft-sigma-d) and the normal parameters'
+values, so the result does not depend on where the model origin is, `hard` = a minimal set of
+plane distances and normal parameters is fixed. The identity observations of plane distances that
+citygml2popa3d writes (origin \"datum\") are read as plane offsets in the same way.
 
-stderr shows a table sorted by normalised residual (Baarda's w); observations with w above the
-critical value (α = --alpha) are flagged, observations with a redundancy number below --min-ev are
-\"not controllable\", and sketch priors that still control the geometry are listed as not yet
-measured. With --strict the exit code is 1 when the global test fails or an observation is
-rejected (for use as a quality gate); otherwise such findings are reported and the exit code is 0.";
+stderr shows σ̂0 with the global χ² test, the largest suspect (Baarda's w above the critical value
+for α = --alpha) and the plane that moved most; --verbose adds the per-type statistics, the
+--rows observations with the largest w (redundancy number below --min-ev: \"not controllable\")
+and the sketch priors that still control the geometry (not yet measured). The --report JSON has
+all of it for every observation. vᵀPv below the lower χ² bound means the observations fit better
+than their σ claim (σ too pessimistic, or conditions met exactly); only vᵀPv above the upper bound
+is a failed test.
+
+Safety: when a plane moves more than --max-shift (metres, along its normal at its own nodes, so
+independent of the model origin), nothing is written and the exit code is 1; the message names the
+plane, its face and polygon. With --strict the exit code is 1 also when the global test fails
+(above the upper bound) or an observation is rejected (for use as a quality gate); otherwise such
+findings are reported and the exit code is 0.";
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 pub enum DatumArg {
@@ -46,7 +58,7 @@ pub struct Args {
     /// Datum definition.
     #[arg(long, value_enum, default_value = "free")]
     pub datum: DatumArg,
-    /// σ of added soft-datum identity observations of plane distances (m).
+    /// σ of added soft-datum observations of plane offsets at their reference points (m).
     #[arg(long, default_value_t = 1.0)]
     pub soft_sigma_d: f64,
     /// σ of added soft-datum identity observations of normal parameters.
@@ -64,9 +76,16 @@ pub struct Args {
     /// Redundancy number below which an observation counts as not controllable.
     #[arg(long, default_value_t = 0.1)]
     pub min_ev: f64,
-    /// Rows of the stderr table (0 = none).
+    /// Rows of the observation table shown with --verbose (0 = none).
     #[arg(long, default_value_t = 20)]
     pub rows: usize,
+    /// Show the per-type statistics, the observation table and the not-yet-measured priors on stderr.
+    #[arg(short, long)]
+    pub verbose: bool,
+    /// Largest allowed plane movement in metres (along the normal, at the plane's nodes); above it
+    /// nothing is written and the exit code is 1.
+    #[arg(long, value_name = "METRES", default_value_t = 1.0)]
+    pub max_shift: f64,
     /// Write the JSON report to this path (`-` = stdout).
     #[arg(long)]
     pub report: Option<String>,
@@ -80,7 +99,7 @@ pub struct Args {
 }
 
 pub(crate) fn model_options(a: &Args) -> Result<ModelOptions, CliError> {
-    require_positive(&[("soft-sigma-d", a.soft_sigma_d), ("soft-sigma-param", a.soft_sigma_param), ("tolerance", a.tolerance)])?;
+    require_positive(&[("soft-sigma-d", a.soft_sigma_d), ("soft-sigma-param", a.soft_sigma_param), ("tolerance", a.tolerance), ("max-shift", a.max_shift)])?;
     if !(a.alpha > 0.0 && a.alpha < 1.0) {
         return Err(CliError::usage(format!("--alpha must lie in (0, 1), got {}", a.alpha)));
     }
@@ -130,39 +149,54 @@ fn row(o: &ObsReport) -> String {
     )
 }
 
-pub(crate) fn print_report(r: &Report, rows: usize) {
-    eprintln!(
-        "adjust: datum {}, {} unknowns, {} conditions, {} restrictions (+{} datum), redundancy {} (Σ r_i = {:.3}), {} iteration(s), {} component(s)",
-        r.datum, r.unknowns, r.conditions, r.restrictions, r.datum_restrictions, r.redundancy, r.redundancy_sum, r.iterations, r.components
-    );
+/// The global test in words: only vᵀPv above the upper bound is a failure.
+pub(crate) fn global_test_line(sigma0: f64, g: &GlobalTest) -> String {
+    let head = format!("σ̂0 = {sigma0:.4}; global test vᵀPv = {:.3} in [{:.3}, {:.3}] for {} dof", g.statistic, g.lower, g.upper, g.dof);
+    match g.verdict {
+        GlobalVerdict::Passed => format!("{head}: passed"),
+        GlobalVerdict::BelowLower => format!("{head}: below the lower bound: the observations fit better than their σ claim (σ too pessimistic, or the conditions are met exactly)"),
+        GlobalVerdict::AboveUpper => format!("{head}: FAILED (above the upper bound: residuals larger than the σ allow, a blunder or σ too optimistic)"),
+    }
+}
+
+pub(crate) fn print_report(r: &Report, rows: usize, verbose: bool) {
+    if verbose {
+        eprintln!(
+            "adjust: datum {}, {} unknowns, {} conditions, {} restrictions (+{} datum), redundancy {} (Σ r_i = {:.3}), {} iteration(s), {} component(s)",
+            r.datum, r.unknowns, r.conditions, r.restrictions, r.datum_restrictions, r.redundancy, r.redundancy_sum, r.iterations, r.components
+        );
+    }
     match (&r.sigma0, &r.global_test) {
-        (Some(s), Some(g)) => eprintln!(
-            "σ̂0 = {s:.4}; global test vᵀPv = {:.3} in [{:.3}, {:.3}] for {} dof: {}",
-            g.statistic,
-            g.lower,
-            g.upper,
-            g.dof,
-            if g.passed { "passed" } else { "FAILED" }
-        ),
+        (Some(s), Some(g)) => eprintln!("{}", global_test_line(*s, g)),
         _ => eprintln!("no redundancy: σ̂0 and the global test are undefined"),
     }
-    eprintln!("{:<28} {:>6} {:>14} {:>14} {:>8}", "type", "count", "max misclosure", "max |v|", "mean EV");
-    for (k, t) in &r.per_type {
-        eprintln!("{:<28} {:>6} {:>14.3e} {:>14.3e} {:>7.1}%", k, t.count, t.max_misclosure_before, t.max_abs_residual, 100.0 * t.mean_redundancy);
-    }
-    if rows > 0 {
-        eprintln!("{:>6} {:<28} {:<9} {:>3} {:>14} {:>11} {:>12} {:>6} {:>7}", "obs", "class", "origin", "", "value", "σ", "v", "EV %", "w");
-        for o in r.observations.iter().take(rows) {
-            eprintln!("{}", row(o));
+    if verbose {
+        eprintln!("{:<28} {:>6} {:>14} {:>14} {:>8}", "type", "count", "max misclosure", "max |v|", "mean EV");
+        for (k, t) in &r.per_type {
+            eprintln!("{:<28} {:>6} {:>14.3e} {:>14.3e} {:>7.1}%", k, t.count, t.max_misclosure_before, t.max_abs_residual, 100.0 * t.mean_redundancy);
+        }
+        if rows > 0 {
+            eprintln!("{:>6} {:<28} {:<9} {:>3} {:>14} {:>11} {:>12} {:>6} {:>7}", "obs", "class", "origin", "", "value", "σ", "v", "EV %", "w");
+            for o in r.observations.iter().take(rows) {
+                eprintln!("{}", row(o));
+            }
         }
     }
     if let Some(s) = &r.largest_suspect {
-        eprintln!("largest suspect: observation {} ({}{}) w = {:.2} (critical {:.2})", s.observation, s.class, if s.component.is_empty() { String::new() } else { format!(" {}", s.component) }, s.normalised, r.critical_w);
+        let obs = if s.observation == u32::MAX { "datum observation".to_string() } else { format!("observation {}", s.observation) };
+        let comp = if s.component.is_empty() { String::new() } else { format!(" {}", s.component) };
+        let rejected = r.observations.iter().filter(|o| o.rejected).count();
+        eprintln!("largest suspect: {obs} ({}{comp}) w = {:.2} (critical {:.2}); {rejected} rejected", s.class, s.normalised, r.critical_w);
+    }
+    if let Some(p) = &r.max_plane_shift_at {
+        eprintln!("largest plane movement: {:.4} m, {p}", p.shift);
     }
     if !r.not_yet_measured.is_empty() {
-        eprintln!("not yet measured ({} sketch priors still control the geometry):", r.not_yet_measured.len());
-        for o in r.not_yet_measured.iter().take(rows.max(1)) {
-            eprintln!("  observation {} {} {}", o.observation, o.class, o.label.clone().unwrap_or_default());
+        eprintln!("not yet measured: {} sketch priors still control the geometry{}", r.not_yet_measured.len(), if verbose { ":" } else { " (--verbose lists them)" });
+        if verbose {
+            for o in r.not_yet_measured.iter().take(rows.max(1)) {
+                eprintln!("  observation {} {} {}", o.observation, o.class, o.label.clone().unwrap_or_default());
+            }
         }
     }
 }
@@ -177,7 +211,19 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     let report = adjust_model(&mut model, &opts).map_err(|e| map_error(&name, e))?;
     progress.finish(&format!("{} iteration(s)", report.iterations));
     if !config.quiet {
-        print_report(&report, args.rows);
+        print_report(&report, args.rows, args.verbose);
+    }
+    // Refuse absurd movements before the model is written (NaN counts as absurd); the report is
+    // still written, it says what moved.
+    if report.max_plane_shift.is_nan() || report.max_plane_shift > args.max_shift {
+        if let Some(p) = &args.report {
+            write_json_report(p, &report)?;
+        }
+        let at = report.max_plane_shift_at.as_ref().map_or_else(|| "a plane".to_string(), |p| p.to_string());
+        return Err(CliError::findings(format!(
+            "{name}: {at} moved {:.3} m, more than --max-shift {} m; nothing written (check the conditions and σ, or raise --max-shift)",
+            report.max_plane_shift, args.max_shift
+        )));
     }
     let out = Output::from_arg(args.output.as_deref());
     out.write_with(|w| popa3d_model::write(&model, w).map_err(|e| CliError::internal(e.to_string())))?;
@@ -185,6 +231,6 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         write_json_report(p, &report)?;
     }
     let rejected = report.observations.iter().any(|o| o.rejected);
-    let failed = report.global_test.as_ref().is_some_and(|g| !g.passed);
+    let failed = report.global_test.as_ref().is_some_and(|g| g.verdict == GlobalVerdict::AboveUpper);
     Ok(if args.strict && (rejected || failed) { Exit::Findings } else { Exit::Ok })
 }
