@@ -19,8 +19,8 @@
 //!
 //! Polygons without gml:id are addressed by the line and column of their start tag
 //! ([`crate::citygml::polygon_key`]). Rewritten numbers keep the text of the input where the
-//! value did not change at the input's number of decimals, and are otherwise written with the
-//! ring's number of decimals (or `BackOptions::precision`). Deleted elements take their now
+//! value did not change at the document's number of decimals (the most any of its coordinates
+//! has), and are otherwise written with that many (or `BackOptions::precision`). Deleted elements take their now
 //! blank lines with them. Limitation (stated, not hidden): merged polygons are written as
 //! `gml:posList` rings.
 
@@ -40,7 +40,7 @@ pub struct BackOptions {
     pub area_tolerance: f64,
     /// Merge touching coplanar polygons of the same semantic type.
     pub merge: bool,
-    /// Decimals of rewritten coordinates; `None`: the input ring's own number of decimals.
+    /// Decimals of rewritten coordinates; `None`: the most decimals of the template's coordinates.
     pub precision: Option<usize>,
 }
 
@@ -207,10 +207,10 @@ fn prefix_at(src: &[u8], at: usize) -> String {
 
 /// A whole `gml:Polygon` in the prefix, ids and number format of the template polygon `kp`
 /// it replaces, with `outer` and `holes` as posList rings.
-fn polygon_text(template: &[u8], kp: &Polygon, outer: &[P3], holes: &[Vec<P3>], precision: Option<usize>) -> String {
+fn polygon_text(template: &[u8], kp: &Polygon, outer: &[P3], holes: &[Vec<P3>], decimals: Option<usize>) -> String {
     let px = prefix_at(template, kp.span.bytes.start);
     let dim = kp.exterior.srs_dimension.max(3);
-    let text = RingText::of(template, &kp.exterior, precision);
+    let text = RingText::of(template, &kp.exterior, decimals);
     let id_attr = |id: Option<&String>| id.map(|i| format!(" {px}id=\"{i}\"")).unwrap_or_default();
     let ring = |r: &[P3], id: Option<&String>| format!("<{px}LinearRing{}><{px}posList srsDimension=\"{dim}\">{}</{px}posList></{px}LinearRing>", id_attr(id), fmt_points(r, &[], dim, &text));
     let mut t = format!("<{px}Polygon{}><{px}exterior>{}</{px}exterior>", id_attr(kp.id.as_ref()), ring(outer, kp.exterior.id.as_ref()));
@@ -352,6 +352,34 @@ fn whole_lines(src: &[u8], r: std::ops::Range<usize>) -> std::ops::Range<usize> 
     }
 }
 
+/// The coordinate tokens of a ring's text, in order.
+fn ring_tokens<'t>(src: &'t [u8], r: &Ring) -> Vec<&'t str> {
+    let spans: Vec<std::ops::Range<usize>> = match r.encoding {
+        citygml_io::CoordEncoding::Pos => r.pos_spans.iter().map(|s| s.bytes.clone()).collect(),
+        _ => vec![r.text_span.bytes.clone()],
+    };
+    let mut tokens = Vec::new();
+    for sp in spans {
+        let text = std::str::from_utf8(src.get(sp).unwrap_or_default()).unwrap_or("");
+        tokens.extend(text.split(|c: char| c.is_ascii_whitespace() || c == ',').filter(|t| !t.is_empty()));
+    }
+    tokens
+}
+
+/// The most decimals any coordinate of these polygons is written with; `None` when one is in
+/// exponent notation (then new numbers are written in shortest round-trip form).
+fn document_decimals<'a>(src: &[u8], polys: impl Iterator<Item = &'a Polygon>) -> Option<usize> {
+    let mut most = 0;
+    for p in polys {
+        for r in std::iter::once(&p.exterior).chain(p.interiors.iter()) {
+            for t in ring_tokens(src, r) {
+                most = most.max(decimals(t)?);
+            }
+        }
+    }
+    Some(most)
+}
+
 /// Number of decimals of a plain decimal number token (`12.345` → 3, `12` → 0); `None` for
 /// exponent notation or anything else.
 fn decimals(tok: &str) -> Option<usize> {
@@ -365,7 +393,8 @@ fn decimals(tok: &str) -> Option<usize> {
 }
 
 /// How rewritten coordinates of one ring are spelled: the input's tokens (one per value, in
-/// order) and the ring's number of decimals.
+/// order) and the number of decimals of the document (not of the ring: a node shared by rings
+/// written with 1 and 2 decimals must come out as the same number in all of them).
 struct RingText<'t> {
     tokens: Vec<&'t str>,
     /// Values per position in the input text.
@@ -374,26 +403,16 @@ struct RingText<'t> {
 }
 
 impl<'t> RingText<'t> {
-    fn of(src: &'t [u8], r: &Ring, precision: Option<usize>) -> RingText<'t> {
-        let spans: Vec<std::ops::Range<usize>> = match r.encoding {
-            citygml_io::CoordEncoding::Pos => r.pos_spans.iter().map(|s| s.bytes.clone()).collect(),
-            _ => vec![r.text_span.bytes.clone()],
-        };
-        let mut tokens = Vec::new();
-        for sp in spans {
-            let text = std::str::from_utf8(src.get(sp).unwrap_or_default()).unwrap_or("");
-            tokens.extend(text.split(|c: char| c.is_ascii_whitespace() || c == ',').filter(|t| !t.is_empty()));
-        }
-        let decimals = precision.or_else(|| tokens.iter().map(|t| decimals(t)).try_fold(0usize, |a, d| d.map(|d| a.max(d))));
-        RingText { tokens, dim: r.srs_dimension.max(1) as usize, decimals }
+    fn of(src: &'t [u8], r: &Ring, decimals: Option<usize>) -> RingText<'t> {
+        RingText { tokens: ring_tokens(src, r), dim: r.srs_dimension.max(1) as usize, decimals }
     }
 
     /// The text of value `c` of point `p` (an index into the input ring, `None` for a new
-    /// point): the input's own token when the value is unchanged at its number of decimals.
+    /// point): the input's own token when the value is unchanged at the document's decimals.
     fn value(&self, p: Option<usize>, c: usize, v: f64) -> String {
-        if let Some(tok) = p.filter(|_| c < self.dim).and_then(|p| self.tokens.get(p * self.dim + c)) {
-            if let (Some(d), Ok(old)) = (decimals(tok), tok.parse::<f64>()) {
-                if format!("{:.*}", d, v).parse::<f64>().ok() == Some(old) {
+        if let (Some(tok), Some(d)) = (p.filter(|_| c < self.dim).and_then(|p| self.tokens.get(p * self.dim + c)), self.decimals) {
+            if let Ok(old) = tok.parse::<f64>() {
+                if format!("{:.*}", d, v).parse::<f64>().ok() == format!("{:.*}", d, old).parse::<f64>().ok() {
                     return tok.to_string();
                 }
             }
@@ -442,6 +461,8 @@ pub struct Template<'a> {
     doc_order: Vec<String>,
     /// Polygon keys per thematic surface (keyed by the surface's start byte).
     surface_polys: HashMap<usize, (&'a CityObject, Vec<String>)>,
+    /// Decimals of the document's coordinates (see [`document_decimals`]).
+    decimals: Option<usize>,
 }
 
 impl<'a> Template<'a> {
@@ -457,7 +478,8 @@ impl<'a> Template<'a> {
                 surface_polys.entry(s.span.bytes.start).or_insert((s, Vec::new())).1.push(id.clone());
             }
         }
-        Template { bytes, polys: ix.polys, refs: ix.refs, doc_order: ix.order, surface_polys }
+        let decimals = document_decimals(bytes, ix.polys.values().map(|p| p.poly));
+        Template { bytes, polys: ix.polys, refs: ix.refs, doc_order: ix.order, surface_polys, decimals }
     }
 
     /// The template with `edits` applied (they must not overlap).
@@ -479,6 +501,7 @@ pub fn to_citygml_with(model: &Popa3d, tpl: &Template, opts: &BackOptions) -> Re
 /// models of different buildings can be applied together or left out one building at a time.
 pub fn back_edits(model: &Popa3d, tpl: &Template, opts: &BackOptions) -> Result<(Vec<Edit>, BackReport), BackError> {
     let (template, polys, refs, doc_order) = (tpl.bytes, &tpl.polys, &tpl.refs, &tpl.doc_order);
+    let decimals = opts.precision.or(tpl.decimals);
     let mut m = model.clone();
     // 1. Make near-coplanar planes on one normal exactly coplanar.
     let mut by_normal: BTreeMap<u32, Vec<usize>> = BTreeMap::new();
@@ -664,7 +687,7 @@ pub fn back_edits(model: &Popa3d, tpl: &Template, opts: &BackOptions) -> Result<
         }
         let outer = rings.remove(0);
         rings.retain(|r| r.len() >= 3 && newell_area(r) >= opts.area_tolerance);
-        replaced.insert(host.clone(), polygon_text(template, polys[&host].poly, &outer, &rings, opts.precision));
+        replaced.insert(host.clone(), polygon_text(template, polys[&host].poly, &outer, &rings, decimals));
         removed.remove(&host);
         for g in &guests {
             removed.remove(g);
@@ -803,7 +826,7 @@ pub fn back_edits(model: &Popa3d, tpl: &Template, opts: &BackOptions) -> Result<
                 let imax = (0..loops.len()).max_by(|&a, &b| newell_area(&loops[a]).total_cmp(&newell_area(&loops[b]))).unwrap();
                 let outer = loops.remove(imax);
                 let kept = ids[members[0]].clone();
-                let t = polygon_text(template, polys[&kept].poly, &outer, &loops, opts.precision);
+                let t = polygon_text(template, polys[&kept].poly, &outer, &loops, decimals);
                 replaced.insert(kept.clone(), t);
                 let others: Vec<String> = members[1..].iter().map(|&k| ids[k].clone()).collect();
                 for o in &others {
@@ -875,7 +898,7 @@ pub fn back_edits(model: &Popa3d, tpl: &Template, opts: &BackOptions) -> Result<
         for (ri, r) in std::iter::once(&p.exterior).chain(p.interiors.iter()).enumerate() {
             match &rings[ri] {
                 Some(pts) => {
-                    let text = RingText::of(template, r, opts.precision);
+                    let text = RingText::of(template, r, decimals);
                     let (xyz, src): (Vec<P3>, Vec<Option<usize>>) = pts.iter().map(|&(q, k)| (q, Some(k))).unzip();
                     let dim = r.srs_dimension.max(3);
                     if r.encoding == citygml_io::CoordEncoding::Pos && pts.len() + 1 != r.pos_spans.len() {

@@ -20,8 +20,8 @@ Example:
 Each building (or building part) is turned into planes (every face becomes exactly planar) about
 its own reference point, adjusted with weak identity observations so every plane stays near its
 measured place, and its vertices are written back as plane intersections. Everything that is not
-geometry is copied byte for byte; unchanged numbers keep their text, new ones the input's number
-of decimals (or --precision).
+geometry is copied byte for byte; unchanged numbers keep their text, new ones the most decimals
+the input file uses (or --precision).
 
 Do no harm: the healed file is read back and every building validated and measured again. A
 building keeps its original geometry when healing would give it a validation finding it did not
@@ -66,7 +66,7 @@ pub struct Args {
     /// A building whose surface area would change by more than this keeps its geometry (percent).
     #[arg(long, default_value_t = 0.5)]
     pub max_area_change: f64,
-    /// Decimals of rewritten coordinates (default: those of the input ring).
+    /// Decimals of rewritten coordinates (default: the most the input file uses).
     #[arg(long)]
     pub precision: Option<usize>,
     /// Do not merge coplanar polygons.

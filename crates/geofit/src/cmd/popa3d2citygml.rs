@@ -22,8 +22,8 @@ the openings of a surface left empty move to the surface keeping the merged poly
 keeps every polygon). A template that does not match the provenance is an error naming the node
 and polygon. A vertex that would move further than --max-move metres (or by a non-finite amount)
 is an error naming the buildings (exit 1, nothing written): an adjustment that moved a building
-that far is not a correction. Unchanged numbers keep their text; new ones get the input ring's
-number of decimals (or --precision).";
+that far is not a correction. Unchanged numbers keep their text; new ones get the most decimals
+the input file uses (or --precision).";
 
 #[derive(ClapArgs, Debug)]
 #[command(after_help = AFTER_HELP)]
@@ -51,7 +51,7 @@ pub struct Args {
     /// Largest vertex move accepted (m); a larger one is an error naming the buildings.
     #[arg(long, default_value_t = 0.05)]
     pub max_move: f64,
-    /// Decimals of rewritten coordinates (default: those of the input ring).
+    /// Decimals of rewritten coordinates (default: the most the input file uses).
     #[arg(long)]
     pub precision: Option<usize>,
     /// Write a JSON report (removed, merged, vertex moves) to this path (`-` = stdout).
