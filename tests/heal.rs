@@ -248,7 +248,7 @@ fn heal_bad_number_affects_only_its_building() {
 /// --strict: a building that keeps its geometry is an error, and nothing is written.
 #[test]
 fn heal_strict_writes_nothing_when_a_building_is_kept() {
-    let Some(tile) = common::fixture("citygml/nrw/LoD2_32_327_5723_1_NW.gml") else { return };
+    let Some(tile) = common::fixture("citygml/nrw/LoD2_32_332_5729_1_NW.gml") else { return };
     let dir = common::tempdir();
     let out = dir.path().join("out.gml");
     let r = heal(&tile, &out, &dir.path().join("r.json"), &[]);

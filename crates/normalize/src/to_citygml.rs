@@ -222,27 +222,29 @@ fn polygon_text(template: &[u8], kp: &Polygon, outer: &[P3], holes: &[Vec<P3>], 
 }
 
 /// Polygons without a face of their own (absorbed by normalization into a coplanar neighbour's
-/// face), grouped by the polygon whose face holds all their remaining vertices; a face of the
-/// same semantic type is preferred. Host polygons in document order.
+/// face), grouped by the polygon whose face holds all their remaining vertices; the face most
+/// nearly coplanar with the absorbed polygon is preferred, then one of the same semantic type.
+/// Host polygons in document order.
 fn absorbed_polygons(
     m: &Popa3d,
     inc: &Incidence,
     pos: &[P3],
     mapped: &[String],
     face_of: &HashMap<String, FaceId>,
-    vmap: &HashMap<(String, u32, u32), NodeId>,
+    nodes_of: &HashMap<&String, BTreeSet<NodeId>>,
     polys: &HashMap<String, PolyInfo>,
 ) -> Vec<(String, Vec<String>)> {
-    let mut nodes_of: HashMap<&String, BTreeSet<NodeId>> = HashMap::new();
-    for ((p, _, _), n) in vmap {
-        nodes_of.entry(p).or_default().insert(*n);
-    }
+    let unit = |v: [f64; 3]| {
+        let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+        if l > 0.0 { [v[0] / l, v[1] / l, v[2] / l] } else { v }
+    };
     let mut hosts: BTreeMap<usize, (String, Vec<String>)> = BTreeMap::new();
     let rank: HashMap<&String, usize> = mapped.iter().enumerate().map(|(i, id)| (id, i)).collect();
     for q in mapped.iter().filter(|q| !face_of.contains_key(*q)) {
         let Some(nodes) = nodes_of.get(q) else { continue };
         let Some(first) = nodes.iter().next() else { continue };
         let sem = polys[q].poly.semantic;
+        let qn = unit(popa3d_model::topology::newell(&polys[q].poly.exterior.points));
         let host = inc
             .node_faces(m, *first)
             .into_iter()
@@ -252,7 +254,14 @@ fn absorbed_polygons(
                 let on: BTreeSet<NodeId> = m.face_loops(inc, *f, pos).unwrap_or_default().into_iter().flatten().collect();
                 nodes.is_subset(&on)
             })
-            .max_by_key(|(_, p)| polys[p].poly.semantic == sem);
+            .map(|(f, p)| {
+                // the face the guest was merged into is coplanar with it: closest normal first
+                let n = unit(m.face_plane_value(f).n);
+                let along = (n[0] * qn[0] + n[1] * qn[1] + n[2] * qn[2]).abs();
+                ((along * 1e6).round() as i64, polys[&p].poly.semantic == sem, p)
+            })
+            .max_by(|a, b| (a.0, a.1).cmp(&(b.0, b.1)))
+            .map(|(_, _, p)| ((), p));
         if let Some((_, p)) = host {
             let r = rank.get(&p).copied().unwrap_or(usize::MAX);
             hosts.entry(r).or_insert_with(|| (p, Vec::new())).1.push(q.clone());
@@ -675,25 +684,38 @@ pub fn back_edits(model: &Popa3d, tpl: &Template, opts: &BackOptions) -> Result<
             refs.get(*id).is_some_and(|rs| rs.iter().any(|r| r.building != own))
         })
         .collect();
-    for (host, guests) in absorbed_polygons(&m, &inc, &pos, &mapped, &face_of, &vmap, polys) {
-        if guests.iter().any(|g| external.contains(g)) {
+    // A polygon whose face has other nodes than its own vertices (it absorbed a neighbour, or
+    // lost collinear vertices to a neighbour's merge) is written as its face.
+    let mut nodes_of: HashMap<&String, BTreeSet<NodeId>> = HashMap::new();
+    for ((p, _, _), n) in &vmap {
+        nodes_of.entry(p).or_default().insert(*n);
+    }
+    for id in &mapped {
+        let Some(&f) = face_of.get(id) else { continue };
+        let Some(loops) = m.face_loops(&inc, f, &pos) else { continue };
+        let on_face: BTreeSet<NodeId> = loops.iter().flatten().copied().collect();
+        if nodes_of.get(id) == Some(&on_face) {
             continue;
         }
-        let f = face_of[&host];
-        let Some(loops) = m.face_loops(&inc, f, &pos) else { continue };
         let mut rings: Vec<Vec<P3>> = loops.iter().map(|l| collapse(l.iter().map(|n| pos[n.idx()]).collect(), opts.collapse_tolerance)).collect();
-        if rings.is_empty() || rings[0].len() < 3 {
+        if rings.is_empty() || rings[0].len() < 3 || newell_area(&rings[0]) < opts.area_tolerance {
             continue;
         }
         let outer = rings.remove(0);
         rings.retain(|r| r.len() >= 3 && newell_area(r) >= opts.area_tolerance);
-        replaced.insert(host.clone(), polygon_text(template, polys[&host].poly, &outer, &rings, decimals));
-        removed.remove(&host);
+        replaced.insert(id.clone(), polygon_text(template, polys[id].poly, &outer, &rings, decimals));
+        removed.remove(id);
+        report.removed_degenerate.retain(|r| r != id);
+    }
+    for (host, guests) in absorbed_polygons(&m, &inc, &pos, &mapped, &face_of, &nodes_of, polys) {
+        if guests.iter().any(|g| external.contains(g)) || !replaced.contains_key(&host) {
+            continue;
+        }
         for g in &guests {
             removed.remove(g);
             merged_away.insert(g.clone(), host.clone());
         }
-        report.removed_degenerate.retain(|r| r != &host && !guests.contains(r));
+        report.removed_degenerate.retain(|r| !guests.contains(r));
         report.merged.push((host, guests));
     }
     if opts.merge {
