@@ -161,6 +161,7 @@ pub fn building_soup(b: &CityObject, max_lod: u8) -> Result<Soup, Rejection> {
                 polygon: pid,
                 semantic: p.semantic.map(|s| s.local_name().to_string()),
                 owner: p.semantic_owner.clone(),
+                merged: Vec::new(),
             },
             locator,
             parent: p.semantic_owner.as_ref().and_then(|o| parent_of.get(o).cloned()),

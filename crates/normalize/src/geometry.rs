@@ -350,7 +350,10 @@ fn build_depth(soup: &Soup, topo: &Topo, tol: &Tolerances, origin: [f64; 3], dep
             orientation: if orient > 0.0 { Sign::Plus } else { Sign::Minus },
             front: SolidId::from(f.front.map_or(0, |s| s + 1)),
             back: SolidId::from(f.back + 1),
-            source: Some(poly.source.clone()),
+            source: Some(FaceSource {
+                merged: f.absorbed.iter().map(|&i| soup.polygons[i].source.polygon.clone()).collect(),
+                ..poly.source.clone()
+            }),
         });
     }
     for &(e, s, f) in &topo.half_edges {

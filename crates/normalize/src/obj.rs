@@ -62,7 +62,7 @@ pub fn read_sketch(bytes: &[u8], name: &str) -> Result<Soup, ObjError> {
                 rings: vec![ring],
                 vertex_sources: vec![src],
                 solid: si,
-                source: FaceSource { polygon: pid.clone(), semantic: None, owner: None },
+                source: FaceSource { polygon: pid.clone(), ..FaceSource::default() },
                 locator: format!("{name}: object {oname} face {}", fi + 1),
                 parent: None,
             });

@@ -221,55 +221,6 @@ fn polygon_text(template: &[u8], kp: &Polygon, outer: &[P3], holes: &[Vec<P3>], 
     t
 }
 
-/// Polygons without a face of their own (absorbed by normalization into a coplanar neighbour's
-/// face), grouped by the polygon whose face holds all their remaining vertices; the face most
-/// nearly coplanar with the absorbed polygon is preferred, then one of the same semantic type.
-/// Host polygons in document order.
-fn absorbed_polygons(
-    m: &Popa3d,
-    inc: &Incidence,
-    pos: &[P3],
-    mapped: &[String],
-    face_of: &HashMap<String, FaceId>,
-    nodes_of: &HashMap<&String, BTreeSet<NodeId>>,
-    polys: &HashMap<String, PolyInfo>,
-) -> Vec<(String, Vec<String>)> {
-    let unit = |v: [f64; 3]| {
-        let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-        if l > 0.0 { [v[0] / l, v[1] / l, v[2] / l] } else { v }
-    };
-    let mut hosts: BTreeMap<usize, (String, Vec<String>)> = BTreeMap::new();
-    let rank: HashMap<&String, usize> = mapped.iter().enumerate().map(|(i, id)| (id, i)).collect();
-    for q in mapped.iter().filter(|q| !face_of.contains_key(*q)) {
-        let Some(nodes) = nodes_of.get(q) else { continue };
-        let Some(first) = nodes.iter().next() else { continue };
-        let sem = polys[q].poly.semantic;
-        let qn = unit(popa3d_model::topology::newell(&polys[q].poly.exterior.points));
-        let host = inc
-            .node_faces(m, *first)
-            .into_iter()
-            .filter_map(|f| m.face(f).source.as_ref().map(|s| (f, s.polygon.clone())))
-            .filter(|(_, p)| polys.contains_key(p))
-            .filter(|(f, _)| {
-                let on: BTreeSet<NodeId> = m.face_loops(inc, *f, pos).unwrap_or_default().into_iter().flatten().collect();
-                nodes.is_subset(&on)
-            })
-            .map(|(f, p)| {
-                // the face the guest was merged into is coplanar with it: closest normal first
-                let n = unit(m.face_plane_value(f).n);
-                let along = (n[0] * qn[0] + n[1] * qn[1] + n[2] * qn[2]).abs();
-                ((along * 1e6).round() as i64, polys[&p].poly.semantic == sem, p)
-            })
-            .max_by(|a, b| (a.0, a.1).cmp(&(b.0, b.1)))
-            .map(|(_, _, p)| ((), p));
-        if let Some((_, p)) = host {
-            let r = rank.get(&p).copied().unwrap_or(usize::MAX);
-            hosts.entry(r).or_insert_with(|| (p, Vec::new())).1.push(q.clone());
-        }
-    }
-    hosts.into_values().collect()
-}
-
 /// A closed posList text of `pts` (the first point repeated at the end); `src[k]` is the input
 /// index of point k in the ring `text` was read from, when it has one.
 fn fmt_points(pts: &[P3], src: &[Option<usize>], dim: u8, text: &RingText) -> String {
@@ -611,7 +562,17 @@ pub fn back_edits(model: &Popa3d, tpl: &Template, opts: &BackOptions) -> Result<
             }
         }
     }
-    let mapped_set: HashSet<&String> = vmap.keys().map(|k| &k.0).collect();
+    // Polygons merged into another polygon's face by normalization: they belong to the model
+    // even when none of their vertices kept a node.
+    let absorbed: Vec<(String, Vec<String>)> = m
+        .faces
+        .iter()
+        .filter_map(|f| f.source.as_ref())
+        .filter(|s| !s.merged.is_empty() && polys.contains_key(&s.polygon))
+        .map(|s| (s.polygon.clone(), s.merged.iter().filter(|g| polys.contains_key(*g)).cloned().collect()))
+        .collect();
+    let mut mapped_set: HashSet<&String> = vmap.keys().map(|k| &k.0).collect();
+    mapped_set.extend(absorbed.iter().flat_map(|(_, g)| g.iter()));
     let mapped: Vec<String> = doc_order.iter().filter(|id| mapped_set.contains(id)).cloned().collect();
     let mut report = BackReport { polygons_mapped: mapped.len(), ..Default::default() };
     // New rings per mapped polygon, each point with its index in the template ring.
@@ -690,11 +651,12 @@ pub fn back_edits(model: &Popa3d, tpl: &Template, opts: &BackOptions) -> Result<
     for ((p, _, _), n) in &vmap {
         nodes_of.entry(p).or_default().insert(*n);
     }
+    let hosts: HashSet<&String> = absorbed.iter().map(|(h, _)| h).collect();
     for id in &mapped {
         let Some(&f) = face_of.get(id) else { continue };
         let Some(loops) = m.face_loops(&inc, f, &pos) else { continue };
         let on_face: BTreeSet<NodeId> = loops.iter().flatten().copied().collect();
-        if nodes_of.get(id) == Some(&on_face) {
+        if nodes_of.get(id) == Some(&on_face) && !hosts.contains(id) {
             continue;
         }
         let mut rings: Vec<Vec<P3>> = loops.iter().map(|l| collapse(l.iter().map(|n| pos[n.idx()]).collect(), opts.collapse_tolerance)).collect();
@@ -707,7 +669,8 @@ pub fn back_edits(model: &Popa3d, tpl: &Template, opts: &BackOptions) -> Result<
         removed.remove(id);
         report.removed_degenerate.retain(|r| r != id);
     }
-    for (host, guests) in absorbed_polygons(&m, &inc, &pos, &mapped, &face_of, &nodes_of, polys) {
+    // The polygons merged into a face go with their host (their surface may empty, openings move).
+    for (host, guests) in absorbed {
         if guests.iter().any(|g| external.contains(g)) || !replaced.contains_key(&host) {
             continue;
         }

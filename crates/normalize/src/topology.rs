@@ -13,6 +13,8 @@ pub struct TopoFace {
     pub rings: Vec<Vec<usize>>,
     /// Index of the source polygon in the soup.
     pub polygon: usize,
+    /// Soup polygons merged into this face by [`repair`].
+    pub absorbed: Vec<usize>,
     pub back: usize,
     pub front: Option<usize>,
 }
@@ -218,7 +220,7 @@ pub fn build(soup: &Soup, tol: &Tolerances, notices: &mut Vec<Notice>) -> Result
             continue;
         }
         seen.insert(key, t.faces.len());
-        t.faces.push(TopoFace { rings: rings.clone(), polygon: pi, back: solid, front: None });
+        t.faces.push(TopoFace { rings: rings.clone(), polygon: pi, absorbed: Vec::new(), back: solid, front: None });
     }
 
     // Orientation per solid: breadth-first over faces sharing edges, then the sign of the volume.
@@ -491,6 +493,10 @@ pub fn repair(t: &mut Topo, deficient: &[usize], mergeable: &dyn Fn(usize, usize
             rings.swap(0, imax);
             let mut nf = t.faces[f].clone();
             nf.rings = rings;
+            for &h in g.iter().filter(|&&h| h != f) {
+                nf.absorbed.push(t.faces[h].polygon);
+                nf.absorbed.extend(t.faces[h].absorbed.iter().copied());
+            }
             new_faces.push(nf);
         }
         t.faces = new_faces;

@@ -10,7 +10,7 @@ fn quad(p: [[f64; 3]; 4], solid: usize, id: &str) -> SoupPolygon {
         rings: vec![p.to_vec()],
         vertex_sources: vec![(0..4).map(|i| VertexSource::CityGml { polygon: id.into(), ring: 0, index: i }).collect()],
         solid,
-        source: FaceSource { polygon: id.into(), semantic: Some("WallSurface".into()), owner: None },
+        source: FaceSource { polygon: id.into(), semantic: Some("WallSurface".into()), owner: None, merged: vec![] },
         locator: id.into(),
         parent: None,
     }

@@ -100,14 +100,18 @@ pub struct Face {
 }
 
 /// Provenance and semantics of a face.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Default)]
 pub struct FaceSource {
-    /// CityGML polygon gml:id (or `#<n>`, see [`VertexSource::CityGml`]); OBJ: `f<line>` of the face.
+    /// CityGML polygon gml:id (or `@line:column` of a polygon without id); OBJ: `f<line>` of the face.
     pub polygon: String,
     /// Semantic type as the CityGML element name (`WallSurface`, `Window`, ...), if any.
     pub semantic: Option<String>,
     /// gml:id of the thematic surface / opening that owns the polygon, if any.
     pub owner: Option<String>,
+    /// Source polygons that normalization merged into this face (coplanar neighbours whose common
+    /// edge left a node without three planes, spec §7.4): the write-back replaces them by this
+    /// face, so their surface is not lost.
+    pub merged: Vec<String>,
 }
 
 /// What a solid stands for.

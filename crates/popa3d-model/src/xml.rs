@@ -159,6 +159,9 @@ pub fn write<W: Write + ?Sized>(m: &Popa3d, w: &mut W) -> Result<(), XmlError> {
                 if let Some(t) = &s.owner {
                     let _ = write!(o, " owner=\"{}\"", esc(t));
                 }
+                if !s.merged.is_empty() {
+                    let _ = write!(o, " merged=\"{}\"", esc(&s.merged.join(" ")));
+                }
             }
             o.push_str("/>\n");
         }
@@ -628,6 +631,7 @@ pub fn read(bytes: &[u8]) -> Result<Popa3d, XmlError> {
                             polygon: p.to_string(),
                             semantic: el.opt("semantic").map(str::to_string),
                             owner: el.opt("owner").map(str::to_string),
+                            merged: el.opt("merged").map(|m| m.split_whitespace().map(str::to_string).collect()).unwrap_or_default(),
                         }),
                         None => None,
                     };
