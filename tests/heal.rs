@@ -219,30 +219,46 @@ fn heal_refuses_degrees() {
     assert!(!out.exists());
 }
 
-/// One absurd coordinate (1e308) keeps only its building as it was; the others are healed, the
-/// totals stay finite, and the exit is 0 with the building named.
+/// Bad numbers keep only their building as it was: an absurd coordinate (1e308), a NaN (which
+/// the reader rejects: the file is read with a stand-in and the NaN written back as it was), and
+/// a ring of identical points. The others are healed, the totals stay finite, the exit is 0 with
+/// the building named.
 #[test]
-fn heal_bad_number_affects_only_its_building() {
+fn heal_bad_numbers_affect_only_their_building() {
     let Some(tile) = common::fixture("citygml/nrw/LoD2_32_327_5723_1_NW.gml") else { return };
     let dir = common::tempdir();
     let d = dir.path();
     let clean = heal(&tile, &d.join("clean.gml"), &d.join("clean.json"), &[]);
     let text = std::fs::read_to_string(&tile).unwrap();
-    // the first coordinate of the 61st posList (inside a building that heals)
+    // the 61st posList lies inside a building that heals
     let at = text.match_indices("<gml:posList").nth(60).unwrap().0;
     let start = text[at..].find('>').unwrap() + at + 1;
-    let end = text[start..].find(' ').unwrap() + start;
-    let bad = d.join("bad.gml");
-    std::fs::write(&bad, format!("{}1e308{}", &text[..start], &text[end..])).unwrap();
-    let o = run(&["heal", s(&bad), "-o", s(&d.join("bad.healed.gml")), "--report", s(&d.join("bad.json"))], None);
-    assert_eq!(code(&o), 0, "{}", String::from_utf8_lossy(&o.stderr));
-    let e = String::from_utf8_lossy(&o.stderr);
-    assert!(e.contains("out of range"), "{e}");
-    let r: Value = serde_json::from_slice(&std::fs::read(d.join("bad.json")).unwrap()).unwrap();
-    assert_eq!(r["healed"].as_u64().unwrap() + 1, clean["healed"].as_u64().unwrap(), "{r}");
-    assert!(r["area_after_m2"].as_f64().is_some_and(f64::is_finite) && r["back"]["max_move"].as_f64().is_some_and(f64::is_finite));
-    let written = std::fs::read_to_string(d.join("bad.healed.gml")).unwrap();
-    assert!(!written.contains(">inf") && !written.contains(" inf ") && !written.contains("NaN"), "non-finite numbers written");
+    let first = text[start..].find(' ').unwrap() + start;
+    let end = text[start..].find('<').unwrap() + start;
+    let triple: Vec<&str> = text[start..end].split_whitespace().take(3).collect();
+    let n = text[start..end].split_whitespace().count() / 3;
+    let same = vec![triple.join(" "); n].join(" ");
+    let cases = [
+        ("big", format!("{}1e308{}", &text[..start], &text[first..]), "out of range"),
+        ("nan", format!("{}NaN{}", &text[..start], &text[first..]), "non-finite coordinate 'NaN'"),
+        ("same", format!("{}{same}{}", &text[..start], &text[end..]), ""),
+    ];
+    for (name, content, why) in cases {
+        let bad = d.join(format!("{name}.gml"));
+        std::fs::write(&bad, &content).unwrap();
+        let out = d.join(format!("{name}.healed.gml"));
+        let rep = d.join(format!("{name}.json"));
+        let o = run(&["heal", s(&bad), "-o", s(&out), "--report", s(&rep)], None);
+        assert_eq!(code(&o), 0, "{name}: {}", String::from_utf8_lossy(&o.stderr));
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert!(e.contains("kept") && e.contains(why), "{name}: {e}");
+        let r: Value = serde_json::from_slice(&std::fs::read(&rep).unwrap()).unwrap();
+        assert_eq!(r["healed"].as_u64().unwrap() + 1, clean["healed"].as_u64().unwrap(), "{name}: {r}");
+        assert!(r["area_after_m2"].as_f64().is_some_and(f64::is_finite) && r["back"]["max_move"].as_f64().is_some_and(f64::is_finite), "{name}: {r}");
+        let written = std::fs::read_to_string(&out).unwrap();
+        assert!(!written.contains(">inf") && !written.contains(" inf "), "{name}: non-finite numbers written");
+        assert_eq!(written.matches("NaN").count(), content.matches("NaN").count(), "{name}: the kept building is written as it was");
+    }
 }
 
 /// --strict: a building that keeps its geometry is an error, and nothing is written.

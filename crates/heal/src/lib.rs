@@ -132,8 +132,9 @@ fn measure_all(units: &[&CityObject], which: &[usize], opts: &citygml_validate::
 
 /// Heals every building of a CityGML document (see the crate documentation). `progress` is
 /// called with the number of buildings adjusted so far.
-pub fn heal(bytes: &[u8], opts: &HealOptions, progress: &(dyn Fn(usize) + Sync)) -> Result<Healed, HealError> {
-    let city = citygml_io::parse(bytes).map_err(|e| HealError::Unreadable(e.to_string()))?;
+pub fn heal(original: &[u8], opts: &HealOptions, progress: &(dyn Fn(usize) + Sync)) -> Result<Healed, HealError> {
+    let (bytes, city, bad) = parse_tolerant(original).map_err(|e| HealError::Unreadable(e.to_string()))?;
+    let bytes = bytes.as_slice();
     if let Some(srs) = &city.srs_name {
         if let Some(epsg) = crs::geographic_epsg(srs) {
             return Err(HealError::Geographic { srs: srs.clone(), epsg });
@@ -154,21 +155,37 @@ pub fn heal(bytes: &[u8], opts: &HealOptions, progress: &(dyn Fn(usize) + Sync))
         })
         .collect();
     let mut kept: Vec<Option<String>> = results.iter().map(|r| r.as_ref().err().cloned()).collect();
+    let mut with_bad_numbers = Vec::new();
+    for b in &bad {
+        // the innermost unit holding the bad number keeps its geometry
+        if let Some(i) = (0..units.len()).filter(|&i| units[i].span.bytes.contains(&b.byte)).max_by_key(|&i| units[i].span.bytes.start) {
+            kept[i] = Some(format!("non-finite coordinate '{}' at line {}, column {}", b.token, b.line, b.column));
+            with_bad_numbers.push(i);
+        }
+    }
     reject_overlaps(&units, &results, &mut kept);
     let all: Vec<usize> = (0..units.len()).collect();
-    let before = measure_all(&units, &all, &opts.validation);
+    let mut before = measure_all(&units, &all, &opts.validation);
+    for &i in &with_bad_numbers {
+        before[i].area = f64::NAN; // measured on the stand-in numbers: left out of the totals
+    }
     let touched_by = touch_map(&units, &results);
     let mut rounds = 0;
     let (document, after) = loop {
         rounds += 1;
         let edits: Vec<Edit> = results.iter().zip(&kept).filter(|(_, k)| k.is_none()).flat_map(|(r, _)| r.as_ref().map(|x| x.0.clone()).unwrap_or_default()).collect();
-        let doc = template.apply(&edits).map_err(|e| HealError::Internal(e.to_string()))?;
-        let city2 = citygml_io::parse(&doc).map_err(|e| HealError::Internal(format!("the healed document cannot be read back: {e}")))?;
+        // the edits go into the original bytes (the tolerant copy differs only inside bad numbers)
+        let mut doc = Vec::with_capacity(original.len());
+        citygml_io::write_with_edits(original, &edits, &mut doc).map_err(|e| HealError::Internal(e.to_string()))?;
+        let (_, city2, _) = parse_tolerant(&doc).map_err(|e| HealError::Internal(format!("the healed document cannot be read back: {e}")))?;
         let units2 = self::units(&city2);
         if units2.len() != units.len() || units2.iter().zip(&units).any(|(a, b)| a.id != b.id) {
             return Err(HealError::Internal("the healed document does not hold the same buildings".into()));
         }
-        let after = measure_all(&units2, &all, &opts.validation);
+        let mut after = measure_all(&units2, &all, &opts.validation);
+        for &i in &with_bad_numbers {
+            after[i].area = f64::NAN;
+        }
         let mut failed = false;
         for i in 0..units.len() {
             let touching: Vec<usize> = touched_by[i].iter().copied().filter(|&j| kept[j].is_none()).collect();
@@ -215,6 +232,41 @@ pub fn heal(bytes: &[u8], opts: &HealOptions, progress: &(dyn Fn(usize) + Sync))
         back,
     };
     Ok(Healed { document, report })
+}
+
+/// A non-finite coordinate token (NaN, inf) found by [`parse_tolerant`].
+struct BadNumber {
+    byte: usize,
+    line: usize,
+    column: usize,
+    token: String,
+}
+
+/// Parses `bytes`, replacing every non-finite coordinate (which the reader rejects: it cannot be
+/// a position) by a finite number of the same length, so one bad number keeps only its building
+/// from being healed instead of the whole file. Same length: byte offsets, and so the edits of
+/// the other buildings, are those of the original. Returns the parsed copy and the bad numbers.
+fn parse_tolerant(bytes: &[u8]) -> Result<(Vec<u8>, CityModel, Vec<BadNumber>), citygml_io::ReadError> {
+    let mut copy = bytes.to_vec();
+    let mut bad = Vec::new();
+    loop {
+        match citygml_io::parse(&copy) {
+            Ok(city) => return Ok((copy, city, bad)),
+            Err(e) if e.message.contains("non-finite coordinate") && bad.len() < 10_000 && e.byte < copy.len() => {
+                let len = copy[e.byte..].iter().position(|c| c.is_ascii_whitespace() || *c == b'<' || *c == b',').unwrap_or(copy.len() - e.byte);
+                if len == 0 {
+                    return Err(e);
+                }
+                let token = String::from_utf8_lossy(&copy[e.byte..e.byte + len]).into_owned();
+                bad.push(BadNumber { byte: e.byte, line: e.line, column: e.column, token });
+                let nines = if copy[e.byte] == b'-' { 1 } else { 0 };
+                for c in &mut copy[e.byte + nines..e.byte + len] {
+                    *c = b'9';
+                }
+            }
+            Err(e) => return Err(e),
+        }
+    }
 }
 
 /// Sum over the buildings whose area before and after is finite (a building with an absurd
