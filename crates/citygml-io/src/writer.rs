@@ -122,3 +122,39 @@ pub fn ring_edits_with(ring: &Ring, points: &[Point3], value: impl Fn(usize, usi
         }
     }
 }
+
+/// Escapes `&`, `<`, `>` and `"` for an attribute value.
+fn attr_escape(v: &str) -> String {
+    v.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;").replace('"', "&quot;")
+}
+
+/// A `gml:LinearRing` element with one `gml:posList` holding `coordinates` (the text of the
+/// positions, see [`format_coordinates`]), in the GML namespace prefix `prefix` (`"gml:"`, or
+/// `""` for a default namespace), with an optional gml:id: what a writer puts where a ring is
+/// replaced by one of another length.
+///
+/// # Examples
+/// ```
+/// use citygml_io::writer::linear_ring_element;
+/// assert_eq!(
+///     linear_ring_element("gml:", Some("r1"), "0 0 0 1 0 0 1 1 0 0 0 0", 3),
+///     r#"<gml:LinearRing gml:id="r1"><gml:posList srsDimension="3">0 0 0 1 0 0 1 1 0 0 0 0</gml:posList></gml:LinearRing>"#
+/// );
+/// ```
+pub fn linear_ring_element(prefix: &str, id: Option<&str>, coordinates: &str, srs_dimension: u8) -> String {
+    let id = id.map(|i| format!(" {prefix}id=\"{}\"", attr_escape(i))).unwrap_or_default();
+    format!("<{prefix}LinearRing{id}><{prefix}posList srsDimension=\"{srs_dimension}\">{coordinates}</{prefix}posList></{prefix}LinearRing>")
+}
+
+/// A `gml:Polygon` element: `rings[0]` is the exterior, the others interiors; each ring is
+/// (its gml:id, its posList text). Used to write a polygon whose outline changed (merged
+/// coplanar polygons) in place of the old element.
+pub fn polygon_element(prefix: &str, id: Option<&str>, rings: &[(Option<&str>, String)], srs_dimension: u8) -> String {
+    let mut t = format!("<{prefix}Polygon{}>", id.map(|i| format!(" {prefix}id=\"{}\"", attr_escape(i))).unwrap_or_default());
+    for (k, (rid, coords)) in rings.iter().enumerate() {
+        let wrapper = if k == 0 { "exterior" } else { "interior" };
+        t.push_str(&format!("<{prefix}{wrapper}>{}</{prefix}{wrapper}>", linear_ring_element(prefix, *rid, coords, srs_dimension)));
+    }
+    t.push_str(&format!("</{prefix}Polygon>"));
+    t
+}

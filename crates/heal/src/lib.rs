@@ -182,7 +182,13 @@ pub fn heal(original: &[u8], opts: &HealOptions, progress: &(dyn Fn(usize) + Syn
         if units2.len() != units.len() || units2.iter().zip(&units).any(|(a, b)| a.id != b.id) {
             return Err(HealError::Internal("the healed document does not hold the same buildings".into()));
         }
-        let mut after = measure_all(&units2, &all, &opts.validation);
+        // Only what the applied edits can have changed is measured again: a building being
+        // healed, or one that another healed building's edits reach.
+        let changed: Vec<usize> = all.iter().copied().filter(|&i| kept[i].is_none() || touched_by[i].iter().any(|&j| kept[j].is_none())).collect();
+        let mut after = before.clone();
+        for (i, m) in changed.iter().zip(measure_all(&units2, &changed, &opts.validation)) {
+            after[*i] = m;
+        }
         for &i in &with_bad_numbers {
             after[i].area = f64::NAN;
         }

@@ -211,14 +211,11 @@ fn polygon_text(template: &[u8], kp: &Polygon, outer: &[P3], holes: &[Vec<P3>], 
     let px = prefix_at(template, kp.span.bytes.start);
     let dim = kp.exterior.srs_dimension.max(3);
     let text = RingText::of(template, &kp.exterior, decimals);
-    let id_attr = |id: Option<&String>| id.map(|i| format!(" {px}id=\"{i}\"")).unwrap_or_default();
-    let ring = |r: &[P3], id: Option<&String>| format!("<{px}LinearRing{}><{px}posList srsDimension=\"{dim}\">{}</{px}posList></{px}LinearRing>", id_attr(id), fmt_points(r, &[], dim, &text));
-    let mut t = format!("<{px}Polygon{}><{px}exterior>{}</{px}exterior>", id_attr(kp.id.as_ref()), ring(outer, kp.exterior.id.as_ref()));
+    let mut rings = vec![(kp.exterior.id.as_deref(), fmt_points(outer, &[], dim, &text))];
     for (k, h) in holes.iter().enumerate() {
-        t.push_str(&format!("<{px}interior>{}</{px}interior>", ring(h, kp.interiors.get(k).and_then(|r| r.id.as_ref()))));
+        rings.push((kp.interiors.get(k).and_then(|r| r.id.as_deref()), fmt_points(h, &[], dim, &text)));
     }
-    t.push_str(&format!("</{px}Polygon>"));
-    t
+    citygml_io::writer::polygon_element(&px, kp.id.as_deref(), &rings, dim)
 }
 
 /// A closed posList text of `pts` (the first point repeated at the end); `src[k]` is the input
@@ -888,8 +885,7 @@ pub fn back_edits(model: &Popa3d, tpl: &Template, opts: &BackOptions) -> Result<
                     let dim = r.srs_dimension.max(3);
                     if r.encoding == citygml_io::CoordEncoding::Pos && pts.len() + 1 != r.pos_spans.len() {
                         let px = prefix_at(template, r.span.bytes.start);
-                        let id_attr = r.id.as_ref().map(|i| format!(" {px}id=\"{i}\"")).unwrap_or_default();
-                        let t = format!("<{px}LinearRing{id_attr}><{px}posList srsDimension=\"{dim}\">{}</{px}posList></{px}LinearRing>", fmt_points(&xyz, &src, dim, &text));
+                        let t = citygml_io::writer::linear_ring_element(&px, r.id.as_deref(), &fmt_points(&xyz, &src, dim, &text), dim);
                         edits.push(Edit { bytes: r.span.bytes.clone(), replacement: t.into_bytes() });
                     } else {
                         let mut closed = xyz.clone();
