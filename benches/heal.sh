@@ -16,23 +16,7 @@ res=benches/results/heal.md
 mkdir -p benches/results
 
 big=$(ls -S "$SHARED"/fixtures/citygml/nrw/*.gml | head -1)
-python3 - "$big" "$OUT/x20.gml" 20 <<'PY'
-import re, sys
-s = open(sys.argv[1], "rb").read()
-a = s.index(b"<core:cityObjectMember>")
-b = s.rindex(b"</core:cityObjectMember>") + len(b"</core:cityObjectMember>")
-def shift(t, dx):
-    def f(m):
-        v = m.group(2).split()
-        return m.group(1) + b" ".join(b"%.3f" % (float(x) + dx) if i % 3 == 0 else x for i, x in enumerate(v)) + b"<"
-    return re.sub(rb"(<gml:posList[^>]*>)([^<]*)<", f, t)
-parts = []
-for c in range(int(sys.argv[3])):
-    t = re.sub(rb'gml:id="([^"]+)"', lambda m: b'gml:id="' + m.group(1) + b"_%d" % c + b'"', s[a:b])
-    t = re.sub(rb'xlink:href="#([^"]+)"', lambda m: b'xlink:href="#' + m.group(1) + b"_%d" % c + b'"', t)
-    parts.append(shift(t, 2000.0 * c))
-open(sys.argv[2], "wb").write(s[:a] + b"".join(parts) + s[b:])
-PY
+python3 benches/citygml_copies.py "$big" "$OUT/x20.gml" 20
 
 # Findings per code of a file, as JSON (validate exits 1 when it finds something).
 codes() { { "$BIN" -q validate --no-xsd --json "$1" || true; } | python3 -c "

@@ -52,23 +52,7 @@ big=$(ls -S "$SHARED"/fixtures/citygml/nrw/*.gml | head -1)
   echo "|---|---|---|---|---|---|"
 } >> "$res"
 for k in 5 10 20; do
-  python3 - "$big" "$OUT/x$k.gml" "$k" <<'PY'
-import re, sys
-s = open(sys.argv[1], "rb").read()
-a = s.index(b"<core:cityObjectMember>")
-b = s.rindex(b"</core:cityObjectMember>") + len(b"</core:cityObjectMember>")
-def shift(t, dx):
-    def f(m):
-        v = m.group(2).split()
-        return m.group(1) + b" ".join(b"%.3f" % (float(x) + dx) if i % 3 == 0 else x for i, x in enumerate(v)) + b"<"
-    return re.sub(rb"(<gml:posList[^>]*>)([^<]*)<", f, t)
-parts = []
-for c in range(int(sys.argv[3])):
-    t = re.sub(rb'gml:id="([^"]+)"', lambda m: b'gml:id="' + m.group(1) + b"_%d" % c + b'"', s[a:b])
-    t = re.sub(rb'xlink:href="#([^"]+)"', lambda m: b'xlink:href="#' + m.group(1) + b"_%d" % c + b'"', t)
-    parts.append(shift(t, 2000.0 * c))
-open(sys.argv[2], "wb").write(s[:a] + b"".join(parts) + s[b:])
-PY
+  python3 benches/citygml_copies.py "$big" "$OUT/x$k.gml" "$k"
   /usr/bin/time -f "%e %M" -o "$OUT/t" "$BIN" -q citygml2popa3d "$OUT/x$k.gml" -o "$OUT/o.popa3d" --report "$OUT/r.json" 2>/dev/null || true
   read -r tc _ < <(tail -n 1 "$OUT/t")
   /usr/bin/time -f "%e %M" -o "$OUT/t" "$BIN" -q heal "$OUT/x$k.gml" -o "$OUT/h.gml" 2>/dev/null || true

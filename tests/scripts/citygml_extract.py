@@ -18,7 +18,6 @@ A warning on stderr lists xlink:hrefs of kept members that point into removed me
 Exit status: 0 on success, 2 (one line on stderr) for bad arguments, malformed input or an ID that
 matches no member.
 """
-import argparse
 import re
 import sys
 
@@ -28,10 +27,9 @@ except ImportError:  # pragma: no cover
     sys.stderr.write("citygml_extract: error: python3 module lxml is required\n")
     sys.exit(2)
 
-GML_ID = ("{http://www.opengis.net/gml}id", "{http://www.opengis.net/gml/3.2}id")
-XLINK_HREF = "{http://www.w3.org/1999/xlink}href"
+from citygml_common import read_bytes, write_bytes, UNIT_NAMES, XLINK_HREF, InputError, arg_parser, gml_id
+
 MEMBER_NAMES = ("cityObjectMember", "featureMember")
-UNIT_NAMES = ("Building", "BuildingPart")
 
 SCAN_RE = re.compile(
     rb"<!--.*?-->|<!\[CDATA\[.*?\]\]>|<\?.*?\?>|<!DOCTYPE(?:[^\[>]|\[.*?\])*>"
@@ -40,20 +38,8 @@ SCAN_RE = re.compile(
 )
 
 
-class InputError(Exception):
-    pass
-
-
 def local(tag):
     return tag.rsplit("}", 1)[-1] if isinstance(tag, str) else None
-
-
-def gml_id(el):
-    for a in GML_ID:
-        v = el.get(a)
-        if v is not None:
-            return v
-    return None
 
 
 def member_spans(data):
@@ -152,28 +138,15 @@ def extract(data, wanted):
 
 
 def main(argv=None):
-    class P(argparse.ArgumentParser):
-        def error(self, message):
-            sys.stderr.write("citygml_extract: error: %s\n" % message)
-            sys.exit(2)
-
-    ap = P(description="Keep only the cityObjectMembers holding the given gml:ids, byte-exact.")
+    ap = arg_parser("citygml_extract", "Keep only the cityObjectMembers holding the given gml:ids, byte-exact.")
     ap.add_argument("input")
     ap.add_argument("output")
     ap.add_argument("ids", nargs="+", metavar="ID")
     args = ap.parse_args(argv)
     try:
-        try:
-            with open(args.input, "rb") as f:
-                data = f.read()
-        except OSError as e:
-            raise InputError("cannot read %s: %s" % (args.input, e.strerror))
+        data = read_bytes(args.input)
         result, kept, total, dangling = extract(data, set(args.ids))
-        try:
-            with open(args.output, "wb") as f:
-                f.write(result)
-        except OSError as e:
-            raise InputError("cannot write %s: %s" % (args.output, e.strerror))
+        write_bytes(args.output, result)
     except InputError as e:
         sys.stderr.write("citygml_extract: error: %s\n" % e)
         return 2

@@ -42,7 +42,6 @@ Coordinates: gml:posList (srsDimension on it or an ancestor, else 3), gml:pos, g
 (cs / ts / decimal attributes). 2D points get z = 0. A ring's repeated closing point is dropped.
 Exit status: 0 on success, 2 (one line on stderr) for unreadable or malformed input.
 """
-import argparse
 import json
 import math
 import sys
@@ -55,14 +54,7 @@ except ImportError:  # pragma: no cover
     sys.stderr.write("citygml_invariants: error: python3 module lxml is required\n")
     sys.exit(2)
 
-GML_NS = ("http://www.opengis.net/gml", "http://www.opengis.net/gml/3.2")
-GML_ID = tuple("{%s}id" % ns for ns in GML_NS)
-XLINK_HREF = "{http://www.w3.org/1999/xlink}href"
-UNIT_NAMES = ("Building", "BuildingPart")
-
-
-class InputError(Exception):
-    pass
+from citygml_common import GML_NS, UNIT_NAMES, XLINK_HREF, InputError, arg_parser, gml_id, srs_dimension
 
 
 def local(el):
@@ -83,14 +75,6 @@ def is_gml(el, name=None):
     return ns_of(el) in GML_NS and (name is None or local(el) == name)
 
 
-def gml_id(el):
-    for a in GML_ID:
-        v = el.get(a)
-        if v is not None:
-            return v
-    return None
-
-
 # ---------------------------------------------------------------------------------------------
 # coordinates
 
@@ -100,24 +84,6 @@ def _floats(tokens, what):
         return [float(t) for t in tokens]
     except ValueError as e:
         raise InputError("bad number in %s: %s" % (what, e))
-
-
-def srs_dimension(el):
-    e = el
-    while e is not None:
-        v = e.get("srsDimension")
-        if v is None and e is el:
-            v = e.get("dimension")
-        if v is not None:
-            try:
-                d = int(v)
-            except ValueError:
-                raise InputError("bad srsDimension %r (line %s)" % (v, el.sourceline))
-            if d < 1:
-                raise InputError("bad srsDimension %r (line %s)" % (v, el.sourceline))
-            return d
-        e = e.getparent()
-    return None
 
 
 def parse_points(container):
@@ -548,12 +514,7 @@ UNITS_OF_MEASURE = {"area": "m2", "move": "m", "planarity": "m", "volume": "m3"}
 
 
 def main(argv=None):
-    class P(argparse.ArgumentParser):
-        def error(self, message):
-            sys.stderr.write("citygml_invariants: error: %s\n" % message)
-            sys.exit(2)
-
-    ap = P(description="Independent CityGML building invariants (area, closedness, volume, planarity, moves).")
+    ap = arg_parser("citygml_invariants", "Independent CityGML building invariants (area, closedness, volume, planarity, moves).")
     ap.add_argument("before", help="CityGML file (BEFORE, or the only file)")
     ap.add_argument("after", nargs="?", help="CityGML file after the change (optional)")
     ap.add_argument("--snap", type=float, default=0.001, help="vertex snapping distance in m (default 0.001)")

@@ -21,7 +21,6 @@ integer shifts for a guaranteed round trip). Numbers that had to be rounded are 
 on stderr (exit status still 0). A component whose shift is 0 is not touched at all.
 Exit status: 0 on success, 2 (one line on stderr) for bad arguments or malformed input.
 """
-import argparse
 import decimal
 import re
 import sys
@@ -32,7 +31,8 @@ except ImportError:  # pragma: no cover
     sys.stderr.write("citygml_shift: error: python3 module lxml is required\n")
     sys.exit(2)
 
-GML_NS = ("http://www.opengis.net/gml", "http://www.opengis.net/gml/3.2")
+from citygml_common import read_bytes, write_bytes, GML_NS, InputError, arg_parser, srs_dimension
+
 NAMES = (b"posList", b"pos", b"coordinates", b"lowerCorner", b"upperCorner")
 NAMES_STR = tuple(n.decode() for n in NAMES)
 
@@ -47,10 +47,6 @@ NUM_RE = re.compile(rb"^([+-]?)(\d*)(?:\.(\d*))?([eE][+-]?\d+)?$")
 
 decimal.getcontext().prec = 80
 STATS = {"rounded": 0}
-
-
-class InputError(Exception):
-    pass
 
 
 def shift_number(tok, delta):
@@ -79,24 +75,6 @@ def shift_number(tok, delta):
     if m.group(1) == b"+" and not s.startswith("-"):
         s = "+" + s
     return s.encode("ascii") + exp_txt
-
-
-def srs_dimension(el):
-    e = el
-    while e is not None:
-        v = e.get("srsDimension")
-        if v is None and e is el:
-            v = e.get("dimension")
-        if v is not None:
-            try:
-                d = int(v)
-            except ValueError:
-                raise InputError("bad srsDimension %r (line %s)" % (v, el.sourceline))
-            if d < 1:
-                raise InputError("bad srsDimension %r (line %s)" % (v, el.sourceline))
-            return d
-        e = e.getparent()
-    return None
 
 
 def shift_whitespace_list(content, dim, deltas):
@@ -209,12 +187,7 @@ def shift_bytes(data, deltas):
 
 
 def main(argv=None):
-    class P(argparse.ArgumentParser):
-        def error(self, message):
-            sys.stderr.write("citygml_shift: error: %s\n" % message)
-            sys.exit(2)
-
-    ap = P(description="Shift all GML coordinates of a file by (DX, DY, DZ), keeping all other bytes.")
+    ap = arg_parser("citygml_shift", "Shift all GML coordinates of a file by (DX, DY, DZ), keeping all other bytes.")
     ap.add_argument("input")
     ap.add_argument("output")
     ap.add_argument("dx")
@@ -232,17 +205,9 @@ def main(argv=None):
             ap.error("%s must be finite: %r" % (name.upper(), v))
         deltas.append(d)
     try:
-        try:
-            with open(args.input, "rb") as f:
-                data = f.read()
-        except OSError as e:
-            raise InputError("cannot read %s: %s" % (args.input, e.strerror))
+        data = read_bytes(args.input)
         result = shift_bytes(data, deltas)
-        try:
-            with open(args.output, "wb") as f:
-                f.write(result)
-        except OSError as e:
-            raise InputError("cannot write %s: %s" % (args.output, e.strerror))
+        write_bytes(args.output, result)
     except InputError as e:
         sys.stderr.write("citygml_shift: error: %s\n" % e)
         return 2
