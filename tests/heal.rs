@@ -26,15 +26,32 @@ fn py(name: &str, args: &[&str]) -> Value {
     serde_json::from_slice(&o.stdout).unwrap_or(Value::Null)
 }
 
-/// Validation findings per feature-independent code, and whether the XSD check passed.
-fn findings(f: &Path) -> (BTreeMap<i64, usize>, bool) {
+/// `geofit validate --json` of a file: its findings and whether the XSD check passed.
+fn validate_json(f: &Path) -> (Vec<Value>, bool) {
     let v = run(&["validate", "-q", "--json", s(f)], None);
     let j: Value = serde_json::from_slice(&v.stdout).unwrap_or_else(|_| panic!("validate {}: {}", f.display(), String::from_utf8_lossy(&v.stderr)));
+    (j["geometry"]["findings"].as_array().cloned().unwrap_or_default(), j["xsd"]["valid"] != Value::Bool(false))
+}
+
+/// Validation findings per code, and whether the XSD check passed.
+fn findings(f: &Path) -> (BTreeMap<i64, usize>, bool) {
+    let (all, xsd) = validate_json(f);
     let mut codes = BTreeMap::new();
-    for x in j["geometry"]["findings"].as_array().cloned().unwrap_or_default() {
+    for x in all {
         *codes.entry(x["code"].as_i64().unwrap()).or_insert(0) += 1;
     }
-    (codes, j["xsd"]["valid"] != Value::Bool(false))
+    (codes, xsd)
+}
+
+/// Validation findings per (feature gml:id, code): what "no building gets a code it did not
+/// have" compares.
+fn findings_by_feature(f: &Path) -> BTreeMap<(String, i64), usize> {
+    let mut out = BTreeMap::new();
+    for x in validate_json(f).0 {
+        let feature = x["feature"].as_str().unwrap_or("(no id)").to_string();
+        *out.entry((feature, x["code"].as_i64().unwrap())).or_insert(0) += 1;
+    }
+    out
 }
 
 fn heal(src: &Path, out: &Path, rep: &Path, extra: &[&str]) -> Value {
@@ -84,6 +101,11 @@ fn heal_never_makes_a_building_worse() {
             assert!(cb.get(c).copied().unwrap_or(0) >= *n, "{name}: code {c} ×{n} after heal, ×{} before", cb.get(c).copied().unwrap_or(0));
         }
         assert!(xa || !xb, "{name}: heal made a schema-valid file invalid");
+        let (fb, fa) = (findings_by_feature(&src), findings_by_feature(&out));
+        for ((feature, c), n) in &fa {
+            let was = fb.get(&(feature.clone(), *c)).copied().unwrap_or(0);
+            assert!(was >= *n, "{name}: {feature} has code {c} ×{n} after heal, ×{was} before");
+        }
 
         let inv = py("citygml_invariants.py", &[s(&src), s(&out)]);
         let total = &inv["total"];
