@@ -286,7 +286,7 @@ fn heal_bad_numbers_affect_only_their_building() {
 /// --strict: a building that keeps its geometry is an error, and nothing is written.
 #[test]
 fn heal_strict_writes_nothing_when_a_building_is_kept() {
-    let Some(tile) = common::fixture("citygml/nrw/LoD2_32_332_5729_1_NW.gml") else { return };
+    let Some(tile) = common::fixture("citygml/nrw/LoD2_32_338_5724_1_NW.gml") else { return };
     let dir = common::tempdir();
     let out = dir.path().join("out.gml");
     let r = heal(&tile, &out, &dir.path().join("r.json"), &[]);

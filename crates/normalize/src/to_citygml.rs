@@ -569,7 +569,9 @@ pub fn back_edits(model: &Popa3d, tpl: &Template, opts: &BackOptions) -> Result<
         .map(|s| (s.polygon.clone(), s.merged.iter().filter(|g| polys.contains_key(*g)).cloned().collect()))
         .collect();
     let mut mapped_set: HashSet<&String> = vmap.keys().map(|k| &k.0).collect();
-    mapped_set.extend(absorbed.iter().flat_map(|(_, g)| g.iter()));
+    // hosts too: a face can keep none of its polygon's own vertices (the middle one of three
+    // collinear wall segments)
+    mapped_set.extend(absorbed.iter().flat_map(|(h, g)| std::iter::once(h).chain(g.iter())));
     let mapped: Vec<String> = doc_order.iter().filter(|id| mapped_set.contains(id)).cloned().collect();
     let mut report = BackReport { polygons_mapped: mapped.len(), ..Default::default() };
     // New rings per mapped polygon, each point with its index in the template ring.
