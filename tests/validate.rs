@@ -199,6 +199,12 @@ fn truncated_xml_is_unreadable_for_both() {
 
 /// The code a QIE file name carries, with the legacy codes mapped to val3dity's current ones.
 fn expected_code(name: &str) -> u64 {
+    // i306_4 (a torus whose hole touches the outer ring at a vertex): the hole's walls meet the
+    // inside of a side face along an edge, which val3dity reports as non-manifold (303) while it
+    // builds the shell, before its intersection test (306); geofit follows val3dity (issue 14)
+    if name.starts_with("i306_4") {
+        return 303;
+    }
     let c: u64 = name[1..4].parse().unwrap();
     match c {
         105 => 104,
@@ -583,4 +589,40 @@ fn whole_geometry_by_xlink_is_checked_as_its_target() {
         assert_eq!(f[0]["line"].as_u64(), Some(line as u64), "{name}: {}", f[0]);
         assert!(f[0]["detail"].as_str().unwrap().contains("#nowhere"), "{name}: {}", f[0]);
     }
+}
+
+/// The findings of one feature in a report.
+fn findings_of<'a>(r: &'a Value, feature: &str) -> Vec<&'a Value> {
+    r["geometry"]["findings"].as_array().unwrap().iter().filter(|f| f["feature"] == feature).collect()
+}
+
+#[test]
+fn nrw_solids_meeting_at_t_junctions_are_holes_not_parts() {
+    // Two groups of faces that share vertices but no edge (T-junctions) are one component for
+    // val3dity (305 is for parts that share no vertex); the edges used once are holes: 302.
+    for (tile, id) in [
+        ("citygml/nrw/LoD2_32_332_5729_1_NW.gml", "UUID_f2df1e06-b1c2-43b1-8ef0-abba25582207"),
+        ("citygml/nrw/LoD2_32_338_5724_1_NW.gml", "GUID_1543405942858_111755289"),
+    ] {
+        let Some(f) = common::fixture(tile) else { return };
+        let (_, r) = validate_json(&["--no-xsd", f.to_str().unwrap()]);
+        let fs = findings_of(&r, id);
+        assert!(!fs.is_empty(), "{id}: no findings");
+        for x in &fs {
+            assert_eq!(x["code"], 302, "{id}: {x}");
+            let d = x["detail"].as_str().unwrap();
+            // every edge used once is named by its end points' coordinates
+            assert!(d.contains("edges used once: (") && d.matches(")–(").count() >= 3, "{id}: {d}");
+        }
+    }
+}
+
+#[test]
+fn qie_pinched_torus_is_non_manifold_at_the_vertex() {
+    let Some(f) = common::fixture("citygml/qie/i306_4.gml") else { return };
+    let (code, r) = validate_json(&["--no-xsd", f.to_str().unwrap()]);
+    assert_eq!(code, 1);
+    assert_eq!(codes(&r), BTreeSet::from([303]), "{}", r["geometry"]["findings"]);
+    let fs = r["geometry"]["findings"].as_array().unwrap();
+    assert!(fs.iter().any(|x| x["detail"].as_str().unwrap().contains("(1, 0.5, 0)")), "{fs:?}");
 }

@@ -2,10 +2,22 @@
 //! (ring and polygon levels), triangulated in their planes, and the triangles' edges on snapped
 //! vertices give the combinatorial checks; a triangle–triangle test gives the geometric one.
 //!
-//! Order: 301 too few polygons; 303 an edge shared by more than two faces; 307 two faces using an
-//! edge in the same direction; 303 a vertex whose faces form several fans (unless the faces
-//! actually cross there, which is 306); 305 several edge-connected components; 302 border edges
-//! (holes); 306 faces meeting anywhere other than along shared vertices and edges.
+//! Order: 301 too few polygons; 303 an edge shared by more than two faces, also where other
+//! polygons meet the inside of a polygon along one of its triangulation edges (a pinched vertex);
+//! 307 two faces using an edge in the same direction; 303 a vertex whose faces form several fans
+//! (unless the faces actually cross there, which is 306); 305 parts that share no vertex; 302
+//! border edges (holes); 306 faces meeting anywhere other than along shared vertices and edges.
+//!
+//! Definitions are val3dity's ("Error codes" in its documentation): 302 SHELL_NOT_CLOSED, the shell
+//! has holes (edges used by one face only); 303 NON_MANIFOLD_VERTEX, a vertex whose incident
+//! polygons do not form one umbrella, and 304 NON_MANIFOLD_EDGE, an edge with other than two
+//! incident polygons (both reported as 303, as val3dity does today); 305
+//! MULTIPLE_CONNECTED_COMPONENTS, parts of the shell that share no vertex or edge; 306
+//! SHELL_SELF_INTERSECTION only once the topology is right (no 301–305).
+//!
+//! Where geofit keeps its own answer (see docs/decisions.md, "validate vs val3dity"): a face
+//! flipped against its neighbours is 307 alone; val3dity, building the shell face by face, may
+//! add a 303 for a later face depending on the order of the faces in the file.
 
 use crate::codes::ErrorCode;
 use crate::geom::{point_segment_distance, Snapper, V3};
@@ -157,19 +169,28 @@ fn shell_topology_and_geometry(mesh: &ShellMesh, opts: &Options) -> Vec<Issue> {
     if !issues.is_empty() {
         return issues;
     }
-    // 306: other polygons meet the inside of a polygon along one of its triangulation edges
+    // 303: other polygons meet the inside of a polygon along one of its triangulation edges. The
+    // polygon is split there (a face on each side of the edge), so the edge has more than two
+    // incident faces (val3dity 304 NON_MANIFOLD_EDGE, "each edge of a shell should have exactly
+    // 2 incident polygons", reported as 303) and the faces around each of its end vertices form
+    // two fans (303 NON_MANIFOLD_VERTEX, "its incident polygons do not form one umbrella"). This
+    // is the pinched vertex of QIE i306_4, where an inner ring touches the outer ring: val3dity's
+    // halfedge builder cannot attach the third face to the edge and reports 303 while building
+    // the shell, before it tests for intersections (306).
     for (e, uses) in &edges {
         if uses.len() > 2 {
             let (bound, inner) = boundary_polys(uses);
             if let (Some(&a), Some(&b)) = (inner.first(), bound.first().or(inner.get(1))) {
                 issues.push(shell_issue(
-                    ErrorCode::ShellSelfIntersection,
+                    ErrorCode::NonManifoldCase,
                     Some(a.min(b)),
                     format!(
-                        "polygon #{} meets the inside of polygon #{} along {}",
+                        "non-manifold vertices at {} and {}: polygon #{} meets the inside of polygon #{} along the edge between them, \
+                         so the faces around each form two fans",
+                        fmt_abs(&mesh.abs_point(e.0)),
+                        fmt_abs(&mesh.abs_point(e.1)),
                         b + 1,
                         a + 1,
-                        edge_str(e)
                     ),
                 ));
             }
@@ -280,14 +301,19 @@ fn shell_topology_and_geometry(mesh: &ShellMesh, opts: &Options) -> Vec<Issue> {
             })
             .collect();
     }
-    // 305: connected components through shared edges
-    let mut d = Dsu::new(tris.len());
-    for u in edges.values() {
-        if u.len() == 2 {
-            d.union(u[0].0, u[1].0);
-        }
+    // 305 MULTIPLE_CONNECTED_COMPONENTS (val3dity, "Error codes": polygons that are not connected
+    // to the rest of the shell). Connected means sharing a vertex, not only an edge: val3dity
+    // builds the shell as a halfedge structure on the snapped vertices and keeps its largest
+    // connected component, whose traversal goes around vertices, so two groups of faces that
+    // share vertices but no edge (real LoD2 solids whose two halves meet at T-junctions, where
+    // one side's edge is split in two on the other) are one component. Their edges used once
+    // are holes in it: 302 SHELL_NOT_CLOSED ("the shell must not have holes").
+    let mut dv = Dsu::new(mesh.points.len());
+    for t in tris {
+        dv.union(t[0] as usize, t[1] as usize);
+        dv.union(t[0] as usize, t[2] as usize);
     }
-    let ncomp = (0..tris.len()).map(|i| d.find(i)).collect::<HashSet<_>>().len();
+    let ncomp = tris.iter().map(|t| dv.find(t[0] as usize)).collect::<HashSet<_>>().len();
     if ncomp > 1 {
         return vec![shell_issue(
             ErrorCode::MultipleConnectedComponents,
@@ -295,23 +321,47 @@ fn shell_topology_and_geometry(mesh: &ShellMesh, opts: &Options) -> Vec<Issue> {
             format!("the faces form {ncomp} separate parts"),
         )];
     }
-    // 302: border edges, grouped into holes
+    // parts through shared edges: more than one means the parts meet only at vertices
+    let mut de = Dsu::new(tris.len());
+    for u in edges.values() {
+        if u.len() == 2 {
+            de.union(u[0].0, u[1].0);
+        }
+    }
+    let edge_parts = (0..tris.len()).map(|i| de.find(i)).collect::<HashSet<_>>().len();
+    // 302: border edges (used by one face only), grouped into holes by shared vertices
     let border: Vec<(&(u32, u32), usize)> = edges.iter().filter(|(_, u)| u.len() == 1).map(|(e, u)| (e, u[0].0)).collect();
     if !border.is_empty() {
-        let nv = mesh.points.len();
-        let mut dv = Dsu::new(nv);
+        let mut dh = Dsu::new(mesh.points.len());
         for (e, _) in &border {
-            dv.union(e.0 as usize, e.1 as usize);
+            dh.union(e.0 as usize, e.1 as usize);
         }
-        let mut seen = HashSet::new();
-        for (e, ti) in &border {
-            if seen.insert(dv.find(e.0 as usize)) {
-                issues.push(shell_issue(
-                    ErrorCode::ShellNotClosed,
-                    Some(tp[*ti]),
-                    format!("hole in the shell at edge {}", edge_str(e)),
-                ));
+        let mut holes: BTreeMap<usize, Vec<(&(u32, u32), usize)>> = BTreeMap::new();
+        let mut order = Vec::new();
+        for b in &border {
+            let r = dh.find(b.0 .0 as usize);
+            holes
+                .entry(r)
+                .or_insert_with(|| {
+                    order.push(r);
+                    Vec::new()
+                })
+                .push(*b);
+        }
+        for r in order {
+            let hole = &holes[&r];
+            let (e, ti) = hole[0];
+            let mut detail = format!("hole in the shell at edge {}", edge_str(e));
+            if edge_parts > 1 {
+                // the faces fall into parts that share vertices but no edge: name every edge
+                // used once, so each place where the parts fail to share an edge can be found
+                let all: Vec<String> = hole.iter().map(|(e, _)| edge_str(e)).collect();
+                detail = format!(
+                    "{detail}: the faces form {edge_parts} parts that share vertices but no edge; edges used once: {}",
+                    all.join(", ")
+                );
             }
+            issues.push(shell_issue(ErrorCode::ShellNotClosed, Some(tp[ti]), detail));
         }
         return issues;
     }

@@ -388,3 +388,77 @@ fn composite_solid_tolerance_and_box_filter() {
     r2.push(scaled(&a, 0.5, [20.25, 0.25, 0.25]));
     assert_eq!(codes(&r2), vec![501]);
 }
+
+/// An open box (floor and four walls up to z = 1) and a roof of four quadrants whose edges are
+/// split at the midpoints of the walls' top edges: the two groups share the four corner vertices
+/// and no edge (four T-junctions), like the real NRW solids of issue 14.
+fn t_junction_box() -> Vec<Vec<P>> {
+    let mut faces = vec![cube()[0].clone()];
+    faces.extend(cube()[2..].iter().cloned());
+    let (c, h) = (0.5, 1.0);
+    for q in [
+        [[0., 0., h], [c, 0., h], [c, c, h], [0., c, h]],
+        [[c, 0., h], [1., 0., h], [1., c, h], [c, c, h]],
+        [[c, c, h], [1., c, h], [1., 1., h], [c, 1., h]],
+        [[0., c, h], [c, c, h], [c, 1., h], [0., 1., h]],
+    ] {
+        faces.push(poly(&q));
+    }
+    faces
+}
+
+#[test]
+fn parts_meeting_at_t_junctions_are_one_component_with_holes() {
+    // val3dity: connected through shared vertices, so not 305; the edges used once are holes (302)
+    let o = Options::default();
+    let faces = t_junction_box();
+    let inp: Vec<PolygonInput> = faces.iter().map(|f| PolygonInput { exterior: f, interiors: vec![], reversed: false }).collect();
+    let is = check_solid(&[inp], &o);
+    assert!(!is.is_empty() && is.iter().all(|i| i.code == ErrorCode::ShellNotClosed), "{is:?}");
+    let all: String = is.iter().map(|i| i.detail.as_str()).collect();
+    // the walls' top edges and the roof's split halves are all named, with their coordinates
+    let named = |a: &str, b: &str| all.contains(&format!("{a}–{b}")) || all.contains(&format!("{b}–{a}"));
+    for (a, b) in [
+        ("(0, 0, 1)", "(1, 0, 1)"),
+        ("(0, 0, 1)", "(0.5, 0, 1)"),
+        ("(0.5, 0, 1)", "(1, 0, 1)"),
+        ("(1, 1, 1)", "(0, 1, 1)"),
+        ("(0, 1, 1)", "(0, 0.5, 1)"),
+    ] {
+        assert!(named(a, b), "{a}–{b} not in {all}");
+    }
+    assert!(all.contains("2 parts"), "{all}");
+    // parts that share no vertex stay 305
+    let mut apart = t_junction_box();
+    apart.truncate(5);
+    apart.extend(cube().into_iter().map(|f| f.into_iter().map(|p| [p[0] + 3., p[1], p[2]]).collect()));
+    assert_eq!(solid_codes(&apart, &o), vec![305]);
+}
+
+#[test]
+fn pinched_vertex_is_non_manifold_303() {
+    // QIE i306_4: a torus whose hole touches the outer ring of the floor and of the roof at
+    // (1, 0.5, z); the hole's walls meet along x = 1, y = 0.5, inside the wall x = 1
+    let o = Options::default();
+    let f: Vec<Vec<P>> = vec![
+        poly(&[[0., 0., 0.], [0., 1., 0.], [1., 1., 0.], [1., 0.5, 0.], [1., 0., 0.]]),
+        poly(&[[0.2, 0.2, 0.], [1., 0.5, 0.], [0.5, 0.8, 0.]]),
+        poly(&[[0., 0., 1.], [1., 0., 1.], [1., 0.5, 1.], [1., 1., 1.], [0., 1., 1.]]),
+        poly(&[[0.2, 0.2, 1.], [0.5, 0.8, 1.], [1., 0.5, 1.]]),
+        poly(&[[0., 0., 0.], [1., 0., 0.], [1., 0., 1.], [0., 0., 1.]]),
+        poly(&[[1., 0., 0.], [1., 0.5, 0.], [1., 1., 0.], [1., 1., 1.], [1., 0.5, 1.], [1., 0., 1.]]),
+        poly(&[[1., 1., 0.], [0., 1., 0.], [0., 1., 1.], [1., 1., 1.]]),
+        poly(&[[0., 1., 0.], [0., 0., 0.], [0., 0., 1.], [0., 1., 1.]]),
+        poly(&[[0.5, 0.8, 0.], [1., 0.5, 0.], [1., 0.5, 1.], [0.5, 0.8, 1.]]),
+        poly(&[[0.2, 0.2, 0.], [0.5, 0.8, 0.], [0.5, 0.8, 1.], [0.2, 0.2, 1.]]),
+        poly(&[[1., 0.5, 0.], [0.2, 0.2, 0.], [0.2, 0.2, 1.], [1., 0.5, 1.]]),
+    ];
+    let mut inp = vec![
+        PolygonInput { exterior: &f[0], interiors: vec![f[1].as_slice()], reversed: false },
+        PolygonInput { exterior: &f[2], interiors: vec![f[3].as_slice()], reversed: false },
+    ];
+    inp.extend(f[4..].iter().map(|r| PolygonInput { exterior: r, interiors: vec![], reversed: false }));
+    let is = check_solid(&[inp], &o);
+    assert!(!is.is_empty() && is.iter().all(|i| i.code == ErrorCode::NonManifoldCase), "{is:?}");
+    assert!(is.iter().any(|i| i.detail.contains("(1, 0.5, 0)")), "{is:?}");
+}
