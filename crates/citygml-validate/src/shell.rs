@@ -330,13 +330,13 @@ fn shell_topology_and_geometry(mesh: &ShellMesh, opts: &Options) -> Vec<Issue> {
     }
     let edge_parts = (0..tris.len()).map(|i| de.find(i)).collect::<HashSet<_>>().len();
     // 302: border edges (used by one face only), grouped into holes by shared vertices
-    let border: Vec<(&(u32, u32), usize)> = edges.iter().filter(|(_, u)| u.len() == 1).map(|(e, u)| (e, u[0].0)).collect();
+    let border: Vec<BorderEdge> = edges.iter().filter(|(_, u)| u.len() == 1).map(|(e, u)| (e, u[0].0)).collect();
     if !border.is_empty() {
         let mut dh = Dsu::new(mesh.points.len());
         for (e, _) in &border {
             dh.union(e.0 as usize, e.1 as usize);
         }
-        let mut holes: BTreeMap<usize, Vec<(&(u32, u32), usize)>> = BTreeMap::new();
+        let mut holes: BTreeMap<usize, Vec<BorderEdge>> = BTreeMap::new();
         let mut order = Vec::new();
         for b in &border {
             let r = dh.find(b.0 .0 as usize);
@@ -367,6 +367,9 @@ fn shell_topology_and_geometry(mesh: &ShellMesh, opts: &Options) -> Vec<Issue> {
     }
     self_intersections(mesh, opts)
 }
+
+/// An edge used by one face only, with that face's triangle.
+type BorderEdge<'a> = (&'a (u32, u32), usize);
 
 fn list1(ps: &[usize]) -> String {
     ps.iter().map(|p| format!("#{}", p + 1)).collect::<Vec<_>>().join(", ")
