@@ -39,3 +39,77 @@ fn every_subcommand_has_a_summary_in_the_top_level_help() {
     sorted.sort();
     assert_eq!(names, sorted, "subcommands are listed alphabetically");
 }
+
+/// Runs geofit with stderr on `/dev/full` (every write fails with ENOSPC), or with stderr a pipe
+/// whose reading end is already closed (EPIPE), stdin from `stdin`; returns the exit code.
+fn run_with_broken_stderr(args: &[&str], stdin: Option<&[u8]>, full: bool) -> i32 {
+    use std::io::Write;
+    use std::process::Stdio;
+    let mut cmd = common::geofit();
+    cmd.args(args).stdout(Stdio::null());
+    cmd.stdin(if stdin.is_some() { Stdio::piped() } else { Stdio::null() });
+    if full {
+        cmd.stderr(std::fs::OpenOptions::new().write(true).open("/dev/full").expect("/dev/full"));
+    } else {
+        cmd.stderr(Stdio::piped());
+    }
+    let mut child = cmd.spawn().expect("spawn geofit");
+    drop(child.stderr.take()); // closes the reading end: the child's stderr writes get EPIPE
+    if let Some(data) = stdin {
+        let mut si = child.stdin.take().unwrap();
+        let data = data.to_vec();
+        std::thread::spawn(move || {
+            let _ = si.write_all(&data);
+        });
+    }
+    let status = child.wait().expect("wait geofit");
+    status.code().unwrap_or_else(|| panic!("{args:?}: killed by a signal"))
+}
+
+/// Issue 13, item 3: progress, notices and summaries on stderr never panic when stderr is full
+/// (`2>/dev/full`) or a closed pipe (`2>&1 | head -n 1`): the command does its work and writes
+/// its output. Before, `eprintln!` panicked (exit 101) in fit, heal, rasterize and adjust.
+#[test]
+fn a_full_or_closed_stderr_does_not_stop_the_work() {
+    let dir = common::tempdir();
+    let d = dir.path();
+    let p = |n: &str| d.join(n).to_str().unwrap().to_string();
+    std::fs::write(d.join("r.asc"), "ncols 3\nnrows 3\nxllcorner 0\nyllcorner 0\ncellsize 1\nNODATA_value -9999\n1 2 3\n4 5 6\n7 8 10\n").unwrap();
+    std::fs::write(d.join("p.xyz"), "0 0 1\n4 0 2\n0 4 3\n4 4 5\n2 2 2\n").unwrap();
+    let gml = common::repo_root().join("fixtures/citygml/three_storey.gml");
+    let model = common::run(&["citygml2popa3d", "-q", gml.to_str().unwrap()], None);
+    assert_eq!(common::code(&model), 0, "{}", String::from_utf8_lossy(&model.stderr));
+    for full in [true, false] {
+        let tag = if full { "full" } else { "pipe" };
+        let cases: Vec<(Vec<String>, Option<&[u8]>, String)> = vec![
+            (vec!["fit".into(), p("r.asc"), "--max-error".into(), "0.01".into(), "-o".into(), p(&format!("fit-{tag}.tmesh"))], None, p(&format!("fit-{tag}.tmesh"))),
+            (vec!["rasterize".into(), p("p.xyz"), "--cell".into(), "1".into(), "-o".into(), p(&format!("r-{tag}.tif"))], None, p(&format!("r-{tag}.tif"))),
+            (vec!["heal".into(), gml.to_str().unwrap().into(), "-o".into(), p(&format!("h-{tag}.gml"))], None, p(&format!("h-{tag}.gml"))),
+            (vec!["adjust".into(), "-".into(), "-o".into(), p(&format!("a-{tag}.popa3d"))], Some(&model.stdout[..]), p(&format!("a-{tag}.popa3d"))),
+        ];
+        for (args, stdin, out) in cases {
+            let a: Vec<&str> = args.iter().map(String::as_str).collect();
+            let code = run_with_broken_stderr(&a, stdin, full);
+            assert_ne!(code, 101, "{tag}: {a:?} panicked");
+            assert!([0, 1].contains(&code), "{tag}: {a:?} exit {code}");
+            assert!(std::path::Path::new(&out).exists(), "{tag}: {a:?} wrote no output");
+        }
+    }
+}
+
+/// Every stderr write of the CLI goes through `config::stderr_line` (the `say!` macro), which
+/// ignores write errors; a plain `eprintln!` would bring the panic above back.
+#[test]
+fn the_cli_has_no_eprintln() {
+    let src = common::repo_root().join("crates/geofit/src");
+    let mut files = vec![src.join("main.rs")];
+    for e in std::fs::read_dir(src.join("cmd")).unwrap() {
+        files.push(e.unwrap().path());
+    }
+    for f in files {
+        let text = std::fs::read_to_string(&f).unwrap();
+        for (i, line) in text.lines().enumerate() {
+            assert!(!line.contains("eprintln!(") && !line.contains("eprint!("), "{}:{}: use crate::say! (stderr errors ignored)", f.display(), i + 1);
+        }
+    }
+}

@@ -166,6 +166,30 @@ where
     Ok(())
 }
 
+/// Writes `args` and a newline to stderr, ignoring write errors.
+///
+/// Progress, notices and summaries are for a person watching; when stderr is a closed pipe
+/// (`geofit fit … 2>&1 | head -n 1`) or a full device (`2>/dev/full`) the command must still do
+/// its work and write its output, so, unlike `eprintln!`, this never panics. Every stderr write
+/// of the CLI goes through here (or [`stderr_str`]) — use the [`say!`](crate::say) macro.
+pub fn stderr_line(args: std::fmt::Arguments<'_>) {
+    let mut e = io::stderr().lock();
+    let _ = e.write_fmt(args).and_then(|()| e.write_all(b"\n"));
+}
+
+/// Writes `s` to stderr as it is (no newline added), ignoring write errors (see [`stderr_line`]).
+pub fn stderr_str(s: &str) {
+    let _ = io::stderr().lock().write_all(s.as_bytes());
+}
+
+/// `eprintln!` that never panics: one line to stderr, write errors ignored ([`stderr_line`]).
+#[macro_export]
+macro_rules! say {
+    ($($arg:tt)*) => {
+        $crate::config::stderr_line(format_args!($($arg)*))
+    };
+}
+
 /// Progress on stderr: an indicatif bar when stderr is a terminal, otherwise one plain line per
 /// stage; nothing with `--quiet`. Library crates report through [`ProgressSink`]-style callbacks
 /// and the CLI forwards them here.
@@ -198,7 +222,7 @@ impl Config {
             bar.set_prefix(stage.to_string());
             ProgressMode::Bar(bar)
         } else {
-            eprintln!("geofit: {stage}");
+            crate::say!("geofit: {stage}");
             ProgressMode::Lines
         };
         Progress { mode }
@@ -207,7 +231,7 @@ impl Config {
     /// A one-line notice on stderr (suppressed by `--quiet`).
     pub fn notice(&self, msg: &str) {
         if !self.quiet {
-            eprintln!("geofit: {msg}");
+            crate::say!("geofit: {msg}");
         }
     }
 }
@@ -219,7 +243,7 @@ impl Progress {
             ProgressMode::Silent => {}
             ProgressMode::Lines => {
                 if !msg.is_empty() {
-                    eprintln!("geofit:   {msg}");
+                    crate::say!("geofit:   {msg}");
                 }
             }
             ProgressMode::Bar(b) => {
@@ -234,7 +258,7 @@ impl Progress {
             ProgressMode::Silent => {}
             ProgressMode::Lines => {
                 if !msg.is_empty() {
-                    eprintln!("geofit:   {msg}");
+                    crate::say!("geofit:   {msg}");
                 }
             }
             ProgressMode::Bar(b) => b.finish_with_message(msg.to_string()),

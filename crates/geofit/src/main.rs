@@ -101,7 +101,7 @@ fn main() -> ExitCode {
             if e.message.contains("Broken pipe") {
                 return Exit::Ok.into();
             }
-            eprintln!("geofit: error: {}", e.message);
+            crate::say!("geofit: error: {}", e.message);
             e.exit.into()
         }
     }

@@ -723,7 +723,9 @@ pub fn solve_rows(
                 let new = next_active(data, xx, &act, p);
                 let same = new == act;
                 if std::env::var_os("GEOFIT_DEBUG_ACTIVE").is_some() {
-                    eprintln!("active-set round {round}: {} rows change", new.iter().zip(&act).filter(|(a, b)| a != b).count());
+                    // debug output: a closed or full stderr must not abort the solve
+                    let changed = new.iter().zip(&act).filter(|(a, b)| a != b).count();
+                    let _ = std::io::Write::write_fmt(&mut std::io::stderr(), format_args!("active-set round {round}: {changed} rows change\n"));
                 }
                 next = Some(new);
                 same

@@ -161,24 +161,24 @@ pub(crate) fn global_test_line(sigma0: f64, g: &GlobalTest) -> String {
 
 pub(crate) fn print_report(r: &Report, rows: usize, verbose: bool) {
     if verbose {
-        eprintln!(
+        crate::say!(
             "adjust: datum {}, {} unknowns, {} conditions, {} restrictions (+{} datum), redundancy {} (Σ r_i = {:.3}), {} iteration(s), {} component(s)",
             r.datum, r.unknowns, r.conditions, r.restrictions, r.datum_restrictions, r.redundancy, r.redundancy_sum, r.iterations, r.components
         );
     }
     match (&r.sigma0, &r.global_test) {
-        (Some(s), Some(g)) => eprintln!("{}", global_test_line(*s, g)),
-        _ => eprintln!("no redundancy: σ̂0 and the global test are undefined"),
+        (Some(s), Some(g)) => crate::say!("{}", global_test_line(*s, g)),
+        _ => crate::say!("no redundancy: σ̂0 and the global test are undefined"),
     }
     if verbose {
-        eprintln!("{:<28} {:>6} {:>14} {:>14} {:>8}", "type", "count", "max misclosure", "max |v|", "mean EV");
+        crate::say!("{:<28} {:>6} {:>14} {:>14} {:>8}", "type", "count", "max misclosure", "max |v|", "mean EV");
         for (k, t) in &r.per_type {
-            eprintln!("{:<28} {:>6} {:>14.3e} {:>14.3e} {:>7.1}%", k, t.count, t.max_misclosure_before, t.max_abs_residual, 100.0 * t.mean_redundancy);
+            crate::say!("{:<28} {:>6} {:>14.3e} {:>14.3e} {:>7.1}%", k, t.count, t.max_misclosure_before, t.max_abs_residual, 100.0 * t.mean_redundancy);
         }
         if rows > 0 {
-            eprintln!("{:>6} {:<28} {:<9} {:>3} {:>14} {:>11} {:>12} {:>6} {:>7}", "obs", "class", "origin", "", "value", "σ", "v", "EV %", "w");
+            crate::say!("{:>6} {:<28} {:<9} {:>3} {:>14} {:>11} {:>12} {:>6} {:>7}", "obs", "class", "origin", "", "value", "σ", "v", "EV %", "w");
             for o in r.observations.iter().take(rows) {
-                eprintln!("{}", row(o));
+                crate::say!("{}", row(o));
             }
         }
     }
@@ -186,16 +186,16 @@ pub(crate) fn print_report(r: &Report, rows: usize, verbose: bool) {
         let obs = if s.observation == u32::MAX { "datum observation".to_string() } else { format!("observation {}", s.observation) };
         let comp = if s.component.is_empty() { String::new() } else { format!(" {}", s.component) };
         let rejected = r.observations.iter().filter(|o| o.rejected).count();
-        eprintln!("largest suspect: {obs} ({}{comp}) w = {:.2} (critical {:.2}); {rejected} rejected", s.class, s.normalised, r.critical_w);
+        crate::say!("largest suspect: {obs} ({}{comp}) w = {:.2} (critical {:.2}); {rejected} rejected", s.class, s.normalised, r.critical_w);
     }
     if let Some(p) = &r.max_plane_shift_at {
-        eprintln!("largest plane movement: {:.4} m, {p}", p.shift);
+        crate::say!("largest plane movement: {:.4} m, {p}", p.shift);
     }
     if !r.not_yet_measured.is_empty() {
-        eprintln!("not yet measured: {} sketch priors still control the geometry{}", r.not_yet_measured.len(), if verbose { ":" } else { " (--verbose lists them)" });
+        crate::say!("not yet measured: {} sketch priors still control the geometry{}", r.not_yet_measured.len(), if verbose { ":" } else { " (--verbose lists them)" });
         if verbose {
             for o in r.not_yet_measured.iter().take(rows.max(1)) {
-                eprintln!("  observation {} {} {}", o.observation, o.class, o.label.clone().unwrap_or_default());
+                crate::say!("  observation {} {} {}", o.observation, o.class, o.label.clone().unwrap_or_default());
             }
         }
     }

@@ -184,7 +184,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     progress.finish(&format!("{} converted, {} rejected", reports.len(), rejected.len()));
     let total = Counts::sum(&name, reports.iter().map(|r| &r.counts));
     if !config.quiet {
-        eprint!("{}", total.table());
+        crate::config::stderr_str(&total.table());
         let mut cc = ConditionCounts::default();
         for r in &reports {
             cc.parallelism += r.conditions.parallelism;
@@ -194,18 +194,18 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
             cc.identity += r.conditions.identity;
             cc.norm += r.conditions.norm;
         }
-        eprintln!(
+        crate::say!(
             "conditions: parallelism {}, coplanarity {}, orthogonality {}, wall-window {}, identity {}, normal-norm {}",
             cc.parallelism, cc.coplanarity, cc.orthogonality, cc.wall_window, cc.identity, cc.norm
         );
         for r in &reports {
             for n in &r.notices {
-                eprintln!("geofit: notice: {}: {}: {}: {}", r.id, n.rule, n.element, n.message);
+                crate::say!("geofit: notice: {}: {}: {}: {}", r.id, n.rule, n.element, n.message);
             }
         }
     }
     for r in &rejected {
-        eprintln!("geofit: rejected: {r}");
+        crate::say!("geofit: rejected: {r}");
     }
     if !reports.is_empty() {
         let out = Output::from_arg(args.output.as_deref());
@@ -228,7 +228,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         Ok(Exit::Ok)
     } else {
         if units.len() == rejected.len() {
-            eprintln!("geofit: error: {name}: no building could be converted");
+            crate::say!("geofit: error: {name}: no building could be converted");
         }
         Ok(Exit::Findings)
     }

@@ -128,7 +128,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         print_report(args.json, &report, |w| print_text(w, &report))?;
     }
     if args.check && report.over_tolerance > 0 {
-        eprintln!(
+        crate::say!(
             "geofit: {} of {} cells differ by more than {} (max {:.4} at col {} row {})",
             report.over_tolerance,
             report.cells_compared,

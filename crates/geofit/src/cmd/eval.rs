@@ -165,7 +165,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
             Some(o) => format!("opencl {}", o.device_name()),
             None => format!("cpu, {} thread(s)", tspline::worker_threads()),
         };
-        eprintln!(
+        crate::say!(
             "geofit: timing: {} points in {:.3} s = {:.2} M points/s, {:.0} flops/point ({}; {} control points, degree {})",
             st.len(),
             secs,

@@ -517,7 +517,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         write_json_report(path, &report)?;
     }
     for f in &findings {
-        eprintln!("{f}");
+        crate::say!("{f}");
     }
     Ok(if findings.is_empty() { Exit::Ok } else { Exit::Findings })
 }

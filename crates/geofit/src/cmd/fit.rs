@@ -400,7 +400,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         ));
     }
     if exit != Exit::Ok {
-        eprintln!("geofit: {name}: {line}");
+        crate::say!("geofit: {name}: {line}");
     }
     let mut mesh = result.mesh;
     let (mask, warp) = match &field {

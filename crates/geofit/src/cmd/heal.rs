@@ -121,7 +121,7 @@ fn heal_error(name: &str, e: HealError) -> CliError {
 
 fn print_summary(r: &HealReport) {
     let pct = if r.area_before_m2 > 0.0 { 100.0 * (r.area_after_m2 / r.area_before_m2 - 1.0) } else { 0.0 };
-    eprintln!(
+    crate::say!(
         "heal: {} of {} buildings healed, {} kept as they were; surface area {:.1} → {:.1} m² ({pct:+.3} %); vertex moves: largest {:.4} m, mean {:.4} m",
         r.healed,
         r.buildings,
@@ -132,7 +132,7 @@ fn print_summary(r: &HealReport) {
         r.back.mean_move
     );
     for k in &r.kept {
-        eprintln!("heal: kept {}: {}", k.building, k.reason);
+        crate::say!("heal: kept {}: {}", k.building, k.reason);
     }
 }
 

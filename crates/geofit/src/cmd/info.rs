@@ -233,7 +233,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     };
     print_report(args.json, &report, |w| write_text(w, &report))?;
     for f in &findings {
-        eprintln!("{f}");
+        crate::say!("{f}");
     }
     Ok(if findings.is_empty() { Exit::Ok } else { Exit::Findings })
 }

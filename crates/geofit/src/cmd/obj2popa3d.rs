@@ -118,10 +118,10 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         }
     }
     if !config.quiet {
-        eprint!("{}", n.counts.table());
-        eprintln!("sketch priors: {nd} plane differences, {na} relative angles, {nn} unit norms; {ndist} distances, {nind} induced constraints");
+        crate::config::stderr_str(&n.counts.table());
+        crate::say!("sketch priors: {nd} plane differences, {na} relative angles, {nn} unit norms; {ndist} distances, {nind} induced constraints");
         for x in &n.notices {
-            eprintln!("geofit: notice: {}: {}: {}", x.rule, x.element, x.message);
+            crate::say!("geofit: notice: {}: {}: {}", x.rule, x.element, x.message);
         }
     }
     let out = Output::from_arg(args.output.as_deref());

@@ -58,7 +58,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         }
     }
     if !config.quiet {
-        eprintln!("observe: {added} measurement(s) added, {induced} induced constraint(s); {} observations in total", model.observations.len());
+        crate::say!("observe: {added} measurement(s) added, {induced} induced constraint(s); {} observations in total", model.observations.len());
     }
     Output::from_arg(args.output.as_deref())
         .write_with(|w| popa3d_model::write(&model, w).map_err(|e| CliError::internal(e.to_string())))?;

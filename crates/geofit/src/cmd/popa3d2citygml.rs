@@ -91,7 +91,7 @@ fn back_error(template: &str, e: BackError) -> CliError {
 }
 
 fn print_back(r: &BackReport) {
-    eprintln!(
+    crate::say!(
         "popa3d2citygml: {} polygons mapped, {} removed (no area), {} merge(s), {} surface(s) removed, {} opening(s) moved; vertex moves: largest {:.6} m, mean {:.6} m over {} vertices",
         r.polygons_mapped,
         r.removed_degenerate.len(),

@@ -119,7 +119,7 @@ pub fn gdal_notices(config: &Config) {
     let quiet = config.quiet;
     raster_io::gdal_io::route_gdal_warnings(move |m| {
         if !quiet {
-            eprintln!("geofit: GDAL: {m}");
+            crate::say!("geofit: GDAL: {m}");
         }
     });
 }
