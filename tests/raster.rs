@@ -454,3 +454,61 @@ fn outputs_are_deterministic() {
     }
     assert_eq!(std::fs::read(&wa).unwrap(), std::fs::read(&wb).unwrap());
 }
+
+/// Issue 13, item 4: sizes claimed by a header (or by an extent and a cell size) are checked
+/// before anything is allocated for them. Before, an 88-byte ASCII grid or a VRT claiming
+/// 10⁶ × 10⁶ cells aborted `info`, `fit`, `warp`, `diff` and `eval --like` in the allocator
+/// (SIGABRT, exit 134), and `rasterize` of 3 points 46 km apart at `--cell 1` tried a 16.9 GB grid.
+#[test]
+fn claimed_sizes_are_checked_before_allocating() {
+    let dir = common::tempdir();
+    let d = dir.path();
+    let s = |p: &Path| p.to_str().unwrap().to_string();
+    let asc = d.join("big.asc");
+    std::fs::write(&asc, "ncols 1000000\nnrows 1000000\nxllcorner 0\nyllcorner 0\ncellsize 1\nNODATA_value -9999\n1 2 3\n").unwrap();
+    let vrt = d.join("big.vrt");
+    std::fs::write(&vrt, r#"<VRTDataset rasterXSize="1000000" rasterYSize="1000000"><VRTRasterBand dataType="Float64" band="1"/></VRTDataset>"#).unwrap();
+    let small = d.join("small.asc");
+    std::fs::write(&small, "ncols 3\nnrows 3\nxllcorner 0\nyllcorner 0\ncellsize 1\nNODATA_value -9999\n1 2 3\n4 5 6\n7 8 10\n").unwrap();
+    let mesh = d.join("m.tmesh");
+    let o = common::run(&["-q", "fit", &s(&small), "--max-error", "0.5", "-o", &s(&mesh)], None);
+    assert_eq!(common::code(&o), 0, "{}", stderr(&o));
+    let out = s(&d.join("out.tif"));
+    for big in [&asc, &vrt] {
+        let b = s(big);
+        let cmds: [Vec<&str>; 5] = [
+            vec!["info", &b],
+            vec!["fit", &b, "--max-error", "1", "-o", &out],
+            vec!["warp", &b, "-o", &out],
+            vec!["diff", &b, &b],
+            vec!["eval", mesh.to_str().unwrap(), "--like", &b, "-o", &out],
+        ];
+        for args in cmds {
+            let o = common::run(&args, None);
+            let e = stderr(&o);
+            assert_eq!(common::code(&o), 3, "{args:?}: {e}");
+            assert_eq!(e.lines().count(), 1, "{args:?}: one line: {e}");
+            assert!(e.contains(&b) && e.contains("1000000×1000000 cells") && e.contains("GEOFIT_MAX_CELLS"), "{args:?}: {e}");
+        }
+    }
+    // rasterize: 3 points spanning 46 km at --cell 1 (2.1·10⁹ cells); the budget is fixed by
+    // GEOFIT_MAX_CELLS so the test does not depend on this machine's memory
+    let pts = d.join("far.xyz");
+    std::fs::write(&pts, "0 0 1\n46000 0 2\n0 46000 3\n").unwrap();
+    let o = common::geofit()
+        .args(["rasterize", &s(&pts), "--cell", "1", "-o", &out])
+        .env("GEOFIT_MAX_CELLS", "1000000")
+        .output()
+        .unwrap();
+    let e = stderr(&o);
+    assert_eq!(common::code(&o), 2, "{e}");
+    assert!(e.contains("--cell 1") && e.contains("46001 × 46001 cells") && e.contains("a cell size of 47 or more fits"), "{e}");
+    assert!(!Path::new(&out).exists());
+    // and that suggestion works
+    let o = common::geofit()
+        .args(["-q", "rasterize", &s(&pts), "--cell", "47", "-o", &out])
+        .env("GEOFIT_MAX_CELLS", "1000000")
+        .output()
+        .unwrap();
+    assert_eq!(common::code(&o), 0, "{}", stderr(&o));
+}

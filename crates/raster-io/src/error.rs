@@ -10,6 +10,9 @@ pub enum RasterError {
     /// A file GDAL opened but that holds nothing usable (no raster band, bad geotransform...).
     #[error("{path}: {message}")]
     Content { path: PathBuf, message: String },
+    /// The header claims more cells than the machine can hold (checked before allocating).
+    #[error("{path}: the file claims {width}×{height} cells ({size} as f64), more than the limit of {limit}")]
+    TooLarge { path: PathBuf, width: usize, height: usize, size: String, limit: String },
     /// Writing failed.
     #[error("{path}: cannot write: {message}")]
     Write { path: PathBuf, message: String },

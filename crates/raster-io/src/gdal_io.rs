@@ -141,6 +141,18 @@ pub fn read_raster_band(path: &Path, band: usize) -> Result<Raster, RasterError>
     if width == 0 || height == 0 {
         return Err(content_err(format!("raster size {width}×{height} has no cells")));
     }
+    // The size is the header's claim: check it before GDAL or Vec allocate for it.
+    let budget = crate::limits::CellBudget::for_cost(crate::limits::READ_BYTES_PER_CELL);
+    if !budget.allows(width, height) {
+        let bytes = (width as u128 * height as u128 * 8).min(u64::MAX as u128) as u64;
+        return Err(RasterError::TooLarge {
+            path: path.to_path_buf(),
+            width,
+            height,
+            size: crate::limits::gib(bytes),
+            limit: budget.describe(),
+        });
+    }
     // GDAL reports a missing geotransform as an error with the default identity-like transform;
     // pixel coordinates (origin top-left, unit cells, y down) are then the honest fallback.
     let geotransform = ds.geo_transform().unwrap_or([0.0, 1.0, 0.0, 0.0, 0.0, 1.0]);

@@ -28,6 +28,7 @@
 
 pub mod error;
 pub mod gdal_io;
+pub mod limits;
 pub mod points;
 pub mod raster;
 

@@ -7,6 +7,10 @@ use crate::ProcError;
 /// The most cells a grid may have (2³¹): beyond that the cell size is surely a mistake.
 pub const MAX_CELLS: usize = 1 << 31;
 
+/// What one grid cell costs while points are gridded: the Gauss splat's two f64 sums, the
+/// output's f64 value and its validity flag (TIN needs less per cell).
+pub const GRID_BYTES_PER_CELL: u64 = 25;
+
 /// A north-up grid: size and GDAL geotransform (corner based, `gt[5] < 0`).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct GridSpec {
@@ -33,6 +37,33 @@ impl GridSpec {
         Self::checked(width, height, [x0, cell, 0.0, top, 0.0, -cell])
     }
 
+    /// Fails with [`ProcError::TooLarge`] when the grid has more cells than [`MAX_CELLS`] or
+    /// than the memory available holds ([`raster_io::limits::CellBudget`], at
+    /// [`GRID_BYTES_PER_CELL`] a cell) — to be called before allocating for it.
+    pub fn check_budget(&self) -> Result<(), ProcError> {
+        let mut budget = raster_io::limits::CellBudget::for_cost(GRID_BYTES_PER_CELL);
+        if budget.max_cells > MAX_CELLS as u64 {
+            budget = raster_io::limits::CellBudget { max_cells: MAX_CELLS as u64, source: raster_io::limits::BudgetSource::Fallback };
+        }
+        if budget.allows(self.width, self.height) {
+            return Ok(());
+        }
+        let cells = self.width as f64 * self.height as f64;
+        let cell = self.geotransform[1].abs();
+        // the side grows with the square root of the cell count; 2 significant digits, up
+        let need = cell * (cells / budget.max_cells.max(1) as f64).sqrt() * 1.01;
+        let mag = 10f64.powf(need.log10().floor() - 1.0);
+        let min_cell = (need / mag).ceil() * mag;
+        let min_cell = format!("{min_cell:.6}").trim_end_matches('0').trim_end_matches('.').parse().unwrap_or(min_cell);
+        Err(ProcError::TooLarge {
+            width: self.width,
+            height: self.height,
+            size: raster_io::limits::gib((cells * 8.0).min(u64::MAX as f64) as u64),
+            limit: budget.describe(),
+            min_cell,
+        })
+    }
+
     /// The grid with exactly these outer EDGES (like `gdal_grid -txe xmin xmax -tye ymin ymax`);
     /// the extent must be a whole number of cells (to 1e-9 relative).
     pub fn from_edges(xmin: f64, ymin: f64, xmax: f64, ymax: f64, cell: f64) -> Result<GridSpec, ProcError> {
@@ -55,12 +86,9 @@ impl GridSpec {
         if width == 0 || height == 0 {
             return Err(ProcError::Input("grid has no cells".into()));
         }
-        if width.saturating_mul(height) > MAX_CELLS {
-            return Err(ProcError::Input(format!(
-                "grid of {width} × {height} cells is too large (limit {MAX_CELLS}); use a larger cell size"
-            )));
-        }
-        Ok(GridSpec { width, height, geotransform })
+        let g = GridSpec { width, height, geotransform };
+        g.check_budget()?;
+        Ok(g)
     }
 
     /// An empty raster on this grid.

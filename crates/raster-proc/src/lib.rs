@@ -22,6 +22,9 @@ pub enum ProcError {
     /// Inputs that cannot produce a result (no points, all-nodata raster, degenerate grid).
     #[error("{0}")]
     Input(String),
+    /// A grid with more cells than the machine can hold (checked before allocating it).
+    #[error("grid of {width} × {height} cells ({size} as f64) is too large: more than the limit of {limit}; a cell size of {min_cell} or more fits")]
+    TooLarge { width: usize, height: usize, size: String, limit: String, min_cell: f64 },
     /// The warp field folds over (crossing displacement vectors).
     #[error("warp field folds over: {0}")]
     FoldOver(String),

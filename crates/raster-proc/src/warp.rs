@@ -551,9 +551,7 @@ pub fn warp_raster(r: &Raster, params: &WarpParams) -> Result<(Raster, WarpField
     let width = (((b.2 + 0.5 * cell) - x0) / cell).ceil().max(1.0) as usize;
     let height = ((ytop - (b.1 - 0.5 * cell)) / cell).ceil().max(1.0) as usize;
     let grid = GridSpec { width, height, geotransform: [x0, cell, 0.0, ytop, 0.0, -cell] };
-    if width.saturating_mul(height) > crate::grid::MAX_CELLS {
-        return Err(ProcError::Input(format!("warped raster would have {width} × {height} cells")));
-    }
+    grid.check_budget()?;
     let mut acc = SplatAccumulator::new(width, height, params.kernel)?;
     for (q, z) in &mapped {
         let (px, py) = grid.world_to_pixel(q[0], q[1]);

@@ -126,7 +126,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     // Binary rasters and LAS/LAZ are opened by path (GDAL, las): decide before reading.
     let by_ext = input.path().and_then(kind_by_extension);
     match (by_ext, input.path()) {
-        (Some(Kind::Raster), Some(p)) => return raster_info(&read_raster_path(p, &name)?, &name, args.json),
+        (Some(Kind::Raster), Some(p)) => return raster_info(&read_raster_path(p)?, &name, args.json),
         (Some(Kind::Points), Some(p)) => {
             let cloud = raster_io::read_points(p, None).map_err(|e| CliError::unreadable(e.to_string()))?;
             return points_info(&cloud, &name, args.json);
@@ -140,7 +140,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     }
     if by_ext.is_none() && !src.is_empty() && !looks_like_xml(&src) {
         // No telling extension and not XML: a raster GDAL opens, else XYZ text.
-        if let Some(r) = raster_from_bytes(&src, input.path()) {
+        if let Some(r) = raster_from_bytes(&src, input.path())? {
             return raster_info(&r, &name, args.json);
         }
         return match raster_io::points::read_xyz(&src[..], &name) {
@@ -272,15 +272,20 @@ fn write_text(w: &mut dyn Write, r: &InfoReport) -> std::io::Result<()> {
 }
 
 /// Reads a raster by path; errors name the file.
-fn read_raster_path(p: &std::path::Path, name: &str) -> Result<raster_io::Raster, CliError> {
-    raster_io::read_raster(p).map_err(|e| CliError::unreadable(format!("{name}: {e}")))
+fn read_raster_path(p: &std::path::Path) -> Result<raster_io::Raster, CliError> {
+    raster_io::read_raster(p).map_err(|e| CliError::unreadable(e.to_string()))
 }
 
 /// A raster GDAL opens from this input (the path, or stdin's bytes spooled), or None.
-fn raster_from_bytes(src: &[u8], path: Option<&std::path::Path>) -> Option<raster_io::Raster> {
+/// A raster too large to read is an error, not a reason to try XYZ text.
+fn raster_from_bytes(src: &[u8], path: Option<&std::path::Path>) -> Result<Option<raster_io::Raster>, CliError> {
     match path {
-        Some(p) => raster_io::read_raster(p).ok(),
-        None => super::rasterize::raster_from_stdin_bytes(src).ok(),
+        Some(p) => match raster_io::read_raster(p) {
+            Ok(r) => Ok(Some(r)),
+            Err(e @ raster_io::RasterError::TooLarge { .. }) => Err(CliError::unreadable(e.to_string())),
+            Err(_) => Ok(None),
+        },
+        None => Ok(super::rasterize::raster_from_stdin_bytes(src).ok()),
     }
 }
 

@@ -92,7 +92,7 @@ struct RasterizeReport {
 /// One line for a raster-io error (its message already names the file).
 pub fn raster_err(e: RasterError) -> CliError {
     match e {
-        RasterError::Open { .. } | RasterError::Content { .. } => CliError::unreadable(e.to_string()),
+        RasterError::Open { .. } | RasterError::Content { .. } | RasterError::TooLarge { .. } => CliError::unreadable(e.to_string()),
         RasterError::Write { .. } => CliError::output(e.to_string()),
         RasterError::Invalid(_) => CliError::findings(e.to_string()),
     }
@@ -109,6 +109,7 @@ pub fn proc_err(what: &str, e: ProcError) -> CliError {
         ProcError::Raster(r) => raster_err(r),
         ProcError::Input(m) => CliError::findings(format!("{what}: {m}")),
         ProcError::FoldOver(_) => CliError::findings(format!("{what}: {e}")),
+        ProcError::TooLarge { .. } => CliError::unreadable(format!("{what}: {e}")),
         ProcError::Field(_) => CliError::unreadable(format!("{what}: {e}")),
     }
 }
@@ -191,6 +192,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     }
     .map_err(|e| match e {
         ProcError::Input(m) => CliError::usage(m),
+        e @ ProcError::TooLarge { .. } => CliError::usage(format!("--cell {}: {e}", args.cell)),
         other => proc_err(&args.input, other),
     })?;
     let crs = cloud.crs.clone();
