@@ -423,3 +423,21 @@ fn indirect_needs_fewer_points_than_direct_on_rotated_channels() {
         assert!(cps[1] < cps[0], "{name} E={e}: indirect {} control points, direct {}", cps[1], cps[0]);
     }
 }
+
+/// Issue 13, item 2: a raster of huge finite values (1.797e308) is refused before fitting with
+/// one line (exit 3). Before, the fit reported "max error inf" and then panicked (exit 101) on
+/// "a valid mesh stays valid when compacted: InvalidMesh(control point 0 has a non-finite value)".
+#[test]
+fn huge_finite_values_are_refused_not_a_panic() {
+    let dir = tempfile::tempdir().unwrap();
+    for (name, cells) in [("same.asc", "1.797e308 1.797e308"), ("mixed.asc", "1 1.797e308"), ("neg.asc", "-1.797e308 0")] {
+        let asc = dir.path().join(name);
+        std::fs::write(&asc, format!("ncols 2\nnrows 1\nxllcorner 0\nyllcorner 0\ncellsize 1\nNODATA_value -9999\n{cells}\n")).unwrap();
+        let out = dir.path().join("h.tmesh");
+        let o = common::run(&["-q", "fit", asc.to_str().unwrap(), "--max-error", "1", "-o", out.to_str().unwrap()], None);
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(3), "{name}: {e}");
+        assert!(e.contains(name) && e.contains("too large to fit") && e.lines().count() == 1, "{name}: {e}");
+        assert!(!out.exists());
+    }
+}

@@ -1158,6 +1158,22 @@ fn refine(
     Ok(Refined::Next(next, splittable.len()))
 }
 
+/// The largest |z| a fit accepts: 1e100, so that squares (1e200) and sums of squares over any
+/// raster (≪ 1e100 cells) stay finite. No elevation or measurement comes near it; values
+/// beyond it (e.g. 1.797e308 in a corrupt file) are refused up front instead of turning the
+/// control points into infinities.
+pub const MAX_ABS_VALUE: f64 = 1e100;
+
+/// Fails with [`TsplineError::ValueRange`] when a finite value of `z` has |z| > [`MAX_ABS_VALUE`]
+/// (non-finite values are no data and skipped).
+pub fn check_value_range(z: &[f64]) -> Result<(), TsplineError> {
+    let (min, max) = z.iter().filter(|v| v.is_finite()).fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+    if min.abs() > MAX_ABS_VALUE || max.abs() > MAX_ABS_VALUE {
+        return Err(TsplineError::ValueRange { min, max, limit: MAX_ABS_VALUE });
+    }
+    Ok(())
+}
+
 /// The approximation loop (Alg. 3). `progress` gets every iteration's statistics.
 pub fn fit(samples: &Samples, opts: &FitOptions, backend: &Backend, progress: &mut dyn FnMut(&IterationStats)) -> Result<FitResult, TsplineError> {
     fit_impl(samples, None, opts, backend, progress)
@@ -1227,6 +1243,10 @@ fn fit_impl(
     if samples.valid_count() == 0 {
         return Err(TsplineError::Fit("the raster has no valid cell".into()));
     }
+    check_value_range(&samples.z)?;
+    if let Some(p) = pts {
+        check_value_range(&p.z)?;
+    }
     let mut mesh = initial_mesh(samples, opts);
     let mut iterations = Vec::new();
     let mut refined = 0usize;
@@ -1253,6 +1273,11 @@ fn fit_impl(
             (Method::Lsq, None) => fit_lsq_local(&mesh, &pb, samples, pts, None, None, asm.as_ref())?,
             (Method::Drag, _) => fit_drag(&pb, samples, opts.drag_steps, 0.01 * opts.max_error, backend)?,
         };
+        if z.iter().any(|v| !v.is_finite()) {
+            // the range check above makes this unreachable for sound solvers; a typed error
+            // rather than an invalid mesh (which would panic when written) if it happens anyway
+            return Err(TsplineError::Fit(format!("iteration {it}: the least-squares solution has non-finite control points")));
+        }
         set_z(&mut mesh, &mut pb, &z);
         let t_opt = t0.elapsed().as_secs_f64();
         let region = local.as_ref().map(|(_, r)| r);

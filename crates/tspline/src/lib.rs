@@ -48,6 +48,10 @@ pub enum TsplineError {
     OpenCl(String),
     #[error("fit: {0}")]
     Fit(String),
+    /// Data values too large in magnitude for the fit's sums and squares to stay finite
+    /// (|z| above [`fit::MAX_ABS_VALUE`]); refused before fitting.
+    #[error("values from {min:e} to {max:e} are too large to fit: |z| must stay below {limit:e} so that sums and squares stay finite")]
+    ValueRange { min: f64, max: f64, limit: f64 },
     #[error("{0}")]
     Io(#[from] std::io::Error),
 }

@@ -120,7 +120,7 @@ pub struct Args {
 /// One line per T-spline library error.
 pub fn tspline_err(what: &str, e: TsplineError) -> CliError {
     match e {
-        TsplineError::Format { .. } | TsplineError::InvalidMesh(_) => CliError::unreadable(format!("{what}: {e}")),
+        TsplineError::Format { .. } | TsplineError::InvalidMesh(_) | TsplineError::ValueRange { .. } => CliError::unreadable(format!("{what}: {e}")),
         TsplineError::Fit(_) => CliError::findings(format!("{what}: {e}")),
         TsplineError::OpenCl(_) | TsplineError::Io(_) => CliError::internal(format!("{what}: {e}")),
     }
