@@ -113,3 +113,31 @@ fn the_cli_has_no_eprintln() {
         }
     }
 }
+
+/// Issue 13, item 7: with stdout closed (`>&-`) a report command fails like any other failed
+/// write (exit 4) instead of exiting 0 having written nothing; `info` on an empty stdin says
+/// the input is empty (it said "no points", from the XYZ reader it tried last).
+#[test]
+fn closed_stdout_is_a_write_failure_and_empty_input_is_named() {
+    let gml = common::repo_root().join("fixtures/citygml/three_storey.gml");
+    let bin = env!("CARGO_BIN_EXE_geofit");
+    for json in ["", "--json"] {
+        let o = std::process::Command::new("sh")
+            .arg("-c")
+            .arg(format!("exec '{bin}' info {json} '{}' >&-", gml.display()))
+            .output()
+            .unwrap();
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(4), "info {json}: {e}");
+        assert!(e.contains("stdout is closed"), "{e}");
+    }
+    // stdout on /dev/null is not closed: still a success
+    let o = std::process::Command::new(bin).args(["info", gml.to_str().unwrap()]).stdout(std::process::Stdio::null()).output().unwrap();
+    assert_eq!(o.status.code(), Some(0));
+    for input in [&b""[..], b"\n  \n"] {
+        let o = common::run(&["info", "-"], Some(input));
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(common::code(&o), 3, "{e}");
+        assert!(e.contains("<stdin>: the input is empty") && !e.contains("no points"), "{e}");
+    }
+}

@@ -67,6 +67,27 @@ impl Input {
     }
 }
 
+/// Whether file descriptor 1 was closed when the process started (`geofit info x.gml >&-`).
+///
+/// Rust's runtime reopens a closed stdout onto `/dev/null` before `main`, so every write would
+/// "succeed" and the command exit 0 having written nothing. A constructor in `.init_array` runs
+/// before that and records the closed descriptor; writes to stdout then fail like any other
+/// failed output (exit 4).
+static STDOUT_CLOSED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+#[cfg(target_os = "linux")]
+#[used]
+#[link_section = ".init_array"]
+static RECORD_CLOSED_STDOUT: extern "C" fn() = record_closed_stdout;
+
+#[cfg(target_os = "linux")]
+extern "C" fn record_closed_stdout() {
+    // SAFETY: F_GETFD only queries the descriptor's flags; it fails with EBADF when fd 1 is closed.
+    if unsafe { libc::fcntl(1, libc::F_GETFD) } == -1 {
+        STDOUT_CLOSED.store(true, std::sync::atomic::Ordering::Relaxed);
+    }
+}
+
 /// Where an output goes: stdout (`-` or no `-o`) or a file written atomically.
 #[derive(Debug, Clone)]
 pub enum Output {
@@ -120,6 +141,9 @@ impl Output {
     {
         match self {
             Output::Stdout => {
+                if STDOUT_CLOSED.load(std::sync::atomic::Ordering::Relaxed) {
+                    return Err(CliError::output("write failed: stdout is closed (Bad file descriptor)"));
+                }
                 let stdout = io::stdout();
                 let mut lock = io::BufWriter::with_capacity(1 << 16, stdout.lock());
                 f(&mut lock)?;

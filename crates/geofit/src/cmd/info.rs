@@ -134,6 +134,13 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         _ => {}
     }
     let src = input.read_all()?;
+    // Nothing to summarise: say so, rather than what the first format tried found missing.
+    let text = src.strip_prefix(b"\xEF\xBB\xBF".as_slice()).unwrap_or(&src);
+    // (a `.gml` file gets the CityGML reader's located message instead)
+    if by_ext.is_none() && text.iter().all(u8::is_ascii_whitespace) {
+        let what = if src.is_empty() { "0 bytes".to_string() } else { format!("{} bytes, only whitespace", src.len()) };
+        return Err(CliError::unreadable(format!("{name}: the input is empty ({what})")));
+    }
     if by_ext == Some(Kind::TMesh) || (by_ext.is_none() && tspline::format::is_tmesh_document(&src)) {
         let file = tspline::format::read(&src).map_err(|e| CliError::unreadable(format!("{name}: {e}")))?;
         return tmesh_info(&file, &name, args.json);
