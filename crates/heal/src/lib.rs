@@ -170,47 +170,8 @@ pub fn heal(original: &[u8], opts: &HealOptions, progress: &(dyn Fn(usize) + Syn
         before[i].area = f64::NAN; // measured on the stand-in numbers: left out of the totals
     }
     let touched_by = touch_map(&units, &results);
-    let mut rounds = 0;
-    let (document, after) = loop {
-        rounds += 1;
-        let edits: Vec<Edit> = results.iter().zip(&kept).filter(|(_, k)| k.is_none()).flat_map(|(r, _)| r.as_ref().map(|x| x.0.clone()).unwrap_or_default()).collect();
-        // the edits go into the original bytes (the tolerant copy differs only inside bad numbers)
-        let mut doc = Vec::with_capacity(original.len());
-        citygml_io::write_with_edits(original, &edits, &mut doc).map_err(|e| HealError::Internal(e.to_string()))?;
-        let (_, city2, _) = parse_tolerant(&doc).map_err(|e| HealError::Internal(format!("the healed document cannot be read back: {e}")))?;
-        let units2 = self::units(&city2);
-        if units2.len() != units.len() || units2.iter().zip(&units).any(|(a, b)| a.id != b.id) {
-            return Err(HealError::Internal("the healed document does not hold the same buildings".into()));
-        }
-        // Only what the applied edits can have changed is measured again: a building being
-        // healed, or one that another healed building's edits reach.
-        let changed: Vec<usize> = all.iter().copied().filter(|&i| kept[i].is_none() || touched_by[i].iter().any(|&j| kept[j].is_none())).collect();
-        let mut after = before.clone();
-        for (i, m) in changed.iter().zip(measure_all(&units2, &changed, &opts.validation)) {
-            after[*i] = m;
-        }
-        for &i in &with_bad_numbers {
-            after[i].area = f64::NAN;
-        }
-        let mut failed = false;
-        for i in 0..units.len() {
-            let touching: Vec<usize> = touched_by[i].iter().copied().filter(|&j| kept[j].is_none()).collect();
-            if kept[i].is_some() && touching.is_empty() {
-                continue; // left as it was, and no other building's edit reaches it
-            }
-            let Some(why) = guard(&before[i], &after[i], opts) else { continue };
-            failed = true;
-            if kept[i].is_none() {
-                kept[i] = Some(why.clone());
-            }
-            for j in touching {
-                kept[j] = Some(format!("its write-back changes {} too, which would then get worse: {why}", unit_name(units[i])));
-            }
-        }
-        if !failed {
-            break (doc, after);
-        }
-    };
+    let verifier = Verifier { original, units: &units, results: &results, touched_by: &touched_by, with_bad_numbers: &with_bad_numbers, opts };
+    let (document, after, rounds) = verifier.run(&mut kept, &before)?;
     let mut back = BackReport::default();
     for (r, k) in results.iter().zip(&kept) {
         if let (Ok((_, rep)), None) = (r, k) {
@@ -238,6 +199,77 @@ pub fn heal(original: &[u8], opts: &HealOptions, progress: &(dyn Fn(usize) + Syn
         back,
     };
     Ok(Healed { document, report })
+}
+
+/// The verify-after-write loop of [`heal`]: apply the edits of the buildings not kept, read the
+/// document back, measure what can have changed, keep every building the guard rejects (and the
+/// buildings whose edits reach it); repeat until a round keeps nothing new.
+struct Verifier<'a> {
+    original: &'a [u8],
+    units: &'a [&'a CityObject],
+    results: &'a [Result<(Vec<Edit>, BackReport), String>],
+    touched_by: &'a [std::collections::BTreeSet<usize>],
+    with_bad_numbers: &'a [usize],
+    opts: &'a HealOptions,
+}
+
+impl Verifier<'_> {
+    /// The written document, the measures after, and the number of rounds.
+    fn run(&self, kept: &mut [Option<String>], before: &[Measures]) -> Result<(Vec<u8>, Vec<Measures>, usize), HealError> {
+        for rounds in 1.. {
+            let (doc, after) = self.round(kept, before)?;
+            if !self.keep_the_worse(kept, before, &after) {
+                return Ok((doc, after, rounds));
+            }
+        }
+        unreachable!("every round that does not end keeps one more building")
+    }
+
+    /// Applies the edits of the buildings not kept and measures what they can have changed.
+    fn round(&self, kept: &[Option<String>], before: &[Measures]) -> Result<(Vec<u8>, Vec<Measures>), HealError> {
+        let (original, units, results, touched_by, opts) = (self.original, self.units, self.results, self.touched_by, self.opts);
+        let edits: Vec<Edit> = results.iter().zip(kept).filter(|(_, k)| k.is_none()).flat_map(|(r, _)| r.as_ref().map(|x| x.0.clone()).unwrap_or_default()).collect();
+        // the edits go into the original bytes (the tolerant copy differs only inside bad numbers)
+        let mut doc = Vec::with_capacity(original.len());
+        citygml_io::write_with_edits(original, &edits, &mut doc).map_err(|e| HealError::Internal(e.to_string()))?;
+        let (_, city2, _) = parse_tolerant(&doc).map_err(|e| HealError::Internal(format!("the healed document cannot be read back: {e}")))?;
+        let units2 = self::units(&city2);
+        if units2.len() != units.len() || units2.iter().zip(units).any(|(a, b)| a.id != b.id) {
+            return Err(HealError::Internal("the healed document does not hold the same buildings".into()));
+        }
+        // Only what the applied edits can have changed is measured again: a building being
+        // healed, or one that another healed building's edits reach.
+        let changed: Vec<usize> = (0..units.len()).filter(|&i| kept[i].is_none() || touched_by[i].iter().any(|&j| kept[j].is_none())).collect();
+        let mut after = before.to_vec();
+        for (i, m) in changed.iter().zip(measure_all(&units2, &changed, &opts.validation)) {
+            after[*i] = m;
+        }
+        for &i in self.with_bad_numbers {
+            after[i].area = f64::NAN;
+        }
+        Ok((doc, after))
+    }
+
+    /// Keeps every building the guard rejects, and the buildings whose edits reach it. Returns
+    /// whether anything was kept (then another round is needed).
+    fn keep_the_worse(&self, kept: &mut [Option<String>], before: &[Measures], after: &[Measures]) -> bool {
+        let mut failed = false;
+        for i in 0..self.units.len() {
+            let touching: Vec<usize> = self.touched_by[i].iter().copied().filter(|&j| kept[j].is_none()).collect();
+            if kept[i].is_some() && touching.is_empty() {
+                continue; // left as it was, and no other building's edit reaches it
+            }
+            let Some(why) = guard(&before[i], &after[i], self.opts) else { continue };
+            failed = true;
+            if kept[i].is_none() {
+                kept[i] = Some(why.clone());
+            }
+            for j in touching {
+                kept[j] = Some(format!("its write-back changes {} too, which would then get worse: {why}", unit_name(self.units[i])));
+            }
+        }
+        failed
+    }
 }
 
 /// A non-finite coordinate token (NaN, inf) found by [`parse_tolerant`].
