@@ -141,3 +141,20 @@ fn closed_stdout_is_a_write_failure_and_empty_input_is_named() {
         assert!(e.contains("<stdin>: the input is empty") && !e.contains("no points"), "{e}");
     }
 }
+
+/// `--report -` with the data also on stdout would mix JSON into the data stream: a usage error
+/// before any work (exit 2, nothing on stdout), for every command that has both.
+#[test]
+fn report_to_stdout_needs_an_output_file() {
+    for args in [
+        &["fit", "x.tif", "--max-error", "1", "--report", "-"][..],
+        &["adjust", "x.popa3d", "--report", "-"][..],
+        &["rasterize", "x.xyz", "--cell", "1", "--report", "-"][..],
+        &["heal", "x.gml", "--report", "-"][..],
+    ] {
+        let o = common::run(args, None);
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(common::code(&o), 2, "{args:?}: {e}");
+        assert!(e.contains("--report - needs -o FILE") && o.stdout.is_empty(), "{args:?}: {e}");
+    }
+}

@@ -159,6 +159,15 @@ impl Output {
     }
 }
 
+/// `--report -` puts the JSON report on stdout: refused before the work when the data goes
+/// there too (no `-o FILE`), since the two would be mixed in one stream.
+pub fn check_report_target(report: Option<&str>, output: Option<&str>) -> Result<(), CliError> {
+    if report == Some("-") && matches!(output, None | Some("-")) {
+        return Err(CliError::usage("--report - needs -o FILE: the data already goes to stdout"));
+    }
+    Ok(())
+}
+
 /// Writes `path` atomically: temp file in the same directory, fsync, rename.
 pub fn write_atomic<F>(path: &Path, f: F) -> Result<(), CliError>
 where

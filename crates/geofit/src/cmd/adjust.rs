@@ -202,6 +202,7 @@ pub(crate) fn print_report(r: &Report, rows: usize, verbose: bool) {
 }
 
 pub fn run(args: Args, config: &Config) -> CmdResult {
+    crate::config::check_report_target(args.report.as_deref(), args.output.as_deref())?;
     let opts = model_options(&args)?;
     let input = Input::from_arg(&args.input);
     let name = input.display_name();

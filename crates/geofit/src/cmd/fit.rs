@@ -212,6 +212,7 @@ fn peak_rss_mib() -> Option<f64> {
 }
 
 pub fn run(args: Args, config: &Config) -> CmdResult {
+    crate::config::check_report_target(args.report.as_deref(), args.output.as_deref())?;
     if !(args.max_error > 0.0 && args.max_error.is_finite()) {
         return Err(CliError::usage(format!("--max-error must be a positive number, got {}", args.max_error)));
     }

@@ -140,9 +140,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     let opts = options(&args)?;
     let output = Output::from_arg(args.output.as_deref());
     output.check_target()?;
-    if args.report.as_deref() == Some("-") && output.path().is_none() {
-        return Err(CliError::usage("--report - needs -o FILE: the healed CityGML already goes to stdout"));
-    }
+    crate::config::check_report_target(args.report.as_deref(), args.output.as_deref())?;
     let input = Input::from_arg(&args.input);
     let name = input.display_name();
     let bytes = input.read_all()?;

@@ -170,6 +170,7 @@ pub fn read_cloud(arg: &str, class: Option<u8>) -> Result<PointCloud, CliError> 
 }
 
 pub fn run(args: Args, config: &Config) -> CmdResult {
+    crate::config::check_report_target(args.report.as_deref(), args.output.as_deref())?;
     gdal_notices(config);
     if !(args.cell.is_finite() && args.cell > 0.0) {
         return Err(CliError::usage(format!("--cell {} must be a positive number", args.cell)));
