@@ -283,7 +283,7 @@ fn heal_bad_numbers_affect_only_their_building() {
     let cases = [
         ("big", format!("{}1e308{}", &text[..start], &text[first..]), "out of range"),
         ("nan", format!("{}NaN{}", &text[..start], &text[first..]), "non-finite coordinate 'NaN'"),
-        ("same", format!("{}{same}{}", &text[..start], &text[end..]), ""),
+        ("same", format!("{}{same}{}", &text[..start], &text[end..]), "distinct point"),
     ];
     for (name, content, why) in cases {
         let bad = d.join(format!("{name}.gml"));

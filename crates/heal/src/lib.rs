@@ -29,6 +29,7 @@ mod unit;
 use citygml_io::{CityModel, CityObject, Edit};
 use measure::Measures;
 use normalize::conditions::ConditionOptions;
+use normalize::citygml::unit_name;
 use normalize::to_citygml::{BackOptions, BackReport, Template};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -115,10 +116,6 @@ pub enum HealError {
     Geographic { srs: String, epsg: u32 },
     #[error("internal: {0}")]
     Internal(String),
-}
-
-fn unit_name(b: &CityObject) -> String {
-    b.id.clone().unwrap_or_else(|| format!("{}@{}:{}", b.kind, b.span.line, b.span.column))
 }
 
 /// The conversion units of a document: every Building / BuildingPart with geometry of its own.

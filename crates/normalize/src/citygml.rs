@@ -13,7 +13,7 @@ use citygml_io::{CityModel, CityObject, GeometryKind, Polygon};
 use popa3d_model::{FaceSource, SolidKind, VertexSource};
 
 /// Is this object a conversion unit?
-fn is_building(o: &CityObject) -> bool {
+pub(crate) fn is_building(o: &CityObject) -> bool {
     o.kind == "Building" || o.kind == "BuildingPart"
 }
 
@@ -52,6 +52,11 @@ fn own_objects_rec(o: &CityObject) -> Vec<&CityObject> {
         }
     }
     out
+}
+
+/// How reports name a Building / BuildingPart: its gml:id, else its element and position.
+pub fn unit_name(b: &CityObject) -> String {
+    b.id.clone().unwrap_or_else(|| format!("{}@{}:{}", b.kind, b.span.line, b.span.column))
 }
 
 /// The provenance key of a polygon: its gml:id, or `@line:column` of its `<gml:Polygon>` start

@@ -117,16 +117,7 @@ fn collapse_indexed(pts: Vec<(P3, usize)>, tol: f64) -> Vec<(P3, usize)> {
 
 /// Remove consecutive duplicates (cyclically) within `tol`.
 fn collapse(pts: Vec<P3>, tol: f64) -> Vec<P3> {
-    let mut out: Vec<P3> = Vec::with_capacity(pts.len());
-    for p in pts {
-        if out.last().is_none_or(|q| dist(*q, p) > tol) {
-            out.push(p);
-        }
-    }
-    while out.len() > 1 && dist(out[0], *out.last().unwrap()) <= tol {
-        out.pop();
-    }
-    out
+    collapse_indexed(pts.into_iter().map(|p| (p, 0)).collect(), tol).into_iter().map(|(p, _)| p).collect()
 }
 
 /// The enclosing element of a span: from the `<` of the start tag right before `start` to the
@@ -197,8 +188,7 @@ fn element_name(src: &[u8], at: usize) -> String {
 
 /// Namespace prefix of the element starting at `at` (`<gml:Polygon` → `gml:`; none → empty).
 fn prefix_at(src: &[u8], at: usize) -> String {
-    let tag: Vec<u8> = src[at + 1..].iter().take_while(|c| !c.is_ascii_whitespace() && **c != b'>' && **c != b'/').copied().collect();
-    let t = String::from_utf8_lossy(&tag).to_string();
+    let t = element_name(src, at);
     match t.find(':') {
         Some(i) => t[..=i].to_string(),
         None => String::new(),
@@ -261,7 +251,7 @@ struct XLinkUse {
 
 fn collect_polys<'a>(o: &'a CityObject, surface: Option<&'a CityObject>, building: Option<&'a CityObject>, ix: &mut PolyIndex<'a>) {
     let surf = if citygml_io::SurfaceType::from_local_name(&o.kind).is_some() { Some(o) } else { surface };
-    let building = if o.kind == "Building" || o.kind == "BuildingPart" { Some(o) } else { building };
+    let building = if crate::citygml::is_building(o) { Some(o) } else { building };
     for g in &o.geometries {
         for p in g.polygons() {
             match (&p.via_xlink, &p.id) {
@@ -285,7 +275,7 @@ fn collect_polys<'a>(o: &'a CityObject, surface: Option<&'a CityObject>, buildin
 /// The gml:id of a building (or its position when it has none), as reports name it.
 fn building_name(b: Option<&CityObject>) -> String {
     match b {
-        Some(b) => b.id.clone().unwrap_or_else(|| format!("{}@{}:{}", b.kind, b.span.line, b.span.column)),
+        Some(b) => crate::citygml::unit_name(b),
         None => "(no building)".into(),
     }
 }
