@@ -12,15 +12,22 @@ export GEOFIT_SHARED := $(SHARED)
 # Debian packages the project uses (libraries it links and tools its tests call).
 APT_PACKAGES := pkg-config libgdal-dev gdal-bin libproj-dev proj-bin ocl-icd-opencl-dev \
   pocl-opencl-icd clinfo libxml2-utils libxml2-dev libclang-dev python3-numpy freecad-python3 nodejs time
-# Python packages for independent checks and reference tools.
-PIP_PACKAGES := numpy scipy lxml pymeshlab trimesh loopstructural pydelatin pymartini
+# Python tools live in a project-local virtual environment ($(VENV)), never in the system Python:
+# `make setup` creates it with the `python3` on PATH and installs the packages the tests use;
+# `make bench` adds the peer tools the benchmarks compare against. Make puts $(VENV)/bin first on
+# PATH for every recipe, so tests and scripts that call `python3` (or `snakemake`) get the venv's.
+VENV ?= $(CURDIR)/.venv
+export PATH := $(VENV)/bin:$(PATH)
+export GEOFIT_PYTHON := $(VENV)/bin/python3
+PIP_TEST_PACKAGES := numpy scipy lxml pymeshlab snakemake
+PIP_BENCH_PACKAGES := loopstructural pydelatin pymartini
 # npm: the Khronos glTF validator. It is a library: tests run it through the small CLI
 # tests/scripts/gltf_validator.js, which finds the package in $(NPM_PREFIX) (no PATH wrapper).
 NPM_PREFIX := $(HOME)/.cache/geofit/npm
 export GEOFIT_NPM_PREFIX := $(NPM_PREFIX)
 GLTF_VALIDATOR_VERSION := 2.0.0-dev.3.10
 
-.PHONY: setup setup-apt setup-pip setup-npm build release test demo bench clean-demo
+.PHONY: setup setup-apt setup-pip setup-bench setup-npm build release test demo bench clean-demo
 
 setup: setup-apt setup-pip setup-npm
 
@@ -35,16 +42,22 @@ setup-apt:
 	else echo "setup: Debian packages present"; fi
 
 setup-pip:
-	@python3 -c "import numpy, scipy, lxml, pymeshlab, trimesh, pydelatin, pymartini, LoopStructural" 2>/dev/null \
-	  && echo "setup: Python packages present" \
-	  || { echo "setup: installing Python packages: $(PIP_PACKAGES)"; \
-	       python3 -m pip --version >/dev/null 2>&1 || { SUDO=""; [ "$$(id -u)" = 0 ] || SUDO=sudo; \
-	         $$SUDO apt-get install -y -qq --no-install-recommends python3-pip >/dev/null; }; \
-	       PIP_BREAK_SYSTEM_PACKAGES=1 python3 -m pip install -q $(PIP_PACKAGES); }
-	@# FreeCAD's Python modules (Debian freecad-python3) are built for the system interpreter.
+	@test -x $(VENV)/bin/python3 || { echo "setup: creating the project's Python environment $(VENV)"; python3 -m venv $(VENV); }
+	@$(VENV)/bin/python3 -c "import numpy, scipy, lxml, pymeshlab, snakemake" 2>/dev/null \
+	  && echo "setup: Python packages present in $(VENV)" \
+	  || { echo "setup: installing into $(VENV): $(PIP_TEST_PACKAGES)"; \
+	       $(VENV)/bin/python3 -m pip install -q --disable-pip-version-check $(PIP_TEST_PACKAGES); }
+	@# FreeCAD's Python modules (Debian freecad-python3) are built for Debian's own interpreter,
+	@# which the FreeCAD checks call as /usr/bin/python3 (read only: nothing is installed into it).
 	@/usr/bin/python3 tests/scripts/export_freecad.py --check >/dev/null 2>&1 \
 	  && echo "setup: FreeCAD Python modules importable" \
 	  || echo "setup: WARNING: FreeCAD (freecad-python3) not importable by /usr/bin/python3"
+
+setup-bench: setup-pip
+	@$(VENV)/bin/python3 -c "import pydelatin, pymartini, LoopStructural" 2>/dev/null \
+	  && echo "setup: benchmark peers present in $(VENV)" \
+	  || { echo "setup: installing benchmark peers into $(VENV): $(PIP_BENCH_PACKAGES)"; \
+	       $(VENV)/bin/python3 -m pip install -q --disable-pip-version-check $(PIP_BENCH_PACKAGES); }
 
 setup-npm:
 	@node tests/scripts/gltf_validator.js --version >/dev/null 2>&1 && echo "setup: gltf-validator present" || { \
@@ -66,5 +79,5 @@ test: setup
 demo: setup release
 	@bash fixtures/demo.sh "$(BIN)"
 
-bench: setup release
+bench: setup setup-bench release
 	@bash benches/run.sh "$(BIN)"

@@ -100,7 +100,8 @@ pub fn tempdir() -> tempfile::TempDir {
     tempfile::tempdir().expect("tempdir")
 }
 
-/// Python 3 interpreter used by the independent-truth check scripts in `tests/scripts/`.
+/// Python 3 interpreter used by the independent-truth check scripts in `tests/scripts/`: the
+/// project's virtual environment (`GEOFIT_PYTHON`, set by `make`), else `python3` on PATH.
 pub fn python() -> Command {
-    Command::new("python3")
+    Command::new(std::env::var_os("GEOFIT_PYTHON").unwrap_or_else(|| "python3".into()))
 }
