@@ -47,7 +47,7 @@ pub fn estimate_k(points: &[(V3, f64)], k: usize) -> Option<f64> {
             .par_iter()
             .map(|&i| {
                 let p = group[i];
-                let nb: Vec<V3> = tree.nearest_neighbor_iter(p).filter(|g| g.data != i).take(k).map(|g| *g.geom()).collect();
+                let nb: Vec<V3> = tree.nearest_neighbor_iter(&p).filter(|g| g.data != i).take(k).map(|g| *g.geom()).collect();
                 if nb.len() < k {
                     return None;
                 }

@@ -234,7 +234,7 @@ pub fn build_pb_incremental(mesh: &TMesh, old: &PbSpline, split: &[crate::mesh::
             if o != u32::MAX {
                 let a = &old.knots[o as usize];
                 let env = AABB::from_corners([a[0], a[5]], [a[k + 1], a[5 + k + 1]]);
-                if tree.locate_in_envelope_intersecting(env).next().is_none() {
+                if tree.locate_in_envelope_intersecting(&env).next().is_none() {
                     let mut kn = crate::knots::LocalKnots { s: [0.0; 5], t: [0.0; 5] };
                     kn.s[..k + 2].copy_from_slice(&a[..k + 2]);
                     kn.t[..k + 2].copy_from_slice(&a[5..5 + k + 2]);

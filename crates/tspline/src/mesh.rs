@@ -191,7 +191,7 @@ impl TMesh {
         let mesh = TMesh { degree, points, cells, tree: RTree::bulk_load(entries), point_at };
         // Overlap check: two leaves may share edges but not area.
         for (i, c) in mesh.cells.iter().enumerate() {
-            for o in mesh.tree.locate_in_envelope_intersecting(c.rect.aabb()) {
+            for o in mesh.tree.locate_in_envelope_intersecting(&c.rect.aabb()) {
                 if o.id as usize == i {
                     continue;
                 }
@@ -216,7 +216,7 @@ impl TMesh {
         // A vertex lying inside a cell's side must be a corner of a neighbouring cell (no
         // I-points); a vertex strictly inside a cell is an error.
         for (i, p) in mesh.points.iter().enumerate() {
-            for e in mesh.tree.locate_in_envelope_intersecting(AABB::from_point([p.s, p.t])) {
+            for e in mesh.tree.locate_in_envelope_intersecting(&AABB::from_point([p.s, p.t])) {
                 let r = mesh.cells[e.id as usize].rect;
                 if r.s_min < p.s && p.s < r.s_max && r.t_min < p.t && p.t < r.t_max {
                     return Err(TsplineError::InvalidMesh(format!("control point {i} lies inside cell {}", e.id)));
@@ -280,20 +280,20 @@ impl TMesh {
 
     /// Point query: all cells (leaves and retained parents) whose closed box holds (s, t).
     pub fn cells_at(&self, s: f64, t: f64) -> Vec<CellId> {
-        let mut v: Vec<CellId> = self.tree.locate_in_envelope_intersecting(AABB::from_point([s, t])).map(|e| e.id).collect();
+        let mut v: Vec<CellId> = self.tree.locate_in_envelope_intersecting(&AABB::from_point([s, t])).map(|e| e.id).collect();
         v.sort_unstable();
         v
     }
 
     /// Point-in-domain test (the domain is the union of leaf rectangles, closed).
     pub fn contains(&self, s: f64, t: f64) -> bool {
-        self.tree.locate_in_envelope_intersecting(AABB::from_point([s, t])).any(|e| self.cells[e.id as usize].is_leaf())
+        self.tree.locate_in_envelope_intersecting(&AABB::from_point([s, t])).any(|e| self.cells[e.id as usize].is_leaf())
     }
 
     /// Area query: leaf cells whose closed box intersects `r`.
     pub fn leaves_in(&self, r: Rect) -> Vec<CellId> {
         let mut v: Vec<CellId> =
-            self.tree.locate_in_envelope_intersecting(r.aabb()).map(|e| e.id).filter(|&id| self.cells[id as usize].is_leaf()).collect();
+            self.tree.locate_in_envelope_intersecting(&r.aabb()).map(|e| e.id).filter(|&id| self.cells[id as usize].is_leaf()).collect();
         v.sort_unstable();
         v
     }
@@ -303,7 +303,7 @@ impl TMesh {
     pub fn neighbours(&self, cell: CellId) -> Vec<(Side, CellId)> {
         let r = self.cells[cell as usize].rect;
         let mut out = Vec::new();
-        for e in self.tree.locate_in_envelope_intersecting(r.aabb()) {
+        for e in self.tree.locate_in_envelope_intersecting(&r.aabb()) {
             if e.id == cell || !self.cells[e.id as usize].is_leaf() {
                 continue;
             }
@@ -507,7 +507,7 @@ impl TMesh {
     pub(crate) fn leaves_on_line(&self, horizontal: bool, at: f64, lo: f64, hi: f64, out: &mut Vec<Rect>) {
         out.clear();
         let env = if horizontal { AABB::from_corners([lo, at], [hi, at]) } else { AABB::from_corners([at, lo], [at, hi]) };
-        for e in self.tree.locate_in_envelope_intersecting(env) {
+        for e in self.tree.locate_in_envelope_intersecting(&env) {
             let c = &self.cells[e.id as usize];
             if c.is_leaf() {
                 out.push(c.rect);
