@@ -6,6 +6,11 @@
 //! `# origin: X Y Z` (world = local + origin). One object `o` per node (children as
 //! `parent/child`), one `usemtl` run per mesh, per-vertex colours as the common `v x y z r g b`
 //! extension (alpha dropped), line sets as `l i j`.
+//!
+//! Vertices are shared within an object: a position (with its colour) is written once per `o`
+//! and every face that uses it refers to the same `v`, while normals stay per face corner (`vn`
+//! is indexed separately). Without that, MeshLab and FreeCAD see every polygon as an island and
+//! every edge as a boundary until the user merges close vertices.
 
 use std::io::Write;
 
@@ -74,14 +79,16 @@ fn write_node(
         writeln!(obj, "o {name}")?;
     }
     let o = scene.origin;
+    let mut shared = SharedVertices::default();
     for m in n.meshes.iter().filter(|m| !m.indices.is_empty()) {
-        let base = write_vertices(
+        let number = write_vertices(
             obj,
             o,
             &m.positions,
             m.colors.as_deref(),
             fallback(scene, m.material),
             next,
+            &mut shared,
         )?;
         let nbase = next.normal;
         if let Some(nr) = &m.normals {
@@ -101,7 +108,7 @@ fn write_node(
             writeln!(obj, "usemtl {}", sanitize(&scene.materials[mi].name))?;
         }
         for t in m.indices.chunks_exact(3) {
-            let [a, b, c] = [t[0], t[1], t[2]].map(|i| base + i as u64);
+            let [a, b, c] = [t[0], t[1], t[2]].map(|i| number[i as usize]);
             if m.normals.is_some() {
                 // Normals were written in the same order as the vertices of this mesh.
                 let [na, nb, nc] = [t[0], t[1], t[2]].map(|i| nbase + i as u64);
@@ -112,19 +119,20 @@ fn write_node(
         }
     }
     for l in n.lines.iter().filter(|l| !l.indices.is_empty()) {
-        let base = write_vertices(
+        let number = write_vertices(
             obj,
             o,
             &l.positions,
             l.colors.as_deref(),
             fallback(scene, l.material),
             next,
+            &mut shared,
         )?;
         if let Some(mi) = l.material {
             writeln!(obj, "usemtl {}", sanitize(&scene.materials[mi].name))?;
         }
         for s in l.indices.chunks_exact(2) {
-            writeln!(obj, "l {} {}", base + s[0] as u64, base + s[1] as u64)?;
+            writeln!(obj, "l {} {}", number[s[0] as usize], number[s[1] as usize])?;
         }
     }
     let child_prefix = format!("{name}/");
@@ -141,7 +149,12 @@ fn fallback(scene: &Scene, material: Option<usize>) -> [f32; 4] {
         .unwrap_or([0.8, 0.8, 0.8, 1.0])
 }
 
-/// Writes `v` lines (local = world − origin) and returns the OBJ number of the first one.
+/// The `v` numbers already written in the current object, by exact position and written colour.
+#[derive(Default)]
+struct SharedVertices(std::collections::HashMap<([u64; 3], [u32; 3]), u64>);
+
+/// Writes the `v` lines (local = world − origin) of positions not yet written in this object and
+/// returns the OBJ number of every position, in order.
 fn write_vertices(
     obj: &mut dyn Write,
     o: [f64; 3],
@@ -149,22 +162,30 @@ fn write_vertices(
     colors: Option<&[[f32; 4]]>,
     fallback: [f32; 4],
     next: &mut Counters,
-) -> Result<u64, ExportError> {
-    let base = next.vertex;
+    shared: &mut SharedVertices,
+) -> Result<Vec<u64>, ExportError> {
+    let mut numbers = Vec::with_capacity(positions.len());
     for (i, p) in positions.iter().enumerate() {
-        let (x, y, z) = (p[0] - o[0], p[1] - o[1], p[2] - o[2]);
-        match (colors, next.any_colors) {
-            (Some(c), _) => writeln!(obj, "v {x} {y} {z} {} {} {}", c[i][0], c[i][1], c[i][2])?,
-            (None, true) => writeln!(
-                obj,
-                "v {x} {y} {z} {} {} {}",
-                fallback[0], fallback[1], fallback[2]
-            )?,
-            (None, false) => writeln!(obj, "v {x} {y} {z}")?,
+        let rgb = match (colors, next.any_colors) {
+            (Some(c), _) => Some([c[i][0], c[i][1], c[i][2]]),
+            (None, true) => Some([fallback[0], fallback[1], fallback[2]]),
+            (None, false) => None,
+        };
+        let key = (p.map(f64::to_bits), rgb.unwrap_or_default().map(f32::to_bits));
+        if let Some(&n) = shared.0.get(&key) {
+            numbers.push(n);
+            continue;
         }
+        let (x, y, z) = (p[0] - o[0], p[1] - o[1], p[2] - o[2]);
+        match rgb {
+            Some([r, g, b]) => writeln!(obj, "v {x} {y} {z} {r} {g} {b}")?,
+            None => writeln!(obj, "v {x} {y} {z}")?,
+        }
+        shared.0.insert(key, next.vertex);
+        numbers.push(next.vertex);
+        next.vertex += 1;
     }
-    next.vertex += positions.len() as u64;
-    Ok(base)
+    Ok(numbers)
 }
 
 /// Writes the MTL library: every material of the scene, in order (`Kd` colour, `d` opacity).

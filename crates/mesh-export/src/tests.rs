@@ -299,3 +299,25 @@ fn tempfile_dir() -> std::path::PathBuf {
     std::fs::create_dir_all(&d).unwrap();
     d
 }
+
+/// A closed box written as walls + roof meshes: one `v` per corner in the object, and every edge
+/// of its faces used exactly twice, so MeshLab/FreeCAD read a closed 2-manifold without merging.
+#[test]
+fn obj_shares_vertices_within_an_object() {
+    let s = box_scene();
+    let mut obj = Vec::new();
+    write_obj(&s, &mut obj, None).unwrap();
+    let text = String::from_utf8(obj).unwrap();
+    let object = text.split("o box_one/edges").next().unwrap();
+    assert_eq!(object.lines().filter(|l| l.starts_with("v ")).count(), 8, "{object}");
+    let mut uses = std::collections::HashMap::<(u64, u64), u32>::new();
+    for l in object.lines().filter(|l| l.starts_with("f ")) {
+        let v: Vec<u64> = l[2..].split(' ').map(|c| c.split('/').next().unwrap().parse().unwrap()).collect();
+        for k in 0..3 {
+            let (a, b) = (v[k], v[(k + 1) % 3]);
+            *uses.entry((a.min(b), a.max(b))).or_default() += 1;
+        }
+    }
+    assert_eq!(uses.len(), 18);
+    assert!(uses.values().all(|&n| n == 2), "{uses:?}");
+}
