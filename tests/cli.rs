@@ -158,3 +158,67 @@ fn report_to_stdout_needs_an_output_file() {
         assert!(e.contains("--report - needs -o FILE") && o.stdout.is_empty(), "{args:?}: {e}");
     }
 }
+
+/// Internal references a user cannot resolve: spec sections, decision numbers, seed equations,
+/// source paths and Rust paths (they belong in doc comments, not in `--help`).
+const INTERNAL: [&str; 7] = ["§", "seed eq", "seed 00", "crates/", "::", "docs/decisions", " T29"];
+
+/// Every subcommand (and `implicit`'s stages) shows a worked example in its `--help`, describes
+/// every option, and cites nothing internal.
+#[test]
+fn every_subcommand_help_has_an_example_and_no_internal_references() {
+    let top = common::run(&["--help"], None);
+    let text = String::from_utf8_lossy(&top.stdout).to_string();
+    let mut commands: Vec<Vec<String>> = text
+        .lines()
+        .skip_while(|l| !l.starts_with("Commands:"))
+        .skip(1)
+        .take_while(|l| l.starts_with(' '))
+        .filter_map(|l| l.strip_prefix("  ").filter(|r| !r.starts_with(' ')))
+        .map(|r| r.split_whitespace().next().unwrap().to_string())
+        .filter(|n| n != "help")
+        .map(|n| vec![n])
+        .collect();
+    for stage in ["run", "interpolate", "update", "iso", "section", "csg"] {
+        commands.push(vec!["implicit".into(), stage.into()]);
+    }
+    let mut problems = Vec::new();
+    for cmd in &commands {
+        let mut args: Vec<&str> = cmd.iter().map(String::as_str).collect();
+        args.push("--help");
+        let o = common::run(&args, None);
+        let help = String::from_utf8_lossy(&o.stdout).to_string();
+        let name = cmd.join(" ");
+        if !help.to_lowercase().contains("example") {
+            problems.push(format!("`geofit {name} --help` has no example"));
+        }
+        for r in INTERNAL {
+            if help.contains(r) {
+                problems.push(format!("`geofit {name} --help` cites '{r}'"));
+            }
+        }
+        for undocumented in undocumented_options(&help) {
+            problems.push(format!("`geofit {name} --help`: {undocumented} has no description"));
+        }
+    }
+    assert!(problems.is_empty(), "{}", problems.join("\n"));
+}
+
+/// Option lines of a clap long help (`  -o, --output <X>` / `      --flag`) not followed by an
+/// indented description line.
+fn undocumented_options(help: &str) -> Vec<String> {
+    let lines: Vec<&str> = help.lines().collect();
+    let mut out = Vec::new();
+    for (i, l) in lines.iter().enumerate() {
+        let t = l.trim_start();
+        let indent = l.len() - t.len();
+        if (2..=6).contains(&indent) && t.starts_with('-') {
+            let next = lines.get(i + 1).copied().unwrap_or("");
+            let described = next.len() - next.trim_start().len() > indent + 2 && !next.trim().is_empty();
+            if !described && !t.starts_with("-h, --help") && !t.starts_with("-V, --version") {
+                out.push(t.to_string());
+            }
+        }
+    }
+    out
+}

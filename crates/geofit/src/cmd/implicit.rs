@@ -52,16 +52,22 @@ pub struct Args {
 #[derive(Subcommand)]
 pub enum Sub {
     /// Interpolate and write iso-surfaces in one step (same as the bare form).
+    #[command(after_long_help = "Example:\n  geofit implicit run sphere.xyz -o sphere.glb --report report.json")]
     Run(RunArgs),
     /// Interpolate φ on an adaptive mesh and save the model (mesh, constraints, solution).
+    #[command(after_long_help = "Example:\n  geofit implicit interpolate horizons.csv --fault f.obj -o model.gfim --vtk field.vtk")]
     Interpolate(InterpolateArgs),
     /// Move or add constraints and re-interpolate (base + float constraints, warm-started CG).
+    #[command(after_long_help = "Example (move data point 17 to new world coordinates, in metres):\n  geofit implicit update model.gfim --move 17,550600,7821900,-9730 -o moved.gfim")]
     Update(UpdateArgs),
     /// Iso-surfaces of a saved model by marching tetrahedra.
+    #[command(after_long_help = "Example:\n  geofit implicit iso model.gfim --value 60 --value 250 -o horizons.glb")]
     Iso(IsoArgs),
     /// Cross-section of a saved model by a plane, coloured by φ or the model's attribute.
+    #[command(after_long_help = "Example (a horizontal section at z = -9800 m):\n  geofit implicit section model.gfim --plane z=-9800 -o section.obj")]
     Section(SectionArgs),
     /// Union, intersection or difference of two models (min/max of their fields).
+    #[command(after_long_help = "Example:\n  geofit implicit csg a.gfim b.gfim --op difference -o a_minus_b.glb")]
     Csg(CsgArgs),
     /// Writes synthetic test data with known truth (noisy sphere, plane, faulted layers).
     #[command(hide = true)]
@@ -91,15 +97,15 @@ pub struct BuildArgs {
     /// Coarse cubes along the longest side of the domain.
     #[arg(long, default_value_t = 8)]
     pub coarse: usize,
-    /// Relative weight ϖ of the value constraints (seed eq. 9).
+    /// Relative weight ϖ of the value constraints φ = v at the points (dimensionless).
     #[arg(long, default_value_t = 1.0)]
     pub w_value: f64,
     /// Relative weight ϖ of the normal / side inequality constraints.
     #[arg(long, default_value_t = 1.0)]
     pub w_normal: f64,
-    /// Relative weight ϖ_r of the roughness constraints: higher = smoother (seed §2.2). Default:
-    /// from the points' noise σ̂ (local quadric fits) and the finest cell h,
-    /// ϖ_r = √((σ̂/h)² + 0.02²)/0.04 (5 for a unit sphere with σ = 0.03; see implicit::dsi::auto_roughness).
+    /// Relative weight ϖ_r of the roughness constraints: higher = smoother (dimensionless).
+    /// Default: from the points' noise σ̂ (local quadric fits) and the finest cell h,
+    /// ϖ_r = √((σ̂/h)² + 0.02²)/0.04 (5 for a unit sphere with σ = 0.03).
     #[arg(long)]
     pub w_rough: Option<f64>,
     /// Step δ along and against each normal (default: the finest cell size).
@@ -150,7 +156,7 @@ pub struct RunArgs {
 pub struct InterpolateArgs {
     #[command(flatten)]
     pub build: BuildArgs,
-    /// Output model file (geofit implicit model format, see crates/implicit/src/model.rs).
+    /// Output model file (`.gfim`: mesh, constraints and solution, read by update/iso/section/csg).
     #[arg(short, long, value_name = "MODEL")]
     pub output: Option<String>,
 }
@@ -172,14 +178,17 @@ pub struct UpdateArgs {
     /// Output model (default: stdout).
     #[arg(short, long, value_name = "MODEL")]
     pub output: Option<String>,
+    /// Also write the updated field on the mesh as a VTK unstructured grid (legacy ASCII).
     #[arg(long, value_name = "PATH")]
     pub vtk: Option<String>,
+    /// Write a JSON report (constraints, CG iterations, misfit) to PATH (`-` = stdout).
     #[arg(long, value_name = "PATH")]
     pub report: Option<String>,
 }
 
 #[derive(ClapArgs)]
 pub struct IsoArgs {
+    /// Saved model (`.gfim`).
     pub model: String,
     /// Iso-value(s) (default: 0, or each distinct constraint value up to 16).
     #[arg(long = "value", value_name = "V")]
@@ -187,9 +196,10 @@ pub struct IsoArgs {
     /// Output (.obj or .glb; stdout = OBJ).
     #[arg(short, long)]
     pub output: Option<String>,
-    /// Vertex colours from the model's attribute (default when it has one).
+    /// Vertex colours: from the model's attribute (`auto`: when it has one), from φ, or none.
     #[arg(long, value_enum, default_value_t = Colour::Auto)]
     pub colour: Colour,
+    /// Write a JSON report (triangles per iso-value, area) to PATH (`-` = stdout).
     #[arg(long, value_name = "PATH")]
     pub report: Option<String>,
 }
@@ -204,6 +214,7 @@ pub enum Colour {
 
 #[derive(ClapArgs)]
 pub struct SectionArgs {
+    /// Saved model (`.gfim`).
     pub model: String,
     /// The plane: `x=V`, `y=V`, `z=V` or `PX,PY,PZ,NX,NY,NZ` (point and normal, world coordinates).
     #[arg(long)]
@@ -211,20 +222,27 @@ pub struct SectionArgs {
     /// Colour by the model's attribute instead of φ.
     #[arg(long)]
     pub attribute: bool,
+    /// Output section (.obj or .glb; stdout = OBJ).
     #[arg(short, long)]
     pub output: Option<String>,
 }
 
 #[derive(ClapArgs)]
 pub struct CsgArgs {
+    /// First saved model (`.gfim`).
     pub a: String,
+    /// Second saved model (`.gfim`); both fields are sampled on a common mesh one level finer than either.
     pub b: String,
+    /// The operation: union (min φ), intersection (max φ) or difference (max(φa, −φb)).
     #[arg(long, value_enum)]
     pub op: Op,
+    /// Output surface of the combined φ = 0 (.obj or .glb; stdout = OBJ).
     #[arg(short, long)]
     pub output: Option<String>,
+    /// Also write the combined field as a VTK unstructured grid (legacy ASCII).
     #[arg(long, value_name = "PATH")]
     pub vtk: Option<String>,
+    /// Write a JSON report (triangles, area) to PATH (`-` = stdout).
     #[arg(long, value_name = "PATH")]
     pub report: Option<String>,
 }
