@@ -64,6 +64,8 @@ enum Command {
     Rasterize(cmd::rasterize::Args),
     /// Tessellate a T-mesh surface to glb/gltf/obj (height or error colours, T-mesh lines).
     Surface(cmd::surface::Args),
+    /// Scale-out: tile plans, per-tile extracts, merged reports and a 3D Tiles tileset.
+    Tile(cmd::tile::Args),
     /// Map a warped raster back onto its original grid (field read from the raster itself).
     Unwarp(cmd::unwarp::Args),
     /// Validate CityGML: XSD schema (libxml2) and geometry (val3dity/QIE codes).
@@ -90,6 +92,7 @@ fn main() -> ExitCode {
         Command::Info(a) => cmd::info::run(a, &config),
         Command::Obj2popa3d(a) => cmd::obj2popa3d::run(a, &config),
         Command::Rasterize(a) => cmd::rasterize::run(a, &config),
+        Command::Tile(a) => cmd::tile::run(a, &config),
         Command::Unwarp(a) => cmd::unwarp::run(a, &config),
         Command::Validate(a) => cmd::validate::run(a, &config),
         Command::Warp(a) => cmd::warp::run(a, &config),

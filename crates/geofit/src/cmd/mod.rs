@@ -19,3 +19,4 @@ pub mod warp;
 pub mod popa3d2citygml;
 pub mod observe;
 pub mod heal;
+pub mod tile;

@@ -1,0 +1,42 @@
+//! Scale-out support: what one tile of a big job is, and how the per-tile results come together.
+//!
+//! geofit does not schedule anything: a workflow engine (Snakemake, make, a Slurm array, GNU
+//! parallel) runs one `geofit` command per tile. This crate gives those commands their inputs
+//! and merges their outputs:
+//! - [`buildings::plan`]: every building-owning top-level object of a set of CityGML files goes
+//!   to exactly one tile of a regular grid, by its footprint centroid; the grid size is the
+//!   largest power of two (metres) that keeps every tile at or under a building budget.
+//! - [`raster::plan`]: core and halo windows (pixels and georeferenced) of a raster, from its
+//!   size and geotransform only (no cell is read).
+//! - [`extract::extract`]: a tile's buildings as one CityGML document, member bytes copied.
+//! - [`report::merge`]: per-tile `validate --json` and `heal --report` outputs summed.
+//! - [`tileset::tileset`]: a 3D Tiles 1.1 `tileset.json` over per-tile glb.
+//!
+//! The rules (centroid assignment, halo buildings read-only, what a cut building does) are in
+//! docs/decisions.md#scale-out-tiles-and-workflows.
+
+pub mod buildings;
+pub mod extract;
+pub mod plan;
+pub mod raster;
+pub mod report;
+pub mod tileset;
+
+pub use plan::{Tile, TileKind, Window};
+
+/// Why a plan, an extract, a report or a tileset cannot be made.
+#[derive(Debug, thiserror::Error)]
+pub enum TilingError {
+    /// Options or a plan that do not fit together (exit 2 in the CLI).
+    #[error("{0}")]
+    Usage(String),
+    /// An input that cannot be read or understood (exit 3).
+    #[error("{name}: {message}")]
+    Unreadable { name: String, message: String },
+}
+
+impl TilingError {
+    pub(crate) fn unreadable(name: impl Into<String>, message: impl std::fmt::Display) -> Self {
+        TilingError::Unreadable { name: name.into(), message: message.to_string() }
+    }
+}
