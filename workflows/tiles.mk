@@ -1,0 +1,57 @@
+# The buildings workflow without Snakemake: the same job lines (workflows/jobs.sh) under make.
+#
+#   make -j2 -f workflows/tiles.mk SOURCES="$(ls data/*.gml)" OUT=out GEOFIT=geofit
+#
+# The plan's tile ids come in as a Makefile fragment written by `geofit tile plan --format make`
+# (make builds it, then restarts with the ids known). Settings travel as the same environment
+# variables Snakemake sets (jobs.sh lists them).
+
+SHELL := /bin/bash
+JOBS := $(abspath $(dir $(lastword $(MAKEFILE_LIST))))/jobs.sh
+OUT ?= out
+SOURCES ?=
+export GEOFIT ?= geofit
+export GEOFIT_BUILDINGS_PER_TILE ?= 2000
+export GEOFIT_HEAL_ARGS ?= --precision 3
+export GEOFIT_VALIDATE_ARGS ?=
+export GEOFIT_TILESET_ARGS ?=
+
+ifeq ($(strip $(SOURCES)),)
+$(error give the CityGML files: make -f workflows/tiles.mk SOURCES="a.gml b.gml")
+endif
+
+.DELETE_ON_ERROR:
+# every intermediate (extracted and healed tiles) is kept, as Snakemake keeps it
+.SECONDARY:
+
+TILES :=
+-include $(OUT)/plan.mk
+
+all: $(OUT)/report.json $(OUT)/tileset.json
+.PHONY: all
+.DEFAULT_GOAL := all
+
+$(OUT)/plan.jsonl: $(SOURCES)
+	bash $(JOBS) plan $(OUT) $(SOURCES)
+
+$(OUT)/plan.mk: $(SOURCES)
+	bash $(JOBS) planmk $(OUT) $(SOURCES)
+
+$(OUT)/tiles/%.gml: $(OUT)/plan.jsonl $(SOURCES)
+	bash $(JOBS) extract $(OUT) $*
+
+$(OUT)/validate/%.validate.json: $(OUT)/tiles/%.gml
+	bash $(JOBS) validate $(OUT) $*
+
+# a pattern rule with two targets: one recipe run makes both
+$(OUT)/healed/%.gml $(OUT)/healed/%.heal.json: $(OUT)/tiles/%.gml
+	bash $(JOBS) heal $(OUT) $*
+
+$(OUT)/glb/%.glb: $(OUT)/healed/%.gml
+	bash $(JOBS) export $(OUT) $*
+
+$(OUT)/report.json: $(TILES:%=$(OUT)/healed/%.heal.json) $(TILES:%=$(OUT)/validate/%.validate.json) $(OUT)/plan.mk
+	bash $(JOBS) report $(OUT) $(TILES)
+
+$(OUT)/tileset.json: $(TILES:%=$(OUT)/glb/%.glb) $(OUT)/plan.mk
+	bash $(JOBS) tileset $(OUT) $(TILES)
