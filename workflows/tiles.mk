@@ -27,7 +27,9 @@ endif
 TILES :=
 -include $(OUT)/plan.mk
 
-all: $(OUT)/report.json $(OUT)/tileset.json
+# per-tile deliverables are targets too, so a deleted one is made again (as in the Snakefile)
+PRODUCTS := $(foreach t,$(TILES),$(OUT)/healed/$(t).gml $(OUT)/healed/$(t).heal.json $(OUT)/validate/$(t).validate.json $(OUT)/glb/$(t).glb)
+all: $(OUT)/report.json $(OUT)/tileset.json $(PRODUCTS)
 .PHONY: all
 .DEFAULT_GOAL := all
 
