@@ -315,3 +315,35 @@ fn snakemake_tiled_run_matches_whole_file_retries_and_make() {
         assert!(&made[k] == v, "make output {k} differs from Snakemake's");
     }
 }
+
+/// Exit codes of the tile commands: a tile the plan does not have is a usage error (2), a plan
+/// that is not JSON lines or a file that is not a glb is unreadable (3); `--format make` lists
+/// the same ids as the JSON plan.
+#[test]
+fn tile_commands_exit_codes_and_make_fragment() {
+    let Some(sources) = nrw_sources() else { return };
+    let dir = common::tempdir();
+    let plan_path = dir.path().join("plan.jsonl");
+    let tiles = plan(&sources[..2], &plan_path);
+    let p = plan_path.to_str().unwrap();
+    let o = common::run(&["tile", "extract", p, "--tile", "x0_y0"], None);
+    assert_eq!(common::code(&o), 2, "{}", String::from_utf8_lossy(&o.stderr));
+    std::fs::write(dir.path().join("bad.jsonl"), "not json\n").unwrap();
+    let o = common::run(&["tile", "extract", dir.path().join("bad.jsonl").to_str().unwrap(), "--tile", "x0_y0"], None);
+    assert_eq!(common::code(&o), 3, "{}", String::from_utf8_lossy(&o.stderr));
+    let sub = dir.path().join("sub");
+    std::fs::create_dir(&sub).unwrap();
+    let glb = dir.path().join("a.glb");
+    std::fs::write(&glb, b"glTF").unwrap();
+    let o = common::run(&["tile", "tileset", glb.to_str().unwrap(), "-o", sub.join("tileset.json").to_str().unwrap()], None);
+    assert_eq!(common::code(&o), 3, "a 4-byte glb is unreadable: {}", String::from_utf8_lossy(&o.stderr));
+    let mut args = vec!["-q", "tile", "plan", "--buildings-per-tile", BUILDINGS_PER_TILE, "--format", "make"];
+    let srcs: Vec<String> = sources[..2].iter().map(|s| s.display().to_string()).collect();
+    args.extend(srcs.iter().map(String::as_str));
+    let o = common::run(&args, None);
+    assert_eq!(common::code(&o), 0);
+    let text = String::from_utf8_lossy(&o.stdout);
+    let ids: Vec<&str> = text.lines().find_map(|l| l.strip_prefix("TILES := ")).expect("TILES line").split(' ').collect();
+    let want: Vec<&str> = tiles.iter().map(|t| t["id"].as_str().unwrap()).collect();
+    assert_eq!(ids, want);
+}
