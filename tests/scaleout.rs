@@ -85,6 +85,17 @@ fn extracts_partition_the_buildings_and_halo_buildings_stay_home() {
         ok(&o, "geofit tile extract");
         extracts.push(p);
     }
+    // each extract names the sources' CRS (heal refuses degrees, export records it) and stays
+    // schema-valid with its new envelope
+    let source_text = std::fs::read_to_string(&sources[0]).unwrap();
+    let srs = source_text.split("srsName=\"").nth(1).and_then(|r| r.split('"').next()).expect("the source names its CRS");
+    for p in &extracts {
+        assert!(std::fs::read_to_string(p).unwrap().contains(&format!("srsName=\"{srs}\"")), "{} lacks srsName", p.display());
+    }
+    if let Some(xsd) = common::shared_xsd() {
+        let o = common::geofit().args(["-q", "validate", "--no-geometry", "--schemas"]).arg(&xsd).arg(&extracts[0]).output().unwrap();
+        ok(&o, "geofit validate (XSD) of an extract");
+    }
     let mut c = common::python();
     c.arg(script("scaleout_buildings.py")).arg("--whole").args(&sources).arg("--tiled").args(&extracts);
     let r = last_json(&c.output().unwrap(), "scaleout_buildings.py");

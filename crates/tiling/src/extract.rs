@@ -37,9 +37,8 @@ pub fn extract(tile: &Tile, read: &dyn Fn(&str) -> Result<Vec<u8>, TilingError>)
         } else {
             head = Some((src.clone(), bytes[..prolog.end].to_vec(), root.clone()));
         }
-        let stream = ObjectStream::new(&bytes).map_err(|e| TilingError::unreadable(src, e))?;
-        srs = srs.or_else(|| stream.srs_name());
-        for o in stream {
+        let mut stream = ObjectStream::new(&bytes).map_err(|e| TilingError::unreadable(src, e))?;
+        for o in stream.by_ref() {
             let o = o.map_err(|e| TilingError::unreadable(src, e))?;
             if !owns_building(&o) {
                 continue;
@@ -54,6 +53,8 @@ pub fn extract(tile: &Tile, read: &dyn Fn(&str) -> Result<Vec<u8>, TilingError>)
             envelope.merge(&o.envelope);
             count += 1;
         }
+        // known once the stream has passed the document's envelope (or first geometry)
+        srs = srs.or_else(|| stream.srs_name());
     }
     let Some((_, start, root)) = head else {
         return Err(TilingError::Usage(format!("tile {}: the plan names no source", tile.id)));
