@@ -5,13 +5,16 @@ use std::fs::File;
 use std::io::{self, BufRead, BufReader, IsTerminal, Read, Write};
 use std::path::{Path, PathBuf};
 
-use crate::error::CliError;
+use crate::error::{CliError, Exit};
 
 /// Options shared by every subcommand.
 #[derive(Debug, Clone, Default)]
 pub struct Config {
     /// `--quiet`: no progress bars, no stage lines.
     pub quiet: bool,
+    /// `--keep-partial`: write the outputs of a step that ends with exit 1 (a fit short of
+    /// --max-error, `diff --check` over tolerance); without it they are not written.
+    pub keep_partial: bool,
 }
 
 /// Where an input comes from: a path or `-` for stdin.
@@ -182,12 +185,18 @@ where
         .suffix(".tmp")
         .tempfile_in(&dir)
         .map_err(|e| CliError::output(format!("cannot create a temporary file in {}: {e}", dir.display())))?;
+    // A write error names the target (`out.tif: File too large`), not the temporary file,
+    // which is removed when `tmp` drops on the error path.
+    let named = |e: CliError| match e.message.strip_prefix("write failed: ") {
+        Some(cause) => CliError::output(format!("cannot write {}: {cause}", path.display())),
+        None => e,
+    };
     {
         let mut w = io::BufWriter::with_capacity(1 << 16, tmp.as_file());
-        f(&mut w)?;
-        w.flush().map_err(CliError::io_out)?;
+        f(&mut w).map_err(named)?;
+        w.flush().map_err(|e| named(CliError::io_out(e)))?;
     }
-    tmp.as_file().sync_all().map_err(CliError::io_out)?;
+    tmp.as_file().sync_all().map_err(|e| named(CliError::io_out(e)))?;
     // tempfile creates 0600 files; an output is an ordinary file others may read.
     #[cfg(unix)]
     {
@@ -259,6 +268,17 @@ impl Config {
             ProgressMode::Lines
         };
         Progress { mode }
+    }
+
+    /// Whether a data output goes out for a command ending with `exit`: a failed step
+    /// (non-zero) writes none unless `--keep-partial`, so `make` runs it again instead of
+    /// taking the partial result as done. Says so on stderr when it withholds `output`.
+    pub fn keeps_output(&self, exit: Exit, output: Option<&str>) -> bool {
+        if exit == Exit::Ok || self.keep_partial {
+            return true;
+        }
+        crate::say!("geofit: {} not written: the step failed (exit {}); --keep-partial writes it anyway", output.unwrap_or("stdout"), exit as u8);
+        false
     }
 
     /// A one-line notice on stderr (suppressed by `--quiet`).

@@ -8,7 +8,7 @@ mod cmd;
 mod config;
 mod error;
 
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 use std::process::ExitCode;
 
 use config::Config;
@@ -29,6 +29,13 @@ struct Cli {
     #[arg(long, short, global = true)]
     quiet: bool,
 
+    /// Write the outputs of a step that fails with exit 1 anyway (a fit that stopped short of
+    /// --max-error, `diff --check` over its tolerance). Without it such a step writes no data
+    /// file (its report still), so `make` does not take a failed result for a finished one; a
+    /// file already at -o is left as it was.
+    #[arg(long, global = true)]
+    keep_partial: bool,
+
     #[command(subcommand)]
     command: Command,
 }
@@ -40,6 +47,8 @@ enum Command {
     Adjust(cmd::adjust::Args),
     /// CityGML buildings to a normalized popa3d model with conditions from their semantics.
     Citygml2popa3d(cmd::citygml2popa3d::Args),
+    /// Print shell completions (bash, zsh, fish, elvish, powershell).
+    Completions(cmd::completions::Args),
     /// Compare two rasters: |dz| statistics, error classes, error-class map PNG.
     Diff(cmd::diff::Args),
     /// Evaluate a T-mesh surface on a raster grid (GeoTIFF, netCDF, ASCII grid).
@@ -54,6 +63,8 @@ enum Command {
     Implicit(cmd::implicit::Args),
     /// Summarise a CityGML file (or a T-mesh, raster or point file): counts, extent, CRS.
     Info(cmd::info::Args),
+    /// Print the man page (roff) of geofit or of one subcommand.
+    Man(cmd::completions::ManArgs),
     /// An OBJ sketch of rooms to a popa3d model with sketch priors, plus measured distances (CSV).
     Obj2popa3d(cmd::obj2popa3d::Args),
     /// Attach measured distances (CSV) to a popa3d model, for the next adjustment.
@@ -74,10 +85,63 @@ enum Command {
     Warp(cmd::warp::Args),
 }
 
+/// GDAL spells multi-letter options with one dash (`-of GTiff -co COMPRESS=ZSTD -ot Float32`);
+/// geofit accepts those three as GDAL users type them (clap would read `-of` as `-o f`).
+fn gdal_style_options(args: impl Iterator<Item = std::ffi::OsString>) -> Vec<std::ffi::OsString> {
+    args.map(|a| match a.to_str() {
+        Some("-of") => "--of".into(),
+        Some("-co") => "--co".into(),
+        Some("-ot") => "--ot".into(),
+        _ => a,
+    })
+    .collect()
+}
+
+/// `geofit --version`: the program's version and the libraries it runs on (GDAL and PROJ as
+/// loaded at run time, the OpenCL platforms the ICD loader finds).
+fn long_version() -> String {
+    let gdal = raster_io::gdal_io::gdal_version();
+    let proj = {
+        use proj::Info;
+        proj::ProjBuilder::new().info().map(|i| format!("PROJ {}", i.version)).unwrap_or_else(|_| "PROJ (unknown)".into())
+    };
+    let opencl = match ocl::core::get_platform_ids() {
+        Ok(ids) if !ids.is_empty() => ids
+            .iter()
+            .map(|p| {
+                let name = ocl::core::get_platform_info(p, ocl::core::PlatformInfo::Name).map(|i| i.to_string()).unwrap_or_default();
+                let version = ocl::core::get_platform_info(p, ocl::core::PlatformInfo::Version).map(|i| i.to_string()).unwrap_or_default();
+                format!("{name} ({version})")
+            })
+            .collect::<Vec<_>>()
+            .join("; "),
+        _ => "no platform found (CPU evaluation)".into(),
+    };
+    format!("{}\n{gdal}\n{proj}\nOpenCL: {opencl}", env!("CARGO_PKG_VERSION"))
+}
+
 fn main() -> ExitCode {
-    let cli = Cli::parse();
-    let config = Config { quiet: cli.quiet };
+    // A file-size limit (`ulimit -f`) makes the kernel send SIGXFSZ, which kills the process
+    // silently and leaves its temporary file; ignored, the write fails with EFBIG and takes the
+    // ordinary error path (message, exit 4, temporary file removed).
+    // SAFETY: installs SIG_IGN for one signal before any thread starts.
+    unsafe {
+        libc::signal(libc::SIGXFSZ, libc::SIG_IGN);
+    }
+    let args = gdal_style_options(std::env::args_os());
+    let mut command = Cli::command();
+    // The library versions are looked up only when asked for (OpenCL start-up is not free).
+    if args.iter().any(|a| a == "--version") {
+        command = command.long_version(long_version());
+    }
+    let cli = match command.clone().try_get_matches_from(&args).and_then(|m| Cli::from_arg_matches(&m)) {
+        Ok(cli) => cli,
+        Err(e) => e.exit(),
+    };
+    let config = Config { quiet: cli.quiet, keep_partial: cli.keep_partial };
     let result = match cli.command {
+        Command::Completions(a) => cmd::completions::run(a, Cli::command()),
+        Command::Man(a) => cmd::completions::run_man(a, Cli::command()),
         Command::Implicit(a) => cmd::implicit::run(a, &config),
         Command::Heal(a) => cmd::heal::run(a, &config),
         Command::Observe(a) => cmd::observe::run(a, &config),

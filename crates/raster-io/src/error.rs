@@ -13,6 +13,10 @@ pub enum RasterError {
     /// The header claims more cells than the machine can hold (checked before allocating).
     #[error("{path}: the file claims {width}×{height} cells ({size} as f64), more than the limit of {limit}")]
     TooLarge { path: PathBuf, width: usize, height: usize, size: String, limit: String },
+    /// An output format, band type or creation option that cannot be written (checked before
+    /// the work: a usage error).
+    #[error("{0}")]
+    Format(String),
     /// Writing failed.
     #[error("{path}: cannot write: {message}")]
     Write { path: PathBuf, message: String },

@@ -14,8 +14,9 @@
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Mutex, Once};
 
-use gdal::errors::GdalError;
+use gdal::errors::{CplErrType, GdalError};
 use gdal::raster::{GdalDataType, RasterCreationOptions};
 use gdal::{Dataset, DriverManager, Metadata};
 
@@ -25,6 +26,9 @@ use crate::raster::{check_geotransform, Raster};
 /// Output formats with known creation options; anything else goes by GDAL driver name.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum RasterFormat {
+    /// Cloud-optimised GeoTIFF (GDAL's COG driver): the default for `.tif`.
+    Cog,
+    /// Plain GeoTIFF (`-of GTiff`): striped, DEFLATE with the floating-point predictor.
     GeoTiff,
     AsciiGrid,
     NetCdf,
@@ -37,16 +41,29 @@ impl RasterFormat {
     pub fn from_path(path: &Path) -> Option<RasterFormat> {
         let ext = path.extension()?.to_string_lossy().to_ascii_lowercase();
         match ext.as_str() {
-            "tif" | "tiff" | "gtiff" => Some(RasterFormat::GeoTiff),
+            "tif" | "tiff" | "gtiff" => Some(RasterFormat::Cog),
             "asc" => Some(RasterFormat::AsciiGrid),
             "nc" | "nc4" => Some(RasterFormat::NetCdf),
             _ => DriverManager::get_output_driver_for_dataset_name(path, gdal::DriverType::Raster)
-                .map(|d| RasterFormat::Driver(d.short_name())),
+                .map(|d| RasterFormat::from_driver_name(&d.short_name())),
         }
     }
 
-    fn driver_name(&self) -> &str {
+    /// The format for a GDAL driver short name as `-of` takes it (case-insensitive for the ones
+    /// with their own defaults; any other name is checked by [`check_write`]).
+    pub fn from_driver_name(name: &str) -> RasterFormat {
+        match name.to_ascii_lowercase().as_str() {
+            "cog" => RasterFormat::Cog,
+            "gtiff" => RasterFormat::GeoTiff,
+            "aaigrid" => RasterFormat::AsciiGrid,
+            "netcdf" => RasterFormat::NetCdf,
+            _ => RasterFormat::Driver(name.to_string()),
+        }
+    }
+
+    pub fn driver_name(&self) -> &str {
         match self {
+            RasterFormat::Cog => "COG",
             RasterFormat::GeoTiff => "GTiff",
             RasterFormat::AsciiGrid => "AAIGrid",
             RasterFormat::NetCdf => "netCDF",
@@ -54,13 +71,78 @@ impl RasterFormat {
         }
     }
 
-    fn creation_options(&self) -> Vec<&'static str> {
+    /// geofit's defaults for the format; `-co` options replace them key by key.
+    fn default_creation_options(&self) -> Vec<&'static str> {
         match self {
-            // PREDICTOR=3 is the floating-point predictor: much better DEFLATE ratios on terrain.
+            // DEFLATE with the predictor GDAL picks for the type (floating-point for floats):
+            // much better ratios on terrain than COG's default LZW without predictor.
+            RasterFormat::Cog => vec!["COMPRESS=DEFLATE", "PREDICTOR=YES"],
+            // PREDICTOR=3 is the floating-point predictor.
             RasterFormat::GeoTiff => vec!["COMPRESS=DEFLATE", "PREDICTOR=3"],
             // Round-trip precision for f64 (17 significant digits).
             RasterFormat::AsciiGrid => vec!["SIGNIFICANT_DIGITS=17"],
             _ => vec![],
+        }
+    }
+
+    /// The defaults merged with the user's `KEY=VALUE` options (a user key replaces the default).
+    fn creation_options(&self, user: &[String]) -> Vec<String> {
+        let key = |o: &str| o.split_once('=').map(|(k, _)| k.trim().to_ascii_uppercase()).unwrap_or_default();
+        let mut out: Vec<String> = self
+            .default_creation_options()
+            .into_iter()
+            .filter(|d| !user.iter().any(|u| key(u) == key(d)))
+            .map(String::from)
+            .collect();
+        out.extend(user.iter().cloned());
+        out
+    }
+
+    /// Extension for a temporary in-memory file of this format.
+    fn extension(&self) -> &str {
+        match self {
+            RasterFormat::Cog | RasterFormat::GeoTiff => "tif",
+            RasterFormat::AsciiGrid => "asc",
+            RasterFormat::NetCdf => "nc",
+            RasterFormat::Driver(_) => "dat",
+        }
+    }
+}
+
+/// The band type written: a float type, so no value is cut to an integer.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum SampleType {
+    Float32,
+    #[default]
+    Float64,
+}
+
+impl SampleType {
+    /// GDAL's name of the type (`Float32`, `Float64`).
+    pub fn gdal_name(self) -> &'static str {
+        match self {
+            SampleType::Float32 => "Float32",
+            SampleType::Float64 => "Float64",
+        }
+    }
+
+    /// The smaller float type that holds every value of a GDAL band type exactly: Float32 for
+    /// Float32 and integers up to 16 bits (24-bit mantissa), Float64 for the rest
+    /// (docs/decisions.md#raster-outputs-by-driver).
+    pub fn holding(t: GdalDataType) -> SampleType {
+        match t {
+            GdalDataType::Float32 | GdalDataType::UInt8 | GdalDataType::UInt16 | GdalDataType::Int16 => {
+                SampleType::Float32
+            }
+            _ => SampleType::Float64,
+        }
+    }
+
+    /// A value as stored at this precision.
+    fn round(self, v: f64) -> f64 {
+        match self {
+            SampleType::Float32 => v as f32 as f64,
+            SampleType::Float64 => v,
         }
     }
 }
@@ -68,8 +150,12 @@ impl RasterFormat {
 /// Options for [`write_raster`].
 #[derive(Debug, Clone, Default)]
 pub struct WriteOptions {
-    /// Output format; `None` = from the path's extension.
+    /// Output format; `None` = from the path's extension (COG for stdout).
     pub format: Option<RasterFormat>,
+    /// GDAL creation options `KEY=VALUE` (`-co`); each replaces geofit's default for its key.
+    pub creation_options: Vec<String>,
+    /// Band type of the output.
+    pub sample_type: SampleType,
 }
 
 /// One clean line out of a GDAL error (its CPL message, without the Rust wrapper).
@@ -87,15 +173,81 @@ fn gdal_msg(e: &GdalError) -> String {
     }
 }
 
+type WarningSink = Box<dyn Fn(&str) + Send + Sync>;
+
+/// Where GDAL warnings go ([`route_gdal_warnings`]); none = dropped.
+static WARNING_SINK: Mutex<Option<WarningSink>> = Mutex::new(None);
+/// How many CE_Failure/CE_Fatal messages GDAL has emitted, and the first one since the last
+/// [`gdal_checked`] began: a write is failed when this count moved during it, even if a later
+/// warning replaced GDAL's "last error" (and the first message is the cause: "No space left
+/// on device", not the "IO error writing directory" that follows it).
+static FAILURES: AtomicU64 = AtomicU64::new(0);
+static FIRST_FAILURE: Mutex<String> = Mutex::new(String::new());
+static HANDLER: Once = Once::new();
+
+/// Installs geofit's GDAL error handler once: failures are counted (see [`FAILURES`]), warnings
+/// go to the sink.
+fn install_error_handler() {
+    HANDLER.call_once(|| {
+        gdal::config::set_error_handler(|class, _no, msg| match class {
+            CplErrType::Failure | CplErrType::Fatal => {
+                if let Ok(mut first) = FIRST_FAILURE.lock() {
+                    if first.is_empty() {
+                        *first = msg.trim().to_string();
+                    }
+                }
+                FAILURES.fetch_add(1, Ordering::SeqCst);
+            }
+            CplErrType::Warning => {
+                if let Ok(sink) = WARNING_SINK.lock() {
+                    if let Some(s) = sink.as_ref() {
+                        s(msg.trim());
+                    }
+                }
+            }
+            _ => {}
+        });
+    });
+}
+
 /// Routes GDAL's warnings (e.g. netCDF "dimension is not a Longitude/X dimension") to `sink`
 /// instead of GDAL's default stderr printer, so a CLI can show them as its own notices (or
 /// not, under `--quiet`). Errors still reach the Rust error values.
 pub fn route_gdal_warnings<F: Fn(&str) + Send + Sync + 'static>(sink: F) {
-    gdal::config::set_error_handler(move |class, _no, msg| {
-        if class == gdal::errors::CplErrType::Warning {
-            sink(msg.trim());
+    if let Ok(mut s) = WARNING_SINK.lock() {
+        *s = Some(Box::new(sink));
+    }
+    install_error_handler();
+}
+
+/// Runs the GDAL calls of `f` and fails when GDAL reported a failure during them, even one the
+/// call itself did not return: GDAL before 3.7 returns nothing from `GDALFlushCache` and
+/// `GDALClose`, and a strip that could not be written (full disk, `ulimit -f`) is only a
+/// CPLError (docs/decisions.md#raster-outputs-by-driver).
+fn gdal_checked<T>(f: impl FnOnce() -> Result<T, GdalError>) -> Result<T, String> {
+    install_error_handler();
+    if let Ok(mut first) = FIRST_FAILURE.lock() {
+        first.clear();
+    }
+    let before = FAILURES.load(Ordering::SeqCst);
+    // SAFETY: resets this thread's CPL error state; no pointers involved.
+    unsafe { gdal_sys::CPLErrorReset() };
+    let value = f();
+    let first = FIRST_FAILURE.lock().map(|s| s.clone()).unwrap_or_default();
+    match value {
+        Err(e) if first.is_empty() => Err(gdal_msg(&e)),
+        Err(_) => Err(first),
+        Ok(_) if FAILURES.load(Ordering::SeqCst) != before => {
+            Err(if first.is_empty() { "GDAL reported a write failure".into() } else { first })
         }
-    });
+        Ok(v) => Ok(v),
+    }
+}
+
+/// The GDAL library loaded at run time, as `gdalinfo --version` says it ("GDAL 3.6.2, released
+/// 2023/01/02").
+pub fn gdal_version() -> String {
+    gdal::version::VersionInfo::version_summary()
 }
 
 /// Reads band 1 of a raster file (see the module docs for what counts as nodata).
@@ -105,9 +257,21 @@ pub fn read_raster(path: &Path) -> Result<Raster, RasterError> {
 
 /// Reads band `band` (1-based, GDAL numbering) of a raster file.
 pub fn read_raster_band(path: &Path, band: usize) -> Result<Raster, RasterError> {
+    read_raster_band_typed(path, band).map(|(r, _)| r)
+}
+
+/// GDAL's virtual file systems (`/vsigzip/`, `/vsizip/`, `/vsicurl/`, ...): paths that exist
+/// for GDAL only, so no local existence check applies to them.
+pub fn is_gdal_virtual_path(path: &Path) -> bool {
+    path.to_str().is_some_and(|s| s.starts_with("/vsi"))
+}
+
+/// Reads band `band` like [`read_raster_band`], with the float type that holds its values
+/// exactly (what an output derived from it is written as).
+pub fn read_raster_band_typed(path: &Path, band: usize) -> Result<(Raster, SampleType), RasterError> {
     let open_err = |message: String| RasterError::Open { path: path.to_path_buf(), message };
     let content_err = |message: String| RasterError::Content { path: path.to_path_buf(), message };
-    if !path.exists() {
+    if !is_gdal_virtual_path(path) && !path.exists() {
         return Err(open_err("no such file".into()));
     }
     // ESRI ASCII grids are opened as Float32 by default; ask for Float64 so written grids
@@ -208,15 +372,21 @@ pub fn read_raster_band(path: &Path, band: usize) -> Result<Raster, RasterError>
             metadata.insert(item.key, item.value);
         }
     }
-    Ok(Raster { width, height, geotransform, crs, data, valid, nodata, metadata })
+    Ok((Raster { width, height, geotransform, crs, data, valid, nodata, metadata }, SampleType::holding(band_type)))
 }
 
 /// A finite nodata marker that no valid cell uses: the raster's own marker when possible,
 /// else the first free one of the usual conventions.
 pub fn choose_nodata(r: &Raster) -> f64 {
-    let used = |c: f64| r.data.iter().zip(&r.valid).any(|(d, v)| *v && *d == c);
+    choose_nodata_for(r, SampleType::Float64)
+}
+
+/// [`choose_nodata`] for values stored as `t`: a marker is taken only when no valid value
+/// equals it at that precision (a Float32 -9999.0001 is -9999).
+pub fn choose_nodata_for(r: &Raster, t: SampleType) -> f64 {
+    let used = |c: f64| r.data.iter().zip(&r.valid).any(|(d, v)| *v && t.round(*d) == t.round(c));
     let mut candidates: Vec<f64> = Vec::new();
-    if let Some(nd) = r.nodata.filter(|v| v.is_finite()) {
+    if let Some(nd) = r.nodata.filter(|v| v.is_finite() && t.round(*v).is_finite()) {
         candidates.push(nd);
     }
     candidates.extend([-9999.0, -99999.0, -999999.0, -32768.0, -3.0e38]);
@@ -231,12 +401,10 @@ pub fn choose_nodata(r: &Raster) -> f64 {
 
 static TMP_COUNTER: AtomicU64 = AtomicU64::new(0);
 
-/// Builds the in-memory GDAL dataset for `r`.
-fn to_mem_dataset(r: &Raster, nodata: f64) -> Result<Dataset, String> {
+/// Builds the in-memory GDAL dataset for `r` with bands of type `T`.
+fn to_mem_dataset_as<T: gdal::raster::GdalType + Copy>(r: &Raster, nodata: f64, cast: impl Fn(f64) -> T) -> Result<Dataset, String> {
     let mem = DriverManager::get_driver_by_name("MEM").map_err(|e| gdal_msg(&e))?;
-    let mut ds = mem
-        .create_with_band_type::<f64, _>("", r.width, r.height, 1)
-        .map_err(|e| gdal_msg(&e))?;
+    let mut ds = mem.create_with_band_type::<T, _>("", r.width, r.height, 1).map_err(|e| gdal_msg(&e))?;
     ds.set_geo_transform(&r.geotransform).map_err(|e| gdal_msg(&e))?;
     if let Some(wkt) = &r.crs {
         ds.set_projection(wkt).map_err(|e| gdal_msg(&e))?;
@@ -247,26 +415,139 @@ fn to_mem_dataset(r: &Raster, nodata: f64) -> Result<Dataset, String> {
     {
         let mut band = ds.rasterband(1).map_err(|e| gdal_msg(&e))?;
         band.set_no_data_value(Some(nodata)).map_err(|e| gdal_msg(&e))?;
-        let data: Vec<f64> = r.data.iter().zip(&r.valid).map(|(d, v)| if *v { *d } else { nodata }).collect();
+        let data: Vec<T> = r.data.iter().zip(&r.valid).map(|(d, v)| cast(if *v { *d } else { nodata })).collect();
         let mut buf = gdal::raster::Buffer::new((r.width, r.height), data);
         band.write((0, 0), (r.width, r.height), &mut buf).map_err(|e| gdal_msg(&e))?;
     }
     Ok(ds)
 }
 
-/// Writes `r` to `path` atomically (see the module docs).
+/// Builds the in-memory GDAL dataset for `r` at the output's band type.
+fn to_mem_dataset(r: &Raster, t: SampleType) -> Result<Dataset, String> {
+    let nodata = t.round(choose_nodata_for(r, t));
+    match t {
+        SampleType::Float32 => to_mem_dataset_as::<f32>(r, nodata, |v| v as f32),
+        SampleType::Float64 => to_mem_dataset_as::<f64>(r, nodata, |v| v),
+    }
+}
+
+/// A GDAL driver's metadata item (`DMD_*`, `DCAP_*`), empty when it has none.
+fn driver_item(driver: &gdal::Driver, key: &str) -> String {
+    driver.metadata_item(key, "").unwrap_or_default()
+}
+
+/// Drivers that write no data of their own: a VRT (or MEM) copy of geofit's in-memory result
+/// would reference a dataset that is gone when the process ends.
+const VIRTUAL_DRIVERS: [&str; 2] = ["VRT", "MEM"];
+
+/// Checks before any work that `opts` can write a raster to `path` (`None` = stdout): the
+/// format is known, writable, stores the band type, accepts the creation options, and (for
+/// stdout) can write through GDAL's in-memory files. Returns the resolved format. Every
+/// refusal is a [`RasterError::Format`] naming the driver and why.
+pub fn check_write(path: Option<&Path>, opts: &WriteOptions) -> Result<RasterFormat, RasterError> {
+    let ferr = |m: String| RasterError::Format(m);
+    if let Some(p) = path {
+        if is_gdal_virtual_path(p) {
+            return Err(ferr(format!("{}: writing to a GDAL virtual path is not supported; write a file and compress it afterwards", p.display())));
+        }
+    }
+    let format = match (&opts.format, path) {
+        (Some(f), _) => f.clone(),
+        (None, None) => RasterFormat::Cog,
+        (None, Some(p)) => RasterFormat::from_path(p).ok_or_else(|| {
+            ferr(format!("{}: GDAL knows no raster format for this extension; use .tif, .asc or .nc, or name a driver with -of", p.display()))
+        })?,
+    };
+    let name = format.driver_name().to_string();
+    let driver = DriverManager::get_driver_by_name(&name)
+        .map_err(|_| ferr(format!("-of {name}: GDAL has no such driver (`gdalinfo --formats` lists them)")))?;
+    let name = driver.short_name();
+    if driver_item(&driver, "DCAP_RASTER") != "YES" {
+        return Err(ferr(format!("{name} is not a raster format")));
+    }
+    if VIRTUAL_DRIVERS.iter().any(|v| v.eq_ignore_ascii_case(&name)) {
+        return Err(ferr(format!(
+            "{name} stores references to other files, and geofit's result exists only in memory: write a GeoTIFF and build the {name} on it (gdalbuildvrt)"
+        )));
+    }
+    if driver_item(&driver, "DCAP_CREATECOPY") != "YES" && driver_item(&driver, "DCAP_CREATE") != "YES" {
+        return Err(ferr(format!("GDAL's {name} driver reads but cannot write")));
+    }
+    let types = driver_item(&driver, "DMD_CREATIONDATATYPES");
+    let stores = |t: &str| types.split_whitespace().any(|x| x == t);
+    let wanted = opts.sample_type.gdal_name();
+    // AAIGrid lists Float32 as its widest type but writes Float64 text at 17 digits (and
+    // geofit reads it back as Float64): the list is trusted for the other drivers only.
+    let own_format = !matches!(format, RasterFormat::Driver(_));
+    if !own_format && !types.is_empty() && !stores(wanted) {
+        return Err(ferr(if stores("Float32") {
+            format!("{name} stores {types}, not {wanted}: add --ot float32 (7 significant digits)")
+        } else {
+            format!("{name} stores only {types}: elevations would be cut to integers; use GeoTIFF (.tif), .asc or .nc")
+        }));
+    }
+    let list = driver_item(&driver, "DMD_CREATIONOPTIONLIST").to_ascii_uppercase();
+    for o in &opts.creation_options {
+        let Some(key) = o.split_once('=').map(|(k, _)| k.trim().to_ascii_uppercase()).filter(|k| !k.is_empty()) else {
+            return Err(ferr(format!("-co {o}: expected KEY=VALUE")));
+        };
+        let known = list.contains(&format!("NAME='{key}'")) || list.contains(&format!("NAME=\"{key}\""));
+        if !list.is_empty() && !known {
+            return Err(ferr(format!("-co {o}: {name} has no creation option {key} (`gdalinfo --format {name}` lists them)")));
+        }
+    }
+    if path.is_none() && driver_item(&driver, "DCAP_VIRTUALIO") != "YES" {
+        return Err(ferr(format!("{name} cannot be written to stdout (the driver needs a real file): use -o FILE")));
+    }
+    Ok(format)
+}
+
+/// A raster written into a temporary directory beside its target, moved into place by
+/// [`commit`](StagedRaster::commit); dropped uncommitted, it leaves nothing behind.
+struct StagedRaster {
+    tmp_dir: PathBuf,
+    dir: PathBuf,
+    file_name: std::ffi::OsString,
+}
+
+impl StagedRaster {
+    /// Moves every file of the temporary directory next to the target, the main file last so
+    /// a reader never sees it without its side files (the `.prj` of an ASCII grid).
+    fn commit(&self) -> Result<(), String> {
+        let mut entries: Vec<PathBuf> = std::fs::read_dir(&self.tmp_dir)
+            .map_err(|e| e.to_string())?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .collect();
+        entries.sort_by_key(|p| p.file_name() == Some(self.file_name.as_os_str()));
+        for p in &entries {
+            // Data the kernel still holds (delayed allocation on a nearly full disk) must reach
+            // the disk before the old file is replaced.
+            std::fs::File::open(p)
+                .and_then(|f| f.sync_all())
+                .map_err(|e| format!("cannot write {}: {e}", p.display()))?;
+        }
+        for p in entries {
+            let name = p.file_name().map(|s| s.to_os_string()).unwrap_or_default();
+            std::fs::rename(&p, self.dir.join(&name)).map_err(|e| format!("cannot move {}: {e}", p.display()))?;
+        }
+        Ok(())
+    }
+}
+
+impl Drop for StagedRaster {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.tmp_dir);
+    }
+}
+
+/// Writes `r` to `path` atomically (see the module docs); the format, band type and creation
+/// options come from `opts` ([`check_write`] refuses what cannot be written).
 pub fn write_raster(r: &Raster, path: &Path, opts: &WriteOptions) -> Result<(), RasterError> {
     let werr = |message: String| RasterError::Write { path: path.to_path_buf(), message };
     r.validate()?;
-    let format = match &opts.format {
-        Some(f) => f.clone(),
-        None => RasterFormat::from_path(path).ok_or_else(|| {
-            werr("unknown raster format for this extension (use .tif, .asc or .nc)".into())
-        })?,
-    };
+    let format = check_write(Some(path), opts)?;
     let driver = DriverManager::get_driver_by_name(format.driver_name()).map_err(|e| werr(gdal_msg(&e)))?;
-    let nodata = choose_nodata(r);
-    let mem = to_mem_dataset(r, nodata).map_err(werr)?;
+    let mem = to_mem_dataset(r, opts.sample_type).map_err(werr)?;
 
     let file_name = path.file_name().ok_or_else(|| werr("not a file path".into()))?;
     let dir = match path.parent() {
@@ -276,60 +557,53 @@ pub fn write_raster(r: &Raster, path: &Path, opts: &WriteOptions) -> Result<(), 
     let n = TMP_COUNTER.fetch_add(1, Ordering::Relaxed);
     let tmp_dir = dir.join(format!(".geofit-raster-{}-{n}.tmp", std::process::id()));
     std::fs::create_dir(&tmp_dir).map_err(|e| werr(format!("cannot create {}: {e}", tmp_dir.display())))?;
-    let result = (|| -> Result<(), String> {
-        let tmp_path = tmp_dir.join(file_name);
-        let mut co = RasterCreationOptions::new();
-        for o in format.creation_options() {
-            co.add_string(o).map_err(|e| gdal_msg(&e))?;
-        }
-        let out = mem.create_copy(&driver, &tmp_path, &co).map_err(|e| gdal_msg(&e))?;
-        out.close().map_err(|e| gdal_msg(&e))?;
-        // Move the main file last so a reader never sees it without its side files.
-        let mut entries: Vec<PathBuf> = std::fs::read_dir(&tmp_dir)
-            .map_err(|e| e.to_string())?
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            .collect();
-        entries.sort_by_key(|p| p.file_name() == Some(file_name));
-        for p in entries {
-            let name = p.file_name().map(|s| s.to_os_string()).unwrap_or_default();
-            std::fs::rename(&p, dir.join(&name)).map_err(|e| format!("cannot move {}: {e}", p.display()))?;
-        }
-        Ok(())
-    })();
-    let _ = std::fs::remove_dir_all(&tmp_dir);
-    result.map_err(werr)
+    let staged = StagedRaster { tmp_dir, dir, file_name: file_name.to_os_string() };
+    let tmp_path = staged.tmp_dir.join(file_name);
+    let co = creation_options(&format, &opts.creation_options).map_err(werr)?;
+    // GDAL's messages name the temporary file: say the target instead (it is the one asked for).
+    let tmp_name = tmp_path.display().to_string();
+    let named = |m: String| werr(m.replace(&tmp_name, &path.display().to_string()));
+    gdal_checked(|| {
+        let mut out = mem.create_copy(&driver, &tmp_path, &co)?;
+        out.flush_cache()?;
+        out.close()
+    })
+    .map_err(named)?;
+    staged.commit().map_err(named)
 }
 
-/// Encodes `r` in `format` and returns the main file's bytes (for writing to stdout); side
-/// files (e.g. an ASCII grid's `.prj`) are dropped.
-pub fn raster_to_bytes(r: &Raster, format: &RasterFormat) -> Result<Vec<u8>, RasterError> {
+fn creation_options(format: &RasterFormat, user: &[String]) -> Result<RasterCreationOptions, String> {
+    let mut co = RasterCreationOptions::new();
+    for o in format.creation_options(user) {
+        co.add_string(&o).map_err(|e| gdal_msg(&e))?;
+    }
+    Ok(co)
+}
+
+/// Encodes `r` as `opts` says (COG by default) and returns the main file's bytes (for writing
+/// to stdout); side files (e.g. an ASCII grid's `.prj`) are dropped.
+pub fn raster_to_bytes(r: &Raster, opts: &WriteOptions) -> Result<Vec<u8>, RasterError> {
     let werr = |message: String| RasterError::Write { path: PathBuf::from("<stdout>"), message };
     r.validate()?;
+    let format = check_write(None, opts)?;
     let driver = DriverManager::get_driver_by_name(format.driver_name()).map_err(|e| werr(gdal_msg(&e)))?;
-    let nodata = choose_nodata(r);
-    let mem = to_mem_dataset(r, nodata).map_err(werr)?;
-    let ext = match format {
-        RasterFormat::GeoTiff => "tif",
-        RasterFormat::AsciiGrid => "asc",
-        RasterFormat::NetCdf => "nc",
-        RasterFormat::Driver(_) => "dat",
-    };
+    let mem = to_mem_dataset(r, opts.sample_type).map_err(werr)?;
     let n = TMP_COUNTER.fetch_add(1, Ordering::Relaxed);
     let dir = format!("/vsimem/geofit-{}-{n}", std::process::id());
-    let vpath = PathBuf::from(format!("{dir}/out.{ext}"));
-    let mut co = RasterCreationOptions::new();
-    for o in format.creation_options() {
-        co.add_string(o).map_err(|e| werr(gdal_msg(&e)))?;
-    }
-    let out = mem.create_copy(&driver, &vpath, &co).map_err(|e| werr(gdal_msg(&e)))?;
-    out.close().map_err(|e| werr(gdal_msg(&e)))?;
-    let bytes = gdal::vsi::get_vsi_mem_file_bytes_owned(&vpath).map_err(|e| werr(gdal_msg(&e)))?;
+    let vpath = PathBuf::from(format!("{dir}/out.{}", format.extension()));
+    let co = creation_options(&format, &opts.creation_options).map_err(werr)?;
+    let written = gdal_checked(|| {
+        let mut out = mem.create_copy(&driver, &vpath, &co)?;
+        out.flush_cache()?;
+        out.close()?;
+        gdal::vsi::get_vsi_mem_file_bytes_owned(&vpath)
+    });
     if let Ok(files) = gdal::vsi::read_dir(&dir, true) {
         for f in files {
             let _ = gdal::vsi::unlink_mem_file(Path::new(&dir).join(f));
         }
     }
-    Ok(bytes)
+    written.map_err(werr)
 }
 
 #[cfg(test)]
@@ -386,7 +660,7 @@ mod tests {
 
     #[test]
     fn bytes_for_stdout() {
-        let b = raster_to_bytes(&sample(), &RasterFormat::GeoTiff).unwrap();
+        let b = raster_to_bytes(&sample(), &WriteOptions::default()).unwrap();
         assert!(b.starts_with(b"II*\0") || b.starts_with(b"MM\0*"));
     }
 

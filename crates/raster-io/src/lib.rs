@@ -26,6 +26,7 @@
 //! For the indirect reduction, `raster_proc::warp::WarpField` (serde) is the displacement
 //! field; `field.mapper().inverse([x, y])` maps a control point back (spec §2.3.7).
 
+pub mod crs;
 pub mod error;
 pub mod gdal_io;
 pub mod limits;
@@ -33,6 +34,6 @@ pub mod points;
 pub mod raster;
 
 pub use error::{PointsError, RasterError};
-pub use gdal_io::{read_raster, read_raster_band, write_raster, RasterFormat, WriteOptions};
+pub use gdal_io::{check_write, read_raster, read_raster_band, read_raster_band_typed, write_raster, RasterFormat, SampleType, WriteOptions};
 pub use points::{read_las, read_points, read_xyz, PointCloud, PointFormat};
 pub use raster::{GeoTransform, MissingCorners, Raster};

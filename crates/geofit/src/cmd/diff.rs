@@ -112,12 +112,16 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     let (a, name_a) = load_a(&args.a)?;
     let (b, name_b) = read_raster_arg(&args.b)?;
     let (report, classes) = compare_with_map(&a, &b, &opts).map_err(|e| proc_err(&format!("{name_a} vs {name_b}"), e))?;
-    if let Some(p) = &args.png {
+    let exit = if args.check && report.over_tolerance > 0 { Exit::Findings } else { Exit::Ok };
+    // --check failing is a failed step: its pictures are not written (make) unless
+    // --keep-partial; the statistics still are.
+    let keep = |p: &str| config.keeps_output(exit, Some(p));
+    if let Some(p) = args.png.as_deref().filter(|p| keep(p)) {
         let px = class_map_rgba(&classes, opts.class_bounds.len() + 1);
         let bytes = encode_png(a.width as u32, a.height as u32, &px)?;
         Output::from_arg(Some(p)).write_bytes(&bytes)?;
     }
-    if let Some(p) = &args.hist {
+    if let Some(p) = args.hist.as_deref().filter(|p| keep(p)) {
         let (w, h, px) = histogram_rgba(&report);
         Output::from_arg(Some(p)).write_bytes(&encode_png(w, h, &px)?)?;
     }
@@ -127,7 +131,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     if args.json || args.report.as_deref() != Some("-") {
         print_report(args.json, &report, |w| print_text(w, &report))?;
     }
-    if args.check && report.over_tolerance > 0 {
+    if exit == Exit::Findings {
         crate::say!(
             "geofit: {} of {} cells differ by more than {} (max {:.4} at col {} row {})",
             report.over_tolerance,

@@ -7,7 +7,7 @@ use raster_io::Raster;
 use tspline::PbSpline;
 
 use super::fit::{read_tmesh_arg, select_device, tspline_err, Device};
-use super::rasterize::{read_raster_arg, write_raster_arg};
+use super::rasterize::{read_raster_arg, read_raster_arg_typed, write_raster_arg, RasterOutArgs};
 use crate::config::Config;
 use crate::error::{CliError, CmdResult, Exit};
 
@@ -47,9 +47,13 @@ pub struct Args {
     /// Print the evaluation throughput (points/s, flops per point) on stderr.
     #[arg(long)]
     pub timing: bool,
+    #[command(flatten)]
+    pub raster_out: RasterOutArgs,
 }
 
 pub fn run(args: Args, config: &Config) -> CmdResult {
+    // The output's band type follows --like (a Float32 grid gets a Float32 surface).
+    let mut write_opts = args.raster_out.checked(args.output.as_deref(), None)?;
     let file = read_tmesh_arg(&args.mesh)?;
     let g = &file.georef;
     // Indirect meshes: output cells are mapped forward through the stored field (spec §2.3.3)
@@ -73,7 +77,8 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     let crs = if g.crs.is_empty() { None } else { Some(g.crs.clone()) };
     // Output grid and the parameter pair of each output cell.
     let (mut out, st, stored_mask): (Raster, Vec<[f64; 2]>, Option<Vec<bool>>) = if let Some(like) = &args.like {
-        let (r, name) = read_raster_arg(like)?;
+        let (r, name, like_type) = read_raster_arg_typed(like)?;
+        write_opts = args.raster_out.checked(args.output.as_deref(), Some(like_type))?;
         let gt = r.geotransform;
         if gt[2] != 0.0 || gt[4] != 0.0 {
             return Err(CliError::findings(format!("{name}: rotated rasters are not supported")));
@@ -185,6 +190,6 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
             out.valid[q] = true;
         }
     }
-    write_raster_arg(&out, args.output.as_deref())?;
+    write_raster_arg(&out, args.output.as_deref(), &write_opts)?;
     Ok(Exit::Ok)
 }

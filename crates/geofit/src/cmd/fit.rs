@@ -421,8 +421,12 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         None => (Some(mask), None),
     };
     let file = TMeshFile { mesh, georef, mask, warp };
-    Output::from_arg(args.output.as_deref())
-        .write_with(|w| tspline::format::write(&file, w).map_err(CliError::io_out))?;
+    // A fit that missed --max-error is a failed step: no mesh for the next one (make) unless
+    // --keep-partial; the report below still says how far it got.
+    if config.keeps_output(exit, args.output.as_deref()) {
+        Output::from_arg(args.output.as_deref())
+            .write_with(|w| tspline::format::write(&file, w).map_err(CliError::io_out))?;
+    }
     if let Some(path) = &args.report {
         let rep = Report {
             input: &name,

@@ -9,6 +9,7 @@ pub mod export;
 pub mod fit;
 pub mod implicit;
 pub mod citygml2popa3d;
+pub mod completions;
 pub mod info;
 pub mod obj2popa3d;
 pub mod rasterize;

@@ -5,7 +5,8 @@
 use clap::{Args as ClapArgs, ValueEnum};
 use serde::Serialize;
 
-use raster_io::{read_xyz, PointCloud, PointsError, Raster, RasterError, RasterFormat, WriteOptions};
+use raster_io::crs::Crs;
+use raster_io::{read_xyz, PointCloud, PointsError, Raster, RasterError, RasterFormat, SampleType, WriteOptions};
 use raster_proc::grid::GridSpec;
 use raster_proc::splat::{splat_points, SplatKernel};
 use raster_proc::tin::{tin_points, TinOptions};
@@ -73,6 +74,15 @@ pub struct Args {
     /// Write a JSON report (counts, grid) to this path (`-` = stdout).
     #[arg(long)]
     pub report: Option<String>,
+    /// CRS of the points (EPSG:code, WKT, PROJ string), overriding a LAS file's own; stored in
+    /// the output.
+    #[arg(long, value_name = "CRS")]
+    pub s_srs: Option<String>,
+    /// Reproject the points into this CRS before gridding (--cell is then in its units).
+    #[arg(long, value_name = "CRS")]
+    pub t_srs: Option<String>,
+    #[command(flatten)]
+    pub raster_out: RasterOutArgs,
 }
 
 #[derive(Debug, Serialize)]
@@ -89,9 +99,56 @@ struct RasterizeReport {
     merged_duplicates: Option<usize>,
 }
 
+/// `--ot`: the band type of a raster output.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum OutType {
+    Float32,
+    Float64,
+}
+
+/// How a raster output is written, with GDAL's option names (`-of`, `-co`, `-ot` are accepted
+/// with one dash, as in gdal_translate).
+#[derive(ClapArgs, Debug, Clone, Default)]
+#[command(next_help_heading = "Raster output (GDAL)")]
+pub struct RasterOutArgs {
+    /// Output format as a GDAL driver name (COG, GTiff, AAIGrid, netCDF, GS7BG, ...); default
+    /// from the -o extension, and a .tif (or stdout) is a Cloud-Optimised GeoTIFF (COG).
+    #[arg(long = "of", value_name = "FORMAT")]
+    pub of: Option<String>,
+    /// GDAL creation option KEY=VALUE (repeatable); replaces geofit's default for that key
+    /// (COG/GTiff: COMPRESS=DEFLATE with the floating-point predictor; AAIGrid: 17 digits).
+    #[arg(long = "co", value_name = "KEY=VALUE")]
+    pub co: Vec<String>,
+    /// Band type of the output (default: the input raster's float type — Float32 for Float32
+    /// and 8/16-bit input, else Float64 — and Float64 for points and T-meshes).
+    #[arg(long = "ot", value_enum, ignore_case = true)]
+    pub ot: Option<OutType>,
+}
+
+impl RasterOutArgs {
+    /// The write options for an output derived from input of type `input` (`None` = no raster
+    /// input: Float64), checked against the driver before the work: refusals are usage errors.
+    pub fn checked(&self, output: Option<&str>, input: Option<SampleType>) -> Result<WriteOptions, CliError> {
+        let out = Output::from_arg(output);
+        let opts = WriteOptions {
+            format: self.of.as_deref().map(RasterFormat::from_driver_name),
+            creation_options: self.co.clone(),
+            sample_type: match self.ot {
+                Some(OutType::Float32) => SampleType::Float32,
+                Some(OutType::Float64) => SampleType::Float64,
+                None => input.unwrap_or_default(),
+            },
+        };
+        raster_io::check_write(out.path(), &opts).map_err(raster_err)?;
+        out.check_target()?;
+        Ok(opts)
+    }
+}
+
 /// One line for a raster-io error (its message already names the file).
 pub fn raster_err(e: RasterError) -> CliError {
     match e {
+        RasterError::Format(_) => CliError::usage(e.to_string()),
         RasterError::Open { .. } | RasterError::Content { .. } | RasterError::TooLarge { .. } => CliError::unreadable(e.to_string()),
         RasterError::Write { .. } => CliError::output(e.to_string()),
         RasterError::Invalid(_) => CliError::findings(e.to_string()),
@@ -126,31 +183,48 @@ pub fn gdal_notices(config: &Config) {
 }
 
 /// Reads a raster from a path argument (GDAL needs a path; stdin is spooled to a temp file).
+/// GDAL's virtual paths (`/vsigzip/x.tif.gz`, `/vsizip/a.zip/x.tif`) are read as GDAL reads them.
 pub fn read_raster_arg(arg: &str) -> Result<(Raster, String), CliError> {
+    read_raster_arg_typed(arg).map(|(r, name, _)| (r, name))
+}
+
+/// [`read_raster_arg`] with the float type that holds the raster's values (kept on output).
+pub fn read_raster_arg_typed(arg: &str) -> Result<(Raster, String, SampleType), CliError> {
     let input = Input::from_arg(arg);
     let name = input.display_name();
     match input.path() {
-        Some(p) => Ok((raster_io::read_raster(p).map_err(raster_err)?, name)),
-        None => Ok((raster_from_stdin_bytes(&input.read_all()?)?, name)),
+        Some(p) => {
+            let (r, t) = raster_io::read_raster_band_typed(p, 1).map_err(raster_err)?;
+            Ok((r, name, t))
+        }
+        None => {
+            let (r, t) = raster_from_stdin_bytes_typed(&input.read_all()?)?;
+            Ok((r, name, t))
+        }
     }
 }
 
 /// A raster from bytes read on stdin: GDAL opens paths, so they are spooled to a temporary file
 /// (errors name `<stdin>`, not the spool file).
 pub fn raster_from_stdin_bytes(bytes: &[u8]) -> Result<Raster, CliError> {
+    raster_from_stdin_bytes_typed(bytes).map(|(r, _)| r)
+}
+
+/// [`raster_from_stdin_bytes`] with the raster's float type.
+fn raster_from_stdin_bytes_typed(bytes: &[u8]) -> Result<(Raster, SampleType), CliError> {
     let dir = tempfile::tempdir().map_err(|e| CliError::internal(format!("temporary directory: {e}")))?;
     let p = dir.path().join("stdin.raster");
     std::fs::write(&p, bytes).map_err(|e| CliError::internal(format!("temporary file: {e}")))?;
-    raster_io::read_raster(&p).map_err(|e| CliError::unreadable(e.to_string().replace(&p.display().to_string(), "<stdin>")))
+    raster_io::read_raster_band_typed(&p, 1).map_err(|e| CliError::unreadable(e.to_string().replace(&p.display().to_string(), "<stdin>")))
 }
 
-/// Writes a raster to `-o` (format from the extension; stdout = GeoTIFF bytes).
-pub fn write_raster_arg(r: &Raster, output: Option<&str>) -> Result<(), CliError> {
+/// Writes a raster to `-o` as `opts` says (stdout: the format's bytes, COG by default).
+pub fn write_raster_arg(r: &Raster, output: Option<&str>, opts: &WriteOptions) -> Result<(), CliError> {
     let out = Output::from_arg(output);
     match out.path() {
-        Some(p) => raster_io::write_raster(r, p, &WriteOptions::default()).map_err(raster_err),
+        Some(p) => raster_io::write_raster(r, p, opts).map_err(raster_err),
         None => {
-            let bytes = raster_io::gdal_io::raster_to_bytes(r, &RasterFormat::GeoTiff).map_err(raster_err)?;
+            let bytes = raster_io::gdal_io::raster_to_bytes(r, opts).map_err(raster_err)?;
             out.write_bytes(&bytes)
         }
     }
@@ -169,24 +243,79 @@ pub fn read_cloud(arg: &str, class: Option<u8>) -> Result<PointCloud, CliError> 
     }
 }
 
+/// The CRS the grid is in: the points' own (`--s-srs`, else the file's), reprojected into
+/// `--t-srs` when given. Invalid strings are usage errors, as in gdalsrsinfo.
+fn grid_crs(args: &Args, cloud: &mut PointCloud) -> Result<Option<Crs>, CliError> {
+    let usage = |e: raster_io::crs::CrsError| CliError::usage(e.to_string());
+    let source = match (&args.s_srs, &cloud.crs) {
+        (Some(s), _) => Some(Crs::parse(s).map_err(|e| CliError::usage(format!("--s-srs: {e}")))?),
+        (None, Some(wkt)) => Crs::from_wkt(wkt).ok(),
+        (None, None) => None,
+    };
+    let Some(t) = &args.t_srs else { return Ok(source) };
+    let target = Crs::parse(t).map_err(|e| CliError::usage(format!("--t-srs: {e}")))?;
+    let Some(source) = source else {
+        return Err(CliError::usage(format!("{} names no CRS: give the points' CRS with --s-srs to reproject them", args.input)));
+    };
+    raster_io::crs::reproject(&mut cloud.points, &source, &target).map_err(usage)?;
+    Ok(Some(target))
+}
+
+/// Refuses a cell size that is almost certainly metres on points in degrees: geographic
+/// coordinates (a geographic CRS, or none declared and every x in −180…360, y in −90…90), a
+/// cell of 1 or more, and a grid of fewer than 10 cells across that holds more points than
+/// cells (7000 lon/lat soundings at `--cell 25` made a 1×2 grid).
+/// docs/decisions.md#raster-outputs-by-driver
+fn check_cell_units(args: &Args, cloud: &PointCloud, crs: Option<&Crs>) -> Result<(), CliError> {
+    let Some((x0, y0, x1, y1)) = cloud.bounds_xy() else { return Ok(()) };
+    let declared = crs.map(|c| c.geographic);
+    let degrees = declared.unwrap_or(x0 >= -180.0 && x1 <= 360.0 && y0 >= -90.0 && y1 <= 90.0);
+    let across = ((x1 - x0).max(y1 - y0) / args.cell).floor() + 1.0;
+    let cells = (((x1 - x0) / args.cell).floor() + 1.0) * (((y1 - y0) / args.cell).floor() + 1.0);
+    if !(degrees && args.cell >= 1.0 && across < 10.0 && cloud.points.len() as f64 > cells) {
+        return Ok(());
+    }
+    let why = if declared == Some(true) { "are in a geographic CRS (degrees)" } else { "look like longitude/latitude degrees (no CRS declared)" };
+    Err(CliError::usage(format!(
+        "--cell {} on {}: the points {why}, x {x0}…{x1}, y {y0}…{y1}, so the grid would be {} cell(s) across; \
+         --cell is in the points' units: give it in degrees (≈ {:.6} for {} m at the equator), or grid in metres with \
+         --s-srs EPSG:4326 --t-srs <a projected CRS, e.g. a UTM zone>",
+        args.cell,
+        args.input,
+        across,
+        args.cell / 111_320.0,
+        args.cell
+    )))
+}
+
 pub fn run(args: Args, config: &Config) -> CmdResult {
     crate::config::check_report_target(args.report.as_deref(), args.output.as_deref())?;
     gdal_notices(config);
     if !(args.cell.is_finite() && args.cell > 0.0) {
         return Err(CliError::usage(format!("--cell {} must be a positive number", args.cell)));
     }
+    for (opt, v) in [("--s-srs", &args.s_srs), ("--t-srs", &args.t_srs)] {
+        if let Some(s) = v {
+            Crs::parse(s).map_err(|e| CliError::usage(format!("{opt}: {e}")))?;
+        }
+    }
+    let write_opts = args.raster_out.checked(args.output.as_deref(), None)?;
     if let Some(p) = Input::from_arg(&args.input).path() {
         if !p.exists() {
             return Err(CliError::unreadable(format!("{}: no such file", p.display())));
         }
     }
-    let cloud = read_cloud(&args.input, args.class)?;
+    let mut cloud = read_cloud(&args.input, args.class)?;
     config.notice(&format!(
         "read {} points from {}{}",
         cloud.points.len(),
         args.input,
         args.class.map(|c| format!(" (class {c})")).unwrap_or_default()
     ));
+    let crs = grid_crs(&args, &mut cloud)?;
+    if args.bounds.is_none() {
+        check_cell_units(&args, &cloud, crs.as_ref())?;
+    }
     let grid = match &args.bounds {
         Some(b) => GridSpec::from_edges(b[0], b[1], b[2], b[3], args.cell),
         None => GridSpec::covering(cloud.bounds_xy().expect("non-empty cloud"), args.cell),
@@ -196,7 +325,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         e @ ProcError::TooLarge { .. } => CliError::usage(format!("--cell {}: {e}", args.cell)),
         other => proc_err(&args.input, other),
     })?;
-    let crs = cloud.crs.clone();
+    let crs = crs.map(|c| c.wkt).or_else(|| cloud.crs.clone());
     let (raster, tin_stats) = match args.method {
         Method::Gauss | Method::GaussLiteral => {
             let kernel = if args.method == Method::Gauss {
@@ -224,7 +353,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     if with_value == 0 {
         return Err(CliError::findings(format!("{}: no cell of the grid received a value", args.input)));
     }
-    write_raster_arg(&raster, args.output.as_deref())?;
+    write_raster_arg(&raster, args.output.as_deref(), &write_opts)?;
     if let Some(path) = &args.report {
         let rep = RasterizeReport {
             input: args.input.clone(),

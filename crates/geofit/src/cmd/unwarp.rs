@@ -7,7 +7,7 @@ use clap::Args as ClapArgs;
 
 use raster_proc::warp::{field_of, unwarp_raster};
 
-use super::rasterize::{gdal_notices, proc_err, read_cloud, read_raster_arg, write_raster_arg};
+use super::rasterize::{gdal_notices, proc_err, read_cloud, read_raster_arg_typed, write_raster_arg, RasterOutArgs};
 use crate::config::{Config, Output};
 use crate::error::{CliError, CmdResult, Exit};
 
@@ -40,11 +40,18 @@ pub struct Args {
     /// With --points: map from the original frame into the warped one.
     #[arg(long, requires = "points")]
     pub forward: bool,
+    #[command(flatten)]
+    pub raster_out: RasterOutArgs,
 }
 
 pub fn run(args: Args, config: &Config) -> CmdResult {
     gdal_notices(config);
-    let (warped, name) = read_raster_arg(&args.input)?;
+    if args.points.is_none() {
+        args.raster_out.checked(args.output.as_deref(), Some(raster_io::SampleType::Float32))?;
+    } else if args.raster_out.of.is_some() || !args.raster_out.co.is_empty() || args.raster_out.ot.is_some() {
+        return Err(CliError::usage("--points writes XYZ text: -of, -co and --ot apply to raster output only"));
+    }
+    let (warped, name, sample_type) = read_raster_arg_typed(&args.input)?;
     let field = field_of(&warped).map_err(|e| proc_err(&name, e))?;
     if let Some(pts) = &args.points {
         if args.input == "-" && pts == "-" {
@@ -63,8 +70,9 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         config.notice(&format!("mapped {} points {}", cloud.points.len(), if args.forward { "into the warped frame" } else { "back to the original frame" }));
         return Ok(Exit::Ok);
     }
+    let write_opts = args.raster_out.checked(args.output.as_deref(), Some(sample_type))?;
     let out = unwarp_raster(&warped, &field).map_err(|e| proc_err(&name, e))?;
     config.notice(&format!("{} x {} cells, {} with a value", out.width, out.height, out.valid_count()));
-    write_raster_arg(&out, args.output.as_deref())?;
+    write_raster_arg(&out, args.output.as_deref(), &write_opts)?;
     Ok(Exit::Ok)
 }

@@ -11,7 +11,8 @@ use raster_proc::pca::Mass;
 use raster_proc::splat::SplatKernel;
 use raster_proc::warp::{warp_raster, WarpParams, WarpStats};
 
-use super::rasterize::{gdal_notices, proc_err, read_raster_arg, write_raster_arg};
+use super::rasterize::{gdal_notices, proc_err, read_raster_arg_typed, write_raster_arg, RasterOutArgs};
+use raster_io::RasterFormat;
 use crate::config::{write_json_report, Config};
 use crate::error::{CliError, CmdResult, Exit};
 
@@ -71,6 +72,8 @@ pub struct Args {
     /// Write a JSON report to this path (`-` = stdout).
     #[arg(long)]
     pub report: Option<String>,
+    #[command(flatten)]
+    pub raster_out: RasterOutArgs,
 }
 
 #[derive(Serialize)]
@@ -92,15 +95,25 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
             }
         }
     }
-    if let Some(p) = args.output.as_deref() {
-        let ext = std::path::Path::new(p).extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
-        // Only GeoTIFF keeps a long metadata string intact (netCDF rewrites it as a number
-        // list, ESRI ASCII grids have no metadata).
-        if !matches!(ext.as_deref(), Some("tif" | "tiff")) {
-            return Err(CliError::usage(format!("{p}: the warp field needs a GeoTIFF output (.tif)")));
+    // Only GeoTIFF keeps a long metadata string intact (netCDF rewrites it as a number list,
+    // ESRI ASCII grids have no metadata).
+    let needs_tiff = |opts: &raster_io::WriteOptions| {
+        let tiff = match &opts.format {
+            Some(f) => matches!(f, RasterFormat::Cog | RasterFormat::GeoTiff),
+            None => args.output.as_deref().map_or(true, |p| {
+                let ext = std::path::Path::new(p).extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
+                matches!(ext.as_deref(), Some("tif" | "tiff")) || p == "-"
+            }),
+        };
+        if tiff {
+            Ok(())
+        } else {
+            Err(CliError::usage(format!("{}: the warp field needs a GeoTIFF output (.tif, -of COG or -of GTiff)", args.output.as_deref().unwrap_or("-"))))
         }
-    }
-    let (raster, name) = read_raster_arg(&args.input)?;
+    };
+    needs_tiff(&args.raster_out.checked(args.output.as_deref(), Some(raster_io::SampleType::Float32))?)?;
+    let (raster, name, sample_type) = read_raster_arg_typed(&args.input)?;
+    let write_opts = args.raster_out.checked(args.output.as_deref(), Some(sample_type))?;
     let params = WarpParams {
         rotate: !args.no_rotate,
         mass: match args.mass {
@@ -124,7 +137,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         "target {} x {} cells: {} splatted, {} filled by dilation ({} passes)",
         stats.target_width, stats.target_height, stats.cells_splatted, stats.cells_filled, stats.dilation_passes
     ));
-    write_raster_arg(&warped, args.output.as_deref())?;
+    write_raster_arg(&warped, args.output.as_deref(), &write_opts)?;
     if let Some(path) = &args.report {
         write_json_report(path, &Report { input: &name, stats })?;
     }
