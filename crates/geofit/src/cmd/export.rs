@@ -393,6 +393,13 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         return Err(CliError::usage("--gltf-bin needs a .gltf output file (-o OUT.gltf)"));
     }
     let fixed_origin = parse_origin(&args.origin)?;
+    // A CRS string GDAL does not know is refused as gdalsrsinfo refuses it (PROJ alone read
+    // `--t-srs foo` as a Bessel longlat).
+    for (opt, crs) in [("--t-srs", args.t_srs.as_deref()), ("--s-srs", args.s_srs.as_deref().map(proj_crs).as_deref())] {
+        if let Some(c) = crs {
+            raster_io::crs::Crs::parse(c).map_err(|e| CliError::usage(format!("{opt}: {e}")))?;
+        }
+    }
 
     let src = input.read_all()?;
     if tspline::format::is_tmesh_document(&src) {
