@@ -445,17 +445,16 @@ const VIRTUAL_DRIVERS: [&str; 2] = ["VRT", "MEM"];
 /// stdout) can write through GDAL's in-memory files. Returns the resolved format. Every
 /// refusal is a [`RasterError::Format`] naming the driver and why.
 pub fn check_write(path: Option<&Path>, opts: &WriteOptions) -> Result<RasterFormat, RasterError> {
-    let ferr = |m: String| RasterError::Format(m);
-    if let Some(p) = path {
-        if is_gdal_virtual_path(p) {
-            return Err(ferr(format!("{}: writing to a GDAL virtual path is not supported; write a file and compress it afterwards", p.display())));
-        }
+    let target = path.map_or_else(|| "stdout".to_string(), |p| p.display().to_string());
+    let ferr = |m: String| RasterError::Format(format!("-o {target}: {m}"));
+    if path.is_some_and(is_gdal_virtual_path) {
+        return Err(ferr("writing to a GDAL virtual path is not supported; write a file and compress it afterwards".into()));
     }
     let format = match (&opts.format, path) {
         (Some(f), _) => f.clone(),
         (None, None) => RasterFormat::Cog,
         (None, Some(p)) => RasterFormat::from_path(p).ok_or_else(|| {
-            ferr(format!("{}: GDAL knows no raster format for this extension; use .tif, .asc or .nc, or name a driver with -of", p.display()))
+            ferr("GDAL knows no raster format for this extension; use .tif, .asc or .nc, or name a driver with -of".into())
         })?,
     };
     let name = format.driver_name().to_string();
