@@ -51,7 +51,7 @@ pub struct Args {
     /// Output raster (.tif, .asc, .nc, ...; `-` or missing = GeoTIFF on stdout).
     #[arg(short, long)]
     pub output: Option<String>,
-    /// Cell size in the points' units.
+    /// Cell size in the points' units (degrees for lon/lat points; --t-srs grids in metres).
     #[arg(long)]
     pub cell: f64,
     #[arg(long, value_enum, default_value_t = Method::Gauss)]
@@ -111,15 +111,16 @@ pub enum OutType {
 #[derive(ClapArgs, Debug, Clone, Default)]
 #[command(next_help_heading = "Raster output (GDAL)")]
 pub struct RasterOutArgs {
-    /// Output format as a GDAL driver name (COG, GTiff, AAIGrid, netCDF, GS7BG, ...); default
-    /// from the -o extension, and a .tif (or stdout) is a Cloud-Optimised GeoTIFF (COG).
+    /// Output format (`-of` as in gdal_translate): a GDAL driver name (COG, GTiff, AAIGrid,
+    /// netCDF, GS7BG, ...); default from the -o extension, and a .tif (or stdout) is a
+    /// Cloud-Optimised GeoTIFF (COG).
     #[arg(long = "of", value_name = "FORMAT")]
     pub of: Option<String>,
-    /// GDAL creation option KEY=VALUE (repeatable); replaces geofit's default for that key
+    /// GDAL creation option KEY=VALUE (`-co`, repeatable); replaces geofit's default for that key
     /// (COG/GTiff: COMPRESS=DEFLATE with the floating-point predictor; AAIGrid: 17 digits).
     #[arg(long = "co", value_name = "KEY=VALUE")]
     pub co: Vec<String>,
-    /// Band type of the output (default: the input raster's float type — Float32 for Float32
+    /// Band type of the output (`-ot`; default: the input raster's float type — Float32 for Float32
     /// and 8/16-bit input, else Float64 — and Float64 for points and T-meshes).
     #[arg(long = "ot", value_enum, ignore_case = true)]
     pub ot: Option<OutType>,
