@@ -360,9 +360,16 @@ fn crs_strings_and_cell_units() {
     }
     let Some(ship) = common::fixture("terrain/gmt_ship_03.txt") else { return };
     // lon/lat degrees (no CRS declared) at a metre-sized cell
-    fails(&["rasterize", s(&ship), "--cell", "25", "-o", o], 2, &["--cell 25", "degrees", "--t-srs"]);
+    fails(&["rasterize", s(&ship), "--cell", "25", "-o", o], 2, &["--cell 25", "degrees", "1×2", "--t-srs", "declare their CRS with --s-srs"]);
     fails(&["rasterize", s(&ship), "--cell", "25", "-o", o, "--s-srs", "EPSG:4326"], 2, &["geographic CRS"]);
     assert!(!out.exists());
+    // local coordinates in the same numeric range are not taken for degrees: GMT's Table 5.11
+    // (52 points, 0…6.3 units) at --cell 1 is a 7×7 grid
+    if let Some(table) = common::fixture("terrain/gmt_Table_5_11.txt") {
+        ok(&["-q", "rasterize", s(&table), "--cell", "1", "-o", o]);
+    }
+    // a projected --s-srs says they are not degrees
+    ok(&["-q", "rasterize", s(&ship), "--cell", "25", "-o", o, "--s-srs", "EPSG:32725"]);
     // in degrees it is fine; in metres through --t-srs (UTM 25S covers 36°–30° W)
     ok(&["-q", "rasterize", s(&ship), "--cell", "0.05", "-o", o]);
     ok(&["-q", "rasterize", s(&ship), "--cell", "5000", "-o", o, "--s-srs", "EPSG:4326", "--t-srs", "EPSG:32725"]);

@@ -264,28 +264,31 @@ fn grid_crs(args: &Args, cloud: &mut PointCloud) -> Result<Option<Crs>, CliError
 
 /// Refuses a cell size that is almost certainly metres on points in degrees: geographic
 /// coordinates (a geographic CRS, or none declared and every x in −180…360, y in −90…90), a
-/// cell of 1 or more, and a grid of fewer than 10 cells across that holds more points than
-/// cells (7000 lon/lat soundings at `--cell 25` made a 1×2 grid).
+/// cell of 1 or more, and a grid of fewer than 10 cells across with 10 or more points per cell
+/// (7000 lon/lat soundings at `--cell 25` made a 1×2 grid). A projected `--s-srs` lifts it.
 /// docs/decisions.md#raster-outputs-by-driver
-fn check_cell_units(args: &Args, cloud: &PointCloud, crs: Option<&Crs>) -> Result<(), CliError> {
+fn check_cell_units(args: &Args, cloud: &PointCloud, crs: Option<&Crs>, grid: &GridSpec) -> Result<(), CliError> {
     let Some((x0, y0, x1, y1)) = cloud.bounds_xy() else { return Ok(()) };
     let declared = crs.map(|c| c.geographic);
     let degrees = declared.unwrap_or(x0 >= -180.0 && x1 <= 360.0 && y0 >= -90.0 && y1 <= 90.0);
-    let across = ((x1 - x0).max(y1 - y0) / args.cell).floor() + 1.0;
-    let cells = (((x1 - x0) / args.cell).floor() + 1.0) * (((y1 - y0) / args.cell).floor() + 1.0);
-    if !(degrees && args.cell >= 1.0 && across < 10.0 && cloud.points.len() as f64 > cells) {
+    let (w, h) = (grid.width as f64, grid.height as f64);
+    let points = cloud.points.len();
+    if !(degrees && args.cell >= 1.0 && w.max(h) < 10.0 && points as f64 >= 10.0 * w * h) {
         return Ok(());
     }
-    let why = if declared == Some(true) { "are in a geographic CRS (degrees)" } else { "look like longitude/latitude degrees (no CRS declared)" };
+    let what = if declared == Some(true) {
+        "the points are in a geographic CRS (degrees)"
+    } else {
+        "the points declare no CRS and lie within longitude/latitude bounds"
+    };
     Err(CliError::usage(format!(
-        "--cell {} on {}: the points {why}, x {x0}…{x1}, y {y0}…{y1}, so the grid would be {} cell(s) across; \
-         --cell is in the points' units: give it in degrees (≈ {:.6} for {} m at the equator), or grid in metres with \
-         --s-srs EPSG:4326 --t-srs <a projected CRS, e.g. a UTM zone>",
-        args.cell,
-        args.input,
-        across,
-        args.cell / 111_320.0,
-        args.cell
+        "--cell {c} on {input}: {what} (x {x0}…{x1}, y {y0}…{y1}), and a cell of {c} makes a grid of only {w}×{h} \
+         cells for {points} points. --cell is in the points' units: in degrees, ≈ {deg:.6} is {c} m at the equator; \
+         to grid in metres, reproject with --s-srs EPSG:4326 --t-srs <a projected CRS, e.g. a UTM zone>{hint}",
+        c = args.cell,
+        input = args.input,
+        deg = args.cell / 111_320.0,
+        hint = if declared.is_none() { "; if they are not degrees, declare their CRS with --s-srs" } else { "" },
     )))
 }
 
@@ -314,9 +317,6 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         args.class.map(|c| format!(" (class {c})")).unwrap_or_default()
     ));
     let crs = grid_crs(&args, &mut cloud)?;
-    if args.bounds.is_none() {
-        check_cell_units(&args, &cloud, crs.as_ref())?;
-    }
     let grid = match &args.bounds {
         Some(b) => GridSpec::from_edges(b[0], b[1], b[2], b[3], args.cell),
         None => GridSpec::covering(cloud.bounds_xy().expect("non-empty cloud"), args.cell),
@@ -326,6 +326,9 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         e @ ProcError::TooLarge { .. } => CliError::usage(format!("--cell {}: {e}", args.cell)),
         other => proc_err(&args.input, other),
     })?;
+    if args.bounds.is_none() {
+        check_cell_units(&args, &cloud, crs.as_ref(), &grid)?;
+    }
     let crs = crs.map(|c| c.wkt).or_else(|| cloud.crs.clone());
     let (raster, tin_stats) = match args.method {
         Method::Gauss | Method::GaussLiteral => {
