@@ -328,6 +328,8 @@ fn gdal_virtual_paths_are_read() {
     }
     let w = d.join("w.tif");
     ok(&["-q", "warp", &vgz, "-o", s(&w), "--spacing", "3"]);
+    let info: Value = serde_json::from_slice(&ok(&["info", &vgz, "--json"]).stdout).unwrap();
+    assert_eq!((info["kind"].as_str(), info["width"].as_u64(), info["valid_count"].as_u64()), (Some("raster"), Some(10), Some(100)), "{info}");
     ok(&["-q", "fit", &vzip, "--max-error", "100", "--device", "cpu", "-o", s(&d.join("m.tmesh"))]);
     // a virtual path to nothing: exit 3 with GDAL's reason, not a Rust-side guess
     fails(&["diff", &format!("/vsigzip/{}/missing.gz", s(d)), s(&r)], 3, &["missing.gz"]);

@@ -104,6 +104,10 @@ enum Kind {
 
 /// Point extensions come first: GDAL has raster drivers for some of them (`.xyz` grids).
 fn kind_by_extension(p: &std::path::Path) -> Option<Kind> {
+    // `/vsigzip/x.tif.gz`, `/vsizip/a.zip/x.tif`: only GDAL opens these
+    if raster_io::gdal_io::is_gdal_virtual_path(p) {
+        return Some(Kind::Raster);
+    }
     let ext = p.extension()?.to_string_lossy().to_ascii_lowercase();
     match ext.as_str() {
         "gml" | "citygml" | "xml" => Some(Kind::CityGml),
