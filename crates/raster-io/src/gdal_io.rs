@@ -375,6 +375,24 @@ pub fn read_raster_band_typed(path: &Path, band: usize) -> Result<(Raster, Sampl
     Ok((Raster { width, height, geotransform, crs, data, valid, nodata, metadata }, SampleType::holding(band_type)))
 }
 
+/// The uncertainty layer that goes with the elevation in band 1 (issue 19): the band whose
+/// description is `uncertainty` (GDAL's BAG driver names band 2 so), else band 2 of a file
+/// with two or more bands (e.g. a GeoTIFF of elevation + uncertainty). Read as any band (nodata,
+/// masks, scale/offset as in [`read_raster_band`]); the caller checks it matches band 1's grid.
+pub fn read_uncertainty(path: &Path) -> Result<(Raster, usize), RasterError> {
+    let content_err = |message: String| RasterError::Content { path: path.to_path_buf(), message };
+    let ds = Dataset::open(path).map_err(|e| RasterError::Open { path: path.to_path_buf(), message: gdal_msg(&e) })?;
+    let count = ds.raster_count();
+    let named = (1..=count).find(|&b| ds.rasterband(b).is_ok_and(|rb| rb.description().is_ok_and(|d| d.trim().eq_ignore_ascii_case("uncertainty"))));
+    let band = match named {
+        Some(b) => b,
+        None if count >= 2 => 2,
+        None => return Err(content_err(format!("no uncertainty layer: {count} band(s), none named \"uncertainty\" (expected as band 2)"))),
+    };
+    drop(ds);
+    Ok((read_raster_band(path, band)?, band))
+}
+
 /// A finite nodata marker that no valid cell uses: the raster's own marker when possible,
 /// else the first free one of the usual conventions.
 pub fn choose_nodata(r: &Raster) -> f64 {
@@ -661,6 +679,30 @@ mod tests {
     fn bytes_for_stdout() {
         let b = raster_to_bytes(&sample(), &WriteOptions::default()).unwrap();
         assert!(b.starts_with(b"II*\0") || b.starts_with(b"MM\0*"));
+    }
+
+    /// Band 2 of a two-band GeoTIFF is its uncertainty layer; a one-band file has none.
+    #[test]
+    fn uncertainty_is_band_two_or_the_named_band() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("two.tif");
+        {
+            let drv = DriverManager::get_driver_by_name("GTiff").unwrap();
+            let mut ds = drv.create_with_band_type::<f32, _>(&p, 3, 2, 2).unwrap();
+            ds.set_geo_transform(&[0.0, 1.0, 0.0, 2.0, 0.0, -1.0]).unwrap();
+            for (b, v) in [(1, 10.0f32), (2, 0.25f32)] {
+                let mut band = ds.rasterband(b).unwrap();
+                let mut buf = gdal::raster::Buffer::new((3, 2), vec![v; 6]);
+                band.write((0, 0), (3, 2), &mut buf).unwrap();
+            }
+        }
+        let (u, band) = read_uncertainty(&p).unwrap();
+        assert_eq!((band, u.width, u.height), (2, 3, 2));
+        assert!(u.data.iter().all(|&v| v == 0.25));
+        let one = dir.path().join("one.tif");
+        write_raster(&sample(), &one, &WriteOptions::default()).unwrap();
+        let e = read_uncertainty(&one).unwrap_err().to_string();
+        assert!(e.contains("no uncertainty layer") && e.contains("one.tif"), "{e}");
     }
 
     #[test]

@@ -26,6 +26,7 @@ use std::time::Instant;
 use crate::eval::PbSpline;
 use crate::fit::{self, Backend, ErrorStats, FitOptions, IterationStats, Samples, Scattered};
 use crate::mesh::{CellId, Rect, TMesh};
+use crate::tolerance::Tolerance;
 use crate::TsplineError;
 
 /// Rounds of merging at most (each round can merge one level of the quadtree everywhere).
@@ -99,8 +100,10 @@ pub(crate) fn coarsen(
     errs: &mut [f64],
     first_round: usize,
     progress: &mut dyn FnMut(&IterationStats),
+    tol: &Tolerance,
 ) -> Result<Coarsened, TsplineError> {
-    let tol = opts.max_error;
+    // the bilinear pre-filter is a heuristic: the smallest tolerance (the refit's check decides)
+    let proxy_tol = opts.max_error;
     let reach = (opts.degree.k() + 1) as f64;
     let mut best = mesh;
     let mut best_pb = pb;
@@ -116,7 +119,7 @@ pub(crate) fn coarsen(
             let all = candidates(&best, &failed);
             // a looser filter tries more merges but keeps fewer (Kilauea 5 m, degree 3: 31418
             // control points at 1·E, 32706 at 2·E, 33107 unfiltered, against 33132 without the pass)
-            let keep: Vec<bool> = all.par_iter().map(|&c| bilinear_proxy(&best_pb, samples, best.cells[c as usize].rect) <= tol).collect();
+            let keep: Vec<bool> = all.par_iter().map(|&c| bilinear_proxy(&best_pb, samples, best.cells[c as usize].rect) <= proxy_tol).collect();
             let (ok, no): (Vec<_>, Vec<_>) = all.into_iter().zip(keep).partition(|(_, k)| *k);
             failed.extend(no.into_iter().map(|(c, _)| c));
             ok.into_iter().map(|(c, _)| c).collect()
@@ -250,7 +253,7 @@ fn refit(
     backend: &Backend,
     errs: &mut [f64],
     undo: &mut Undo,
-    tol: f64,
+    tol: &Tolerance,
 ) -> Result<(PbSpline, ErrorStats, Vec<CellId>), TsplineError> {
     let mut pb = match backend {
         Backend::Cpu => fit::build_pb_incremental(m, old, changed),

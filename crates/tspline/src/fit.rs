@@ -59,6 +59,7 @@ use rayon::prelude::*;
 use crate::eval::{GridSpec, PbSpline};
 use crate::mesh::{CellId, Degree, TMesh};
 use crate::ocl_eval::OclEvaluator;
+use crate::tolerance::{CellTolerance, Tolerance};
 use crate::TsplineError;
 
 /// A raster in parameter layout: value (i, j) at (s = i, t = j), row-major from the bottom row,
@@ -145,11 +146,15 @@ pub struct FitOptions {
     /// Least squares on a raster: after the tolerance is reached, merge back the splits it did
     /// not need (`crate::coarsen`).
     pub coarsen: bool,
+    /// A tolerance per raster cell (from the survey's uncertainty) instead of `max_error`
+    /// everywhere; `max_error` should then be the smallest of them (it scales the dragging
+    /// threshold, the margin and the coarsening pre-filter). Rasters only.
+    pub cell_tolerance: Option<CellTolerance>,
 }
 
 impl FitOptions {
     pub fn new(degree: Degree, max_error: f64) -> FitOptions {
-        FitOptions { degree, max_error, max_points: None, max_iterations: 100, method: Method::Lsq, overhang: 0.25, initial_cells: 4, drag_steps: 40, local_updates: true, opencl_assembly: false, coarsen: true }
+        FitOptions { degree, max_error, max_points: None, max_iterations: 100, method: Method::Lsq, overhang: 0.25, initial_cells: 4, drag_steps: 40, local_updates: true, opencl_assembly: false, coarsen: true, cell_tolerance: None }
     }
 }
 
@@ -903,12 +908,12 @@ pub(crate) fn eval_errors_region(pb: &PbSpline, samples: &Samples, region: &Regi
 /// the thread count) and the leaf cells whose closed box holds a cell over the tolerance.
 /// The median is taken on an f32 copy (exact to f32 rounding); the maximum and the tolerance
 /// test use the f64 errors.
-pub fn summarize(mesh: &TMesh, pb: &PbSpline, w: usize, errs: &[f64], tol: f64) -> (ErrorStats, Vec<CellId>) {
+pub fn summarize(mesh: &TMesh, pb: &PbSpline, w: usize, errs: &[f64], tol: &Tolerance) -> (ErrorStats, Vec<CellId>) {
     summarize_at(mesh, pb, &|q| ((q % w) as f64, (q / w) as f64), errs, tol)
 }
 
 /// [`summarize`] with the parameter position of error `q` given by `pos`.
-pub(crate) fn summarize_at(mesh: &TMesh, pb: &PbSpline, pos: &(dyn Fn(usize) -> (f64, f64) + Sync), errs: &[f64], tol: f64) -> (ErrorStats, Vec<CellId>) {
+pub(crate) fn summarize_at(mesh: &TMesh, pb: &PbSpline, pos: &(dyn Fn(usize) -> (f64, f64) + Sync), errs: &[f64], tol: &Tolerance) -> (ErrorStats, Vec<CellId>) {
     // Leaves whose closed box holds (s, t): through the PB-spline's bucket grid when its cell
     // list is the mesh's leaves in id order (checked per hit), else through the R-tree.
     let leaf_ids: Vec<CellId> = mesh.leaves().collect();
@@ -961,8 +966,9 @@ pub(crate) fn summarize_at(mesh: &TMesh, pb: &PbSpline, pos: &(dyn Fn(usize) -> 
                 if e.is_nan() {
                     continue;
                 }
-                acc.push(e, tol);
-                if e <= tol {
+                let tq = tol.at(q0 + k);
+                acc.push(e, tq);
+                if e <= tq {
                     continue;
                 }
                 let (s, t) = pos(q0 + k);
@@ -1210,7 +1216,7 @@ pub(crate) fn check(
     region: Option<&Region>,
     backend: &Backend,
     errs: &mut [f64],
-    tol: f64,
+    tol: &Tolerance,
 ) -> Result<(ErrorStats, Vec<CellId>), TsplineError> {
     if let Some(p) = pts {
         let z = match backend {
@@ -1225,6 +1231,89 @@ pub(crate) fn check(
         None => eval_errors(pb, samples, backend, errs)?,
     }
     Ok(summarize(mesh, pb, samples.width, errs, tol))
+}
+
+/// The loop's tolerance (T − δ) and the final acceptance check's (T − δ/2), δ the margin of
+/// `crate::tolerance` (docs/decisions.md#the-guarantee-holds-for-what-eval-computes): the loop
+/// and its coarsening keep δ free, the check of the written mesh may use half of it for the
+/// rounding between the loop's and `eval`'s evaluation paths, and the other half stays for
+/// the paths not checked here (the OpenCL kernels).
+fn tolerances(samples: &Samples, pts: Option<&Scattered>, opts: &FitOptions) -> Result<(Tolerance, Tolerance), TsplineError> {
+    let data = pts.map_or(&samples.z, |p| &p.z);
+    let zscale = data.iter().filter(|v| v.is_finite()).fold(0.0f64, |m, v| m.max(v.abs()));
+    let (cells, min_tol) = match &opts.cell_tolerance {
+        None => (None, opts.max_error),
+        Some(c) => {
+            if pts.is_some() {
+                return Err(TsplineError::Fit("a per-cell tolerance applies to raster fits, not to scattered points (--indirect)".into()));
+            }
+            if c.uncertainty.len() != samples.z.len() {
+                return Err(TsplineError::Fit(format!("{} per-cell tolerances for {} cells", c.uncertainty.len(), samples.z.len())));
+            }
+            let min = c.min_over(|q| !samples.z[q].is_nan()).unwrap_or(opts.max_error);
+            if !(min > 0.0 && min.is_finite()) {
+                return Err(TsplineError::Fit(format!("the per-cell tolerance must be positive at every valid cell, got {min}")));
+            }
+            (Some(c.clone()), min)
+        }
+    };
+    let delta = crate::tolerance::margin(zscale, min_tol);
+    let t = Tolerance::new(opts.max_error, cells, delta);
+    let fin = t.with_margin(0.5 * delta);
+    Ok((t, fin))
+}
+
+/// The mesh as the output file holds it: written with [`crate::format::write`] and read back
+/// (compacted numbering, text round trip). What `geofit eval` reads.
+pub fn as_written(mesh: &TMesh) -> Result<TMesh, TsplineError> {
+    let file = crate::format::TMeshFile { mesh: mesh.clone(), georef: crate::format::Georef::identity(), mask: None, warp: None };
+    let mut bytes = Vec::new();
+    crate::format::write(&file, &mut bytes)?;
+    Ok(crate::format::read(&bytes)?.mesh)
+}
+
+/// Heights of the surface of `pb` on the raster rows j0..j1 exactly as [`PbSpline::eval_z`]
+/// computes them for the whole grid `w`×`h` at once (`geofit eval` on the fitted grid): the
+/// same element-extraction-or-reference choice (made for `w·h` points, not per block), the same
+/// per-point arithmetic (an element owns its points half-open, so the row order does not
+/// matter). `ex`: the extraction when that choice takes it.
+fn eval_rows_as_eval(pb: &PbSpline, ex: Option<&crate::extraction::Extraction>, w: usize, j0: usize, j1: usize) -> Vec<f64> {
+    let g = GridSpec { s0: 0.0, t0: j0 as f64, ds: 1.0, dt: 1.0, ns: w, nt: j1 - j0 };
+    match ex {
+        Some(ex) => ex.eval_grid(pb, &g, false),
+        None => (0..w * (j1 - j0)).map(|k| pb.point((k % w) as f64, (j0 + k / w) as f64)[2]).collect(),
+    }
+}
+
+/// The acceptance check: |Δz| of the mesh as written ([`as_written`]), evaluated as `geofit
+/// eval` does (raster: [`eval_rows_as_eval`] over every cell; scattered data: `eval_z` at the
+/// points), into `errs`; statistics and the leaves (of `mesh`, through its `pb`) over `tol`.
+fn check_written(
+    mesh: &TMesh,
+    pb: &PbSpline,
+    samples: &Samples,
+    pts: Option<&Scattered>,
+    errs: &mut [f64],
+    tol: &Tolerance,
+) -> Result<(ErrorStats, Vec<CellId>), TsplineError> {
+    let written = PbSpline::build(&as_written(mesh)?);
+    let err_of = |zk: f64, dk: f64| if dk.is_nan() { f64::NAN } else if zk.is_nan() { f64::INFINITY } else { (zk - dk).abs() };
+    if let Some(p) = pts {
+        let z = written.eval_z(&p.st, true);
+        errs.par_iter_mut().zip(&z).zip(&p.z).for_each(|((e, zk), dk)| *e = err_of(*zk, *dk));
+        return Ok(summarize_at(mesh, pb, &|q| (p.st[q][0], p.st[q][1]), errs, tol));
+    }
+    let (w, h) = (samples.width, samples.height);
+    let ex = written.use_extraction(w * h).then(|| crate::extraction::Extraction::new(&written, true));
+    let rows = (PASS_BLOCK / w.max(1)).max(1);
+    errs.par_chunks_mut(rows * w).enumerate().for_each(|(b, out)| {
+        let j0 = b * rows;
+        let z = eval_rows_as_eval(&written, ex.as_ref(), w, j0, j0 + out.len() / w);
+        for ((e, zk), dk) in out.iter_mut().zip(z).zip(&samples.z[j0 * w..]) {
+            *e = err_of(zk, *dk);
+        }
+    });
+    Ok(summarize(mesh, pb, w, errs, tol))
 }
 
 fn fit_impl(
@@ -1247,6 +1336,10 @@ fn fit_impl(
     if let Some(p) = pts {
         check_value_range(&p.z)?;
     }
+    let (tol, tol_final) = tolerances(samples, pts, opts)?;
+    // a final check that failed (rounding beyond the margin: not seen) turns coarsening off, so
+    // that refinement converges instead of merging the same cells back
+    let mut may_coarsen = opts.coarsen && opts.method == Method::Lsq;
     let mut mesh = initial_mesh(samples, opts);
     let mut iterations = Vec::new();
     let mut refined = 0usize;
@@ -1281,10 +1374,10 @@ fn fit_impl(
         set_z(&mut mesh, &mut pb, &z);
         let t_opt = t0.elapsed().as_secs_f64();
         let region = local.as_ref().map(|(_, r)| r);
-        let (mut err, mut over_leaves) = check(&mesh, &pb, samples, pts, region, backend, &mut errs, opts.max_error)?;
+        let (mut err, mut over_leaves) = check(&mesh, &pb, samples, pts, region, backend, &mut errs, &tol)?;
         if err.over_tolerance == 0 && region.is_some() {
             // the tolerance is declared only on a fresh check of every cell
-            (err, over_leaves) = check(&mesh, &pb, samples, pts, None, backend, &mut errs, opts.max_error)?;
+            (err, over_leaves) = check(&mesh, &pb, samples, pts, None, backend, &mut errs, &tol)?;
         }
         let t_check = t0.elapsed().as_secs_f64();
         let st = IterationStats {
@@ -1302,28 +1395,38 @@ fn fit_impl(
         progress(&st);
         iterations.push(st);
         if err.over_tolerance == 0 {
-            if opts.coarsen && opts.method == Method::Lsq {
+            if may_coarsen {
                 // rasters: the pre-coarsening mesh is the fallback of the fresh check below
                 let before = pts.is_none().then(|| mesh.clone());
-                let c = crate::coarsen::coarsen(mesh, pb, samples, pts, opts, backend, &mut errs, it + 1, progress)?;
+                let c = crate::coarsen::coarsen(mesh, pb, samples, pts, opts, backend, &mut errs, it + 1, progress, &tol)?;
                 mesh = c.mesh;
+                pb = c.pb;
                 // the tolerance is declared only on a fresh check of every cell (scattered data:
                 // every round coarsen::refit kept was already checked at every point)
-                let mut fresh = None;
                 if let (Some(before), false) = (before, c.rounds.is_empty()) {
-                    let (f, _) = check(&mesh, &c.pb, samples, None, None, backend, &mut errs, opts.max_error)?;
+                    let (f, _) = check(&mesh, &pb, samples, None, None, backend, &mut errs, &tol)?;
                     if f.over_tolerance > 0 {
                         // cannot happen when the checks above are sound; keep the guarantee anyway
-                        return Ok(FitResult { mesh: before, iterations, stop: StopReason::ToleranceReached });
+                        mesh = before;
+                        pb = build_pb(&mesh, backend)?;
+                    } else {
+                        iterations.extend(c.rounds);
                     }
-                    fresh = Some(f);
-                }
-                iterations.extend(c.rounds);
-                if let (Some(fresh), Some(last)) = (fresh, iterations.last_mut()) {
-                    last.error = fresh;
+                } else {
+                    iterations.extend(c.rounds);
                 }
             }
-            return Ok(FitResult { mesh, iterations, stop: StopReason::ToleranceReached });
+            // The acceptance: the mesh as written, evaluated as `geofit eval` evaluates it.
+            let (fin, over) = check_written(&mesh, &pb, samples, pts, &mut errs, &tol_final)?;
+            if fin.over_tolerance == 0 {
+                if let Some(last) = iterations.last_mut() {
+                    last.error = fin;
+                }
+                return Ok(FitResult { mesh, iterations, stop: StopReason::ToleranceReached });
+            }
+            // beyond the margin: refine where the written mesh misses, as for any miss
+            may_coarsen = false;
+            (err, over_leaves) = (fin, over);
         }
         if it >= opts.max_iterations {
             return Ok(FitResult { mesh, iterations, stop: StopReason::MaxIterations });
@@ -1405,6 +1508,37 @@ mod tests {
                 for p in &truth.points {
                     let id = r.mesh.point_id_at(p.s, p.t).expect("truth point in the fitted mesh");
                     assert!((r.mesh.points[id as usize].z - p.z).abs() < 1e-9);
+                }
+            }
+        }
+    }
+
+    /// The acceptance check evaluates the written mesh bitwise as `PbSpline::eval_z` over the
+    /// whole grid in `geofit eval`'s north-up order (extraction path and, on a grid too sparse
+    /// for it, the reference path); the fitted surface read back holds E at every cell.
+    #[test]
+    fn final_check_evaluates_as_eval_does() {
+        let (w, h) = (70, 50);
+        let z: Vec<f64> = (0..w * h).map(|q| ((q % w) as f64 * 0.21).sin() * 7.0 + ((q / w) as f64 * 0.13).cos() * 4.0).collect();
+        let s = Samples { width: w, height: h, z };
+        for (degree, method) in [(Degree::Cubic, Method::Lsq), (Degree::Linear, Method::Drag)] {
+            let mut o = FitOptions::new(degree, 0.5);
+            o.method = method;
+            let r = fit(&s, &o, &Backend::Cpu, &mut |_| {}).unwrap();
+            assert_eq!(r.stop, StopReason::ToleranceReached);
+            let written = PbSpline::build(&as_written(&r.mesh).unwrap());
+            for (gw, gh) in [(w, h), (3, 2)] {
+                let st: Vec<[f64; 2]> = (0..gh).rev().flat_map(|j| (0..gw).map(move |i| [i as f64, j as f64])).collect();
+                let z_eval = written.eval_z(&st, true);
+                let ex = written.use_extraction(gw * gh).then(|| crate::extraction::Extraction::new(&written, true));
+                assert_eq!(ex.is_some(), (gw, gh) == (w, h), "both paths covered");
+                let z_rows = eval_rows_as_eval(&written, ex.as_ref(), gw, 0, gh);
+                for (k, p) in st.iter().enumerate() {
+                    assert_eq!(z_eval[k].to_bits(), z_rows[p[1] as usize * gw + p[0] as usize].to_bits(), "{degree:?} at {p:?}");
+                }
+                if (gw, gh) == (w, h) {
+                    let max = st.iter().enumerate().map(|(k, p)| (z_eval[k] - s.get(p[0] as usize, p[1] as usize)).abs()).fold(0.0, f64::max);
+                    assert!(max <= 0.5, "{degree:?} {method:?}: {max}");
                 }
             }
         }

@@ -7,7 +7,8 @@
 //! - [`rtree_pages`]: the thesis' Nearest-X int8 page encoding (Tables 5.2, 6.3).
 //! - [`format`]: the T-mesh file format (`xsd/tmesh.xsd`).
 //! - [`fit`]: adaptive approximation (Alg. 3) with sparse least squares or dragging;
-//!   `coarsen`: merging back the splits the tolerance did not need.
+//!   `coarsen`: merging back the splits the tolerance did not need; [`tolerance`]: what the
+//!   fit accepts per cell; [`blunders`]: spikes found before a fit.
 //!
 //! Where the spec's ambiguities are decided (doc comments there): A1, A2, A15 in [`eval`];
 //! A7–A12, A17, A19 in [`fit`]; A13, A14, A22 in [`mesh`]; A16 (formats: GDAL rasters in, the
@@ -20,6 +21,7 @@
 //! counted from the bottom row, so raster cell centres sit at integer (s, t) and the sample
 //! spacing is 1. The affine map to world coordinates is stored with the mesh ([`format::Georef`]).
 
+pub mod blunders;
 pub mod eval;
 pub mod extraction;
 pub mod fit;
@@ -31,6 +33,7 @@ mod ocl_device;
 pub mod ocl_eval;
 pub mod ocl_fit;
 pub mod rtree_pages;
+pub mod tolerance;
 #[cfg(test)]
 mod testing;
 

@@ -69,9 +69,26 @@ pub struct Args {
     /// Output T-mesh file (`-` or none = stdout).
     #[arg(short, long)]
     pub output: Option<String>,
-    /// Maximum |Δz| allowed at every valid raster cell (raster units).
-    #[arg(long, allow_negative_numbers = true)]
-    pub max_error: f64,
+    /// Maximum |Δz| allowed at every valid raster cell (raster units). With
+    /// --max-error-from-uncertainty: the floor of the per-cell tolerance.
+    #[arg(long, allow_negative_numbers = true, required_unless_present = "max_error_from_uncertainty")]
+    pub max_error: Option<f64>,
+    /// Per-cell tolerance from the survey's uncertainty layer (the band named "uncertainty", as in
+    /// a BAG, else band 2): every valid cell within max(--max-error, K × its uncertainty).
+    #[arg(long, value_name = "K", allow_negative_numbers = true)]
+    pub max_error_from_uncertainty: Option<f64>,
+    /// Cells holding this value are no data (an undeclared marker such as 1e30; also matched at
+    /// float32 precision, as GDAL matches a Float32 band's marker).
+    #[arg(long, value_name = "V", allow_negative_numbers = true)]
+    pub nodata: Option<f64>,
+    /// Exclude blunders from the fit and from the output's data mask: isolated cells more than
+    /// K × the tolerance from what their neighbourhood predicts. Without it they are reported
+    /// (at K = 10) and fitted.
+    #[arg(long, value_name = "K", allow_negative_numbers = true)]
+    pub reject_outliers: Option<f64>,
+    /// Write the blunders found (row, col, x, y, value, predicted, deviation, rejected) as CSV.
+    #[arg(long, value_name = "FILE")]
+    pub outliers_csv: Option<String>,
     /// Polynomial degree (1 or 3).
     #[arg(long, default_value_t = 3)]
     pub degree: u32,
@@ -189,7 +206,10 @@ struct Report<'a> {
     valid_cells: usize,
     degree: u32,
     method: Method,
+    /// The tolerance; with a per-cell tolerance, its smallest value.
     max_error: f64,
+    max_error_from_uncertainty: Option<f64>,
+    outliers: OutlierReport,
     max_points: Option<usize>,
     device: String,
     stop: &'a StopReason,
@@ -211,11 +231,175 @@ fn peak_rss_mib() -> Option<f64> {
     Some(kib / 1024.0)
 }
 
+/// Blunders are reported at this K when `--reject-outliers` does not give one.
+const REPORT_OUTLIERS_K: f64 = 10.0;
+/// Blunders listed by position on stderr (all of them go to `--outliers-csv`).
+const LISTED_OUTLIERS: usize = 5;
+
+fn check_tolerance_args(args: &Args) -> Result<(), CliError> {
+    let positive = |v: f64| v > 0.0 && v.is_finite();
+    if let Some(e) = args.max_error.filter(|&e| !positive(e)) {
+        return Err(CliError::usage(format!("--max-error must be a positive number, got {e}")));
+    }
+    if let Some(k) = args.max_error_from_uncertainty {
+        if !positive(k) {
+            return Err(CliError::usage(format!("--max-error-from-uncertainty must be a positive factor, got {k}")));
+        }
+        if args.indirect {
+            return Err(CliError::usage("--max-error-from-uncertainty applies to the direct fit (not --indirect)"));
+        }
+        if args.input == "-" {
+            return Err(CliError::usage("--max-error-from-uncertainty reads the uncertainty layer from the input file: it needs a path, not stdin"));
+        }
+    }
+    if let Some(k) = args.reject_outliers.filter(|&k| !positive(k)) {
+        return Err(CliError::usage(format!("--reject-outliers must be a positive factor, got {k}")));
+    }
+    if args.nodata.is_some_and(|v| v.is_nan()) {
+        return Err(CliError::usage("--nodata must be a number (NaN cells are no data already)"));
+    }
+    Ok(())
+}
+
+/// `--nodata V`: cells equal to V (or to V at float32 precision) become no data.
+fn declare_nodata(r: &mut Raster, v: f64) {
+    let v32 = v as f32;
+    for (d, ok) in r.data.iter_mut().zip(r.valid.iter_mut()) {
+        if *ok && (*d == v || (v32.is_finite() && *d as f32 == v32)) {
+            *ok = false;
+            *d = f64::NAN;
+        }
+    }
+}
+
+/// The uncertainty layer of the input file, on the elevation's grid.
+fn read_uncertainty_arg(input: &str, elevation: &Raster, name: &str) -> Result<Raster, CliError> {
+    let (u, band) = raster_io::read_uncertainty(std::path::Path::new(input)).map_err(|e| CliError::unreadable(e.to_string()))?;
+    if (u.width, u.height, u.geotransform) != (elevation.width, elevation.height, elevation.geotransform) {
+        return Err(CliError::unreadable(format!("{name}: the uncertainty layer (band {band}) is not on the elevation's grid")));
+    }
+    Ok(u)
+}
+
+/// The tolerance per cell of the raster as read (file layout): `e` everywhere, or
+/// max(e, k·u) with the uncertainty layer `u` (NaN = none: the floor e).
+struct CellTol<'a> {
+    e: Option<f64>,
+    k: Option<f64>,
+    u: Option<&'a [f64]>,
+}
+
+impl CellTol<'_> {
+    fn at(&self, q: usize) -> f64 {
+        let floor = self.e.unwrap_or(0.0);
+        match (self.k, self.u) {
+            (Some(k), Some(u)) if !u[q].is_nan() => (k * u[q]).max(floor),
+            _ => floor,
+        }
+    }
+    /// The smallest tolerance over the valid cells.
+    fn min_over(&self, r: &Raster) -> f64 {
+        (0..r.valid.len()).filter(|&q| r.valid[q]).map(|q| self.at(q)).fold(f64::INFINITY, f64::min)
+    }
+    fn describe(&self) -> String {
+        match (self.e, self.k) {
+            (Some(e), Some(k)) => format!("max({e}, {k} × uncertainty)"),
+            (None, Some(k)) => format!("{k} × uncertainty"),
+            (Some(e), None) => format!("{e}"),
+            (None, None) => unreachable!("clap requires one of them"),
+        }
+    }
+    /// Every valid cell needs a positive tolerance: an uncertainty, or the floor --max-error.
+    fn check_coverage(&self, r: &Raster, name: &str) -> Result<(), CliError> {
+        let bad: Vec<usize> = (0..r.valid.len()).filter(|&q| r.valid[q] && !(self.at(q) > 0.0 && self.at(q).is_finite())).collect();
+        let Some(&q) = bad.first() else { return Ok(()) };
+        let u = self.u.map_or(f64::NAN, |u| u[q]);
+        Err(CliError::unreadable(format!(
+            "{name}: {} valid cells have no usable uncertainty (first: row {}, col {}, uncertainty {u}); give --max-error E as the tolerance floor for them",
+            bad.len(),
+            q / r.width,
+            q % r.width
+        )))
+    }
+}
+
+#[derive(serde::Serialize)]
+struct OutlierReport {
+    /// The K of the test (|z − prediction| > K × tolerance, isolated).
+    k: f64,
+    found: usize,
+    rejected: bool,
+}
+
+/// Blunder screening (docs/decisions.md#blunders-before-a-fit): detects isolated cells far from
+/// their neighbourhood's prediction, reports them (count and the first positions on stderr, all
+/// in `--outliers-csv`), excludes them with `--reject-outliers`; refuses cells beyond the f64
+/// precision at the tolerance (an undeclared no-data marker) that are not excluded.
+fn screen_outliers(r: &mut Raster, name: &str, args: &Args, tol: &CellTol) -> Result<OutlierReport, CliError> {
+    let k = args.reject_outliers.unwrap_or(REPORT_OUTLIERS_K);
+    let reject = args.reject_outliers.is_some();
+    for (d, ok) in r.data.iter_mut().zip(&r.valid) {
+        if !ok {
+            *d = f64::NAN; // the scans below read NaN as no data
+        }
+    }
+    let found = tspline::blunders::detect(&r.data, r.width, r.height, &|q| k * tol.at(q));
+    let (width, gt) = (r.width, r.geotransform);
+    let at = move |q: usize| {
+        let (col, row) = (q % width, q / width);
+        let (x, y) = (gt[0] + (col as f64 + 0.5) * gt[1], gt[3] + (row as f64 + 0.5) * gt[5]);
+        (row, col, x, y)
+    };
+    if let Some(path) = &args.outliers_csv {
+        Output::from_arg(Some(path)).write_with(|w| {
+            let mut text = String::from("row,col,x,y,value,predicted,deviation,rejected\n");
+            for b in &found {
+                let (row, col, x, y) = at(b.index);
+                text.push_str(&format!("{row},{col},{x},{y},{},{},{},{reject}\n", b.value, b.predicted, b.deviation()));
+            }
+            w.write_all(text.as_bytes()).map_err(CliError::io_out)
+        })?;
+    }
+    if !found.is_empty() {
+        let list: Vec<String> = found
+            .iter()
+            .take(LISTED_OUTLIERS)
+            .map(|b| {
+                let (row, col, x, y) = at(b.index);
+                format!("row {row}, col {col} (x {x}, y {y}): {} where the neighbourhood predicts {:.6}", b.value, b.predicted)
+            })
+            .collect();
+        let more = if found.len() > LISTED_OUTLIERS { format!("; {} more", found.len() - LISTED_OUTLIERS) } else { String::new() };
+        let what = if reject { "excluded from the fit and the data mask (--reject-outliers)" } else { "fitted as data; --reject-outliers K excludes them" };
+        crate::say!(
+            "geofit: {name}: {} blunder(s) (isolated cells more than {k} × the tolerance off their neighbourhood: blunders or single-cell features), {what}: {}{more}",
+            found.len(),
+            list.join("; ")
+        );
+    }
+    if reject {
+        for b in &found {
+            r.valid[b.index] = false;
+            r.data[b.index] = f64::NAN;
+        }
+    }
+    let beyond = tspline::blunders::beyond_precision(&r.data, &|q| tol.at(q));
+    if let Some(&q) = beyond.first() {
+        let (row, col, x, y) = at(q);
+        let v = r.data[q];
+        let isolated = found.iter().any(|b| b.index == q);
+        let hint = if isolated { " or --reject-outliers K to exclude the blunders" } else { "" };
+        return Err(CliError::unreadable(format!(
+            "{name}: {} cell(s) hold values no fit within the tolerance can follow in f64 arithmetic, first row {row}, col {col} (x {x}, y {y}): {v:e}; if {v:e} marks missing data pass --nodata {v:e}{hint}",
+            beyond.len()
+        )));
+    }
+    Ok(OutlierReport { k, found: found.len(), rejected: reject })
+}
+
 pub fn run(args: Args, config: &Config) -> CmdResult {
     crate::config::check_report_target(args.report.as_deref(), args.output.as_deref())?;
-    if !(args.max_error > 0.0 && args.max_error.is_finite()) {
-        return Err(CliError::usage(format!("--max-error must be a positive number, got {}", args.max_error)));
-    }
+    check_tolerance_args(&args)?;
     let degree = Degree::from_u32(args.degree).ok_or_else(|| CliError::usage(format!("--degree must be 1 or 3, got {}", args.degree)))?;
     if !(args.overhang >= 0.0 && args.overhang <= 4.0) {
         return Err(CliError::usage(format!("--overhang must be within 0..4, got {}", args.overhang)));
@@ -239,7 +423,19 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     }
     let t_start = std::time::Instant::now();
     super::rasterize::gdal_notices(config);
-    let (raster, name) = read_raster_arg(&args.input)?;
+    let (mut raster, name) = read_raster_arg(&args.input)?;
+    if let Some(v) = args.nodata {
+        declare_nodata(&mut raster, v);
+    }
+    let uncertainty = match args.max_error_from_uncertainty {
+        Some(_) => Some(read_uncertainty_arg(&args.input, &raster, &name)?),
+        None => None,
+    };
+    let tol = CellTol { e: args.max_error, k: args.max_error_from_uncertainty, u: uncertainty.as_ref().map(|u| &u.data[..]) };
+    tol.check_coverage(&raster, &name)?;
+    let outliers = screen_outliers(&mut raster, &name, &args, &tol)?;
+    let e_min = tol.min_over(&raster);
+    let e_text = tol.describe();
     // Indirect reduction (spec §1, §2.3). A raster not yet warped is warped here with the default
     // parameters and the fit works on its ORIGINAL cells mapped forward into the warped frame
     // (scattered data): least squares and the tolerance check see the original values at the
@@ -281,6 +477,15 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     };
     let (mut samples, georef, mask) = samples_from_raster(&raster, &name)?;
     drop(raster); // the samples hold the data from here on (halves the peak for big rasters)
+    let cell_tolerance = match (&uncertainty, args.max_error_from_uncertainty) {
+        (Some(u), Some(k)) => {
+            let (us, _, _) = samples_from_raster(u, &name)?;
+            let u32s: Vec<f32> = us.z.iter().map(|&v| v as f32).collect();
+            Some(tspline::tolerance::CellTolerance { k, floor: args.max_error.unwrap_or(0.0), uncertainty: std::sync::Arc::new(u32s) })
+        }
+        _ => None,
+    };
+    drop(uncertainty);
     let points = match (&original, &field) {
         (Some(o), Some(f)) => {
             let mapper = f.mapper();
@@ -324,10 +529,9 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     }
     // Tolerance below the data's own precision: integer-valued data resolve 1 unit at best.
     let integers = samples.z.iter().filter(|v| !v.is_nan()).all(|v| v.fract() == 0.0);
-    if integers && args.max_error < 0.5 {
+    if integers && e_min < 0.5 {
         config.notice(&format!(
-            "warning: {name} holds integer values (precision 1); --max-error {} is below the data's own precision and forces interpolation of every cell",
-            args.max_error
+            "warning: {name} holds integer values (precision 1); a tolerance of {e_min} is below the data's own precision and forces interpolation of every cell"
         ));
     }
     let ocl = select_device(args.device, config)?;
@@ -336,7 +540,8 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         None => Backend::Cpu,
     };
     let device_name = ocl.as_ref().map(|o| format!("opencl: {}", o.device_name())).unwrap_or_else(|| "cpu (rayon)".into());
-    let mut opts = FitOptions::new(degree, args.max_error);
+    let mut opts = FitOptions::new(degree, e_min);
+    opts.cell_tolerance = cell_tolerance;
     opts.max_points = args.max_points;
     opts.max_iterations = args.max_iterations;
     opts.overhang = args.overhang;
@@ -347,7 +552,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         MethodArg::Drag => Method::Drag,
     };
     let progress = config.progress("fit", args.max_iterations as u64);
-    let e = args.max_error;
+    let e = &e_text;
     let mut cb = |st: &IterationStats| {
         let stage = if st.merged_cells > 0 { format!("coarsening ({} cells merged)", st.merged_cells) } else { "iteration".into() };
         progress.set(
@@ -435,7 +640,9 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
             valid_cells: valid,
             degree: args.degree,
             method: opts.method,
-            max_error: e,
+            max_error: e_min,
+            max_error_from_uncertainty: args.max_error_from_uncertainty,
+            outliers,
             max_points: args.max_points,
             device: device_name,
             stop: &result.stop,
