@@ -441,3 +441,182 @@ fn huge_finite_values_are_refused_not_a_panic() {
         assert!(!out.exists());
     }
 }
+
+/// Runs `geofit` with `args`, asserting exit `code`; returns stderr. `fit` and `eval` run on the
+/// CPU unless `--device` is given (an OpenCL kernel build per process costs seconds).
+fn run_expect(args: &[&str], code: i32) -> String {
+    let mut args = args.to_vec();
+    if args.iter().any(|a| *a == "fit" || *a == "eval") && !args.contains(&"--device") {
+        args.extend(["--device", "cpu"]);
+    }
+    let o = common::run(&args, None);
+    let err = String::from_utf8_lossy(&o.stderr).to_string();
+    assert_eq!(o.status.code(), Some(code), "geofit {}: {err}", args.join(" "));
+    err
+}
+
+/// Issue 19: the guarantee holds for the surface as `geofit eval` computes it from the written
+/// file, for both methods: on every terrain raster fixture `fit` reads, `eval` of the fitted
+/// mesh on the input grid passes `geofit diff --tolerance E --check`. Before, `--method drag`
+/// reported "every valid cell within E" while `eval` exceeded E by up to 6e-11 at cells of
+/// integer data sitting exactly at E. Fits and evaluations run on the CPU (`--device cpu`: the
+/// OpenCL kernels' rounding is what the margin covers, tested by `eval_device_opencl_matches_cpu`);
+/// with the OpenCL kernel build per process the test took minutes. A debug build runs the
+/// four small rasters (about a minute on a loaded 2-core machine); Kilauea, the Jacksboro DEM
+/// and the BAG (1.16 M valid cells) run in release builds or with GEOFIT_SLOW_TESTS=1.
+#[test]
+fn eval_of_every_fit_passes_diff_check_on_every_terrain_fixture() {
+    let slow = !cfg!(debug_assertions) || std::env::var("GEOFIT_SLOW_TESTS").is_ok_and(|v| v == "1");
+    // (fixture, drag E, least-squares E)
+    let mut cases = vec![
+        ("terrain/gmt_tut_bathy.nc", "10", "10"),
+        ("terrain/gmt_guinea_bay.nc", "20", "20"),
+        ("terrain/georust_dem-hills.tiff", "20", "10"),
+        ("terrain/giswqs-lidar_dem.tif", "2", "1"),
+    ];
+    if slow {
+        cases.extend([
+            ("terrain/gmt_Kilauea.utm.nc", "40", "20"),
+            ("terrain/mpl_jacksboro_fault_dem.asc", "40", "20"),
+            ("terrain/ons-bag_JD211_public_Release_1-4_UTM.bag", "0.5", "0.25"),
+        ]);
+    }
+    let dir = tempfile::tempdir().unwrap();
+    for (fixture, e_drag, e_lsq) in cases {
+        let Some(input) = common::fixture(fixture) else { return };
+        let input = input.to_str().unwrap();
+        for (method, e) in [("drag", e_drag), ("lsq", e_lsq)] {
+            let m = dir.path().join("m.tmesh");
+            let ev = dir.path().join("e.tif");
+            let t0 = std::time::Instant::now();
+            run_expect(&["-q", "fit", input, "-o", m.to_str().unwrap(), "--max-error", e, "--method", method], 0);
+            run_expect(&["-q", "eval", m.to_str().unwrap(), "-o", ev.to_str().unwrap()], 0);
+            let o = common::run(&["diff", input, ev.to_str().unwrap(), "--tolerance", e, "--check", "--json"], None);
+            let rep = String::from_utf8_lossy(&o.stdout);
+            assert_eq!(o.status.code(), Some(0), "{fixture} {method} E={e}: diff --check: {rep}{}", String::from_utf8_lossy(&o.stderr));
+            let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+            assert_eq!(v["only_in_a"].as_u64(), Some(0), "{fixture} {method}: every valid cell evaluated: {rep}");
+            eprintln!("{fixture} {method} E={e}: max |dz| {} ({:.1} s)", v["max_abs"], t0.elapsed().as_secs_f64());
+        }
+    }
+}
+
+/// (row, col) pairs of a CSV with those two leading columns (header skipped).
+fn csv_positions(path: &Path) -> Vec<(u64, u64)> {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut v: Vec<(u64, u64)> = text.lines().skip(1).map(|l| {
+        let mut f = l.split(',');
+        (f.next().unwrap().parse().unwrap(), f.next().unwrap().parse().unwrap())
+    }).collect();
+    v.sort_unstable();
+    v
+}
+
+/// Issue 19, blunders: spikes injected into a shipped 1 m LiDAR DEM by a numpy script are all
+/// reported at their (row, col), the clean DEM has none at the same K; with --reject-outliers
+/// the fit meets E at every other cell (independent GDAL/numpy check against the DEM with the
+/// spike cells as nodata) with about the control points of the clean DEM (within 10 %).
+#[test]
+fn injected_spikes_are_reported_and_rejected() {
+    if !python_ok() || !common::tool("gdal_translate") {
+        return;
+    }
+    let Some(dem) = common::fixture("terrain/giswqs-lidar_dem.tif") else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let (e, k, amp) = ("0.5", "10", "8");
+    let o = Command::new("python3").args([&script("tspline_spikes.py"), dem.to_str().unwrap(), d.to_str().unwrap(), "25", amp, "19"]).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let p = |n: &str| d.join(n).to_str().unwrap().to_string();
+    let points = |rep: &str| -> u64 {
+        let v: serde_json::Value = serde_json::from_slice(&std::fs::read(rep).unwrap()).unwrap();
+        v["control_points"].as_u64().unwrap()
+    };
+    // the clean DEM: no blunder at this K (no false positives), fitted
+    let err = run_expect(&["-q", "fit", &p("clean.asc"), "-o", &p("clean.tmesh"), "--max-error", e, "--reject-outliers", k, "--outliers-csv", &p("clean.csv"), "--report", &p("clean.json")], 0);
+    assert!(csv_positions(&d.join("clean.csv")).is_empty(), "false positives on the clean DEM: {err}");
+    assert!(!err.contains("blunder"), "{err}");
+    // the spiked DEM: every spike reported where it was put, and nothing else
+    let err = run_expect(&["-q", "fit", &p("spiked.asc"), "-o", &p("spiked.tmesh"), "--max-error", e, "--reject-outliers", k, "--outliers-csv", &p("found.csv"), "--report", &p("spiked.json")], 0);
+    assert!(err.contains("25 blunder(s)") && err.contains("excluded"), "{err}");
+    assert_eq!(csv_positions(&d.join("found.csv")), csv_positions(&d.join("spikes.csv")));
+    // E holds at every other cell of the DEM (the spikes are no data in the reference)
+    run_expect(&["-q", "eval", &p("spiked.tmesh"), "-o", &p("spiked-eval.tif")], 0);
+    let chk = Command::new("python3").args([&script("tspline_maxerror.py"), &p("holes.asc"), &p("spiked-eval.tif"), e]).output().unwrap();
+    assert!(chk.status.success(), "independent check: {}", String::from_utf8_lossy(&chk.stdout));
+    let (clean, spiked) = (points(&p("clean.json")), points(&p("spiked.json")));
+    assert!((spiked as f64 - clean as f64).abs() <= 0.1 * clean as f64, "{spiked} control points with the spikes rejected, {clean} on the clean DEM");
+    // without --reject-outliers they are reported (at the default K) and fitted
+    let err = run_expect(&["-q", "fit", &p("spiked.asc"), "-o", &p("kept.tmesh"), "--max-error", e], 0);
+    assert!(err.contains("25 blunder(s)") && err.contains("--reject-outliers K excludes them"), "{err}");
+}
+
+/// Issue 19: one 1e30 cell (an undeclared float no-data marker) is named with its row, column
+/// and value, and the fit refuses with the hints (exit 3, nothing written); `--nodata 1e30`
+/// or `--reject-outliers` fit the rest within E.
+#[test]
+fn undeclared_nodata_cell_is_named_not_fitted() {
+    let dir = tempfile::tempdir().unwrap();
+    let asc = dir.path().join("h.asc");
+    let (w, h) = (60usize, 50usize);
+    let mut text = format!("ncols {w}\nnrows {h}\nxllcorner 1000\nyllcorner 2000\ncellsize 1\nNODATA_value -9999\n");
+    for r in 0..h {
+        let row: Vec<String> = (0..w)
+            .map(|c| if (r, c) == (17, 23) { "1e30".into() } else { format!("{:.3}", 50.0 + 3.0 * (c as f64 / 9.0).sin() + 0.05 * r as f64) })
+            .collect();
+        text.push_str(&row.join(" "));
+        text.push('\n');
+    }
+    std::fs::write(&asc, text).unwrap();
+    let out = dir.path().join("h.tmesh");
+    let (a, o) = (asc.to_str().unwrap(), out.to_str().unwrap());
+    let err = run_expect(&["-q", "fit", a, "-o", o, "--max-error", "0.1"], 3);
+    assert!(err.contains("row 17, col 23") && err.contains("1e30") && err.contains("--nodata 1e30") && err.contains("--reject-outliers"), "{err}");
+    assert!(!out.exists());
+    let err = run_expect(&["-q", "fit", a, "-o", o, "--max-error", "0.1", "--reject-outliers", "10"], 0);
+    assert!(err.contains("1 blunder(s)") && err.contains("row 17, col 23 (x 1023.5, y 2032.5): 1000000000000000000000000000000"), "{err}");
+    let err = run_expect(&["-q", "fit", a, "-o", o, "--max-error", "0.1", "--nodata", "1e30"], 0);
+    assert!(!err.contains("blunder"), "{err}");
+    let ev = dir.path().join("h.asc.eval.tif");
+    run_expect(&["-q", "eval", o, "-o", ev.to_str().unwrap()], 0);
+    let d = common::run(&["diff", a, ev.to_str().unwrap(), "--tolerance", "0.1", "--check", "--json"], None);
+    let v: serde_json::Value = serde_json::from_slice(&d.stdout).unwrap();
+    assert_eq!(d.status.code(), Some(0), "{v}");
+    assert_eq!(v["cells_compared"].as_u64(), Some((w * h - 1) as u64), "{v}");
+}
+
+/// Issue 19, per-cell tolerance (the uncertainty band holds f32 values, 0.05 is 0.0500000007):
+/// on a synthetic two-band survey (elevation, uncertainty: 0.05
+/// in the smooth west, 1.0 in the rough east, none in a 6 × 6 block) `--max-error-from-uncertainty 1
+/// --max-error 0.02` holds every cell within its own max(0.02, u) (independent numpy check of
+/// both bands), uses the slack in the east (errors far above the west's 0.05) while the west
+/// stays within 0.05, and needs fewer control points than the uniform 0.05; without the floor
+/// the cells without uncertainty are refused by position.
+#[test]
+fn per_cell_tolerance_from_uncertainty() {
+    if !python_ok() || !common::tool("gdalbuildvrt") {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let o = Command::new("python3").args([&script("tspline_cell_tolerance.py"), "make", d.to_str().unwrap()]).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let p = |n: &str| d.join(n).to_str().unwrap().to_string();
+    let err = run_expect(&["-q", "fit", &p("survey.tif"), "-o", &p("u.tmesh"), "--max-error-from-uncertainty", "1"], 3);
+    assert!(err.contains("36 valid cells have no usable uncertainty") && err.contains("row 30, col 20") && err.contains("--max-error"), "{err}");
+    run_expect(&["-q", "fit", &p("survey.tif"), "-o", &p("u.tmesh"), "--max-error-from-uncertainty", "1", "--max-error", "0.02", "--report", &p("u.json")], 0);
+    run_expect(&["-q", "eval", &p("u.tmesh"), "-o", &p("u.tif")], 0);
+    let chk = Command::new("python3").args([&script("tspline_cell_tolerance.py"), "check", &p("survey.tif"), &p("u.tif"), "1", "0.02"]).output().unwrap();
+    let out = String::from_utf8_lossy(&chk.stdout).to_string();
+    assert!(chk.status.success(), "independent check: {out}{}", String::from_utf8_lossy(&chk.stderr));
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let classes = v["classes"].as_array().unwrap();
+    let class = |t: f64| classes.iter().find(|c| (c["tolerance"].as_f64().unwrap() - t).abs() < 1e-7).unwrap_or_else(|| panic!("no class {t}: {out}"));
+    assert_eq!(class(0.02)["cells"].as_u64(), Some(36), "{out}");
+    assert!(class(0.05)["max"].as_f64().unwrap() <= 0.05, "{out}");
+    assert!(class(1.0)["max"].as_f64().unwrap() > 0.2, "the east's slack is not used: {out}");
+    // the uniform tolerance of the west needs more control points
+    run_expect(&["-q", "fit", &p("survey.tif"), "-o", &p("e.tmesh"), "--max-error", "0.05", "--report", &p("e.json")], 0);
+    let cp = |f: &str| serde_json::from_slice::<serde_json::Value>(&std::fs::read(p(f)).unwrap()).unwrap()["control_points"].as_u64().unwrap();
+    assert!(cp("u.json") < cp("e.json"), "per cell {} control points, uniform {}", cp("u.json"), cp("e.json"));
+}

@@ -343,6 +343,8 @@ fn screen_outliers(r: &mut Raster, name: &str, args: &Args, tol: &CellTol) -> Re
             *d = f64::NAN; // the scans below read NaN as no data
         }
     }
+    // values beyond ±1e100 get the library's own refusal (the range its sums stay finite in)
+    tspline::fit::check_value_range(&r.data).map_err(|e| tspline_err(name, e))?;
     let found = tspline::blunders::detect(&r.data, r.width, r.height, &|q| k * tol.at(q));
     let (width, gt) = (r.width, r.geotransform);
     let at = move |q: usize| {
