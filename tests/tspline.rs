@@ -575,6 +575,8 @@ fn undeclared_nodata_cell_is_named_not_fitted() {
     assert!(!out.exists());
     let err = run_expect(&["-q", "fit", a, "-o", o, "--max-error", "0.1", "--reject-outliers", "10"], 0);
     assert!(err.contains("1 blunder(s)") && err.contains("row 17, col 23 (x 1023.5, y 2032.5): 1000000000000000000000000000000"), "{err}");
+    let err = run_expect(&["-q", "fit", a, "--max-error", "0.1", "--outliers-csv", "-"], 2);
+    assert!(err.contains("--outliers-csv -"), "{err}");
     let err = run_expect(&["-q", "fit", a, "-o", o, "--max-error", "0.1", "--nodata", "1e30"], 0);
     assert!(!err.contains("blunder"), "{err}");
     let ev = dir.path().join("h.asc.eval.tif");

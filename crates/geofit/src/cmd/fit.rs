@@ -255,6 +255,9 @@ fn check_tolerance_args(args: &Args) -> Result<(), CliError> {
     if let Some(k) = args.reject_outliers.filter(|&k| !positive(k)) {
         return Err(CliError::usage(format!("--reject-outliers must be a positive factor, got {k}")));
     }
+    if args.outliers_csv.as_deref() == Some("-") && args.output.as_deref().is_none_or(|o| o == "-") {
+        return Err(CliError::usage("--outliers-csv - with the T-mesh also on stdout would mix the two: give -o FILE"));
+    }
     if args.nodata.is_some_and(|v| v.is_nan()) {
         return Err(CliError::usage("--nodata must be a number (NaN cells are no data already)"));
     }
