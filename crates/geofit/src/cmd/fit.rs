@@ -30,7 +30,17 @@ and 1:2 balance repaired). Once every cell is within --max-error, least squares 
 splits that were not needed (--no-coarsen keeps the loop's mesh). The fit ends when every valid
 cell is within --max-error (exit 0), or
 with exit 1 and the error reached when --max-points, --max-iterations or the minimum cell size
-(one raster cell) stops it first. The output stores the data mask (and the CRS) for `geofit eval`.";
+(one raster cell) stops it first. The output stores the data mask (and the CRS) for `geofit eval`.
+The final check evaluates the mesh as written, as `geofit eval` does, so `geofit diff --check`
+at the same tolerance passes on its output.
+
+  $ geofit fit survey.bag -o s.tmesh --max-error-from-uncertainty 1 --max-error 0.05
+  $ geofit fit dem.tif -o d.tmesh --max-error 0.5 --reject-outliers 10 --outliers-csv spikes.csv
+
+Per-cell tolerance: max(--max-error, K × the uncertainty band). Blunders (isolated cells more
+than K × the tolerance off every local linear prediction) are always reported; --reject-outliers
+excludes them from the fit and the data mask. A value no f64 fit can follow (an undeclared
+no-data marker such as 1e30) is refused by position (exit 3): --nodata V declares it.";
 
 /// `--device`: where dense evaluations run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
