@@ -18,7 +18,8 @@
 //!   the data extent grown by `overhang` (default 25 %, §3.2.5) on every side; the mesh border lies
 //!   strictly outside the data.
 //! - **A9** least squares on all valid cells (streamed into the sparse normal equations, never the
-//!   model matrix), solved by Jacobi-preconditioned conjugate gradients. Control points with little
+//!   model matrix), solved by a sparse Cholesky factorisation (`crate::sparse`; Jacobi-PCG as the
+//!   fallback, its non-convergence an error). Control points with little
 //!   data (column sum of the model matrix below 0.5 samples) get a regulariser whose weight fades
 //!   in as the support vanishes: second divided differences along the mesh lines (zero on planes,
 //!   so planes stay exact) plus a weak pull to the current surface; a 1e-12 ridge keeps the system
@@ -289,27 +290,13 @@ pub fn initial_mesh(samples: &Samples, opts: &FitOptions) -> TMesh {
     m
 }
 
-/// Sparse symmetric matrix in CSR (full pattern, both triangles).
-struct Csr {
-    start: Vec<usize>,
-    cols: Vec<u32>,
-    vals: Vec<f64>,
-}
+/// The normal equations' storage: `crate::sparse`'s symmetric CSR.
+type Csr = crate::sparse::SymCsr;
 
-impl Csr {
-    fn mul(&self, x: &[f64], y: &mut [f64]) {
-        y.par_iter_mut().enumerate().with_min_len(1024).for_each(|(i, yi)| {
-            let mut acc = 0.0;
-            for k in self.start[i]..self.start[i + 1] {
-                acc += self.vals[k] * x[self.cols[k] as usize];
-            }
-            *yi = acc;
-        });
-    }
-    fn pos(&self, i: usize, j: u32) -> usize {
-        let row = &self.cols[self.start[i]..self.start[i + 1]];
-        self.start[i] + row.binary_search(&j).expect("pattern covers every overlapping pair")
-    }
+/// Index of entry (i, j), which the pattern holds by construction (every overlapping pair).
+#[inline]
+fn entry(a: &Csr, i: usize, j: u32) -> usize {
+    a.find(i, j).expect("pattern covers every overlapping pair")
 }
 
 /// Pattern: pairs of PB points whose supports overlap with positive area, plus mesh-line
@@ -589,7 +576,7 @@ pub(crate) fn fit_lsq_local(
                         for x in 0..m {
                             for y in x..m {
                                 let (p, q) = (row[x].0.min(row[y].0), row[x].0.max(row[y].0));
-                                pos.push(a.pos(p as usize, q));
+                                pos.push(entry(&a, p as usize, q));
                             }
                         }
                     }
@@ -640,11 +627,11 @@ pub(crate) fn fit_lsq_local(
         for k in a.start[i]..a.start[i + 1] {
             let j = a.cols[k] as usize;
             if j < i {
-                a.vals[k] = a.vals[a.pos(j, i as u32)];
+                a.vals[k] = a.vals[entry(&a, j, i as u32)];
             }
         }
     }
-    let diag: Vec<f64> = (0..n).map(|i| a.vals[a.pos(i, i as u32)]).collect();
+    let diag: Vec<f64> = (0..n).map(|i| a.vals[entry(&a, i, i as u32)]).collect();
     let supported: Vec<f64> = (0..n).filter(|&i| is_free(i) && diag[i] > 0.0).map(|i| diag[i]).collect();
     if supported.is_empty() {
         return Err(TsplineError::Fit("no valid raster cell lies inside the mesh".into()));
@@ -653,7 +640,7 @@ pub(crate) fn fit_lsq_local(
     // A9 regulariser
     for i in 0..n {
         if !is_free(i) {
-            let pii = a.pos(i, i as u32);
+            let pii = entry(&a, i, i as u32);
             a.vals[pii] = 1.0;
             rhs[i] = prior[i];
             continue;
@@ -662,7 +649,7 @@ pub(crate) fn fit_lsq_local(
         let lam = 1e-3 * mean_diag * lack * lack;
         // ridge: tiny everywhere, stronger where data is lacking
         let ridge = 1e-12 * diag[i].max(mean_diag * 1e-6) + 1e-6 * lam;
-        let pii = a.pos(i, i as u32);
+        let pii = entry(&a, i, i as u32);
         a.vals[pii] += ridge;
         rhs[i] += ridge * prior[i];
         if lam == 0.0 {
@@ -678,7 +665,7 @@ pub(crate) fn fit_lsq_local(
                 }
                 for y in 0..3 {
                     if is_free(idx[y] as usize) {
-                        let p = a.pos(idx[x] as usize, idx[y]);
+                        let p = entry(&a, idx[x] as usize, idx[y]);
                         a.vals[p] += lam * c[x] * c[y];
                     } else {
                         rhs[idx[x] as usize] -= lam * c[x] * c[y] * prior[idx[y] as usize];
@@ -687,48 +674,9 @@ pub(crate) fn fit_lsq_local(
             }
         }
     }
-    Ok(cg(&a, &rhs, &prior, 1e-13, 20 * n + 2000))
-}
-
-/// Dot product with a fixed summation order (deterministic under rayon).
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    let parts: Vec<f64> = a.par_chunks(8192).zip(b.par_chunks(8192)).map(|(x, y)| x.iter().zip(y).map(|(p, q)| p * q).sum::<f64>()).collect();
-    parts.iter().sum()
-}
-
-/// Jacobi-preconditioned conjugate gradients.
-fn cg(a: &Csr, b: &[f64], x0: &[f64], tol: f64, max_iter: usize) -> Vec<f64> {
-    let n = b.len();
-    let dinv: Vec<f64> = (0..n).map(|i| 1.0 / a.vals[a.pos(i, i as u32)]).collect();
-    let mut x = x0.to_vec();
-    let mut r = vec![0.0; n];
-    a.mul(&x, &mut r);
-    r.par_iter_mut().zip(b).for_each(|(ri, bi)| *ri = bi - *ri);
-    let bnorm = dot(b, b).sqrt().max(1e-300);
-    let mut z: Vec<f64> = r.iter().zip(&dinv).map(|(a, d)| a * d).collect();
-    let mut p = z.clone();
-    let mut rz: f64 = dot(&r, &z);
-    let mut ap = vec![0.0; n];
-    for _ in 0..max_iter {
-        let rnorm = dot(&r, &r).sqrt();
-        if rnorm <= tol * bnorm {
-            break;
-        }
-        a.mul(&p, &mut ap);
-        let pap: f64 = dot(&p, &ap);
-        if pap <= 0.0 {
-            break;
-        }
-        let alpha = rz / pap;
-        x.par_iter_mut().zip(&p).for_each(|(xi, pi)| *xi += alpha * pi);
-        r.par_iter_mut().zip(&ap).for_each(|(ri, api)| *ri -= alpha * api);
-        z.par_iter_mut().zip(&r).zip(&dinv).for_each(|((zi, ri), d)| *zi = ri * d);
-        let rz_new: f64 = dot(&r, &z);
-        let beta = rz_new / rz;
-        rz = rz_new;
-        p.par_iter_mut().zip(&z).for_each(|(pi, zi)| *pi = zi + beta * *pi);
-    }
-    x
+    // the current heights are the iterative fallback's warm start
+    let (z, _info) = crate::sparse::solve_spd(&a, &rhs, &prior).map_err(|e| TsplineError::Fit(format!("least squares: {e}")))?;
+    Ok(z)
 }
 
 /// Dragging (spec §4.6, Alg. 4): z-only, Jacobi-style simultaneous update, step limit A12.
