@@ -230,10 +230,25 @@ impl PbSpline {
         let nt = ((n / aspect).sqrt().ceil() as u32).clamp(1, 4096);
         let grid = BucketGrid { s0: b.s_min, t0: b.t_min, ds: b.width() / ns as f64, dt: b.height() / nt as f64, ns, nt };
         let nb = (ns * nt) as usize;
+        // Bucket lists in the order of the points' parameters (t, then s), not of their ids:
+        // every sum over a bucket's points (here, in the extraction and in the kernels) then
+        // runs in an order fixed by the mesh's geometry, so a mesh evaluates to the same bits
+        // however its points are numbered (the XML keeps the fit's numbering, the binary
+        // `.tmb` stores a canonical one: both give the same surface, bit for bit).
+        let mut order: Vec<u32> = (0..point_ids.len() as u32).collect();
+        let st = |i: u32| {
+            let p = &mesh.points[point_ids[i as usize] as usize];
+            (p.t, p.s)
+        };
+        order.sort_by(|&a, &b| {
+            let (p, q) = (st(a), st(b));
+            p.0.total_cmp(&q.0).then(p.1.total_cmp(&q.1))
+        });
         let (pt_start, pt_items) = csr(
             nb,
-            knots.iter().enumerate().map(|(i, kn)| {
-                (i as u32, grid.index_range(kn[0], kn[k + 1], true), grid.index_range(kn[5], kn[5 + k + 1], false))
+            order.iter().map(|&i| {
+                let kn = &knots[i as usize];
+                (i, grid.index_range(kn[0], kn[k + 1], true), grid.index_range(kn[5], kn[5 + k + 1], false))
             }),
             ns,
         );

@@ -104,10 +104,13 @@ fn esc(s: &str) -> String {
     s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;").replace('"', "&quot;")
 }
 
-/// A T-mesh document: the first element (after a BOM, the XML declaration, comments and a
+/// A T-mesh document: a binary `.tmb` (its magic bytes, [`crate::tmb`]), or XML whose first element (after a BOM, the XML declaration, comments and a
 /// DOCTYPE) is `<tmesh`. CityGML never starts so, so the sniff cannot take a city model for a
 /// T-mesh; commands that take either (`geofit export`, `geofit info`) use it to choose the reader.
 pub fn is_tmesh_document(src: &[u8]) -> bool {
+    if src.starts_with(crate::tmb::MAGIC) {
+        return true;
+    }
     let mut rest = src.strip_prefix(b"\xEF\xBB\xBF".as_slice()).unwrap_or(src);
     loop {
         let start = rest.iter().position(|b| !b.is_ascii_whitespace()).unwrap_or(rest.len());
@@ -126,6 +129,33 @@ pub fn is_tmesh_document(src: &[u8]) -> bool {
             Some(n) => rest = &rest[n..],
             None => return false,
         }
+    }
+}
+
+/// The file formats a T-mesh is written in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Encoding {
+    /// The XML `.tmesh` (the documented exchange format).
+    Xml,
+    /// The compact binary `.tmb` ([`crate::tmb`]).
+    Binary,
+}
+
+impl Encoding {
+    /// `.tmb` paths are binary, everything else (and stdout) XML.
+    pub fn for_path(path: Option<&str>) -> Encoding {
+        match path {
+            Some(p) if p.to_ascii_lowercase().ends_with(".tmb") => Encoding::Binary,
+            _ => Encoding::Xml,
+        }
+    }
+}
+
+/// Writes `f` in the given encoding.
+pub fn write_as(f: &TMeshFile, encoding: Encoding, w: &mut dyn Write) -> std::io::Result<()> {
+    match encoding {
+        Encoding::Xml => write(f, w),
+        Encoding::Binary => crate::tmb::write(f, w),
     }
 }
 
@@ -170,8 +200,12 @@ fn line_col(data: &[u8], pos: usize) -> String {
     format!("line {line}:{col}")
 }
 
-/// Reads a T-mesh file; every problem is reported with its line:column and element.
+/// Reads a T-mesh file, XML or binary (told apart by the binary's magic bytes, not by a file
+/// name); every problem is reported with its line:column and element (XML) or byte (binary).
 pub fn read(data: &[u8]) -> Result<TMeshFile, TsplineError> {
+    if data.starts_with(crate::tmb::MAGIC) {
+        return crate::tmb::read(data);
+    }
     let ferr = |pos: usize, msg: String| TsplineError::Format { pos: line_col(data, pos), msg };
     let mut r = Reader::from_reader(data);
     r.config_mut().trim_text(false);

@@ -5,7 +5,7 @@
 //! - [`eval`]: the rational T-spline through its PB-spline form, CPU (rayon) evaluation.
 //! - [`ocl_eval`]: the same evaluation and the knot derivation as OpenCL kernels.
 //! - [`rtree_pages`]: the thesis' Nearest-X int8 page encoding (Tables 5.2, 6.3).
-//! - [`format`]: the T-mesh file format (`xsd/tmesh.xsd`).
+//! - [`format`]: the T-mesh file format (`xsd/tmesh.xsd`); [`tmb`]: its compact binary twin.
 //! - [`sparse`]: the sparse Cholesky (and PCG fallback) of the least-squares solve.
 //! - [`fit`]: adaptive approximation (Alg. 3) with sparse least squares or dragging;
 //!   `coarsen`: merging back the splits the tolerance did not need; [`tolerance`]: what the
@@ -35,8 +35,8 @@ pub mod ocl_eval;
 pub mod ocl_fit;
 pub mod rtree_pages;
 pub mod tolerance;
-
 pub mod sparse;
+pub mod tmb;
 #[cfg(test)]
 mod testing;
 

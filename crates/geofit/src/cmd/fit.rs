@@ -6,7 +6,7 @@ use clap::{Args as ClapArgs, ValueEnum};
 
 use raster_io::Raster;
 use tspline::fit::{Backend, FitOptions, IterationStats, Method, Samples, StopReason};
-use tspline::format::{DataMask, Georef, TMeshFile};
+use tspline::format::{DataMask, Encoding, Georef, TMeshFile};
 use tspline::ocl_eval::OclEvaluator;
 use tspline::{Degree, TsplineError};
 
@@ -76,7 +76,8 @@ pub enum MethodArg {
 pub struct Args {
     /// Input raster (GeoTIFF, netCDF, ASCII grid, ...; `-` = stdin).
     pub input: String,
-    /// Output T-mesh file (`-` or none = stdout).
+    /// Output T-mesh file (`-` or none = stdout): XML `.tmesh`, or the compact binary form when
+    /// the name ends in `.tmb` (lossless; `eval`, `surface`, `export` and `info` read both).
     #[arg(short, long)]
     pub output: Option<String>,
     /// Maximum |Δz| allowed at every valid raster cell (raster units). With
@@ -644,8 +645,20 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     // A fit that missed --max-error is a failed step: no mesh for the next one (make) unless
     // --keep-partial; the report below still says how far it got.
     if config.keeps_output(exit, args.output.as_deref()) {
-        Output::from_arg(args.output.as_deref())
-            .write_with(|w| tspline::format::write(&file, w).map_err(CliError::io_out))?;
+        // `-o x.tmb`: the compact binary form; anything else the XML exchange format
+        let encoding = Encoding::for_path(args.output.as_deref());
+        let mut bytes = Vec::new();
+        tspline::format::write_as(&file, encoding, &mut bytes).map_err(CliError::io_out)?;
+        Output::from_arg(args.output.as_deref()).write_with(|w| std::io::Write::write_all(w, &bytes).map_err(CliError::io_out))?;
+        if let Some(input_bytes) = Input::from_arg(&args.input).path().and_then(|p| std::fs::metadata(p).ok()).map(|m| m.len()) {
+            if bytes.len() as u64 >= input_bytes {
+                config.notice(&format!(
+                    "notice: the T-mesh ({} bytes) is not smaller than the input raster file ({input_bytes} bytes){}",
+                    bytes.len(),
+                    if encoding == Encoding::Xml { "; -o NAME.tmb writes the compact binary form" } else { "" }
+                ));
+            }
+        }
     }
     if let Some(path) = &args.report {
         let rep = Report {

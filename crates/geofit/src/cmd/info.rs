@@ -111,7 +111,7 @@ fn kind_by_extension(p: &std::path::Path) -> Option<Kind> {
     let ext = p.extension()?.to_string_lossy().to_ascii_lowercase();
     match ext.as_str() {
         "gml" | "citygml" | "xml" => Some(Kind::CityGml),
-        "tmesh" => Some(Kind::TMesh),
+        "tmesh" | "tmb" => Some(Kind::TMesh),
         "las" | "laz" | "xyz" | "csv" | "txt" | "pts" => Some(Kind::Points),
         _ => raster_io::RasterFormat::from_path(p).map(|_| Kind::Raster),
     }

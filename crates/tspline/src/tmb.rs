@@ -1,0 +1,623 @@
+//! The compact binary T-mesh (`.tmb`), lossless: it stores the same surface as the XML
+//! `.tmesh` (the documented exchange format, [`crate::format`]) in a fraction of the bytes.
+//!
+//! Why: a text line "s t x y z w" spends ~60 bytes per control point where the information of
+//! a direct fit is one height; the reduced model was often bigger than the raster it reduces
+//! (issue 19). Here the mesh structure is implicit and the heights are compressed losslessly.
+//!
+//! Layout (little-endian):
+//! ```text
+//! magic    8 bytes  89 'T' 'M' 'B' 0D 0A 1A 0A   (PNG-style: catches text-mode mangling)
+//! version  u8       1
+//! body_len u64      bytes of the body before compression
+//! body     deflate (zlib) stream of the body
+//! crc32    u32      CRC-32 (IEEE) of the uncompressed body
+//! ```
+//! Body: `degree u8`, `flags u8`, the georeference (`x0 y0 dx dy` f64, CRS as varint length +
+//! UTF-8), the structure, then the per-point arrays, the mask and the warp:
+//! - structure, flag [`QUADTREE`]: the leaf cells as a forest of quadtrees over `ns × nt` root
+//!   squares of side `c0` from (`s0`, `t0`) (f64, f64, f64, varint, varint): one bit per node in
+//!   depth-first order (children SW, SE, NW, NE), 1 = split at the centre, 0 = leaf — what
+//!   the fit produces (4-way splits of an initial grid), ~1.3 bits per leaf cell. Otherwise the
+//!   explicit form: the distinct s and t values (varint count + f64 each) and per cell four
+//!   varint indices into them (s_min, s_max − s_min, t_min, t_max − t_min).
+//! - control points are the leaf corners in the canonical order of [`canonical`] (by t, then
+//!   s), so neither their count nor their parameters are stored. Heights: each f64 XOR-ed with
+//!   the previous one (neighbours share sign, exponent and leading mantissa bits), then the 8
+//!   byte planes one after the other (the deflate stream then finds the zero runs). `x, y`
+//!   (flag [`XY`], else x = s, y = t) and `w` (flag [`W`], else 1) the same way.
+//! - mask (flag [`MASK`]): width, height, run count and the runs as varints (as the XML: from
+//!   t = 0, alternating no data / data, starting with no data); warp (flag [`WARP`]): varint
+//!   length + the JSON.
+//!
+//! Lossless: `read(write(f))` gives the mesh [`canonical`] gives, bit for bit; evaluation
+//! sums over points in the order of their parameters, not their ids (`PbSpline::from_parts`),
+//! so `.tmb` and `.tmesh` of one fit evaluate to the same bits. Every defect of a file (magic, version, truncation, checksum, lengths, an invalid mesh)
+//! is a [`TsplineError::Format`] naming it, never a panic.
+
+use std::collections::{HashMap, HashSet};
+use std::io::{Read, Write};
+
+use crate::format::{DataMask, Georef, TMeshFile};
+use crate::mesh::{ControlPoint, Degree, PointId, Rect, TMesh};
+use crate::TsplineError;
+
+pub const MAGIC: &[u8; 8] = b"\x89TMB\r\n\x1a\n";
+pub const VERSION: u8 = 1;
+/// Structure flag: leaf cells as a quadtree forest (else explicit).
+pub const QUADTREE: u8 = 1;
+/// Control points' x, y stored (else x = s, y = t).
+pub const XY: u8 = 2;
+/// Weights stored (else 1).
+pub const W: u8 = 4;
+pub const MASK: u8 = 8;
+pub const WARP: u8 = 16;
+/// Largest body a reader inflates (a corrupt length must not allocate terabytes).
+const MAX_BODY: u64 = 1 << 36;
+
+/// The leaf-only mesh with points ordered by (t, s) and cells by (t_min, s_min): the order the
+/// binary form stores (implicit in the structure, so no ids are stored).
+pub fn canonical(mesh: &TMesh) -> TMesh {
+    let active = mesh.active_points();
+    let mut ids: Vec<u32> = (0..mesh.points.len() as u32).filter(|&i| active[i as usize]).collect();
+    ids.sort_by(|&a, &b| {
+        let (p, q) = (&mesh.points[a as usize], &mesh.points[b as usize]);
+        p.t.total_cmp(&q.t).then(p.s.total_cmp(&q.s))
+    });
+    let mut remap = vec![u32::MAX; mesh.points.len()];
+    for (k, &i) in ids.iter().enumerate() {
+        remap[i as usize] = k as u32;
+    }
+    let points: Vec<ControlPoint> = ids.iter().map(|&i| mesh.points[i as usize]).collect();
+    let mut cells: Vec<(Rect, [PointId; 4])> = mesh.cells.iter().filter(|c| c.is_leaf()).map(|c| (c.rect, c.corners.map(|p| remap[p as usize]))).collect();
+    cells.sort_by(|a, b| a.0.t_min.total_cmp(&b.0.t_min).then(a.0.s_min.total_cmp(&b.0.s_min)));
+    TMesh::from_cells(mesh.degree, points, cells.into_iter().map(|c| c.1).collect()).expect("a valid mesh stays valid when reordered")
+}
+
+fn put_varint(out: &mut Vec<u8>, mut v: u64) {
+    while v >= 0x80 {
+        out.push((v as u8) | 0x80);
+        v >>= 7;
+    }
+    out.push(v as u8);
+}
+
+fn put_f64(out: &mut Vec<u8>, v: f64) {
+    out.extend_from_slice(&v.to_le_bytes());
+}
+
+/// XOR with the previous value, then byte planes (see the module doc).
+fn put_f64s(out: &mut Vec<u8>, v: &[f64]) {
+    let mut prev = 0u64;
+    let x: Vec<[u8; 8]> = v
+        .iter()
+        .map(|a| {
+            let b = a.to_bits();
+            let d = b ^ prev;
+            prev = b;
+            d.to_le_bytes()
+        })
+        .collect();
+    for plane in 0..8 {
+        out.extend(x.iter().map(|b| b[plane]));
+    }
+}
+
+fn rect_key(r: &Rect) -> [u64; 4] {
+    [r.s_min, r.t_min, r.s_max, r.t_max].map(|v| (v + 0.0).to_bits())
+}
+
+/// Children of a quadtree square as `TMesh::split` makes them, in the order SW, SE, NW, NE.
+fn children(r: &Rect) -> [Rect; 4] {
+    let sm = 0.5 * (r.s_min + r.s_max);
+    let tm = 0.5 * (r.t_min + r.t_max);
+    [Rect::new(r.s_min, r.t_min, sm, tm), Rect::new(sm, r.t_min, r.s_max, tm), Rect::new(r.s_min, tm, sm, r.t_max), Rect::new(sm, tm, r.s_max, r.t_max)]
+}
+
+/// Depth limit of a quadtree (2⁶⁰ subdivisions is far past f64 resolution).
+const MAX_DEPTH: usize = 60;
+
+/// The quadtree encoding of the leaves, or None when they are not a quadtree forest over a
+/// regular grid of squares.
+fn quadtree(leaves: &[Rect]) -> Option<(f64, f64, f64, u64, u64, Vec<u8>)> {
+    let c0 = leaves.iter().map(|r| r.width().max(r.height())).fold(0.0, f64::max);
+    let s0 = leaves.iter().map(|r| r.s_min).fold(f64::INFINITY, f64::min);
+    let t0 = leaves.iter().map(|r| r.t_min).fold(f64::INFINITY, f64::min);
+    let s1 = leaves.iter().map(|r| r.s_max).fold(f64::NEG_INFINITY, f64::max);
+    let t1 = leaves.iter().map(|r| r.t_max).fold(f64::NEG_INFINITY, f64::max);
+    let ns = ((s1 - s0) / c0).round();
+    let nt = ((t1 - t0) / c0).round();
+    if !(c0 > 0.0 && ns >= 1.0 && nt >= 1.0 && ns < 4e9 && nt < 4e9) {
+        return None;
+    }
+    let set: HashSet<[u64; 4]> = leaves.iter().map(rect_key).collect();
+    let mut bits = Vec::new();
+    let mut found = 0usize;
+    fn walk(r: Rect, depth: usize, set: &HashSet<[u64; 4]>, bits: &mut Vec<bool>, found: &mut usize) -> bool {
+        if set.contains(&rect_key(&r)) {
+            bits.push(false);
+            *found += 1;
+            return true;
+        }
+        if depth >= MAX_DEPTH {
+            return false;
+        }
+        bits.push(true);
+        children(&r).into_iter().all(|c| walk(c, depth + 1, set, bits, found))
+    }
+    for j in 0..nt as u64 {
+        for i in 0..ns as u64 {
+            let r = Rect::new(s0 + i as f64 * c0, t0 + j as f64 * c0, s0 + (i + 1) as f64 * c0, t0 + (j + 1) as f64 * c0);
+            if !walk(r, 0, &set, &mut bits, &mut found) {
+                return None;
+            }
+        }
+    }
+    if found != leaves.len() {
+        return None;
+    }
+    let mut packed = vec![0u8; bits.len().div_ceil(8)];
+    for (k, &b) in bits.iter().enumerate() {
+        if b {
+            packed[k / 8] |= 1 << (k % 8);
+        }
+    }
+    let mut head = Vec::new();
+    put_varint(&mut head, bits.len() as u64);
+    head.extend_from_slice(&packed);
+    Some((s0, t0, c0, ns as u64, nt as u64, head))
+}
+
+/// Writes the compact binary form of `f`.
+pub fn write(f: &TMeshFile, w: &mut dyn Write) -> std::io::Result<()> {
+    let m = canonical(&f.mesh);
+    let mut body = Vec::new();
+    let leaves: Vec<Rect> = m.cells.iter().map(|c| c.rect).collect();
+    let qt = quadtree(&leaves);
+    let xy = m.points.iter().any(|p| p.x.to_bits() != p.s.to_bits() || p.y.to_bits() != p.t.to_bits());
+    let wt = m.points.iter().any(|p| p.w != 1.0);
+    let mut flags = 0;
+    if qt.is_some() {
+        flags |= QUADTREE;
+    }
+    if xy {
+        flags |= XY;
+    }
+    if wt {
+        flags |= W;
+    }
+    if f.mask.is_some() {
+        flags |= MASK;
+    }
+    if f.warp.is_some() {
+        flags |= WARP;
+    }
+    body.push(m.degree.k() as u8);
+    body.push(flags);
+    let g = &f.georef;
+    for v in [g.x0, g.y0, g.dx, g.dy] {
+        put_f64(&mut body, v);
+    }
+    put_varint(&mut body, g.crs.len() as u64);
+    body.extend_from_slice(g.crs.as_bytes());
+    match qt {
+        Some((s0, t0, c0, ns, nt, bits)) => {
+            for v in [s0, t0, c0] {
+                put_f64(&mut body, v);
+            }
+            put_varint(&mut body, ns);
+            put_varint(&mut body, nt);
+            body.extend_from_slice(&bits);
+        }
+        None => {
+            // (+0.0: -0.0 and 0.0 are one lattice value)
+            let mut sv: Vec<f64> = m.points.iter().map(|p| p.s + 0.0).collect();
+            let mut tv: Vec<f64> = m.points.iter().map(|p| p.t + 0.0).collect();
+            for v in [&mut sv, &mut tv] {
+                v.sort_by(|a, b| a.total_cmp(b));
+                v.dedup();
+            }
+            for v in [&sv, &tv] {
+                put_varint(&mut body, v.len() as u64);
+                v.iter().for_each(|&x| put_f64(&mut body, x));
+            }
+            let idx = |v: &[f64], x: f64| v.binary_search_by(|a| a.total_cmp(&(x + 0.0))).expect("a corner value is in its list") as u64;
+            put_varint(&mut body, leaves.len() as u64);
+            for r in &leaves {
+                let (a, b) = (idx(&sv, r.s_min), idx(&sv, r.s_max));
+                let (c, d) = (idx(&tv, r.t_min), idx(&tv, r.t_max));
+                for v in [a, b - a, c, d - c] {
+                    put_varint(&mut body, v);
+                }
+            }
+        }
+    }
+    put_f64s(&mut body, &m.points.iter().map(|p| p.z).collect::<Vec<_>>());
+    if xy {
+        put_f64s(&mut body, &m.points.iter().map(|p| p.x).collect::<Vec<_>>());
+        put_f64s(&mut body, &m.points.iter().map(|p| p.y).collect::<Vec<_>>());
+    }
+    if wt {
+        put_f64s(&mut body, &m.points.iter().map(|p| p.w).collect::<Vec<_>>());
+    }
+    if let Some(mask) = &f.mask {
+        put_varint(&mut body, mask.width as u64);
+        put_varint(&mut body, mask.height as u64);
+        let runs = mask_runs(mask);
+        put_varint(&mut body, runs.len() as u64);
+        runs.iter().for_each(|&r| put_varint(&mut body, r as u64));
+    }
+    if let Some(json) = &f.warp {
+        put_varint(&mut body, json.len() as u64);
+        body.extend_from_slice(json.as_bytes());
+    }
+    let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::best());
+    z.write_all(&body)?;
+    let packed = z.finish()?;
+    let mut crc = flate2::Crc::new();
+    crc.update(&body);
+    w.write_all(MAGIC)?;
+    w.write_all(&[VERSION])?;
+    w.write_all(&(body.len() as u64).to_le_bytes())?;
+    w.write_all(&packed)?;
+    w.write_all(&crc.sum().to_le_bytes())?;
+    Ok(())
+}
+
+fn mask_runs(mask: &DataMask) -> Vec<usize> {
+    let mut runs = Vec::new();
+    let (mut cur, mut n) = (false, 0usize);
+    for &b in &mask.bits {
+        if b == cur {
+            n += 1;
+        } else {
+            runs.push(n);
+            cur = b;
+            n = 1;
+        }
+    }
+    runs.push(n);
+    runs
+}
+
+/// Bounds-checked reader of the body; errors name the byte offset in the body.
+struct Cursor<'a> {
+    data: &'a [u8],
+    pos: usize,
+}
+
+impl<'a> Cursor<'a> {
+    fn err(&self, msg: impl Into<String>) -> TsplineError {
+        TsplineError::Format { pos: format!("body byte {}", self.pos), msg: msg.into() }
+    }
+    fn take(&mut self, n: usize, what: &str) -> Result<&'a [u8], TsplineError> {
+        if self.data.len() - self.pos < n {
+            return Err(self.err(format!("the body ends inside {what} ({n} bytes needed, {} left)", self.data.len() - self.pos)));
+        }
+        let s = &self.data[self.pos..self.pos + n];
+        self.pos += n;
+        Ok(s)
+    }
+    fn u8(&mut self, what: &str) -> Result<u8, TsplineError> {
+        Ok(self.take(1, what)?[0])
+    }
+    fn f64(&mut self, what: &str) -> Result<f64, TsplineError> {
+        let v = f64::from_le_bytes(self.take(8, what)?.try_into().expect("8 bytes"));
+        if !v.is_finite() {
+            return Err(self.err(format!("{what} is not finite")));
+        }
+        Ok(v)
+    }
+    fn varint(&mut self, what: &str) -> Result<u64, TsplineError> {
+        let mut v = 0u64;
+        for shift in (0..64).step_by(7) {
+            let b = self.u8(what)?;
+            v |= ((b & 0x7f) as u64) << shift;
+            if b & 0x80 == 0 {
+                return Ok(v);
+            }
+        }
+        Err(self.err(format!("{what}: varint longer than 64 bits")))
+    }
+    /// A count of items of `item_bytes` each that must fit in what is left.
+    fn count(&mut self, item_bytes: usize, what: &str) -> Result<usize, TsplineError> {
+        let n = self.varint(what)?;
+        if n.saturating_mul(item_bytes.max(1) as u64) > (self.data.len() - self.pos) as u64 {
+            return Err(self.err(format!("{what} {n} exceeds the rest of the body")));
+        }
+        Ok(n as usize)
+    }
+    fn f64s(&mut self, n: usize, what: &str) -> Result<Vec<f64>, TsplineError> {
+        let planes = self.take(n.checked_mul(8).ok_or_else(|| self.err(format!("{what}: too many values")))?, what)?;
+        let mut prev = 0u64;
+        let mut out = Vec::with_capacity(n);
+        for i in 0..n {
+            let mut b = [0u8; 8];
+            for (p, bp) in b.iter_mut().enumerate() {
+                *bp = planes[p * n + i];
+            }
+            prev ^= u64::from_le_bytes(b);
+            let v = f64::from_bits(prev);
+            if !v.is_finite() {
+                return Err(self.err(format!("{what}: value {i} is not finite")));
+            }
+            out.push(v);
+        }
+        Ok(out)
+    }
+    fn string(&mut self, what: &str) -> Result<String, TsplineError> {
+        let n = self.count(1, what)?;
+        let b = self.take(n, what)?;
+        String::from_utf8(b.to_vec()).map_err(|_| self.err(format!("{what} is not UTF-8")))
+    }
+}
+
+fn head_err(pos: usize, msg: impl Into<String>) -> TsplineError {
+    TsplineError::Format { pos: format!("byte {pos}"), msg: msg.into() }
+}
+
+/// Reads a `.tmb` file (see the module doc); `data` starts with [`MAGIC`].
+pub fn read(data: &[u8]) -> Result<TMeshFile, TsplineError> {
+    if !data.starts_with(MAGIC) {
+        return Err(head_err(0, "not a binary T-mesh (magic bytes missing)"));
+    }
+    if data.len() < 8 + 1 + 8 + 4 {
+        return Err(head_err(data.len(), format!("truncated binary T-mesh: {} bytes, the header and checksum alone take 21", data.len())));
+    }
+    let version = data[8];
+    if version != VERSION {
+        return Err(head_err(8, format!("binary T-mesh version {version} is not supported (this reader knows {VERSION})")));
+    }
+    let body_len = u64::from_le_bytes(data[9..17].try_into().expect("8 bytes"));
+    if body_len > MAX_BODY {
+        return Err(head_err(9, format!("body length {body_len} is beyond any T-mesh (corrupt header)")));
+    }
+    let (packed, crc_bytes) = data[17..].split_at(data.len() - 17 - 4);
+    let mut body = Vec::with_capacity(body_len.min(1 << 26) as usize);
+    let mut dec = flate2::read::ZlibDecoder::new(packed).take(body_len + 1);
+    dec.read_to_end(&mut body).map_err(|e| head_err(17, format!("the compressed body is damaged or truncated: {e}")))?;
+    if body.len() as u64 != body_len {
+        return Err(head_err(17, format!("the body holds {} bytes, the header says {body_len} (truncated or corrupt file)", body.len())));
+    }
+    let mut crc = flate2::Crc::new();
+    crc.update(&body);
+    let want = u32::from_le_bytes(crc_bytes.try_into().expect("4 bytes"));
+    if crc.sum() != want {
+        return Err(head_err(data.len() - 4, format!("checksum mismatch (CRC-32 {:08x}, file says {want:08x}): the file is corrupt", crc.sum())));
+    }
+    parse_body(&body)
+}
+
+fn parse_body(body: &[u8]) -> Result<TMeshFile, TsplineError> {
+    let mut c = Cursor { data: body, pos: 0 };
+    let k = c.u8("degree")?;
+    let degree = Degree::from_u32(k as u32).ok_or_else(|| c.err(format!("degree {k} is not supported (1 or 3)")))?;
+    let flags = c.u8("flags")?;
+    if flags & !(QUADTREE | XY | W | MASK | WARP) != 0 {
+        return Err(c.err(format!("unknown flags {flags:#04x}")));
+    }
+    let georef = Georef { x0: c.f64("georef x0")?, y0: c.f64("georef y0")?, dx: c.f64("georef dx")?, dy: c.f64("georef dy")?, crs: c.string("CRS")? };
+    if georef.dx == 0.0 || georef.dy == 0.0 {
+        return Err(c.err("georef dx and dy must be non-zero"));
+    }
+    let leaves = if flags & QUADTREE != 0 { read_quadtree(&mut c)? } else { read_explicit(&mut c)? };
+    // points: the leaf corners in canonical order
+    let mut st: Vec<(f64, f64)> = leaves.iter().flat_map(|r| [(r.s_min, r.t_max), (r.s_max, r.t_max), (r.s_min, r.t_min), (r.s_max, r.t_min)]).collect();
+    st.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.total_cmp(&b.0)));
+    st.dedup_by(|a, b| a.0 == b.0 && a.1 == b.1);
+    let n = st.len();
+    let z = c.f64s(n, "heights")?;
+    let (x, y) = if flags & XY != 0 { (c.f64s(n, "x")?, c.f64s(n, "y")?) } else { (st.iter().map(|p| p.0).collect(), st.iter().map(|p| p.1).collect()) };
+    let w = if flags & W != 0 { c.f64s(n, "weights")? } else { vec![1.0; n] };
+    let points: Vec<ControlPoint> = (0..n).map(|i| ControlPoint { s: st[i].0, t: st[i].1, x: x[i], y: y[i], z: z[i], w: w[i] }).collect();
+    let mut id: HashMap<(u64, u64), PointId> = HashMap::with_capacity(n);
+    for (i, p) in st.iter().enumerate() {
+        id.insert(((p.0 + 0.0).to_bits(), (p.1 + 0.0).to_bits()), i as PointId);
+    }
+    let pid = |s: f64, t: f64| id[&((s + 0.0).to_bits(), (t + 0.0).to_bits())];
+    let mut cells: Vec<(Rect, [PointId; 4])> =
+        leaves.iter().map(|r| (*r, [pid(r.s_min, r.t_max), pid(r.s_max, r.t_max), pid(r.s_min, r.t_min), pid(r.s_max, r.t_min)])).collect();
+    cells.sort_by(|a, b| a.0.t_min.total_cmp(&b.0.t_min).then(a.0.s_min.total_cmp(&b.0.s_min)));
+    let mask = if flags & MASK != 0 { Some(read_mask(&mut c)?) } else { None };
+    let warp = if flags & WARP != 0 { Some(c.string("warp")?) } else { None };
+    if c.pos != body.len() {
+        return Err(c.err(format!("{} bytes after the last section", body.len() - c.pos)));
+    }
+    let mesh = TMesh::from_cells(degree, points, cells.into_iter().map(|c| c.1).collect())
+        .map_err(|e| TsplineError::Format { pos: "structure".into(), msg: e.to_string() })?;
+    Ok(TMeshFile { mesh, georef, mask, warp })
+}
+
+fn read_quadtree(c: &mut Cursor) -> Result<Vec<Rect>, TsplineError> {
+    let (s0, t0, c0) = (c.f64("root s0")?, c.f64("root t0")?, c.f64("root size")?);
+    if c0 <= 0.0 {
+        return Err(c.err("root size must be positive"));
+    }
+    let ns = c.varint("root columns")?;
+    let nt = c.varint("root rows")?;
+    let nbits = c.varint("quadtree bit count")?;
+    if nbits < ns.saturating_mul(nt) || nbits.div_ceil(8) > (c.data.len() - c.pos) as u64 {
+        return Err(c.err(format!("quadtree of {nbits} bits for {ns}×{nt} roots does not fit the body")));
+    }
+    let bytes = c.take(nbits.div_ceil(8) as usize, "quadtree bits")?;
+    let bit = |k: usize| bytes[k / 8] >> (k % 8) & 1 == 1;
+    let mut leaves = Vec::new();
+    let mut k = 0usize;
+    let mut stack: Vec<(Rect, usize)> = Vec::new();
+    for j in 0..nt {
+        for i in 0..ns {
+            stack.push((Rect::new(s0 + i as f64 * c0, t0 + j as f64 * c0, s0 + (i + 1) as f64 * c0, t0 + (j + 1) as f64 * c0), 0));
+            while let Some((r, depth)) = stack.pop() {
+                if k >= nbits as usize {
+                    return Err(c.err("the quadtree bits end before the tree does"));
+                }
+                let split = bit(k);
+                k += 1;
+                if !split {
+                    leaves.push(r);
+                    continue;
+                }
+                if depth >= MAX_DEPTH {
+                    return Err(c.err(format!("quadtree deeper than {MAX_DEPTH} levels")));
+                }
+                // depth first in the order SW, SE, NW, NE: push in reverse
+                for ch in children(&r).into_iter().rev() {
+                    stack.push((ch, depth + 1));
+                }
+            }
+        }
+    }
+    if k != nbits as usize {
+        return Err(c.err(format!("{} quadtree bits left over", nbits as usize - k)));
+    }
+    Ok(leaves)
+}
+
+fn read_explicit(c: &mut Cursor) -> Result<Vec<Rect>, TsplineError> {
+    let ns = c.count(8, "s value count")?;
+    let sv: Vec<f64> = (0..ns).map(|_| c.f64("s value")).collect::<Result<_, _>>()?;
+    let nt = c.count(8, "t value count")?;
+    let tv: Vec<f64> = (0..nt).map(|_| c.f64("t value")).collect::<Result<_, _>>()?;
+    let nc = c.count(4, "cell count")?;
+    let mut leaves = Vec::with_capacity(nc);
+    for ci in 0..nc {
+        let a = c.varint("cell index")?;
+        let da = c.varint("cell index")?;
+        let b = c.varint("cell index")?;
+        let db = c.varint("cell index")?;
+        let get = |v: &[f64], i: u64| v.get(i as usize).copied();
+        match (get(&sv, a), get(&sv, a.saturating_add(da)), get(&tv, b), get(&tv, b.saturating_add(db))) {
+            (Some(s0), Some(s1), Some(t0), Some(t1)) if s0 < s1 && t0 < t1 => leaves.push(Rect::new(s0, t0, s1, t1)),
+            _ => return Err(c.err(format!("cell {ci}: indices out of range or an empty rectangle"))),
+        }
+    }
+    Ok(leaves)
+}
+
+fn read_mask(c: &mut Cursor) -> Result<DataMask, TsplineError> {
+    let width = c.varint("mask width")? as usize;
+    let height = c.varint("mask height")? as usize;
+    let total = width.checked_mul(height).filter(|&t| t as u64 <= MAX_BODY * 8).ok_or_else(|| c.err("mask size overflows"))?;
+    let nr = c.count(1, "mask run count")?;
+    let mut bits = Vec::with_capacity(total);
+    let mut bit = false;
+    for _ in 0..nr {
+        let r = c.varint("mask run")? as usize;
+        if r > total - bits.len() {
+            return Err(c.err(format!("mask runs exceed {width}×{height} cells")));
+        }
+        bits.extend(std::iter::repeat_n(bit, r));
+        bit = !bit;
+    }
+    if bits.len() != total {
+        return Err(c.err(format!("mask runs cover {} of {total} cells", bits.len())));
+    }
+    Ok(DataMask { width, height, bits })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::eval::{GridSpec, PbSpline};
+
+    fn sample_file(degree: Degree, xy: bool) -> TMeshFile {
+        let mut m = TMesh::grid(degree, -8.0, -4.0, 8.0, 5, 3);
+        let mut g = |s: f64, t: f64| (s, t, 0.0);
+        let c = m.leaves_in(Rect::new(4.5, 1.0, 4.5, 1.0))[0];
+        let kids = m.split(c, &mut g);
+        m.split(kids[2], &mut g);
+        m.repair(1.0, &mut g);
+        for (i, p) in m.points.iter_mut().enumerate() {
+            p.z = (p.s * 0.37).sin() * 10.0 + p.t * 0.01 + i as f64 * 1e-9;
+            if xy {
+                p.x = p.s + 0.25 * (p.t * 0.1).cos();
+                p.w = 1.0 + (i % 3) as f64 * 0.125;
+            }
+        }
+        TMeshFile {
+            mesh: m,
+            georef: Georef { x0: 500015.0, y0: 2150015.5, dx: 2.0, dy: -2.0, crs: "EPSG:32605".into() },
+            mask: Some(DataMask { width: 7, height: 5, bits: (0..35).map(|i| i % 5 != 1).collect() }),
+            warp: xy.then(|| r#"{"version":1}"#.to_string()),
+        }
+    }
+
+    fn bytes(f: &TMeshFile, binary: bool) -> Vec<u8> {
+        let mut buf = Vec::new();
+        if binary { write(f, &mut buf).unwrap() } else { crate::format::write(f, &mut buf).unwrap() }
+        buf
+    }
+
+    /// .tmb and .tmesh of one mesh read back to the same mesh (up to numbering) and evaluate to
+    /// the same bits on a grid that crosses every cell, and as the mesh itself; the quadtree form is taken for a refined grid and the
+    /// explicit one for a merged mesh with a gap.
+    #[test]
+    fn round_trip_equals_the_xml_bit_for_bit() {
+        for degree in [Degree::Linear, Degree::Cubic] {
+            for xy in [false, true] {
+                let f = sample_file(degree, xy);
+                let b = bytes(&f, true);
+                assert_eq!(b[..8], MAGIC[..]);
+                let fb = crate::format::read(&b).unwrap();
+                let fx = crate::format::read(&bytes(&f, false)).unwrap();
+                let cx = canonical(&fx.mesh);
+                assert_eq!(fb.mesh.points, cx.points);
+                let (cb, cc): (Vec<_>, Vec<_>) = (fb.mesh.cells.iter().map(|c| c.corners).collect(), cx.cells.iter().map(|c| c.corners).collect());
+                assert_eq!(cb, cc);
+                assert_eq!((fb.georef.clone(), fb.mask.clone(), fb.warp.clone()), (fx.georef.clone(), fx.mask.clone(), fx.warp.clone()));
+                let g = GridSpec { s0: -8.0, t0: -4.0, ds: 0.25, dt: 0.25, ns: 161, nt: 97 };
+                let (zb, zx) = (PbSpline::build(&fb.mesh).eval_grid(&g, true), PbSpline::build(&fx.mesh).eval_grid(&g, true));
+                let zm = PbSpline::build(&f.mesh).eval_grid(&g, true);
+                assert!(zb.iter().zip(&zx).all(|(a, b)| a.to_bits() == b.to_bits()));
+                assert!(zb.iter().zip(&zm).all(|(a, b)| a.to_bits() == b.to_bits()));
+                // and point by point (the reference path)
+                let (pb_b, pb_m) = (PbSpline::build(&fb.mesh), PbSpline::build(&f.mesh));
+                for q in 0..2000 {
+                    let (s, t) = (-8.0 + 40.0 * ((q * 37) % 1000) as f64 / 1000.0, -4.0 + 24.0 * ((q * 91) % 1000) as f64 / 1000.0);
+                    assert_eq!(pb_b.point(s, t)[2].to_bits(), pb_m.point(s, t)[2].to_bits());
+                }
+                // the quadtree form: far fewer bytes than the XML
+                assert!(b.len() * 3 < bytes(&f, false).len(), "{degree:?}: {} vs {}", b.len(), bytes(&f, false).len());
+                // writing the read-back file again gives the same bytes
+                assert_eq!(bytes(&fb, true), b);
+            }
+        }
+        let a = TMesh::grid(Degree::Cubic, 0.0, 0.0, 4.0, 5, 4);
+        let mut c = TMesh::grid(Degree::Cubic, 24.0, 4.0, 3.0, 3, 3);
+        c.points.iter_mut().for_each(|p| p.z = 1.0 + 0.1 * p.s);
+        let f = TMeshFile { mesh: a.merge(&c).unwrap(), georef: Georef::identity(), mask: None, warp: None };
+        let b = bytes(&f, true);
+        let body_flags = {
+            let mut d = flate2::read::ZlibDecoder::new(&b[17..b.len() - 4]);
+            let mut v = Vec::new();
+            d.read_to_end(&mut v).unwrap();
+            v[1]
+        };
+        assert_eq!(body_flags & QUADTREE, 0, "a mesh with a gap takes the explicit form");
+        let back = read(&b).unwrap();
+        assert_eq!(back.mesh.points, canonical(&f.mesh).points);
+    }
+
+    /// Every truncation and a flipped byte anywhere give a Format error, never a panic or a
+    /// different mesh (a flip in the deflate stream's unused padding bits changes nothing).
+    #[test]
+    fn damaged_files_are_errors() {
+        let b = bytes(&sample_file(Degree::Cubic, true), true);
+        let good = read(&b).unwrap();
+        for n in 0..b.len() {
+            assert!(read(&b[..n]).is_err(), "truncated to {n} bytes");
+        }
+        for i in 0..b.len() {
+            let mut d = b.clone();
+            d[i] ^= 0x40;
+            match crate::format::read(&d) {
+                Err(TsplineError::Format { .. }) => {}
+                Err(e) => panic!("byte {i}: not a format error: {e}"),
+                Ok(f) => {
+                    assert_eq!(f.mesh.points, good.mesh.points, "byte {i} flipped: a different mesh read without error");
+                    assert_eq!((f.georef, f.mask, f.warp), (good.georef.clone(), good.mask.clone(), good.warp.clone()));
+                }
+            }
+        }
+    }
+}
