@@ -4,7 +4,7 @@
 use clap::Args as ClapArgs;
 
 use raster_io::Raster;
-use tspline::PbSpline;
+use tspline::{GridSpec, PbSpline};
 
 use super::fit::{read_tmesh_arg, select_device, tspline_err, Device};
 use super::rasterize::{read_raster_arg, read_raster_arg_typed, write_raster_arg, RasterOutArgs};
@@ -51,6 +51,22 @@ pub struct Args {
     pub raster_out: RasterOutArgs,
 }
 
+/// The parameter pairs of the output cells: a list, or a regular grid (row-major).
+enum Params {
+    List(Vec<[f64; 2]>),
+    Grid(GridSpec),
+}
+
+impl Params {
+    /// The pairs as a list (the timing's flop estimate samples them).
+    fn list(&self) -> std::borrow::Cow<'_, [[f64; 2]]> {
+        match self {
+            Params::List(v) => std::borrow::Cow::Borrowed(v),
+            Params::Grid(g) => (0..g.ns * g.nt).map(|q| [g.s0 + (q % g.ns) as f64 * g.ds, g.t0 + (q / g.ns) as f64 * g.dt]).collect(),
+        }
+    }
+}
+
 pub fn run(args: Args, config: &Config) -> CmdResult {
     // The output's band type follows --like (a Float32 grid gets a Float32 surface).
     let mut write_opts = args.raster_out.checked(args.output.as_deref(), None)?;
@@ -76,7 +92,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     };
     let crs = if g.crs.is_empty() { None } else { Some(g.crs.clone()) };
     // Output grid and the parameter pair of each output cell.
-    let (mut out, st, stored_mask): (Raster, Vec<[f64; 2]>, Option<Vec<bool>>) = if let Some(like) = &args.like {
+    let (mut out, st, stored_mask): (Raster, Params, Option<Vec<bool>>) = if let Some(like) = &args.like {
         let (r, name, like_type) = read_raster_arg_typed(like)?;
         write_opts = args.raster_out.checked(args.output.as_deref(), Some(like_type))?;
         let gt = r.geotransform;
@@ -92,7 +108,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
             }
         }
         let out = Raster::new_empty(r.width, r.height, gt, r.crs.clone().or(crs));
-        (out, st, None)
+        (out, Params::List(st), None)
     } else if let Some(src) = field.as_ref().and_then(|f| f.source.as_ref()) {
         let out = Raster::new_empty(src.width, src.height, src.geotransform, src.crs.clone().or(crs));
         let mut st = Vec::with_capacity(src.width * src.height);
@@ -104,7 +120,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
             }
         }
         let mask = src.mask().map_err(|e| CliError::unreadable(format!("{}: <warp> source grid: {e}", args.mesh)))?;
-        (out, st, Some(mask))
+        (out, Params::List(st), Some(mask))
     } else {
         let (w, h, s0, t0) = match &file.mask {
             Some(m) => (m.width, m.height, 0.0, 0.0),
@@ -118,15 +134,11 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         if w.saturating_mul(h) > 2_000_000_000 {
             return Err(CliError::usage(format!("{}: the output grid {w}×{h} is too large; pass --like", args.mesh)));
         }
-        // North-up output: row r holds t = t0 + h − 1 − r.
+        // North-up output: row r holds t = t0 + h − 1 − r. A regular grid: evaluated
+        // separably (rows of basis values reused, no per-cell parameter list).
         let (x0, ytop) = g.world(s0, t0 + (h as f64 - 1.0));
         let gt = Raster::geotransform_from_centres(x0, ytop, g.dx, -g.dy);
-        let mut st = Vec::with_capacity(w * h);
-        for row in 0..h {
-            for col in 0..w {
-                st.push([s0 + col as f64, t0 + (h - 1 - row) as f64]);
-            }
-        }
+        let st = Params::Grid(GridSpec { s0, t0: t0 + (h as f64 - 1.0), ds: 1.0, dt: -1.0, ns: w, nt: h });
         let mask = file.mask.as_ref().map(|m| {
             let mut v = vec![false; w * h];
             for row in 0..h {
@@ -157,15 +169,22 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         None => PbSpline::build(&file.mesh),
     };
     let t0 = std::time::Instant::now();
-    let z = match &ocl {
-        Some(o) => {
+    let parallel = tspline::worker_threads() > 1;
+    let z = match (&ocl, &st) {
+        (Some(o), _) => {
             let sp = o.upload(&pb).map_err(|e| tspline_err(&args.mesh, e))?;
-            o.eval_points(&sp, &st).map_err(|e| tspline_err(&args.mesh, e))?
+            match &st {
+                Params::List(st) => o.eval_points(&sp, st),
+                Params::Grid(gs) => o.eval_grid(&sp, gs),
+            }
+            .map_err(|e| tspline_err(&args.mesh, e))?
         }
-        None => pb.eval_z(&st, tspline::worker_threads() > 1),
+        (None, Params::List(st)) => pb.eval_z(st, parallel),
+        (None, Params::Grid(gs)) => pb.eval_grid(gs, parallel),
     };
     if args.timing {
         let secs = t0.elapsed().as_secs_f64();
+        let st = st.list();
         let dev = match &ocl {
             Some(o) => format!("opencl {}", o.device_name()),
             None => format!("cpu, {} thread(s)", tspline::worker_threads()),
