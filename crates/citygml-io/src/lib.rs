@@ -19,6 +19,7 @@
 //! envelope. Geometric defects (a ring with 3 positions, an unclosed ring) are kept as written
 //! for the validator; only what cannot be decoded at all is a [`ReadError`].
 
+pub mod crs;
 pub mod error;
 mod lines;
 pub mod model;

@@ -176,7 +176,8 @@ pub fn tileset(tiles: &[ContentTile], crs_override: Option<&str>, height_offset:
     let (mut lo, mut hi) = ([f64::MAX; 3], [f64::MIN; 3]);
     let mut children = Vec::new();
     for t in tiles {
-        let crs = crs_override.map(str::to_string).or_else(|| t.extent.crs.clone()).ok_or_else(|| {
+        // the glb records the source's srsName (an AdV URN for German data): PROJ's spelling of it
+        let crs = crs_override.map(str::to_string).or_else(|| t.extent.crs.as_deref().map(citygml_io::crs::proj_crs)).ok_or_else(|| {
             TilingError::Usage(format!("{}: the glb records no CRS; give one (e.g. EPSG:25832)", t.uri))
         })?;
         let m = enu_like_transform(&crs, t.extent.origin, height_offset)?;

@@ -17,7 +17,7 @@ Example (what workflows/Snakefile runs; make -j, a Slurm array or GNU parallel r
   geofit heal tiles/x1296_y22916.gml -o healed/x1296_y22916.gml --report healed/x1296_y22916.heal.json
   geofit export healed/x1296_y22916.gml -o glb/x1296_y22916.glb
   geofit tile report healed/*.heal.json reports/*.validate.json -o report.json
-  geofit tile tileset glb/*.glb --crs EPSG:25832 -o tileset.json
+  geofit tile tileset glb/*.glb -o tileset.json
   geofit tile plan dem.vrt --cells-per-tile 4194304 --halo 32 --format tsv
 
 Buildings: every top-level object holding a Building or BuildingPart belongs to exactly one tile,
