@@ -285,3 +285,66 @@ fn info_counts_a_referenced_solid_once() {
     assert_eq!(code, 1, "the reference to a building is a finding: {stderr}");
     assert!(stderr.contains(&format!("{}:5:", p.display())) && stderr.contains("xlink:href=\"#a\" points to <bldg:Building>, not a geometry"), "{stderr}");
 }
+
+/// `geofit info --json DIR` (issue 14): one JSON line per file, equal to the one-file report
+/// plus its `schema` key, in path order, then a summary recounted here from the one-file runs'
+/// exit codes; the text form is each file's block and a blank line, then a summary line.
+#[test]
+fn info_on_a_directory_equals_the_single_file_runs() {
+    let files = all_fixtures();
+    if files.is_empty() {
+        return;
+    }
+    let root = citygml_root().unwrap();
+    let o = common::run(&["-q", "info", "--json", root.to_str().unwrap()], None);
+    let batch_code = common::code(&o);
+    let stdout = String::from_utf8(o.stdout).unwrap();
+    let mut lines: Vec<Value> = stdout.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    let summary = lines.pop().unwrap();
+    assert_eq!(lines.len(), files.len());
+    let (mut clean, mut with_findings, mut worst) = (0, 0, 0);
+    let mut text_want = String::new();
+    for (f, line) in files.iter().zip(&lines) {
+        let (code, single, _) = info_json(f);
+        let mut line = line.clone();
+        assert_eq!(line.as_object_mut().unwrap().remove("schema"), Some(Value::from("geofit-info/1")));
+        assert_eq!(line, single, "{}", f.display());
+        match code {
+            0 => clean += 1,
+            1 => with_findings += 1,
+            c => panic!("{}: exit {c}", f.display()),
+        }
+        worst = worst.max(code);
+        let t = common::run(&["info", f.to_str().unwrap()], None);
+        text_want += &format!("{}\n", String::from_utf8(t.stdout).unwrap());
+    }
+    assert_eq!(batch_code, worst);
+    let s = &summary["summary"];
+    assert_eq!(summary["schema"], "geofit-info/1");
+    assert_eq!((s["files"].as_u64(), s["clean"].as_u64()), (Some(files.len() as u64), Some(clean)));
+    assert_eq!((s["with_findings"].as_u64(), s["unreadable"].as_u64()), (Some(with_findings), Some(0)));
+    let o = common::run(&["-q", "info", root.to_str().unwrap()], None);
+    let text = String::from_utf8(o.stdout).unwrap();
+    let (body, last) = text.trim_end().rsplit_once('\n').unwrap();
+    assert_eq!(format!("{body}\n\n"), text_want);
+    assert!(last.starts_with(&format!("summary: {} files: {clean} without findings, {with_findings} with findings, 0 unreadable;", files.len())), "{last}");
+}
+
+/// A file that cannot be read among good ones: its own error line (exit 3), the others summarised.
+#[test]
+fn info_reports_a_bad_file_in_its_place() {
+    let Some(good) = common::fixture("citygml/v2/FZK-Haus-LoD2-KIT-IAI-KHH-B36-V1.gml") else { return };
+    let tmp = common::tempdir();
+    let bad = tmp.path().join("bad.gml");
+    std::fs::write(&bad, "<core:CityModel").unwrap();
+    let args = ["-q", "info", "--json", bad.to_str().unwrap(), good.to_str().unwrap()];
+    let o = common::run(&args, None);
+    assert_eq!(common::code(&o), 3, "{}", String::from_utf8_lossy(&o.stderr));
+    let lines: Vec<Value> = String::from_utf8(o.stdout).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    assert_eq!(lines.len(), 3);
+    assert_eq!(lines[0]["exit"], 3);
+    assert!(lines[0]["error"].as_str().unwrap().contains("bad.gml"), "{}", lines[0]);
+    let (_, single, _) = info_json(&good);
+    assert_eq!(lines[1]["polygons"], single["polygons"]);
+    assert_eq!(lines[2]["summary"]["unreadable"], 1);
+}

@@ -626,3 +626,197 @@ fn qie_pinched_torus_is_non_manifold_at_the_vertex() {
     let fs = r["geometry"]["findings"].as_array().unwrap();
     assert!(fs.iter().any(|x| x["detail"].as_str().unwrap().contains("(1, 0.5, 0)")), "{fs:?}");
 }
+
+// ---------------------------------------------------------------------------------------------
+// Many files per process (issue 14): `geofit validate DIR | FILES… | 'PATTERN'`. The truth is the
+// one-file run of each file, and the summary is recounted here from the per-file objects.
+
+/// `geofit [env] validate --json ARGS…` as JSON lines → (exit code, per-file objects, summary, stderr).
+fn validate_lines(args: &[&str], env: &[(&str, &str)]) -> (i32, Vec<Value>, Value, String) {
+    let mut cmd = common::geofit();
+    cmd.args(["--quiet", "validate", "--json"]).args(args);
+    for (k, v) in env {
+        cmd.env(k, v);
+    }
+    let o = cmd.output().unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr).into_owned();
+    let code = common::code(&o);
+    let text = String::from_utf8(o.stdout).unwrap();
+    let mut lines: Vec<Value> = text
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("not a JSON line ({e}): {l}\nstderr: {stderr}")))
+        .collect();
+    let summary = lines.pop().unwrap_or_else(|| panic!("no output; stderr: {stderr}"));
+    assert!(summary["summary"].is_object(), "the last line is the summary: {summary}");
+    for l in &lines {
+        assert_eq!(l["schema"], "geofit-validate/1", "{l}");
+    }
+    (code, lines, summary, stderr)
+}
+
+/// A per-file object without the keys the many-file form adds.
+fn without_added_keys(v: &Value) -> Value {
+    let mut v = v.clone();
+    v.as_object_mut().unwrap().remove("schema");
+    v
+}
+
+/// The summary as recounted from the per-file objects: files, valid, invalid, unreadable,
+/// findings per code (geometry codes; `xsd` / `not_well_formed` for the XSD findings).
+fn recount(lines: &[Value]) -> Value {
+    let (mut valid, mut invalid, mut unreadable) = (0, 0, 0);
+    let mut errors = serde_json::Map::new();
+    let mut add = |k: String| {
+        let n = errors.get(&k).and_then(Value::as_u64).unwrap_or(0);
+        errors.insert(k, Value::from(n + 1));
+    };
+    for l in lines {
+        if l.get("error").is_some() {
+            unreadable += 1;
+            continue;
+        }
+        if l["valid"].as_bool().unwrap() {
+            valid += 1;
+        } else {
+            invalid += 1;
+        }
+        for e in l["xsd"]["errors"].as_array().unwrap() {
+            add(if e["kind"] == "invalid" { "xsd".into() } else { e["kind"].as_str().unwrap().to_string() });
+        }
+        for f in l["geometry"]["findings"].as_array().unwrap() {
+            add(f["code"].to_string());
+        }
+    }
+    serde_json::json!({ "files": lines.len(), "valid": valid, "invalid": invalid, "unreadable": unreadable, "errors": errors })
+}
+
+fn summary_counts(summary: &Value) -> Value {
+    let mut s = summary["summary"].clone();
+    let wall = s.as_object_mut().unwrap().remove("wall_seconds").expect("wall_seconds");
+    assert!(wall.as_f64().unwrap() > 0.0);
+    s
+}
+
+#[test]
+fn directory_run_equals_the_single_file_runs_with_xsd() {
+    let (Some(dir), Some(_)) = (common::fixture("citygml"), shared_xsd_dir()) else { return };
+    let files = all_gml(&dir);
+    assert!(files.len() >= 60, "the whole fixture set, found {}", files.len());
+    let (code, lines, summary, stderr) = validate_lines(&[dir.to_str().unwrap()], &[]);
+    assert_eq!(lines.len(), files.len(), "one object per file; stderr: {stderr}");
+    let mut worst = 0;
+    for (f, line) in files.iter().zip(&lines) {
+        let (c, single) = validate_json(&[f.to_str().unwrap()]);
+        assert_eq!(line["file"], f.to_str().unwrap(), "input order: files sorted by path");
+        assert_eq!(without_added_keys(line), single, "{}: the directory run's object differs from the single run", f.display());
+        assert!(single["xsd"]["checked"].as_bool().unwrap(), "{}: XSD checked", f.display());
+        worst = worst.max(c);
+    }
+    assert_eq!(code, worst, "exit status: the worst of the single runs");
+    assert_eq!(summary_counts(&summary), recount(&lines));
+    assert_eq!(summary["summary"]["invalid"].as_u64(), Some(lines.iter().filter(|l| l["valid"] == false).count() as u64));
+}
+
+#[test]
+fn text_run_is_the_concatenation_of_single_file_texts_then_a_summary() {
+    let Some(dir) = common::fixture("citygml/qie") else { return };
+    let o = common::run(&["-q", "validate", dir.to_str().unwrap()], None);
+    let code = common::code(&o);
+    let out = String::from_utf8(o.stdout).unwrap();
+    let (body, last) = out.trim_end().rsplit_once('\n').unwrap();
+    let mut want = String::new();
+    let files = all_gml(&dir);
+    let (mut valid, mut invalid) = (0, 0);
+    for f in &files {
+        let s = common::run(&["-q", "validate", f.to_str().unwrap()], None);
+        match common::code(&s) {
+            0 => valid += 1,
+            1 => invalid += 1,
+            c => panic!("{}: exit {c}", f.display()),
+        }
+        want.push_str(&String::from_utf8(s.stdout).unwrap());
+    }
+    assert_eq!(format!("{body}\n"), want);
+    let head = format!("summary: {} files: {valid} valid, {invalid} invalid, 0 unreadable; errors: ", files.len());
+    assert!(last.starts_with(&head), "{last}\nwanted it to start with {head}");
+    assert_eq!(code, if invalid > 0 { 1 } else { 0 });
+}
+
+#[test]
+fn a_bad_file_among_good_ones_is_reported_and_the_rest_checked() {
+    let (Some(good), Some(v1)) = (common::fixture("citygml/qie/v001.gml"), common::fixture("citygml/qie/i201_1.gml")) else { return };
+    let tmp = common::tempdir();
+    let text = std::fs::read(&good).unwrap();
+    let cut = write(tmp.path(), "cut.gml", std::str::from_utf8(&text[..text.len() / 2]).unwrap_or("<a"));
+    let missing = tmp.path().join("missing.gml");
+    let args = [good.to_str().unwrap(), cut.to_str().unwrap(), missing.to_str().unwrap(), v1.to_str().unwrap()];
+    let (code, lines, summary, stderr) = validate_lines(&args, &[]);
+    assert_eq!(code, 3, "unreadable input wins over findings: {stderr}");
+    assert_eq!(lines.len(), 4);
+    let files: Vec<&str> = lines.iter().map(|l| l["file"].as_str().unwrap()).collect();
+    assert_eq!(files, args, "input order");
+    assert_eq!(lines[0]["valid"], true);
+    for bad in &lines[1..3] {
+        assert_eq!(bad["exit"], 3, "{bad}");
+        let f = bad["file"].as_str().unwrap();
+        assert!(bad["error"].as_str().unwrap().contains(f), "the message names the file: {bad}");
+        assert!(stderr.contains(&format!("geofit: error: {}", bad["error"].as_str().unwrap())), "{stderr}");
+    }
+    // the file after the bad ones is still checked, with the same result as alone
+    let (c, single) = validate_json(&[v1.to_str().unwrap()]);
+    assert_eq!(c, 1);
+    assert_eq!(without_added_keys(&lines[3]), single);
+    assert_eq!(summary_counts(&summary), recount(&lines));
+    assert_eq!(summary["summary"]["unreadable"], 2);
+    // text: one line each, in place
+    let o = common::run(&["-q", "validate", "--no-xsd", args[0], args[1], args[2], args[3]], None);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(out.contains(&format!("{}: UNREADABLE: ", args[2])), "{out}");
+    assert!(out.lines().any(|l| l.starts_with(args[3]) && l.ends_with("INVALID")), "{out}");
+}
+
+#[test]
+fn result_order_does_not_depend_on_the_threads() {
+    let Some(dir) = common::fixture("citygml") else { return };
+    let run = |n: &str| validate_lines(&["--no-xsd", dir.to_str().unwrap()], &[("RAYON_NUM_THREADS", n)]);
+    let (c1, l1, s1, _) = run("1");
+    let (c2, l2, s2, _) = run("2");
+    assert!(l1.len() >= 60);
+    assert_eq!(c1, c2);
+    assert_eq!(l1, l2, "same objects in the same order");
+    assert_eq!(summary_counts(&s1), summary_counts(&s2));
+}
+
+#[test]
+fn quoted_glob_patterns_and_stdin_among_files() {
+    let Some(dir) = common::fixture("citygml/qie") else { return };
+    // the pattern's matches, listed here independently
+    let mut want: Vec<PathBuf> = all_gml(&dir)
+        .into_iter()
+        .filter(|p| {
+            let n = p.file_name().unwrap().to_str().unwrap();
+            n.starts_with("i2") && n.ends_with(".gml")
+        })
+        .collect();
+    want.sort();
+    assert!(want.len() >= 3);
+    let pattern = format!("{}/i2*.gml", dir.display());
+    let (_, lines, _, _) = validate_lines(&["--no-xsd", &pattern], &[]);
+    let got: Vec<&str> = lines.iter().map(|l| l["file"].as_str().unwrap()).collect();
+    assert_eq!(got, want.iter().map(|p| p.to_str().unwrap()).collect::<Vec<_>>());
+    // `-` among files is standard input, in its place
+    let stdin = std::fs::read(&want[0]).unwrap();
+    let mut cmd = common::geofit();
+    cmd.args(["-q", "validate", "--json", "--no-xsd", want[1].to_str().unwrap(), "-"]);
+    let o = cmd.stdin(std::process::Stdio::piped()).stdout(std::process::Stdio::piped()).spawn().unwrap();
+    let mut o = o;
+    std::io::Write::write_all(&mut o.stdin.take().unwrap(), &stdin).unwrap();
+    let o = o.wait_with_output().unwrap();
+    let lines: Vec<Value> = String::from_utf8(o.stdout).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    assert_eq!(lines[1]["file"], "<stdin>");
+    let (_, single) = validate_json(&["--no-xsd", want[0].to_str().unwrap()]);
+    assert_eq!(lines[1]["geometry"], single["geometry"]);
+    // a pattern or directory naming nothing is a usage error
+    let o = common::run(&["validate", &format!("{}/nothing*.gml", dir.display())], None);
+    assert_eq!(common::code(&o), 2);
+}

@@ -7,6 +7,7 @@
 //! * XSD validation with libxml2 linked in-process ([`xsd`]).
 
 pub mod codes;
+pub mod document;
 pub mod geom;
 pub mod model;
 pub mod polygon;

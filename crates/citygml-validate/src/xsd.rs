@@ -41,6 +41,7 @@ type EntityLoader = unsafe extern "C" fn(*const c_char, *const c_char, *mut c_vo
 #[link(name = "xml2")]
 extern "C" {
     fn xmlInitParser();
+    fn xmlSchemaInitTypes();
     fn xmlSetExternalEntityLoader(f: EntityLoader);
     fn xmlNoNetExternalEntityLoader(url: *const c_char, id: *const c_char, ctxt: *mut c_void) -> *mut c_void;
     fn xmlSetStructuredErrorFunc(ctx: *mut c_void, handler: Option<StructuredErrorFunc>);
@@ -63,9 +64,14 @@ const XML_PARSE_BIG_LINES: c_int = 1 << 22;
 
 static INIT: Once = Once::new();
 
+/// libxml2's process-wide set-up, once, before any thread parses: `xmlInitParser`, and
+/// `xmlSchemaInitTypes`, which `xmlSchemaParse` otherwise runs lazily without a lock (two
+/// threads parsing their first schemas at once could both build the built-in types; libxml2
+/// issue 930). After this, schemas may be parsed and documents validated on any thread.
 fn init() {
     INIT.call_once(|| unsafe {
         xmlInitParser();
+        xmlSchemaInitTypes();
         xmlSetExternalEntityLoader(xmlNoNetExternalEntityLoader);
     });
 }
@@ -390,5 +396,35 @@ mod tests {
         assert_eq!(f[0].kind, XsdErrorKind::NotWellFormed);
         assert!(f[0].line >= 6 && f[0].column >= 1, "{f:?}");
         assert!(Schema::load(&dir.join("no-such.xsd")).is_err());
+    }
+
+    /// The rules the many-file run relies on: schemas parsed on several threads at once (after
+    /// the one-time set-up) and one parsed schema validating on several threads at once give
+    /// the same findings as one thread alone.
+    #[test]
+    fn schemas_parse_and_validate_on_many_threads() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/xsd");
+        if !dir.join("citygml-2.0.xsd").is_file() {
+            eprintln!("SKIP: {} not found", dir.display());
+            return;
+        }
+        let bad = DOC.replace("gml:id=\"B1\"", "gml:id=\"1B\"");
+        let alone = Schema::load(&dir.join("citygml-2.0.xsd")).unwrap().validate(bad.as_bytes(), "bad.gml").unwrap();
+        assert!(!alone.is_empty());
+        let shared = Schema::load(&dir.join("citygml-2.0.xsd")).unwrap();
+        std::thread::scope(|s| {
+            for k in 0..4 {
+                let (dir, bad, alone, shared) = (&dir, &bad, &alone, &shared);
+                s.spawn(move || {
+                    // each thread parses a different wrapper first
+                    let v = ["1.0", "2.0", "3.0", "2.0"][k];
+                    Schema::load(&dir.join(wrapper_for(v))).unwrap();
+                    for _ in 0..20 {
+                        assert_eq!(&shared.validate(bad.as_bytes(), "bad.gml").unwrap(), alone);
+                        assert!(shared.validate(DOC.as_bytes(), "ok.gml").unwrap().is_empty());
+                    }
+                });
+            }
+        });
     }
 }

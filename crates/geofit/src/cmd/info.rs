@@ -5,14 +5,18 @@
 //! (XYZ/CSV text, LAS/LAZ: count, bounds, CRS). The kind comes from the extension where it is
 //! unambiguous, otherwise from the content (root element, then GDAL, then XYZ text).
 
+use std::cell::RefCell;
 use std::collections::BTreeMap;
 use std::io::Write;
+use std::time::Instant;
 
 use citygml_io::{CityObject, Envelope, ObjectStream, ReadError};
 use clap::Args as ClapArgs;
 use serde::Serialize;
 
-use crate::config::{print_report, Config, Input};
+use crate::config::{
+    batch_inputs, print_report, run_batch, worse_exit, write_batch_error, write_json_line, Config, Input, CITYGML_EXTENSIONS,
+};
 use crate::error::{CliError, CmdResult, Exit};
 
 const EXAMPLE: &str = "\
@@ -43,14 +47,25 @@ Example:
 
 Counts are of definitions: a polygon referenced by xlink:href (the faces of an NRW lod2Solid)
 is counted once, where it is defined; `xlinks_resolved` says how many references were followed.
+
+Many inputs (several arguments, a directory — searched recursively for *.gml, *.xml, *.citygml —
+or a glob pattern): read in parallel, reported in input order, each block as for one file and a
+blank line, then a summary line; with --json, JSON lines: one object per file (the one-file
+report plus \"schema\": \"geofit-info/1\"; an unreadable one is {\"schema\", \"file\", \"error\",
+\"exit\"}), then {\"schema\", \"summary\": {files, clean, with_findings, unreadable, wall_seconds}}.
+An unreadable input is reported in its place and the rest still read; the exit status is the
+worst over the inputs.
 Exit 1 when the file is readable but has rings with fewer than 4 positions or XLinks whose
 target is missing (each listed on stderr as FILE:LINE:COL); exit 3 when it cannot be read.";
 
 #[derive(ClapArgs, Debug)]
 #[command(about = "Summarise a CityGML file (or a T-mesh, raster or point file): counts, extent, CRS", after_help = EXAMPLE)]
 pub struct Args {
-    /// CityGML file (1.0, 2.0 or 3.0), T-mesh, raster (GDAL) or point file (XYZ/CSV, LAS/LAZ), or `-` for stdin.
-    pub input: String,
+    /// CityGML files (1.0, 2.0 or 3.0), T-meshes, rasters (GDAL) or point files (XYZ/CSV, LAS/LAZ);
+    /// directories (searched recursively for *.gml, *.xml, *.citygml), glob patterns (quoted:
+    /// expanded by geofit), or `-` for stdin.
+    #[arg(required = true, value_name = "INPUT")]
+    pub inputs: Vec<String>,
     /// Print the report as JSON on stdout instead of text.
     #[arg(long)]
     pub json: bool,
@@ -123,17 +138,64 @@ fn looks_like_xml(src: &[u8]) -> bool {
     src.iter().find(|b| !b.is_ascii_whitespace()) == Some(&b'<')
 }
 
+/// What `info` found in one input; serialized as the inner report.
+#[derive(Debug, Serialize)]
+#[serde(untagged)]
+enum Info {
+    CityGml(InfoReport),
+    TMesh(TMeshInfo),
+    Raster(RasterInfo),
+    Points(PointsInfo),
+}
+
+impl Info {
+    fn write_text(&self, w: &mut dyn Write) -> std::io::Result<()> {
+        match self {
+            Info::CityGml(r) => write_text(w, r),
+            Info::TMesh(r) => write_tmesh_text(w, r),
+            Info::Raster(r) => write_raster_text(w, r),
+            Info::Points(r) => write_points_text(w, r),
+        }
+    }
+}
+
+/// One input's summary and its located problems (`FILE:LINE:COL: …`, exit 1 when there are any).
+struct Summary {
+    info: Info,
+    findings: Vec<String>,
+}
+
+impl From<Info> for Summary {
+    fn from(info: Info) -> Summary {
+        Summary { info, findings: Vec::new() }
+    }
+}
+
 pub fn run(args: Args, config: &Config) -> CmdResult {
-    let input = Input::from_arg(&args.input);
-    let name = input.display_name();
+    let started = Instant::now();
     super::rasterize::gdal_notices(config);
+    if file_batch::is_batch(&args.inputs) {
+        let inputs = batch_inputs(&args.inputs, CITYGML_EXTENSIONS)?;
+        return run_many(inputs, args.json, config, started);
+    }
+    let s = summarize(&Input::from_arg(&args.inputs[0]))?;
+    print_report(args.json, &s.info, |w| s.info.write_text(w))?;
+    for f in &s.findings {
+        crate::say!("{f}");
+    }
+    Ok(if s.findings.is_empty() { Exit::Ok } else { Exit::Findings })
+}
+
+/// Reads one input and summarises it, whatever kind it is.
+fn summarize(input: &Input) -> Result<Summary, CliError> {
+    let name = input.display_name();
     // Binary rasters and LAS/LAZ are opened by path (GDAL, las): decide before reading.
     let by_ext = input.path().and_then(kind_by_extension);
     match (by_ext, input.path()) {
-        (Some(Kind::Raster), Some(p)) => return raster_info(&read_raster_path(p)?, &name, args.json),
+        (Some(Kind::Raster), Some(p)) => return Ok(raster_info(&read_raster_path(p)?, &name).into()),
         (Some(Kind::Points), Some(p)) => {
             let cloud = raster_io::read_points(p, None).map_err(|e| CliError::unreadable(e.to_string()))?;
-            return points_info(&cloud, &name, args.json);
+            return Ok(points_info(&cloud, &name).into());
         }
         _ => {}
     }
@@ -147,15 +209,15 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     }
     if by_ext == Some(Kind::TMesh) || (by_ext.is_none() && tspline::format::is_tmesh_document(&src)) {
         let file = tspline::format::read(&src).map_err(|e| CliError::unreadable(format!("{name}: {e}")))?;
-        return tmesh_info(&file, &name, args.json);
+        return Ok(tmesh_info(&file, &name).into());
     }
     if by_ext.is_none() && !src.is_empty() && !looks_like_xml(&src) {
         // No telling extension and not XML: a raster GDAL opens, else XYZ text.
         if let Some(r) = raster_from_bytes(&src, input.path())? {
-            return raster_info(&r, &name, args.json);
+            return Ok(raster_info(&r, &name).into());
         }
         return match raster_io::points::read_xyz(&src[..], &name) {
-            Ok(cloud) => points_info(&cloud, &name, args.json),
+            Ok(cloud) => Ok(points_info(&cloud, &name).into()),
             // The XYZ error names file and line; say what else was tried.
             Err(e) => Err(CliError::unreadable(format!("{e} (read as XYZ text: not XML, and no raster GDAL opens)"))),
         };
@@ -242,11 +304,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         xlinks_resolved: xlinks,
         unresolved_xlinks: stream.unresolved_xlinks().len(),
     };
-    print_report(args.json, &report, |w| write_text(w, &report))?;
-    for f in &findings {
-        crate::say!("{f}");
-    }
-    Ok(if findings.is_empty() { Exit::Ok } else { Exit::Findings })
+    Ok(Summary { info: Info::CityGml(report), findings })
 }
 
 fn write_text(w: &mut dyn Write, r: &InfoReport) -> std::io::Result<()> {
@@ -300,11 +358,6 @@ fn raster_from_bytes(src: &[u8], path: Option<&std::path::Path>) -> Result<Optio
     }
 }
 
-fn json_out<T: Serialize>(report: &T, text: impl FnOnce(&mut dyn Write) -> std::io::Result<()>, json: bool) -> CmdResult {
-    print_report(json, report, text)?;
-    Ok(Exit::Ok)
-}
-
 /// `info` of a T-mesh file.
 #[derive(Debug, Serialize)]
 pub struct TMeshInfo {
@@ -326,7 +379,7 @@ pub struct TMeshInfo {
     pub indirect: bool,
 }
 
-fn tmesh_info(f: &tspline::format::TMeshFile, name: &str, json: bool) -> CmdResult {
+fn tmesh_info(f: &tspline::format::TMeshFile, name: &str) -> Info {
     let m = &f.mesh;
     let b = m.bounds();
     let g = &f.georef;
@@ -342,24 +395,22 @@ fn tmesh_info(f: &tspline::format::TMeshFile, name: &str, json: bool) -> CmdResu
         mask: f.mask.as_ref().map(|k| [k.width, k.height, k.bits.iter().filter(|v| **v).count()]),
         indirect: f.warp.is_some(),
     };
-    json_out(
-        &r,
-        |w| {
-            writeln!(w, "file:           {}", r.file)?;
-            writeln!(w, "kind:           T-mesh, degree {}", r.degree)?;
-            writeln!(w, "cells:          {}", r.cells)?;
-            writeln!(w, "control points: {}", r.control_points)?;
-            writeln!(w, "domain (s, t):  {} {} .. {} {}", r.domain[0], r.domain[1], r.domain[2], r.domain[3])?;
-            writeln!(w, "georef:         x = {} + s·{}, y = {} + t·{}", r.georef[0], r.georef[2], r.georef[1], r.georef[3])?;
-            writeln!(w, "crs:            {}", r.crs.as_deref().map(short_crs).unwrap_or("none"))?;
-            match r.mask {
-                Some([mw, mh, n]) => writeln!(w, "mask:           {mw}×{mh}, {n} cells with data")?,
-                None => writeln!(w, "mask:           none")?,
-            }
-            writeln!(w, "indirect:       {}", if r.indirect { "yes (warp field stored)" } else { "no" })
-        },
-        json,
-    )
+    Info::TMesh(r)
+}
+
+fn write_tmesh_text(w: &mut dyn Write, r: &TMeshInfo) -> std::io::Result<()> {
+    writeln!(w, "file:           {}", r.file)?;
+    writeln!(w, "kind:           T-mesh, degree {}", r.degree)?;
+    writeln!(w, "cells:          {}", r.cells)?;
+    writeln!(w, "control points: {}", r.control_points)?;
+    writeln!(w, "domain (s, t):  {} {} .. {} {}", r.domain[0], r.domain[1], r.domain[2], r.domain[3])?;
+    writeln!(w, "georef:         x = {} + s·{}, y = {} + t·{}", r.georef[0], r.georef[2], r.georef[1], r.georef[3])?;
+    writeln!(w, "crs:            {}", r.crs.as_deref().map(short_crs).unwrap_or("none"))?;
+    match r.mask {
+        Some([mw, mh, n]) => writeln!(w, "mask:           {mw}×{mh}, {n} cells with data")?,
+        None => writeln!(w, "mask:           none")?,
+    }
+    writeln!(w, "indirect:       {}", if r.indirect { "yes (warp field stored)" } else { "no" })
 }
 
 /// `info` of a raster.
@@ -381,7 +432,7 @@ pub struct RasterInfo {
     pub range: Option<[f64; 2]>,
 }
 
-fn raster_info(r: &raster_io::Raster, name: &str, json: bool) -> CmdResult {
+fn raster_info(r: &raster_io::Raster, name: &str) -> Info {
     let info = RasterInfo {
         file: name.to_string(),
         kind: "raster",
@@ -394,23 +445,21 @@ fn raster_info(r: &raster_io::Raster, name: &str, json: bool) -> CmdResult {
         valid_count: r.valid_count(),
         range: r.min_max().map(|(a, b)| [a, b]),
     };
-    json_out(
-        &info,
-        |w| {
-            let gt = &info.geotransform;
-            writeln!(w, "file:         {}", info.file)?;
-            writeln!(w, "kind:         raster, {}×{} cells", info.width, info.height)?;
-            writeln!(w, "geotransform: {} {} {} {} {} {}", gt[0], gt[1], gt[2], gt[3], gt[4], gt[5])?;
-            writeln!(w, "crs:          {}", info.crs.as_deref().map(short_crs).unwrap_or("none"))?;
-            writeln!(w, "nodata:       {} cells (marker {})", info.nodata_count, info.nodata.map(|v| v.to_string()).unwrap_or_else(|| "none".into()))?;
-            writeln!(w, "valid:        {} cells", info.valid_count)?;
-            match info.range {
-                Some([a, b]) => writeln!(w, "range:        {a} .. {b}"),
-                None => writeln!(w, "range:        none (no valid cell)"),
-            }
-        },
-        json,
-    )
+    Info::Raster(info)
+}
+
+fn write_raster_text(w: &mut dyn Write, info: &RasterInfo) -> std::io::Result<()> {
+    let gt = &info.geotransform;
+    writeln!(w, "file:         {}", info.file)?;
+    writeln!(w, "kind:         raster, {}×{} cells", info.width, info.height)?;
+    writeln!(w, "geotransform: {} {} {} {} {} {}", gt[0], gt[1], gt[2], gt[3], gt[4], gt[5])?;
+    writeln!(w, "crs:          {}", info.crs.as_deref().map(short_crs).unwrap_or("none"))?;
+    writeln!(w, "nodata:       {} cells (marker {})", info.nodata_count, info.nodata.map(|v| v.to_string()).unwrap_or_else(|| "none".into()))?;
+    writeln!(w, "valid:        {} cells", info.valid_count)?;
+    match info.range {
+        Some([a, b]) => writeln!(w, "range:        {a} .. {b}"),
+        None => writeln!(w, "range:        none (no valid cell)"),
+    }
 }
 
 /// `info` of a point file.
@@ -424,26 +473,24 @@ pub struct PointsInfo {
     pub crs: Option<String>,
 }
 
-fn points_info(c: &raster_io::PointCloud, name: &str, json: bool) -> CmdResult {
+fn points_info(c: &raster_io::PointCloud, name: &str) -> Info {
     let mut e = Envelope::empty();
     for p in &c.points {
         e.add_point(p);
     }
     let info = PointsInfo { file: name.to_string(), kind: "points", points: c.points.len(), envelope: env(&e), crs: c.crs.clone() };
-    json_out(
-        &info,
-        |w| {
-            writeln!(w, "file:     {}", info.file)?;
-            writeln!(w, "kind:     points")?;
-            writeln!(w, "points:   {}", info.points)?;
-            match info.envelope {
-                Some([a, b]) => writeln!(w, "envelope: {} {} {} .. {} {} {}", a[0], a[1], a[2], b[0], b[1], b[2])?,
-                None => writeln!(w, "envelope: none")?,
-            }
-            writeln!(w, "crs:      {}", info.crs.as_deref().map(short_crs).unwrap_or("none"))
-        },
-        json,
-    )
+    Info::Points(info)
+}
+
+fn write_points_text(w: &mut dyn Write, info: &PointsInfo) -> std::io::Result<()> {
+    writeln!(w, "file:     {}", info.file)?;
+    writeln!(w, "kind:     points")?;
+    writeln!(w, "points:   {}", info.points)?;
+    match info.envelope {
+        Some([a, b]) => writeln!(w, "envelope: {} {} {} .. {} {} {}", a[0], a[1], a[2], b[0], b[1], b[2])?,
+        None => writeln!(w, "envelope: none")?,
+    }
+    writeln!(w, "crs:      {}", info.crs.as_deref().map(short_crs).unwrap_or("none"))
 }
 
 /// The first line of a CRS for the text report (WKT is long; the JSON keeps all of it).
@@ -458,4 +505,86 @@ fn short_crs(s: &str) -> &str {
         }
         _ => s,
     }
+}
+
+/// Version of the JSON lines a many-file run writes (one object per file, then the summary).
+const JSON_LINES_SCHEMA: &str = "geofit-info/1";
+
+/// One line of `--json` output for a file: the one-file report plus the format version.
+#[derive(Serialize)]
+struct FileLine<'a> {
+    schema: &'static str,
+    #[serde(flatten)]
+    info: &'a Info,
+}
+
+#[derive(Debug, Default, Serialize)]
+struct BatchSummary {
+    files: usize,
+    /// Read, and nothing to report (exit 0 on their own).
+    clean: usize,
+    /// Read, with located problems (exit 1 on their own).
+    with_findings: usize,
+    unreadable: usize,
+    wall_seconds: f64,
+}
+
+#[derive(Serialize)]
+struct SummaryLine<'a> {
+    schema: &'static str,
+    summary: &'a BatchSummary,
+}
+
+/// Several inputs: summarised in parallel, reported in input order (text blocks separated by a
+/// blank line, or JSON lines), then a summary; an unreadable input is reported in its place.
+fn run_many(inputs: Vec<Input>, json: bool, config: &Config, started: Instant) -> CmdResult {
+    // shared by the per-file and the summary writer
+    let tally = RefCell::new((BatchSummary::default(), Exit::Ok));
+    run_batch(
+        inputs,
+        "info",
+        config,
+        summarize,
+        |w, name, result| {
+            let (summary, worst) = &mut *tally.borrow_mut();
+            summary.files += 1;
+            let s = match result {
+                Ok(s) => s,
+                Err(e) => {
+                    summary.unreadable += 1;
+                    *worst = worse_exit(*worst, e.exit);
+                    return write_batch_error(w, json, JSON_LINES_SCHEMA, name, &e);
+                }
+            };
+            for f in &s.findings {
+                crate::say!("{f}");
+            }
+            if s.findings.is_empty() {
+                summary.clean += 1;
+            } else {
+                summary.with_findings += 1;
+                *worst = worse_exit(*worst, Exit::Findings);
+            }
+            if json {
+                write_json_line(w, &FileLine { schema: JSON_LINES_SCHEMA, info: &s.info })
+            } else {
+                s.info.write_text(w).and_then(|()| writeln!(w)).map_err(CliError::io_out)
+            }
+        },
+        |w| {
+            let (summary, _) = &mut *tally.borrow_mut();
+            summary.wall_seconds = started.elapsed().as_secs_f64();
+            if json {
+                return write_json_line(w, &SummaryLine { schema: JSON_LINES_SCHEMA, summary });
+            }
+            writeln!(
+                w,
+                "summary: {} files: {} without findings, {} with findings, {} unreadable; {:.3} s",
+                summary.files, summary.clean, summary.with_findings, summary.unreadable, summary.wall_seconds
+            )
+            .map_err(CliError::io_out)
+        },
+    )?;
+    let worst = tally.borrow().1;
+    Ok(worst)
 }

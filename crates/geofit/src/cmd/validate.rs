@@ -1,16 +1,20 @@
 //! `geofit validate`: XSD validation against the offline CityGML schemas (libxml2 in-process) and
 //! geometric validation with the val3dity / OGC QIE error codes (ring → polygon → shell → solid).
 
+use std::cell::RefCell;
 use std::io::Write;
 use std::path::{Path, PathBuf};
+use std::time::Instant;
 
-use citygml_io::ObjectStream;
-use citygml_validate::xsd::{sniff_version, wrapper_for, Schema, XsdErrorKind, XsdFinding};
-use citygml_validate::{add_unresolved_xlinks, sort_findings, validate_objects, Finding, Options};
+use citygml_validate::document::{validate_document, Checks, DocumentError, Report, SchemaSet, Summary};
+use citygml_validate::xsd::XsdErrorKind;
+use citygml_validate::Options;
 use clap::Args as ClapArgs;
 use serde::Serialize;
 
-use crate::config::{print_report, Config, Input};
+use crate::config::{
+    batch_inputs, print_report, run_batch, worse_exit, write_batch_error, write_json_line, Config, Input, CITYGML_EXTENSIONS,
+};
 use crate::error::{CliError, CmdResult, Exit};
 
 const EXAMPLE: &str = "\
@@ -23,6 +27,20 @@ Example:
   building.gml: geometry: 1 error (snap 0.001 m, planarity 0.01 m, normals 20°)
   building.gml: INVALID
   $ geofit validate --json --no-xsd --planarity-tol 0.05 - < tile.gml | jq '.geometry.findings[].code'
+  $ geofit validate tiles/ 'more/*.gml' extra.gml
+  ... one block per file, in argument order (a directory's files sorted by path) ...
+  summary: 66 files: 62 valid, 4 invalid, 0 unreadable; errors: 203 ×10, 302 ×3, xsd ×2; 1.912 s
+  $ geofit validate --json tiles/ | jq -c 'select(.file) | [.file, .valid]'
+
+Many files (several arguments, a directory — searched recursively for *.gml, *.xml, *.citygml —
+or a glob pattern): the schemas are parsed once and the files checked in parallel
+(RAYON_NUM_THREADS threads, default one per core); the output is in input order whatever the
+threads. Text: each file's block as for one file, then a summary line. --json: JSON lines, one
+object per file (the one-file report plus \"schema\": \"geofit-validate/1\"; a file that cannot be
+read is {\"schema\", \"file\", \"error\", \"exit\"}), then {\"schema\", \"summary\": {files, valid,
+invalid, unreadable, errors (per code: val3dity codes, xsd, not_well_formed), wall_seconds}}. A
+file that cannot be read is reported in its place (and on stderr) and the others are still
+checked; the exit status is the worst over the files.
 
 Geometric checks run level by level like val3dity — ring (101–104), polygon (201–208), shell
 (301–307), solid (401–405), CompositeSolid (501–503) — and a primitive whose lower level fails
@@ -39,13 +57,16 @@ from the working directory upwards and from the source tree geofit was built fro
 citygml-1.0.xsd, citygml-2.0.xsd, citygml-3.0.xsd wrappers (see ../shared/xsd/README.md); the
 wrapper is chosen from the document's namespaces. Without schemas the geometric checks run alone.
 
-Exit status: 0 valid, 1 XSD or geometric errors (all listed), 2 bad options, 3 unreadable input.";
+Exit status: 0 valid, 1 XSD or geometric errors (all listed), 2 bad options (or a pattern or
+directory that names no file), 3 unreadable input, 4 internal failure.";
 
 #[derive(ClapArgs, Debug)]
 #[command(about = "Validate CityGML: XSD schema (libxml2) and geometry (val3dity/QIE codes)", after_help = EXAMPLE)]
 pub struct Args {
-    /// CityGML file (1.0, 2.0 or 3.0), or `-` for stdin.
-    pub input: String,
+    /// CityGML files (1.0, 2.0 or 3.0), directories (searched recursively for *.gml, *.xml,
+    /// *.citygml), glob patterns (quoted: expanded by geofit), or `-` for stdin.
+    #[arg(required = true, value_name = "INPUT")]
+    pub inputs: Vec<String>,
     /// Print the report as JSON on stdout instead of text.
     #[arg(long)]
     pub json: bool,
@@ -67,36 +88,6 @@ pub struct Args {
     /// Maximum angle between the normals of a polygon's triangles (degrees).
     #[arg(long, default_value_t = 20.0, value_name = "DEG")]
     pub normals_tol: f64,
-}
-
-#[derive(Serialize)]
-struct XsdReport {
-    checked: bool,
-    /// Why it was not checked.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    reason: Option<String>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    schema: Option<String>,
-    valid: Option<bool>,
-    errors: Vec<XsdFinding>,
-}
-
-#[derive(Serialize)]
-struct GeometryReport {
-    checked: bool,
-    options: Options,
-    features: usize,
-    valid: Option<bool>,
-    findings: Vec<Finding>,
-}
-
-#[derive(Serialize)]
-struct Report {
-    file: String,
-    version: Option<String>,
-    valid: bool,
-    xsd: XsdReport,
-    geometry: GeometryReport,
 }
 
 const HOW_TO_GET: &str = "CityGML schemas not found (no --schemas DIR, GEOFIT_SCHEMAS unset or empty, no ../shared/xsd \
@@ -148,115 +139,146 @@ fn check_opts(args: &Args) -> Result<Options, CliError> {
     Ok(Options { snap_tol: args.snap_tol, planarity_tol: args.planarity_tol, normals_tol_deg: args.normals_tol })
 }
 
-fn run_xsd(bytes: &[u8], name: &str, dir: &Path, version: &str) -> XsdReport {
-    let path = dir.join(wrapper_for(version));
-    let schema = match Schema::load(&path) {
-        Ok(s) => s,
-        Err(e) => {
-            return XsdReport { checked: false, reason: Some(e.to_string()), schema: Some(path.display().to_string()), valid: None, errors: vec![] }
+/// Checks that do not depend on the documents: tolerances, schemas (found once per process).
+fn checks(args: &Args, options: Options, config: &Config) -> Result<Checks, CliError> {
+    let xsd = if args.no_xsd {
+        Err("--no-xsd".to_string())
+    } else {
+        match find_schema_dir(args.schemas.as_deref()) {
+            Ok(dir) => Ok(SchemaSet::new(dir)),
+            Err(why) => {
+                if args.schemas.is_some() || std::env::var_os("GEOFIT_SCHEMAS").is_some_and(|v| !v.is_empty()) {
+                    return Err(CliError::usage(why));
+                }
+                config.notice(&why);
+                Err(why)
+            }
         }
     };
-    match schema.validate(bytes, name) {
-        Ok(errors) => XsdReport {
-            checked: true,
-            reason: None,
-            schema: Some(path.display().to_string()),
-            valid: Some(errors.is_empty()),
-            errors,
-        },
-        Err(e) => XsdReport { checked: false, reason: Some(e.to_string()), schema: Some(path.display().to_string()), valid: None, errors: vec![] },
+    Ok(Checks { xsd, geometry: !args.no_geometry, options })
+}
+
+fn document_error(e: DocumentError) -> CliError {
+    match e {
+        DocumentError::Unreadable(m) => CliError::unreadable(m),
+        DocumentError::Schema(m) => CliError::usage(m),
+        DocumentError::Internal(m) => CliError::internal(m),
     }
 }
 
 pub fn run(args: Args, config: &Config) -> CmdResult {
-    let opts = check_opts(&args)?;
-    let input = Input::from_arg(&args.input);
+    let started = Instant::now();
+    let options = check_opts(&args)?;
+    if !file_batch::is_batch(&args.inputs) {
+        return run_one(&args, options, config);
+    }
+    let sources = batch_inputs(&args.inputs, CITYGML_EXTENSIONS)?;
+    let checks = checks(&args, options, config)?;
+    run_many(sources, &checks, args.json, config, started)
+}
+
+/// One file or `-`: the report as it always was (pretty JSON or text), exit 3 when unreadable.
+fn run_one(args: &Args, options: Options, config: &Config) -> CmdResult {
+    let input = Input::from_arg(&args.inputs[0]);
     let name = input.display_name();
     let bytes = input.read_all()?;
-    let version = sniff_version(&bytes);
-
-    let schema_dir = if args.no_xsd { None } else { Some(find_schema_dir(args.schemas.as_deref())) };
-    if let Some(Err(why)) = &schema_dir {
-        if args.schemas.is_some() || std::env::var_os("GEOFIT_SCHEMAS").is_some_and(|v| !v.is_empty()) {
-            return Err(CliError::usage(why.clone()));
-        }
-        config.notice(why);
-    }
-
-    // XSD on its own thread while the geometry is read and checked.
-    let (xsd, geometry) = std::thread::scope(|s| {
-        let xsd_job = s.spawn(|| match (&schema_dir, version) {
-            (None, _) => XsdReport { checked: false, reason: Some("--no-xsd".into()), schema: None, valid: None, errors: vec![] },
-            (Some(Err(why)), _) => XsdReport { checked: false, reason: Some(why.clone()), schema: None, valid: None, errors: vec![] },
-            (Some(Ok(_)), None) => XsdReport {
-                checked: false,
-                reason: Some("no CityGML 1.0/2.0/3.0 namespace on the root element, no schema to choose".into()),
-                schema: None,
-                valid: None,
-                errors: vec![],
-            },
-            (Some(Ok(dir)), Some(v)) => run_xsd(&bytes, &name, dir, v),
-        });
-        let geometry = if args.no_geometry {
-            Ok(GeometryReport { checked: false, options: opts, features: 0, valid: None, findings: vec![] })
-        } else {
-            check_geometry(&bytes, &name, &opts, config)
-        };
-        (xsd_job.join(), geometry)
-    });
-    let xsd = xsd.map_err(|_| CliError::internal("XSD validation thread panicked"))?;
-    if let (false, Some(why), Some(Ok(_))) = (xsd.checked, &xsd.reason, &schema_dir) {
-        if version.is_some() {
-            // the schema directory was found but the wrapper could not be loaded
-            return Err(CliError::usage(why.clone()));
-        }
-    }
-    let geometry = match geometry {
-        Ok(g) => g,
-        Err(e) => {
-            // Unreadable as CityGML: show what libxml2 said about well-formedness, then exit 3.
-            if let Some(f) = xsd.errors.iter().find(|f| f.kind == XsdErrorKind::NotWellFormed) {
-                return Err(CliError::unreadable(format!("{name}:{}:{}: not well-formed XML: {}", f.line, f.column, f.message)));
-            }
-            return Err(e);
-        }
-    };
-    let xsd_bad = xsd.valid == Some(false);
-    let geom_bad = geometry.valid == Some(false);
-    let report = Report {
-        file: name.clone(),
-        version: version.map(str::to_string),
-        valid: !xsd_bad && !geom_bad,
-        xsd,
-        geometry,
+    let checks = checks(args, options, config)?;
+    let report = if checks.geometry {
+        let progress = config.progress("validate", 0);
+        let report = validate_document(&bytes, &name, &checks, &|n| progress.set(n as u64, &format!("{n} features checked")))
+            .map_err(document_error)?;
+        progress.finish(&format!("{} features checked", report.geometry.features));
+        report
+    } else {
+        validate_document(&bytes, &name, &checks, &|_| {}).map_err(document_error)?
     };
     print_report(args.json, &report, |w| write_text(w, &report))?;
     Ok(if report.valid { Exit::Ok } else { Exit::Findings })
 }
 
-fn check_geometry(bytes: &[u8], name: &str, opts: &Options, config: &Config) -> Result<GeometryReport, CliError> {
-    let unreadable = |e: citygml_io::ReadError| CliError::unreadable(format!("{name}:{e}"));
-    let mut stream = ObjectStream::new(bytes).map_err(unreadable)?;
-    let progress = config.progress("validate", 0);
-    let mut findings = Vec::new();
-    let mut batch = Vec::new();
-    let mut features = 0usize;
-    // Objects are read one by one and checked in parallel batches: memory stays bounded.
-    for obj in stream.by_ref() {
-        batch.push(obj.map_err(unreadable)?);
-        if batch.len() == 256 {
-            features += batch.len();
-            findings.extend(validate_objects(&batch, opts));
-            batch.clear();
-            progress.set(features as u64, &format!("{features} features checked"));
-        }
+/// Version of the JSON lines a many-file run writes (one object per file, then the summary).
+const JSON_LINES_SCHEMA: &str = "geofit-validate/1";
+
+/// One line of `--json` output for a file: the one-file report plus the format version.
+#[derive(Serialize)]
+struct FileLine<'a> {
+    schema: &'static str,
+    #[serde(flatten)]
+    report: &'a Report,
+}
+
+#[derive(Serialize)]
+struct SummaryLine<'a> {
+    schema: &'static str,
+    summary: &'a Summary,
+}
+
+/// Reads and checks one file of a many-file run.
+fn check_source(input: &Input, checks: &Checks) -> Result<Report, CliError> {
+    let bytes = input.read_all()?;
+    validate_document(&bytes, &input.display_name(), checks, &|_| {}).map_err(document_error)
+}
+
+/// Several files: checked in parallel (the schemas parsed once), reported in input order, one
+/// block (text) or one line (JSON) per file, then the summary. A file that cannot be read is
+/// reported in its place and the others are still checked; the exit status is the worst one.
+fn run_many(inputs: Vec<Input>, checks: &Checks, json: bool, config: &Config, started: Instant) -> CmdResult {
+    // shared by the per-file and the summary writer
+    let summary = RefCell::new(Summary::default());
+    let mut worst = Exit::Ok;
+    run_batch(
+        inputs,
+        "validate",
+        config,
+        |input| check_source(input, checks),
+        |w, name, result| {
+            let exit = match &result {
+                Ok(r) if r.valid => Exit::Ok,
+                Ok(_) => Exit::Findings,
+                Err(e) => e.exit,
+            };
+            worst = worse_exit(worst, exit);
+            match &result {
+                Ok(report) => {
+                    summary.borrow_mut().add_report(report);
+                    if json {
+                        write_json_line(w, &FileLine { schema: JSON_LINES_SCHEMA, report })
+                    } else {
+                        write_text(w, report).map_err(CliError::io_out)
+                    }
+                }
+                Err(e) => {
+                    summary.borrow_mut().add_unreadable();
+                    write_batch_error(w, json, JSON_LINES_SCHEMA, name, e)
+                }
+            }
+        },
+        |w| {
+            let mut summary = summary.borrow_mut();
+            summary.wall_seconds = started.elapsed().as_secs_f64();
+            write_summary(w, json, &summary)
+        },
+    )?;
+    Ok(worst)
+}
+
+fn write_summary(w: &mut dyn Write, json: bool, s: &Summary) -> Result<(), CliError> {
+    if json {
+        return write_json_line(w, &SummaryLine { schema: JSON_LINES_SCHEMA, summary: s });
     }
-    features += batch.len();
-    findings.extend(validate_objects(&batch, opts));
-    add_unresolved_xlinks(&mut findings, stream.unresolved_xlinks());
-    sort_findings(&mut findings);
-    progress.finish(&format!("{features} features checked"));
-    Ok(GeometryReport { checked: true, options: *opts, features, valid: Some(findings.is_empty()), findings })
+    let errors: Vec<String> = s.errors.iter().map(|(code, n)| format!("{code} ×{n}")).collect();
+    writeln!(
+        w,
+        "summary: {} file{}: {} valid, {} invalid, {} unreadable; errors: {}; {:.3} s",
+        s.files,
+        if s.files == 1 { "" } else { "s" },
+        s.valid,
+        s.invalid,
+        s.unreadable,
+        if errors.is_empty() { "none".to_string() } else { errors.join(", ") },
+        s.wall_seconds
+    )
+    .map_err(CliError::io_out)
 }
 
 fn write_text(w: &mut dyn Write, r: &Report) -> std::io::Result<()> {
