@@ -326,7 +326,7 @@ fn info_on_a_directory_equals_the_single_file_runs() {
     let o = common::run(&["-q", "info", root.to_str().unwrap()], None);
     let text = String::from_utf8(o.stdout).unwrap();
     let (body, last) = text.trim_end().rsplit_once('\n').unwrap();
-    assert_eq!(format!("{body}\n\n"), text_want);
+    assert_eq!(format!("{body}\n"), text_want);
     assert!(last.starts_with(&format!("summary: {} files: {clean} without findings, {with_findings} with findings, 0 unreadable;", files.len())), "{last}");
 }
 
