@@ -266,7 +266,7 @@ mod tests {
         let pat = format!("{}/*/*.*ml", d.display());
         let top = d.join("top.gml");
         let got = expand(&args(&[top.to_str().unwrap(), "-", &pat]), &["gml"]).unwrap();
-        assert_eq!(names(&got, d), ["top.gml", "-", "a/w.gml", "b/y.xml"]);
+        assert_eq!(names(&got, d), ["top.gml", "-", "a/w.gml", "a/x.citygml", "b/y.xml"]);
         // a pattern that matches a directory walks it
         let got = expand(&args(&[&format!("{}/[b]", d.display())]), &["gml"]).unwrap();
         assert_eq!(names(&got, d), ["b/sub/z.GML"]);
