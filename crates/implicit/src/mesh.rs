@@ -151,7 +151,7 @@ impl Locator {
     /// tetrahedron index so the result is deterministic.
     pub fn locate(&self, mesh: &TetMesh, p: V3) -> Option<(usize, [f64; 4])> {
         let mut best: Option<(usize, [f64; 4], f64)> = None;
-        for item in self.tree.locate_all_at_point(p) {
+        for item in self.tree.locate_all_at_point(&p) {
             let t = item.data as usize;
             if let Some(l) = barycentric(&mesh.corners(t), p) {
                 let worst = l.iter().cloned().fold(f64::INFINITY, f64::min);
