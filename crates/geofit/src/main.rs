@@ -6,6 +6,7 @@
 
 mod cmd;
 mod config;
+mod terrain_io;
 mod error;
 
 use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};

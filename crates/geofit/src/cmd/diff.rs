@@ -11,7 +11,7 @@ use clap::Args as ClapArgs;
 use raster_io::Raster;
 use raster_proc::diff::{class_map_rgba, compare_with_map, histogram_rgba, DiffOptions, DiffReport, DEFAULT_CLASS_BOUNDS};
 
-use super::rasterize::{gdal_notices, proc_err, read_raster_arg};
+use crate::terrain_io::{gdal_notices, proc_err, read_raster_arg};
 use crate::config::{print_report, write_json_report, Config, Output};
 use crate::error::{CliError, CmdResult, Exit};
 

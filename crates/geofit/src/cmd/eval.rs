@@ -6,8 +6,8 @@ use clap::Args as ClapArgs;
 use raster_io::Raster;
 use tspline::{GridSpec, PbSpline};
 
-use super::fit::{read_tmesh_arg, select_device, tspline_err, Device};
-use super::rasterize::{read_raster_arg, read_raster_arg_typed, write_raster_arg, RasterOutArgs};
+use crate::terrain_io::{read_tmesh_arg, select_device, tspline_err, Device};
+use crate::terrain_io::{read_raster_arg, read_raster_arg_typed, write_raster_arg, RasterOutArgs};
 use crate::config::Config;
 use crate::error::{CliError, CmdResult, Exit};
 

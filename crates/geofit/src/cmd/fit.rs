@@ -7,10 +7,9 @@ use clap::{Args as ClapArgs, ValueEnum};
 use raster_io::Raster;
 use tspline::fit::{Backend, FitOptions, IterationStats, Method, Samples, StopReason};
 use tspline::format::{DataMask, Encoding, Georef, TMeshFile};
-use tspline::ocl_eval::OclEvaluator;
-use tspline::{Degree, TsplineError};
+use tspline::Degree;
 
-use super::rasterize::read_raster_arg;
+use crate::terrain_io::{read_raster_arg, select_device, tspline_err, Device};
 use crate::config::{write_json_report, Config, Input, Output};
 use crate::error::{CliError, CmdResult, Exit};
 
@@ -41,17 +40,6 @@ Per-cell tolerance: max(--max-error, K × the uncertainty band). Blunders (isola
 than K × the tolerance off every local linear prediction) are always reported; --reject-outliers
 excludes them from the fit and the data mask. A value no f64 fit can follow (an undeclared
 no-data marker such as 1e30) is refused by position (exit 3): --nodata V declares it.";
-
-/// `--device`: where dense evaluations run.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum Device {
-    /// OpenCL when a platform exists and the kernels build, otherwise the CPU (with a notice).
-    Auto,
-    /// OpenCL or fail.
-    Opencl,
-    /// Multi-threaded CPU (rayon).
-    Cpu,
-}
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum Assembly {
@@ -145,38 +133,6 @@ pub struct Args {
     pub report: Option<String>,
 }
 
-/// One line per T-spline library error.
-pub fn tspline_err(what: &str, e: TsplineError) -> CliError {
-    match e {
-        TsplineError::Format { .. } | TsplineError::InvalidMesh(_) | TsplineError::ValueRange { .. } => CliError::unreadable(format!("{what}: {e}")),
-        TsplineError::Fit(_) => CliError::findings(format!("{what}: {e}")),
-        TsplineError::OpenCl(_) | TsplineError::Io(_) => CliError::internal(format!("{what}: {e}")),
-    }
-}
-
-/// The OpenCL evaluator per `--device`: `auto` falls back to the CPU with one notice when no
-/// platform exists (checked first, never a panic) or the kernels do not build.
-pub fn select_device(device: Device, config: &Config) -> Result<Option<OclEvaluator>, CliError> {
-    match device {
-        Device::Cpu => Ok(None),
-        Device::Opencl => OclEvaluator::new().map(Some).map_err(|e| CliError::internal(format!("--device opencl: {e}"))),
-        Device::Auto => {
-            let has_platform = ocl::core::get_platform_ids().map(|v| !v.is_empty()).unwrap_or(false);
-            if !has_platform {
-                config.notice("notice: no OpenCL platform found; evaluating on the CPU");
-                return Ok(None);
-            }
-            match OclEvaluator::new() {
-                Ok(o) => Ok(Some(o)),
-                Err(e) => {
-                    config.notice(&format!("notice: {e}; evaluating on the CPU"));
-                    Ok(None)
-                }
-            }
-        }
-    }
-}
-
 /// Raster → parameter layout (A21): s = column, t = row counted from the bottom, the affine map
 /// to world coordinates in the georeference. Needs an axis-aligned raster.
 pub fn samples_from_raster(r: &Raster, name: &str) -> Result<(Samples, Georef, DataMask), CliError> {
@@ -200,13 +156,6 @@ pub fn samples_from_raster(r: &Raster, name: &str) -> Result<(Samples, Georef, D
     let (y0, dy) = if north_up { (gt[3] + (h as f64 - 0.5) * gt[5], -gt[5]) } else { (gt[3] + 0.5 * gt[5], gt[5]) };
     let mask = DataMask { width: w, height: h, bits: z.iter().map(|v| !v.is_nan()).collect() };
     Ok((Samples { width: w, height: h, z }, Georef { x0, y0, dx: gt[1], dy, crs: r.crs.clone().unwrap_or_default() }, mask))
-}
-
-/// Reads a `.tmesh` argument.
-pub fn read_tmesh_arg(arg: &str) -> Result<TMeshFile, CliError> {
-    let input = Input::from_arg(arg);
-    let bytes = input.read_all()?;
-    tspline::format::read(&bytes).map_err(|e| CliError::unreadable(format!("{}: {e}", input.display_name())))
 }
 
 #[derive(serde::Serialize)]
@@ -438,7 +387,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         }
     }
     let t_start = std::time::Instant::now();
-    super::rasterize::gdal_notices(config);
+    crate::terrain_io::gdal_notices(config);
     let (mut raster, name) = read_raster_arg(&args.input)?;
     if let Some(v) = args.nodata {
         declare_nodata(&mut raster, v);
@@ -484,7 +433,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
                     wp.landmark_spacing = Some(sp * (dx * dy).abs().sqrt());
                 }
                 let (w, f, _) = raster_proc::warp::warp_raster(&raster, &wp)
-                    .map_err(|e| super::rasterize::proc_err(&name, e))?;
+                    .map_err(|e| crate::terrain_io::proc_err(&name, e))?;
                 (w, Some(f), Some(raster))
             }
         }

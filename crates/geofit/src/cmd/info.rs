@@ -173,7 +173,7 @@ impl From<Info> for Summary {
 
 pub fn run(args: Args, config: &Config) -> CmdResult {
     let started = Instant::now();
-    super::rasterize::gdal_notices(config);
+    crate::terrain_io::gdal_notices(config);
     if file_batch::is_batch(&args.inputs) {
         let inputs = batch_inputs(&args.inputs, CITYGML_EXTENSIONS)?;
         return run_many(inputs, args.json, config, started);
@@ -354,7 +354,7 @@ fn raster_from_bytes(src: &[u8], path: Option<&std::path::Path>) -> Result<Optio
             Err(e @ raster_io::RasterError::TooLarge { .. }) => Err(CliError::unreadable(e.to_string())),
             Err(_) => Ok(None),
         },
-        None => Ok(super::rasterize::raster_from_stdin_bytes(src).ok()),
+        None => Ok(crate::terrain_io::raster_from_stdin_bytes(src).ok()),
     }
 }
 

@@ -6,13 +6,14 @@ use clap::{Args as ClapArgs, ValueEnum};
 use serde::Serialize;
 
 use raster_io::crs::Crs;
-use raster_io::{read_xyz, PointCloud, PointsError, Raster, RasterError, RasterFormat, SampleType, WriteOptions};
+use raster_io::PointCloud;
 use raster_proc::grid::GridSpec;
 use raster_proc::splat::{splat_points, SplatKernel};
 use raster_proc::tin::{tin_points, TinOptions};
 use raster_proc::ProcError;
 
-use crate::config::{write_json_report, Config, Input, Output};
+use crate::config::{write_json_report, Config, Input};
+use crate::terrain_io::{gdal_notices, proc_err, read_cloud, write_raster_arg, RasterOutArgs};
 use crate::error::{CliError, CmdResult, Exit};
 
 const EXAMPLE: &str = "\
@@ -97,151 +98,6 @@ struct RasterizeReport {
     cells_without_value: usize,
     tin_vertices: Option<usize>,
     merged_duplicates: Option<usize>,
-}
-
-/// `--ot`: the band type of a raster output.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum OutType {
-    Float32,
-    Float64,
-}
-
-/// How a raster output is written, with GDAL's option names (`-of`, `-co`, `-ot` are accepted
-/// with one dash, as in gdal_translate).
-#[derive(ClapArgs, Debug, Clone, Default)]
-#[command(next_help_heading = "Raster output (GDAL)")]
-pub struct RasterOutArgs {
-    /// Output format (`-of` as in gdal_translate): a GDAL driver name (COG, GTiff, AAIGrid,
-    /// netCDF, GS7BG, ...); default from the -o extension, and a .tif (or stdout) is a
-    /// Cloud-Optimised GeoTIFF (COG).
-    #[arg(long = "of", value_name = "FORMAT")]
-    pub of: Option<String>,
-    /// GDAL creation option KEY=VALUE (`-co`, repeatable); replaces geofit's default for that key
-    /// (COG/GTiff: COMPRESS=DEFLATE with the floating-point predictor; AAIGrid: 17 digits).
-    #[arg(long = "co", value_name = "KEY=VALUE")]
-    pub co: Vec<String>,
-    /// Band type of the output (`-ot`; default: the input raster's float type — Float32 for Float32
-    /// and 8/16-bit input, else Float64 — and Float64 for points and T-meshes).
-    #[arg(long = "ot", value_enum, ignore_case = true)]
-    pub ot: Option<OutType>,
-}
-
-impl RasterOutArgs {
-    /// The write options for an output derived from input of type `input` (`None` = no raster
-    /// input: Float64), checked against the driver before the work: refusals are usage errors.
-    pub fn checked(&self, output: Option<&str>, input: Option<SampleType>) -> Result<WriteOptions, CliError> {
-        let out = Output::from_arg(output);
-        let opts = WriteOptions {
-            format: self.of.as_deref().map(RasterFormat::from_driver_name),
-            creation_options: self.co.clone(),
-            sample_type: match self.ot {
-                Some(OutType::Float32) => SampleType::Float32,
-                Some(OutType::Float64) => SampleType::Float64,
-                None => input.unwrap_or_default(),
-            },
-        };
-        raster_io::check_write(out.path(), &opts).map_err(raster_err)?;
-        out.check_target()?;
-        Ok(opts)
-    }
-}
-
-/// One line for a raster-io error (its message already names the file).
-pub fn raster_err(e: RasterError) -> CliError {
-    match e {
-        RasterError::Format(_) => CliError::usage(e.to_string()),
-        RasterError::Open { .. } | RasterError::Content { .. } | RasterError::TooLarge { .. } => CliError::unreadable(e.to_string()),
-        RasterError::Write { .. } => CliError::output(e.to_string()),
-        RasterError::Invalid(_) => CliError::findings(e.to_string()),
-    }
-}
-
-/// One line for a point-file error.
-pub fn points_err(e: PointsError) -> CliError {
-    CliError::unreadable(e.to_string())
-}
-
-/// One line for a processing error, prefixed with what was being processed.
-pub fn proc_err(what: &str, e: ProcError) -> CliError {
-    match e {
-        ProcError::Raster(r) => raster_err(r),
-        ProcError::Input(m) => CliError::findings(format!("{what}: {m}")),
-        ProcError::FoldOver(_) => CliError::findings(format!("{what}: {e}")),
-        ProcError::TooLarge { .. } => CliError::unreadable(format!("{what}: {e}")),
-        ProcError::Field(_) => CliError::unreadable(format!("{what}: {e}")),
-    }
-}
-
-/// Shows GDAL's warnings as geofit notices (one line each, silent under `--quiet`) instead of
-/// GDAL's own "Warning 1: ..." lines.
-pub fn gdal_notices(config: &Config) {
-    let quiet = config.quiet;
-    raster_io::gdal_io::route_gdal_warnings(move |m| {
-        if !quiet {
-            crate::say!("geofit: GDAL: {m}");
-        }
-    });
-}
-
-/// Reads a raster from a path argument (GDAL needs a path; stdin is spooled to a temp file).
-/// GDAL's virtual paths (`/vsigzip/x.tif.gz`, `/vsizip/a.zip/x.tif`) are read as GDAL reads them.
-pub fn read_raster_arg(arg: &str) -> Result<(Raster, String), CliError> {
-    read_raster_arg_typed(arg).map(|(r, name, _)| (r, name))
-}
-
-/// [`read_raster_arg`] with the float type that holds the raster's values (kept on output).
-pub fn read_raster_arg_typed(arg: &str) -> Result<(Raster, String, SampleType), CliError> {
-    let input = Input::from_arg(arg);
-    let name = input.display_name();
-    match input.path() {
-        Some(p) => {
-            let (r, t) = raster_io::read_raster_band_typed(p, 1).map_err(raster_err)?;
-            Ok((r, name, t))
-        }
-        None => {
-            let (r, t) = raster_from_stdin_bytes_typed(&input.read_all()?)?;
-            Ok((r, name, t))
-        }
-    }
-}
-
-/// A raster from bytes read on stdin: GDAL opens paths, so they are spooled to a temporary file
-/// (errors name `<stdin>`, not the spool file).
-pub fn raster_from_stdin_bytes(bytes: &[u8]) -> Result<Raster, CliError> {
-    raster_from_stdin_bytes_typed(bytes).map(|(r, _)| r)
-}
-
-/// [`raster_from_stdin_bytes`] with the raster's float type.
-fn raster_from_stdin_bytes_typed(bytes: &[u8]) -> Result<(Raster, SampleType), CliError> {
-    let dir = tempfile::tempdir().map_err(|e| CliError::internal(format!("temporary directory: {e}")))?;
-    let p = dir.path().join("stdin.raster");
-    std::fs::write(&p, bytes).map_err(|e| CliError::internal(format!("temporary file: {e}")))?;
-    raster_io::read_raster_band_typed(&p, 1).map_err(|e| CliError::unreadable(e.to_string().replace(&p.display().to_string(), "<stdin>")))
-}
-
-/// Writes a raster to `-o` as `opts` says (stdout: the format's bytes, COG by default).
-pub fn write_raster_arg(r: &Raster, output: Option<&str>, opts: &WriteOptions) -> Result<(), CliError> {
-    let out = Output::from_arg(output);
-    match out.path() {
-        Some(p) => raster_io::write_raster(r, p, opts).map_err(raster_err),
-        None => {
-            let bytes = raster_io::gdal_io::raster_to_bytes(r, opts).map_err(raster_err)?;
-            out.write_bytes(&bytes)
-        }
-    }
-}
-
-pub fn read_cloud(arg: &str, class: Option<u8>) -> Result<PointCloud, CliError> {
-    let input = Input::from_arg(arg);
-    match input.path() {
-        Some(p) => raster_io::read_points(p, class).map_err(points_err),
-        None => {
-            if class.is_some() {
-                return Err(CliError::usage("--class needs a LAS/LAZ file, not stdin"));
-            }
-            read_xyz(input.open()?, "<stdin>").map_err(points_err)
-        }
-    }
 }
 
 /// The CRS the grid is in: the points' own (`--s-srs`, else the file's), reprojected into

@@ -13,8 +13,8 @@ use tspline::format::TMeshFile;
 use tspline::PbSpline;
 
 use super::export::Format;
-use super::fit::{read_tmesh_arg, select_device, tspline_err, Device};
-use super::rasterize::read_raster_arg;
+use crate::terrain_io::{read_tmesh_arg, select_device, tspline_err, Device};
+use crate::terrain_io::read_raster_arg;
 use crate::config::{write_atomic, Config, Output};
 use crate::error::{CliError, CmdResult, Exit};
 

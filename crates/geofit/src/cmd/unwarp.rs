@@ -7,7 +7,7 @@ use clap::Args as ClapArgs;
 
 use raster_proc::warp::{field_of, unwarp_raster};
 
-use super::rasterize::{gdal_notices, proc_err, read_cloud, read_raster_arg_typed, write_raster_arg, RasterOutArgs};
+use crate::terrain_io::{gdal_notices, proc_err, read_cloud, read_raster_arg_typed, write_raster_arg, RasterOutArgs};
 use crate::config::{Config, Output};
 use crate::error::{CliError, CmdResult, Exit};
 

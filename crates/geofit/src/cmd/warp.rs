@@ -11,7 +11,7 @@ use raster_proc::pca::Mass;
 use raster_proc::splat::SplatKernel;
 use raster_proc::warp::{warp_raster, WarpParams, WarpStats};
 
-use super::rasterize::{gdal_notices, proc_err, read_raster_arg_typed, write_raster_arg, RasterOutArgs};
+use crate::terrain_io::{gdal_notices, proc_err, read_raster_arg_typed, write_raster_arg, RasterOutArgs};
 use raster_io::RasterFormat;
 use crate::config::{write_json_report, Config};
 use crate::error::{CliError, CmdResult, Exit};

@@ -1,0 +1,210 @@
+//! The terrain data arguments the subcommands share: rasters, point clouds and T-meshes read
+//! from a path or stdin and written to `-o`, the raster output options (`-of`, `-co`, `-ot`),
+//! `--device`, and the one-line messages of the terrain libraries' errors. Subcommands call these
+//! instead of each other (one module per subcommand, none importing another).
+
+use clap::{Args as ClapArgs, ValueEnum};
+use raster_io::{read_xyz, PointCloud, PointsError, Raster, RasterError, RasterFormat, SampleType, WriteOptions};
+use raster_proc::ProcError;
+use tspline::format::TMeshFile;
+use tspline::ocl_eval::OclEvaluator;
+use tspline::TsplineError;
+
+use crate::config::{Config, Input, Output};
+use crate::error::CliError;
+
+/// `--device`: where dense evaluations run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Device {
+    /// OpenCL when a platform exists and the kernels build, otherwise the CPU (with a notice).
+    Auto,
+    /// OpenCL or fail.
+    Opencl,
+    /// Multi-threaded CPU (rayon).
+    Cpu,
+}
+
+/// `--ot`: the band type of a raster output.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum OutType {
+    Float32,
+    Float64,
+}
+
+/// How a raster output is written, with GDAL's option names (`-of`, `-co`, `-ot` are accepted
+/// with one dash, as in gdal_translate).
+#[derive(ClapArgs, Debug, Clone, Default)]
+#[command(next_help_heading = "Raster output (GDAL)")]
+pub struct RasterOutArgs {
+    /// Output format (`-of` as in gdal_translate): a GDAL driver name (COG, GTiff, AAIGrid,
+    /// netCDF, GS7BG, ...); default from the -o extension, and a .tif (or stdout) is a
+    /// Cloud-Optimised GeoTIFF (COG).
+    #[arg(long = "of", value_name = "FORMAT")]
+    pub of: Option<String>,
+    /// GDAL creation option KEY=VALUE (`-co`, repeatable); replaces geofit's default for that key
+    /// (COG/GTiff: COMPRESS=DEFLATE with the floating-point predictor; AAIGrid: 17 digits).
+    #[arg(long = "co", value_name = "KEY=VALUE")]
+    pub co: Vec<String>,
+    /// Band type of the output (`-ot`; default: the input raster's float type — Float32 for Float32
+    /// and 8/16-bit input, else Float64 — and Float64 for points and T-meshes).
+    #[arg(long = "ot", value_enum, ignore_case = true)]
+    pub ot: Option<OutType>,
+}
+
+impl RasterOutArgs {
+    /// The write options for an output derived from input of type `input` (`None` = no raster
+    /// input: Float64), checked against the driver before the work: refusals are usage errors.
+    pub fn checked(&self, output: Option<&str>, input: Option<SampleType>) -> Result<WriteOptions, CliError> {
+        let out = Output::from_arg(output);
+        let opts = WriteOptions {
+            format: self.of.as_deref().map(RasterFormat::from_driver_name),
+            creation_options: self.co.clone(),
+            sample_type: match self.ot {
+                Some(OutType::Float32) => SampleType::Float32,
+                Some(OutType::Float64) => SampleType::Float64,
+                None => input.unwrap_or_default(),
+            },
+        };
+        raster_io::check_write(out.path(), &opts).map_err(raster_err)?;
+        out.check_target()?;
+        Ok(opts)
+    }
+}
+
+/// One line for a raster-io error (its message already names the file).
+pub fn raster_err(e: RasterError) -> CliError {
+    match e {
+        RasterError::Format(_) => CliError::usage(e.to_string()),
+        RasterError::Open { .. } | RasterError::Content { .. } | RasterError::TooLarge { .. } => CliError::unreadable(e.to_string()),
+        RasterError::Write { .. } => CliError::output(e.to_string()),
+        RasterError::Invalid(_) => CliError::findings(e.to_string()),
+    }
+}
+
+/// One line for a point-file error.
+pub fn points_err(e: PointsError) -> CliError {
+    CliError::unreadable(e.to_string())
+}
+
+/// One line for a processing error, prefixed with what was being processed.
+pub fn proc_err(what: &str, e: ProcError) -> CliError {
+    match e {
+        ProcError::Raster(r) => raster_err(r),
+        ProcError::Input(m) => CliError::findings(format!("{what}: {m}")),
+        ProcError::FoldOver(_) => CliError::findings(format!("{what}: {e}")),
+        ProcError::TooLarge { .. } => CliError::unreadable(format!("{what}: {e}")),
+        ProcError::Field(_) => CliError::unreadable(format!("{what}: {e}")),
+    }
+}
+
+/// Shows GDAL's warnings as geofit notices (one line each, silent under `--quiet`) instead of
+/// GDAL's own "Warning 1: ..." lines.
+pub fn gdal_notices(config: &Config) {
+    let quiet = config.quiet;
+    raster_io::gdal_io::route_gdal_warnings(move |m| {
+        if !quiet {
+            crate::say!("geofit: GDAL: {m}");
+        }
+    });
+}
+
+/// Reads a raster from a path argument (GDAL needs a path; stdin is spooled to a temp file).
+/// GDAL's virtual paths (`/vsigzip/x.tif.gz`, `/vsizip/a.zip/x.tif`) are read as GDAL reads them.
+pub fn read_raster_arg(arg: &str) -> Result<(Raster, String), CliError> {
+    read_raster_arg_typed(arg).map(|(r, name, _)| (r, name))
+}
+
+/// [`read_raster_arg`] with the float type that holds the raster's values (kept on output).
+pub fn read_raster_arg_typed(arg: &str) -> Result<(Raster, String, SampleType), CliError> {
+    let input = Input::from_arg(arg);
+    let name = input.display_name();
+    match input.path() {
+        Some(p) => {
+            let (r, t) = raster_io::read_raster_band_typed(p, 1).map_err(raster_err)?;
+            Ok((r, name, t))
+        }
+        None => {
+            let (r, t) = raster_from_stdin_bytes_typed(&input.read_all()?)?;
+            Ok((r, name, t))
+        }
+    }
+}
+
+/// A raster from bytes read on stdin: GDAL opens paths, so they are spooled to a temporary file
+/// (errors name `<stdin>`, not the spool file).
+pub fn raster_from_stdin_bytes(bytes: &[u8]) -> Result<Raster, CliError> {
+    raster_from_stdin_bytes_typed(bytes).map(|(r, _)| r)
+}
+
+/// [`raster_from_stdin_bytes`] with the raster's float type.
+fn raster_from_stdin_bytes_typed(bytes: &[u8]) -> Result<(Raster, SampleType), CliError> {
+    let dir = tempfile::tempdir().map_err(|e| CliError::internal(format!("temporary directory: {e}")))?;
+    let p = dir.path().join("stdin.raster");
+    std::fs::write(&p, bytes).map_err(|e| CliError::internal(format!("temporary file: {e}")))?;
+    raster_io::read_raster_band_typed(&p, 1).map_err(|e| CliError::unreadable(e.to_string().replace(&p.display().to_string(), "<stdin>")))
+}
+
+/// Writes a raster to `-o` as `opts` says (stdout: the format's bytes, COG by default).
+pub fn write_raster_arg(r: &Raster, output: Option<&str>, opts: &WriteOptions) -> Result<(), CliError> {
+    let out = Output::from_arg(output);
+    match out.path() {
+        Some(p) => raster_io::write_raster(r, p, opts).map_err(raster_err),
+        None => {
+            let bytes = raster_io::gdal_io::raster_to_bytes(r, opts).map_err(raster_err)?;
+            out.write_bytes(&bytes)
+        }
+    }
+}
+
+/// Reads a point cloud argument (XYZ/CSV, LAS/LAZ; stdin: XYZ text), LAS points of `class` only.
+pub fn read_cloud(arg: &str, class: Option<u8>) -> Result<PointCloud, CliError> {
+    let input = Input::from_arg(arg);
+    match input.path() {
+        Some(p) => raster_io::read_points(p, class).map_err(points_err),
+        None => {
+            if class.is_some() {
+                return Err(CliError::usage("--class needs a LAS/LAZ file, not stdin"));
+            }
+            read_xyz(input.open()?, "<stdin>").map_err(points_err)
+        }
+    }
+}
+
+/// One line per T-spline library error.
+pub fn tspline_err(what: &str, e: TsplineError) -> CliError {
+    match e {
+        TsplineError::Format { .. } | TsplineError::InvalidMesh(_) | TsplineError::ValueRange { .. } => CliError::unreadable(format!("{what}: {e}")),
+        TsplineError::Fit(_) => CliError::findings(format!("{what}: {e}")),
+        TsplineError::OpenCl(_) | TsplineError::Io(_) => CliError::internal(format!("{what}: {e}")),
+    }
+}
+
+/// The OpenCL evaluator per `--device`: `auto` falls back to the CPU with one notice when no
+/// platform exists (checked first, never a panic) or the kernels do not build.
+pub fn select_device(device: Device, config: &Config) -> Result<Option<OclEvaluator>, CliError> {
+    match device {
+        Device::Cpu => Ok(None),
+        Device::Opencl => OclEvaluator::new().map(Some).map_err(|e| CliError::internal(format!("--device opencl: {e}"))),
+        Device::Auto => {
+            let has_platform = ocl::core::get_platform_ids().map(|v| !v.is_empty()).unwrap_or(false);
+            if !has_platform {
+                config.notice("notice: no OpenCL platform found; evaluating on the CPU");
+                return Ok(None);
+            }
+            match OclEvaluator::new() {
+                Ok(o) => Ok(Some(o)),
+                Err(e) => {
+                    config.notice(&format!("notice: {e}; evaluating on the CPU"));
+                    Ok(None)
+                }
+            }
+        }
+    }
+}
+
+/// Reads a `.tmesh` argument.
+pub fn read_tmesh_arg(arg: &str) -> Result<TMeshFile, CliError> {
+    let input = Input::from_arg(arg);
+    let bytes = input.read_all()?;
+    tspline::format::read(&bytes).map_err(|e| CliError::unreadable(format!("{}: {e}", input.display_name())))
+}
