@@ -213,8 +213,12 @@ fn undocumented_options(help: &str) -> Vec<String> {
         let t = l.trim_start();
         let indent = l.len() - t.len();
         if (2..=6).contains(&indent) && t.starts_with('-') {
+            // clap's compact form puts the description on the flag's line after 2+ spaces; its
+            // long form on the next, deeper-indented line
+            let same_line = t.split_once("  ").is_some_and(|(_, d)| !d.trim().is_empty());
             let next = lines.get(i + 1).copied().unwrap_or("");
-            let described = next.len() - next.trim_start().len() > indent + 2 && !next.trim().is_empty();
+            let next_line = next.len() - next.trim_start().len() > indent + 2 && !next.trim().is_empty();
+            let described = same_line || next_line;
             if !described && !t.starts_with("-h, --help") && !t.starts_with("-V, --version") {
                 out.push(t.to_string());
             }

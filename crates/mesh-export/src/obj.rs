@@ -171,7 +171,13 @@ fn write_vertices(
             (None, true) => Some([fallback[0], fallback[1], fallback[2]]),
             (None, false) => None,
         };
-        let key = (p.map(f64::to_bits), rgb.unwrap_or_default().map(f32::to_bits));
+        // a material's fallback colour exists only because readers want colours on all vertices
+        // or none: it does not keep a position from being shared (the face's usemtl colours it)
+        let key_colour = match colors {
+            Some(_) => rgb.unwrap_or_default().map(f32::to_bits),
+            None => [u32::MAX; 3],
+        };
+        let key = (p.map(f64::to_bits), key_colour);
         if let Some(&n) = shared.0.get(&key) {
             numbers.push(n);
             continue;

@@ -119,7 +119,7 @@ pub struct Args {
     /// Where dense evaluations run.
     #[arg(long, value_enum, default_value_t = Device::Auto)]
     pub device: Device,
-    /// Where the least-squares model-matrix rows are computed: `cpu`, or `opencl` (the T29
+    /// Where the least-squares model-matrix rows are computed: `cpu`, or `opencl` (the
     /// kernel; the host accumulates the normal equations from its rows block by block).
     #[arg(long, value_enum, default_value_t = Assembly::Cpu)]
     pub assembly: Assembly,

@@ -17,7 +17,7 @@ CSV: one measurement per line, `type,a,b,value,sigma` (`#` comments, optional he
 face:ID, edge:ID, node:ID, v:N (OBJ vertex), or a source polygon id (CityGML gml:id). Each
 measurement is checked against the topology (unknown ids and wrong primitive kinds are errors
 naming the CSV line); face-face, face-edge and edge-edge distances add their induced parallelism
-constraint (spec §4.5) unless parallelism holds by construction. Polar pointings are not read from
+constraint unless parallelism holds by construction. Polar pointings are not read from
 CSV yet.";
 
 #[derive(ClapArgs, Debug)]

@@ -23,7 +23,7 @@ Example:
 The output raster has the original size, geotransform, CRS and data footprint. With --points,
 XYZ points are mapped instead (warped frame → original; --forward the other way), z kept, one
 `x y z` line each with shortest round-trip decimals: the inverse is exact for the piecewise-
-linear warp (spec §2.3.7), so forward then back returns each point to within rounding. Exit 3
+linear warp, so forward then back returns each point to within rounding. Exit 3
 when the input holds no (or a damaged) warp field.";
 
 #[derive(ClapArgs, Debug)]
