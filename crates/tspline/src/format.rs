@@ -70,7 +70,9 @@ impl DataMask {
     pub fn get(&self, i: usize, j: usize) -> bool {
         self.bits[j * self.width + i]
     }
-    fn runs(&self) -> Vec<usize> {
+    /// Run lengths of alternating no-data / data, starting with no data (the first run may be
+    /// 0): how both file formats store the mask.
+    pub(crate) fn runs(&self) -> Vec<usize> {
         let mut runs = Vec::new();
         let mut cur = false;
         let mut n = 0usize;

@@ -243,7 +243,7 @@ pub fn write(f: &TMeshFile, w: &mut dyn Write) -> std::io::Result<()> {
     if let Some(mask) = &f.mask {
         put_varint(&mut body, mask.width as u64);
         put_varint(&mut body, mask.height as u64);
-        let runs = mask_runs(mask);
+        let runs = mask.runs();
         put_varint(&mut body, runs.len() as u64);
         runs.iter().for_each(|&r| put_varint(&mut body, r as u64));
     }
@@ -262,22 +262,6 @@ pub fn write(f: &TMeshFile, w: &mut dyn Write) -> std::io::Result<()> {
     w.write_all(&packed)?;
     w.write_all(&crc.sum().to_le_bytes())?;
     Ok(())
-}
-
-fn mask_runs(mask: &DataMask) -> Vec<usize> {
-    let mut runs = Vec::new();
-    let (mut cur, mut n) = (false, 0usize);
-    for &b in &mask.bits {
-        if b == cur {
-            n += 1;
-        } else {
-            runs.push(n);
-            cur = b;
-            n = 1;
-        }
-    }
-    runs.push(n);
-    runs
 }
 
 /// Bounds-checked reader of the body; errors name the byte offset in the body.
