@@ -24,24 +24,9 @@ import sys
 
 import numpy as np
 
+from tspline_maxerror import load as band
+
 ENV = dict(os.environ, GDAL_PAM_ENABLED="NO")
-
-
-def band(path, b):
-    info = json.loads(subprocess.run(["gdalinfo", "-json", path], check=True, capture_output=True, env=ENV).stdout)
-    w, h = info["size"]
-    bi = info["bands"][b - 1]
-    nodata = bi.get("noDataValue")
-    xyz = subprocess.run(["gdal_translate", "-q", "-b", str(b), "-of", "XYZ", "-co", "SIGNIFICANT_DIGITS=17", path, "/vsistdout/"],
-                         check=True, capture_output=True, env=ENV).stdout
-    a = np.loadtxt(xyz.decode().splitlines(), dtype=np.float64)
-    v = a[:, 2]
-    ok = np.isfinite(v)
-    if nodata is not None:
-        ok &= v != float(nodata)
-        if bi.get("type") == "Float32":
-            ok &= v.astype(np.float32) != np.float32(nodata)
-    return a[:, :2], v, ok, (w, h)
 
 
 def write_asc(path, v, ok, x0, y0, cell):

@@ -14,17 +14,22 @@ import sys
 import numpy as np
 
 
-def load(path):
+def load(path, b=1):
+    """Band `b` of a raster as (x y, value, valid, (width, height)): valid = finite and not the
+    band's no-data marker (also at float32 precision for a Float32 band, as GDAL matches it)."""
     env = dict(os.environ, GDAL_PAM_ENABLED="NO")
     info = json.loads(subprocess.run(["gdalinfo", "-json", path], check=True, capture_output=True, env=env).stdout)
-    nodata = info["bands"][0].get("noDataValue")
-    xyz = subprocess.run(["gdal_translate", "-q", "-of", "XYZ", "-co", "SIGNIFICANT_DIGITS=17", path, "/vsistdout/"],
+    bi = info["bands"][b - 1]
+    nodata = bi.get("noDataValue")
+    xyz = subprocess.run(["gdal_translate", "-q", "-b", str(b), "-of", "XYZ", "-co", "SIGNIFICANT_DIGITS=17", path, "/vsistdout/"],
                          check=True, capture_output=True, env=env).stdout
     a = np.loadtxt(xyz.decode().splitlines(), dtype=np.float64)
     v = a[:, 2]
     ok = np.isfinite(v)
     if nodata is not None:
         ok &= v != float(nodata)
+        if bi.get("type") == "Float32":
+            ok &= v.astype(np.float32) != np.float32(nodata)
     return a[:, :2], v, ok, info["size"]
 
 
