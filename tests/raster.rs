@@ -346,12 +346,14 @@ fn diff_statistics_match_numpy() {
     }
     let counts: Vec<Value> = ours["histogram"].as_array().unwrap().iter().map(|c| c["count"].clone()).collect();
     assert_eq!(Value::Array(counts), truth["histogram"]);
-    // the PNGs are real PNGs of the expected size (A's grid for the map)
-    let bytes = std::fs::read(&png).unwrap();
-    assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n");
-    let (w, h) = (u32::from_be_bytes(bytes[16..20].try_into().unwrap()), u32::from_be_bytes(bytes[20..24].try_into().unwrap()));
+    check_error_map_picture(&a, &png, &ours, bounds.split(',').count() + 1);
+    check_histogram_picture(&hist, &ours);
+    // --plain: the bare map, one pixel per cell, placed exactly on A's grid
+    let plain = d.join("plain.png");
+    ok(&["diff", a.to_str().unwrap(), b.to_str().unwrap(), "--classes", bounds, "--png", plain.to_str().unwrap(), "--plain"]);
+    let (w, h, _) = decode_png(&plain);
     assert_eq!((w, h), (857, 793));
-    assert_eq!(&std::fs::read(&hist).unwrap()[..4], b"\x89PNG");
+    assert_eq!(gdal_json(&[plain.to_str().unwrap()])["geoTransform"], gdal_json(&[a.to_str().unwrap()])["geoTransform"]);
     // --check turns cells over the tolerance into exit 1
     let c = common::run(&["diff", a.to_str().unwrap(), b.to_str().unwrap(), "--tolerance", "0.5", "--check"], None);
     assert_eq!(common::code(&c), 1);
@@ -359,6 +361,72 @@ fn diff_statistics_match_numpy() {
     let same = ok(&["diff", a.to_str().unwrap(), a.to_str().unwrap(), "--json", "--check"]);
     let s: Value = serde_json::from_slice(&same.stdout).unwrap();
     assert_eq!(f(&s["max_abs"]), 0.0);
+}
+
+/// A PNG as (width, height, RGBA8 pixels), decoded by the png crate.
+fn decode_png(path: &Path) -> (usize, usize, Vec<u8>) {
+    let dec = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
+    let mut r = dec.read_info().unwrap();
+    let mut buf = vec![0; r.output_buffer_size()];
+    let info = r.next_frame(&mut buf).unwrap();
+    assert_eq!(info.color_type, png::ColorType::Rgba, "{}", path.display());
+    buf.truncate(info.buffer_size());
+    (info.width as usize, info.height as usize, buf)
+}
+
+fn gdal_json(args: &[&str]) -> Value {
+    let o = std::process::Command::new("gdalinfo").arg("-json").args(args).output().unwrap();
+    assert!(o.status.success(), "gdalinfo {args:?}: {}", String::from_utf8_lossy(&o.stderr));
+    serde_json::from_slice(&o.stdout).unwrap()
+}
+
+/// Distinct saturated colours (not grey, opaque) among the pixels in columns `x0..` of a picture.
+fn saturated_colours(w: usize, px: &[u8], x0: usize) -> std::collections::BTreeSet<[u8; 3]> {
+    px.chunks(4)
+        .enumerate()
+        .filter(|(i, p)| i % w >= x0 && p[3] == 255 && !(p[0] == p[1] && p[1] == p[2]))
+        .map(|(_, p)| [p[0], p[1], p[2]])
+        .collect()
+}
+
+/// The error map: A's grid one pixel per cell inside a frame with a title and a legend; GDAL
+/// places it through the world file and reads A's CRS from the .aux.xml; the pixel GDAL finds at
+/// the largest error's location is that cell's (red, large-class) colour; the legend shows a
+/// swatch for every class, the empty ones included.
+fn check_error_map_picture(a: &Path, png: &Path, report: &Value, n_classes: usize) {
+    let (w, h, px) = decode_png(png);
+    let (ia, ip) = (gdal_json(&[a.to_str().unwrap()]), gdal_json(&[png.to_str().unwrap()]));
+    let (ga, gp) = (ia["geoTransform"].as_array().unwrap(), ip["geoTransform"].as_array().unwrap());
+    let (ga, gp): (Vec<f64>, Vec<f64>) = (ga.iter().map(f).collect(), gp.iter().map(f).collect());
+    assert_eq!((gp[1], gp[5]), (ga[1], ga[5]), "pixel size");
+    let (ox, oy) = ((ga[0] - gp[0]) / ga[1], (ga[3] - gp[3]) / ga[5]);
+    assert!(ox.fract().abs() < 1e-6 && oy.fract().abs() < 1e-6 && ox >= 1.0 && oy >= 1.0, "map offset {ox} {oy}");
+    let (ox, oy) = (ox.round() as usize, oy.round() as usize);
+    let size = ia["size"].as_array().unwrap();
+    let (aw, ah) = (size[0].as_u64().unwrap() as usize, size[1].as_u64().unwrap() as usize);
+    assert!(ox + aw < w && oy + ah <= h, "the map lies inside the {w}×{h} picture");
+    assert!(ip["coordinateSystem"]["wkt"].as_str().is_some_and(|s| s.contains("UTM zone 5N")), "CRS from the .aux.xml");
+    let at = report["max_at"].as_array().unwrap();
+    let (c, r) = (at[0].as_u64().unwrap() as usize, at[1].as_u64().unwrap() as usize);
+    let (x, y) = (ga[0] + (c as f64 + 0.5) * ga[1], ga[3] + (r as f64 + 0.5) * ga[5]);
+    let o = std::process::Command::new("gdallocationinfo").args(["-valonly", "-geoloc", png.to_str().unwrap(), &x.to_string(), &y.to_string()]).output().unwrap();
+    let rgba: Vec<u8> = String::from_utf8_lossy(&o.stdout).split_whitespace().map(|v| v.parse().unwrap()).collect();
+    let i = 4 * ((oy + r) * w + ox + c);
+    assert_eq!(rgba, px[i..i + 4], "GDAL's pixel at the largest error");
+    assert!(rgba[0] == 255 && rgba[1] < 200, "the largest error is drawn at the red end: {rgba:?}");
+    let legend = saturated_colours(w, &px, ox + aw);
+    assert!(legend.len() >= n_classes, "{} legend colours for {n_classes} classes", legend.len());
+    let title_dark = px[..4 * w * oy].chunks(4).filter(|p| p[..3] == [0, 0, 0]).count();
+    assert!(title_dark > 100, "a title above the map");
+}
+
+/// The histogram: a bar per non-empty class in its colour, heights in proportion to the shares.
+fn check_histogram_picture(hist: &Path, report: &Value) {
+    let (w, _, px) = decode_png(hist);
+    let classes = report["histogram"].as_array().unwrap();
+    let non_empty = classes.iter().filter(|c| c["count"].as_u64().unwrap() > 0).count();
+    assert!(saturated_colours(w, &px, 0).len() >= non_empty);
+    assert!(px.chunks(4).filter(|p| p[..3] == [0, 0, 0]).count() > 500, "axes and labels");
 }
 
 /// Bad input gets one clear line and the documented exit code; never a panic.

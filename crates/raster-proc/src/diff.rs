@@ -241,6 +241,9 @@ pub fn class_colour(k: usize, n: usize) -> [u8; 4] {
     [(r * 255.0).round() as u8, (g * 200.0).round() as u8, 40, 255]
 }
 
+/// Map colour of a cell where only one of the two rasters has a value.
+pub const ONE_RASTER_ONLY: [u8; 4] = [150, 150, 150, 255];
+
 /// The error-class map as RGBA8 pixels (A's grid, row 0 on top): class colours, grey where
 /// only one raster has a value, transparent where neither has.
 pub fn class_map_rgba(classes: &[CellClass], n_classes: usize) -> Vec<u8> {
@@ -248,39 +251,11 @@ pub fn class_map_rgba(classes: &[CellClass], n_classes: usize) -> Vec<u8> {
     for c in classes {
         px.extend_from_slice(&match c {
             CellClass::Neither => [0, 0, 0, 0],
-            CellClass::OnlyA | CellClass::OnlyB => [150, 150, 150, 255],
+            CellClass::OnlyA | CellClass::OnlyB => ONE_RASTER_ONLY,
             CellClass::Class(k) => class_colour(*k as usize, n_classes),
         });
     }
     px
-}
-
-/// A bar chart of the histogram as RGBA8 pixels: one bar per class in the map's colours,
-/// heights proportional to the share; returns (width, height, pixels).
-pub fn histogram_rgba(report: &DiffReport) -> (u32, u32, Vec<u8>) {
-    let n = report.histogram.len();
-    let (bar, gap, h, margin) = (40u32, 8u32, 240u32, 10u32);
-    let w = margin * 2 + n as u32 * (bar + gap) - gap;
-    let hh = h + margin * 2;
-    let mut px = vec![255u8; (w * hh * 4) as usize];
-    let max_share = report.histogram.iter().map(|c| c.share).fold(0.0, f64::max).max(1e-12);
-    for (k, c) in report.histogram.iter().enumerate() {
-        let bh = ((c.share / max_share) * h as f64).round() as u32;
-        let x0 = margin + k as u32 * (bar + gap);
-        let col = class_colour(k, n);
-        for y in (margin + h - bh)..(margin + h) {
-            for x in x0..x0 + bar {
-                let i = ((y * w + x) * 4) as usize;
-                px[i..i + 4].copy_from_slice(&col);
-            }
-        }
-    }
-    // baseline
-    for x in margin / 2..w - margin / 2 {
-        let i = (((margin + h) * w + x) * 4) as usize;
-        px[i..i + 4].copy_from_slice(&[0, 0, 0, 255]);
-    }
-    (w, hh, px)
 }
 
 #[cfg(test)]

@@ -7,8 +7,10 @@
 //! - [`pca`]: principal-axis rotation (spec §2.3.1, A3).
 //! - [`warp`]: landmark warp field, forward/inverse mapping, raster warping (spec §2.3.2–2.3.3, A4).
 //! - [`diff`]: raster-vs-raster error statistics, histograms and error-class maps (spec §4.2, A17).
+//! - [`diff_figures`]: the comparison's map with legend and its histogram chart.
 
 pub mod diff;
+pub mod diff_figures;
 pub mod dilate;
 pub mod grid;
 pub mod pca;

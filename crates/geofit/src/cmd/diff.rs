@@ -9,7 +9,9 @@ use std::io::Write;
 use clap::Args as ClapArgs;
 
 use raster_io::Raster;
-use raster_proc::diff::{class_map_rgba, compare_with_map, histogram_rgba, DiffOptions, DiffReport, DEFAULT_CLASS_BOUNDS};
+use raster_picture::{aux_xml, bar_chart, sidecar_paths, world_file, Canvas};
+use raster_proc::diff::{class_map_rgba, compare_with_map, DiffOptions, DiffReport, DEFAULT_CLASS_BOUNDS};
+use raster_proc::diff_figures::{error_map, histogram_chart};
 
 use crate::terrain_io::{gdal_notices, proc_err, read_raster_arg};
 use crate::config::{print_report, write_json_report, Config, Output};
@@ -28,9 +30,13 @@ Example:
 
 Δz = B − A over the cells valid in both; B is resampled bilinearly onto A's grid when the grids
 differ. Classes are given by their upper bounds (--classes 0.01,0.02,0.05,...), the last class
-is open. Map colours: green (small) to red (large) by class, grey where only one raster has a
-value, transparent where neither has. Exit 1 with --check when any cell is over --tolerance;
-exit 3 for unreadable input.";
+is open. The map PNG has one pixel per cell of A, coloured green (small) to red (large) by
+class, grey where only one raster has a value, transparent where neither has; a title above and
+a legend to the right name the classes in --z-unit. Beside it go a world file (errors.pgw) and
+errors.png.aux.xml with A's CRS, so GDAL and QGIS place the map (the title and legend lie
+outside the map's footprint); --plain writes the bare map. The histogram PNG is a bar chart with
+axes, in % of the compared cells. Exit 1 with --check when any cell is over --tolerance; exit 3
+for unreadable input.";
 
 #[derive(ClapArgs, Debug)]
 #[command(about = "Compare two rasters: |dz| statistics, error classes, error-class map PNG", after_help = EXAMPLE)]
@@ -48,12 +54,19 @@ pub struct Args {
     /// Write the JSON report to this path (`-` = stdout).
     #[arg(long)]
     pub report: Option<String>,
-    /// Write the error-class map (A's grid) as PNG.
+    /// Write the error-class map (A's grid, with title and legend) as PNG, plus its world
+    /// file (.pgw) and .aux.xml with the CRS.
     #[arg(long)]
     pub png: Option<String>,
-    /// Write the class histogram as a PNG bar chart.
+    /// The map PNG without title and legend: one pixel per cell, for overlays in a GIS.
+    #[arg(long, requires = "png")]
+    pub plain: bool,
+    /// Write the class histogram as a PNG bar chart with axes.
     #[arg(long)]
     pub hist: Option<String>,
+    /// Unit of the heights, for legends and the report's units.
+    #[arg(long, default_value = "m")]
+    pub z_unit: String,
     /// Print the report as JSON on stdout instead of text.
     #[arg(long)]
     pub json: bool,
@@ -62,16 +75,26 @@ pub struct Args {
     pub check: bool,
 }
 
-fn encode_png(w: u32, h: u32, rgba: &[u8]) -> Result<Vec<u8>, CliError> {
-    let mut buf = Vec::new();
-    {
-        let mut enc = png::Encoder::new(&mut buf, w, h);
-        enc.set_color(png::ColorType::Rgba);
-        enc.set_depth(png::BitDepth::Eight);
-        let mut wr = enc.write_header().map_err(|e| CliError::internal(format!("PNG: {e}")))?;
-        wr.write_image_data(rgba).map_err(|e| CliError::internal(format!("PNG: {e}")))?;
+fn png_bytes(c: &Canvas) -> Result<Vec<u8>, CliError> {
+    c.to_png().map_err(|e| CliError::internal(e.to_string()))
+}
+
+/// The map picture and, when it is a file and A is georeferenced, its world file and CRS.
+fn write_map(path: &str, a: &Raster, map: &Canvas, map_at: (usize, usize)) -> Result<(), CliError> {
+    Output::from_arg(Some(path)).write_bytes(&png_bytes(map)?)?;
+    if path == "-" {
+        return Ok(());
     }
-    Ok(buf)
+    let (pgw, aux) = sidecar_paths(std::path::Path::new(path));
+    Output::from_arg(pgw.to_str()).write_bytes(world_file(a.geotransform, map_at.0, map_at.1).as_bytes())?;
+    if let Some(wkt) = &a.crs {
+        Output::from_arg(aux.to_str()).write_bytes(aux_xml(wkt).as_bytes())?;
+    }
+    Ok(())
+}
+
+fn base_name(arg: &str) -> &str {
+    std::path::Path::new(arg).file_name().and_then(|n| n.to_str()).unwrap_or(arg)
 }
 
 /// Loads A. (A T-mesh evaluated on B's grid can be plugged in here.)
@@ -117,13 +140,17 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     // --keep-partial; the statistics still are.
     let keep = |p: &str| config.keeps_output(exit, Some(p));
     if let Some(p) = args.png.as_deref().filter(|p| keep(p)) {
-        let px = class_map_rgba(&classes, opts.class_bounds.len() + 1);
-        let bytes = encode_png(a.width as u32, a.height as u32, &px)?;
-        Output::from_arg(Some(p)).write_bytes(&bytes)?;
+        if args.plain {
+            let map = Canvas::from_rgba(a.width, a.height, class_map_rgba(&classes, opts.class_bounds.len() + 1));
+            write_map(p, &a, &map, (0, 0))?;
+        } else {
+            let title = format!("{} vs {}", base_name(&args.a), base_name(&args.b));
+            let framed = error_map(&report, &classes, &opts, &args.z_unit, &title);
+            write_map(p, &a, &framed.canvas, (framed.map_x, framed.map_y))?;
+        }
     }
     if let Some(p) = args.hist.as_deref().filter(|p| keep(p)) {
-        let (w, h, px) = histogram_rgba(&report);
-        Output::from_arg(Some(p)).write_bytes(&encode_png(w, h, &px)?)?;
+        Output::from_arg(Some(p)).write_bytes(&png_bytes(&bar_chart(&histogram_chart(&report, &args.z_unit)))?)?;
     }
     if let Some(p) = &args.report {
         write_json_report(p, &report)?;
