@@ -450,3 +450,83 @@ fn completions_man_page_and_version() {
     }
     assert!(v.contains("OpenCL: "), "{v}");
 }
+
+/// Whether `path` (dots between keys, `[]` for every array element, `*` for every map value)
+/// names something in `v`: at least one element for arrays and maps, and nothing below a null.
+fn key_resolves(v: &Value, path: &[&str]) -> bool {
+    let Some((head, rest)) = path.split_first() else { return true };
+    match (*head, v) {
+        (_, Value::Null) => true,
+        ("*", Value::Object(m)) => m.is_empty() || m.values().any(|x| key_resolves(x, rest)),
+        (k, Value::Object(m)) => {
+            let (name, each) = k.strip_suffix("[]").map_or((k, false), |n| (n, true));
+            match m.get(name) {
+                Some(Value::Array(a)) if each => a.is_empty() || a.iter().any(|x| key_resolves(x, rest)),
+                Some(x) if !each => key_resolves(x, rest),
+                _ => false,
+            }
+        }
+        _ => false,
+    }
+}
+
+/// A JSON report's `schema` is `geofit-…/N` and each of its `units` keys names a quantity the
+/// report holds (so a renamed field cannot leave a stale unit behind).
+fn check_schema_and_units(what: &str, r: &Value, schema: &str) {
+    assert_eq!(r["schema"], schema, "{what}: {r}");
+    let units = r["units"].as_object().unwrap_or_else(|| panic!("{what}: no units object"));
+    for (key, unit) in units {
+        assert!(unit.as_str().is_some_and(|u| !u.is_empty()), "{what}: unit of {key}");
+        assert!(key_resolves(r, &key.split('.').collect::<Vec<_>>()), "{what}: units name {key}, which the report lacks");
+    }
+}
+
+/// Issue 15: JSON reports carried no units and no schema/version key. Now every report a
+/// command writes (`--report`, `--json`) starts with `schema` and `units`; checked for the
+/// terrain, buildings and info/validate reports on shipped and generated data.
+#[test]
+fn json_reports_carry_schema_and_units() {
+    let (Some(dem), Some(gml)) = (common::fixture("terrain/giswqs-lidar_dem.tif"), common::fixture("citygml/v2/FZK-Haus-LoD2-KIT-IAI-KHH-B36-V1.gml")) else { return };
+    if !common::tool("gdal_translate") {
+        return;
+    }
+    let tmp = common::tempdir();
+    let d = tmp.path();
+    let read = |p: &Path| -> Value { serde_json::from_slice(&std::fs::read(p).unwrap()).unwrap() };
+    let stdout_json = |args: &[&str]| -> Value { serde_json::from_slice(&ok(args).stdout).unwrap() };
+    let small = d.join("small.tif");
+    let st = Command::new("gdal_translate").args(["-q", "-srcwin", "0", "0", "40", "40", s(&dem), s(&small)]).status().unwrap();
+    assert!(st.success());
+    let (tm, rep) = (d.join("s.tmb"), d.join("fit.json"));
+    ok(&["-q", "fit", s(&small), "--max-error", "0.5", "-o", s(&tm), "--report", s(&rep)]);
+    check_schema_and_units("fit", &read(&rep), "geofit-fit-report/1");
+    let fitted = d.join("f.tif");
+    ok(&["-q", "eval", s(&tm), "--like", s(&small), "-o", s(&fitted)]);
+    let diff = stdout_json(&["-q", "diff", s(&small), s(&fitted), "--json", "--z-unit", "ft"]);
+    check_schema_and_units("diff", &diff, "geofit-diff-report/1");
+    assert_eq!(diff["units"]["max_abs"], "ft", "--z-unit names the height unit");
+    let pts = d.join("p.xyz");
+    noisy_points(&pts, 12);
+    let rrep = d.join("rasterize.json");
+    ok(&["-q", "rasterize", s(&pts), "--cell", "1", "-o", s(&d.join("r.tif")), "--report", s(&rrep)]);
+    check_schema_and_units("rasterize", &read(&rrep), "geofit-rasterize-report/1");
+    for (what, input) in [("info raster", s(&small)), ("info points", s(&pts)), ("info citygml", s(&gml)), ("info tmesh", s(&tm))] {
+        check_schema_and_units(what, &stdout_json(&["-q", "info", "--json", input]), "geofit-info/1");
+    }
+    check_schema_and_units("validate", &stdout_json(&["-q", "validate", "--json", s(&gml)]), "geofit-validate/1");
+    let (hrep, erep) = (d.join("heal.json"), d.join("export.json"));
+    ok(&["-q", "heal", s(&gml), "-o", s(&d.join("h.gml")), "--report", s(&hrep)]);
+    check_schema_and_units("heal", &read(&hrep), "geofit-heal-report/1");
+    ok(&["-q", "export", s(&gml), "-o", s(&d.join("h.glb")), "--report", s(&erep)]);
+    check_schema_and_units("export", &read(&erep), "geofit-export-report/1");
+    let (p1, p2, crep, arep, brep) = (d.join("a.popa3d"), d.join("b.popa3d"), d.join("c.json"), d.join("a.json"), d.join("b.json"));
+    ok(&["-q", "citygml2popa3d", s(&gml), "-o", s(&p1), "--report", s(&crep)]);
+    check_schema_and_units("citygml2popa3d", &read(&crep), "geofit-citygml2popa3d-report/1");
+    ok(&["-q", "adjust", s(&p1), "-o", s(&p2), "--report", s(&arep)]);
+    check_schema_and_units("adjust", &read(&arep), "geofit-adjust-report/1");
+    ok(&["-q", "popa3d2citygml", s(&p2), "--template", s(&gml), "-o", s(&d.join("back.gml")), "--report", s(&brep)]);
+    check_schema_and_units("popa3d2citygml", &read(&brep), "geofit-popa3d2citygml-report/1");
+    // the checker itself: a unit naming a missing key is caught
+    let bad: Value = serde_json::json!({ "schema": "geofit-x/1", "units": { "gone": "m" }, "here": 1.0 });
+    assert!(!key_resolves(&bad, &["gone"]) && key_resolves(&bad, &["here"]));
+}

@@ -232,11 +232,12 @@ macro_rules! say {
     };
 }
 
-/// Progress on stderr: an indicatif bar when stderr is a terminal, otherwise one plain line per
-/// stage; nothing with `--quiet`. Library crates report through [`ProgressSink`]-style callbacks
-/// and the CLI forwards them here.
+/// Progress on stderr: an indicatif bar with elapsed time and ETA when stderr is a terminal,
+/// otherwise one plain line per stage and a last line with the stage's elapsed time; nothing
+/// with `--quiet`. Library crates report through callbacks and the CLI forwards them here.
 pub struct Progress {
     mode: ProgressMode,
+    started: std::time::Instant,
 }
 
 enum ProgressMode {
@@ -256,18 +257,25 @@ impl Config {
             } else {
                 indicatif::ProgressBar::new_spinner()
             };
+            // a known total gets a bar and an ETA; an unknown one a spinner and the count so far
+            let template = if total > 0 {
+                "{prefix:>12} {elapsed_precise} [{bar:30}] {pos}/{len} ETA {eta} {msg}"
+            } else {
+                "{prefix:>12} {elapsed_precise} {spinner} {pos} {msg}"
+            };
             bar.set_style(
-                indicatif::ProgressStyle::with_template("{prefix:>12} [{bar:30}] {pos}/{len} {msg}")
+                indicatif::ProgressStyle::with_template(template)
                     .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
                     .progress_chars("=> "),
             );
+            bar.enable_steady_tick(std::time::Duration::from_millis(250));
             bar.set_prefix(stage.to_string());
             ProgressMode::Bar(bar)
         } else {
             crate::say!("geofit: {stage}");
             ProgressMode::Lines
         };
-        Progress { mode }
+        Progress { mode, started: std::time::Instant::now() }
     }
 
     /// Whether a data output goes out for a command ending with `exit`: a failed step
@@ -306,33 +314,25 @@ impl Progress {
         }
     }
 
+    /// Ends the stage with `msg` and the time it took.
     pub fn finish(self, msg: &str) {
+        let took = format_elapsed(self.started.elapsed());
         match self.mode {
             ProgressMode::Silent => {}
-            ProgressMode::Lines => {
-                if !msg.is_empty() {
-                    crate::say!("geofit:   {msg}");
-                }
-            }
+            ProgressMode::Lines => crate::say!("geofit:   {}{took}", if msg.is_empty() { String::new() } else { format!("{msg}; ") }),
             ProgressMode::Bar(b) => b.finish_with_message(msg.to_string()),
         }
     }
 }
 
-/// Writes a JSON report to `path` atomically (`--report PATH`), or to stdout for `-`.
-pub fn write_json_report<T: serde::Serialize>(path: &str, report: &T) -> Result<(), CliError> {
-    Output::from_arg(Some(path)).write_with(|w| write_json(w, report))
-}
-
-/// The report of a report-only command on stdout: as JSON with `--json`, else as the text
-/// `text` writes.
-pub fn print_report<T: serde::Serialize>(json: bool, report: &T, text: impl FnOnce(&mut dyn Write) -> io::Result<()>) -> Result<(), CliError> {
-    Output::Stdout.write_with(|w| if json { write_json(w, report) } else { text(w).map_err(CliError::io_out) })
-}
-
-fn write_json<T: serde::Serialize>(w: &mut dyn Write, report: &T) -> Result<(), CliError> {
-    serde_json::to_writer_pretty(&mut *w, report).map_err(|e| CliError::internal(e.to_string()))?;
-    w.write_all(b"\n").map_err(CliError::io_out)
+/// "done in 3.2 s", "done in 2 min 05 s": a stage's elapsed time for a person.
+fn format_elapsed(d: std::time::Duration) -> String {
+    let s = d.as_secs_f64();
+    if s < 60.0 {
+        format!("done in {s:.1} s")
+    } else {
+        format!("done in {} min {:02} s", (s / 60.0).floor(), (s % 60.0).floor())
+    }
 }
 
 /// What a directory argument is searched for by the commands that take many CityGML files.

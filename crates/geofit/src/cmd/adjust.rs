@@ -4,7 +4,8 @@
 use clap::{Args as ClapArgs, ValueEnum};
 
 use crate::cmd::args::require_positive;
-use crate::config::{write_json_report, Config, Input, Output};
+use crate::config::{Config, Input, Output};
+use crate::report::{write_json_report, ReportKind};
 use crate::error::{CliError, CmdResult, Exit};
 use adjust::popa3d::{adjust_model, DatumChoice, ModelError, ModelOptions, ObsReport, Report};
 use adjust::{GlobalTest, GlobalVerdict};
@@ -149,6 +150,27 @@ fn row(o: &ObsReport) -> String {
     )
 }
 
+/// Observation values, σ and residuals are in the units the popa3d model stores them.
+const OBSERVATION_UNIT: &str = "as stored in popa3d: m for lengths and distances, gon for Hz and V, cosine for angle conditions";
+
+/// `--report`: the adjustment's statistics (spec §6).
+const REPORT: ReportKind = ReportKind {
+    schema: "geofit-adjust-report/1",
+    units: &[
+        ("vtpv", "1 (weighted squared residuals)"),
+        ("sigma0", "1 (a posteriori variance factor, square root)"),
+        ("critical_w", "1 (normalised residual)"),
+        ("per_type.*.max_misclosure_before", OBSERVATION_UNIT),
+        ("per_type.*.max_abs_residual", OBSERVATION_UNIT),
+        ("per_type.*.mean_redundancy", "fraction"),
+        ("observations[].value", OBSERVATION_UNIT),
+        ("observations[].sigma", OBSERVATION_UNIT),
+        ("observations[].v", OBSERVATION_UNIT),
+        ("observations[].redundancy", "fraction"),
+        ("max_plane_shift", "m"),
+    ],
+};
+
 /// The global test in words: only vᵀPv above the upper bound is a failure.
 pub(crate) fn global_test_line(sigma0: f64, g: &GlobalTest) -> String {
     let head = format!("σ̂0 = {sigma0:.4}; global test vᵀPv = {:.3} in [{:.3}, {:.3}] for {} dof", g.statistic, g.lower, g.upper, g.dof);
@@ -218,7 +240,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     // still written, it says what moved.
     if report.max_plane_shift.is_nan() || report.max_plane_shift > args.max_shift {
         if let Some(p) = &args.report {
-            write_json_report(p, &report)?;
+            write_json_report(p, &REPORT, &report)?;
         }
         let at = report.max_plane_shift_at.as_ref().map_or_else(|| "a plane".to_string(), |p| p.to_string());
         return Err(CliError::findings(format!(
@@ -229,7 +251,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     let out = Output::from_arg(args.output.as_deref());
     out.write_with(|w| popa3d_model::write(&model, w).map_err(|e| CliError::internal(e.to_string())))?;
     if let Some(p) = &args.report {
-        write_json_report(p, &report)?;
+        write_json_report(p, &REPORT, &report)?;
     }
     let rejected = report.observations.iter().any(|o| o.rejected);
     let failed = report.global_test.as_ref().is_some_and(|g| g.verdict == GlobalVerdict::AboveUpper);

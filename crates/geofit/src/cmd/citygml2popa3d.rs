@@ -5,7 +5,8 @@ use clap::Args as ClapArgs;
 use serde::Serialize;
 
 use crate::cmd::args::{require_positive, NormalizeArgs};
-use crate::config::{write_json_report, Config, Input, Output};
+use crate::config::{Config, Input, Output};
+use crate::report::{write_json_report, ReportKind};
 use crate::error::{CliError, CmdResult, Exit};
 use normalize::conditions::{self, ConditionCounts, ConditionOptions, Ranges};
 use normalize::{Counts, Notice, Rejection, Tolerances};
@@ -87,6 +88,19 @@ struct BuildingReport {
     conditions: ConditionCounts,
     notices: Vec<Notice>,
 }
+
+/// `--report`: what was converted, per building.
+const REPORT: ReportKind = ReportKind {
+    schema: "geofit-citygml2popa3d-report/1",
+    units: &[
+        ("origin", "CRS units (subtracted from every coordinate)"),
+        ("tolerances.snap", "m"),
+        ("tolerances.planarity", "m"),
+        ("tolerances.normal_angle_deg", "deg"),
+        ("total.max_node_shift", "m"),
+        ("buildings[].counts.max_node_shift", "m"),
+    ],
+};
 
 #[derive(Serialize)]
 struct Report {
@@ -222,7 +236,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
             total,
             buildings: reports,
         };
-        write_json_report(p, &report)?;
+        write_json_report(p, &REPORT, &report)?;
     }
     if rejected.is_empty() {
         Ok(Exit::Ok)

@@ -14,7 +14,8 @@ use raster_proc::diff::{class_map_rgba, compare_with_map, DiffOptions, DiffRepor
 use raster_proc::diff_figures::{error_map, histogram_chart};
 
 use crate::terrain_io::{gdal_notices, proc_err, read_raster_arg};
-use crate::config::{print_report, write_json_report, Config, Output};
+use crate::config::{Config, Output};
+use crate::report::{print_report_with_units, with_z_unit, write_json_report_with_units, ReportKind, Z_UNIT};
 use crate::error::{CliError, CmdResult, Exit};
 
 const EXAMPLE: &str = "\
@@ -74,6 +75,27 @@ pub struct Args {
     #[arg(long)]
     pub check: bool,
 }
+
+/// `--report` / `--json`: the comparison's statistics.
+const REPORT: ReportKind = ReportKind {
+    schema: "geofit-diff-report/1",
+    units: &[
+        ("width", "cells"),
+        ("height", "cells"),
+        ("mean_abs", Z_UNIT),
+        ("std_abs", Z_UNIT),
+        ("median_abs", Z_UNIT),
+        ("max_abs", Z_UNIT),
+        ("rms", Z_UNIT),
+        ("mean_signed", Z_UNIT),
+        ("max_at", "[column, row] of A"),
+        ("tolerance", Z_UNIT),
+        ("share_over_tolerance", "fraction of compared cells"),
+        ("histogram[].from", Z_UNIT),
+        ("histogram[].to", Z_UNIT),
+        ("histogram[].share", "fraction of compared cells"),
+    ],
+};
 
 fn png_bytes(c: &Canvas) -> Result<Vec<u8>, CliError> {
     c.to_png().map_err(|e| CliError::internal(e.to_string()))
@@ -135,6 +157,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     let (a, name_a) = load_a(&args.a)?;
     let (b, name_b) = read_raster_arg(&args.b)?;
     let (report, classes) = compare_with_map(&a, &b, &opts).map_err(|e| proc_err(&format!("{name_a} vs {name_b}"), e))?;
+    let units = with_z_unit(REPORT.units, &args.z_unit);
     let exit = if args.check && report.over_tolerance > 0 { Exit::Findings } else { Exit::Ok };
     // --check failing is a failed step: its pictures are not written (make) unless
     // --keep-partial; the statistics still are.
@@ -153,10 +176,10 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         Output::from_arg(Some(p)).write_bytes(&png_bytes(&bar_chart(&histogram_chart(&report, &args.z_unit)))?)?;
     }
     if let Some(p) = &args.report {
-        write_json_report(p, &report)?;
+        write_json_report_with_units(p, &REPORT, &units, &report)?;
     }
     if args.json || args.report.as_deref() != Some("-") {
-        print_report(args.json, &report, |w| print_text(w, &report))?;
+        print_report_with_units(args.json, &REPORT, &units, &report, |w| print_text(w, &report))?;
     }
     if exit == Exit::Findings {
         crate::say!(

@@ -14,7 +14,8 @@ use mesh_export::{GltfBuffer, Material, MeshNode, Scene};
 use serde::Serialize;
 
 use crate::cmd::surface::{tessellate, SurfaceOptions};
-use crate::config::{write_atomic, write_json_report, Config, Input, Output};
+use crate::config::{write_atomic, Config, Input, Output};
+use crate::report::{write_json_report, ReportKind};
 use crate::error::{CliError, CmdResult, Exit};
 
 const EXAMPLE: &str = "\
@@ -120,6 +121,12 @@ fn export_tmesh(args: &Args, src: &[u8], name: &str, output: &Output, format: Fo
 }
 
 /// What `--report` writes.
+/// `--report`: what went into the mesh file.
+const REPORT: ReportKind = ReportKind {
+    schema: "geofit-export-report/1",
+    units: &[("origin", "CRS units (subtracted from every vertex)"), ("area", "CRS units squared (m2 in a metric CRS)")],
+};
+
 #[derive(Debug, Serialize)]
 pub struct ExportReport {
     pub file: String,
@@ -477,7 +484,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
             area: scene.area(),
             skipped: findings.clone(),
         };
-        write_json_report(path, &report)?;
+        write_json_report(path, &REPORT, &report)?;
     }
     for f in &findings {
         crate::say!("{f}");

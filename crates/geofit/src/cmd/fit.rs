@@ -10,7 +10,8 @@ use tspline::format::{DataMask, Encoding, Georef, TMeshFile};
 use tspline::Degree;
 
 use crate::terrain_io::{read_raster_arg, select_device, tspline_err, Device};
-use crate::config::{write_json_report, Config, Input, Output};
+use crate::config::{Config, Input, Output};
+use crate::report::{write_json_report, ReportKind, Z_UNIT};
 use crate::error::{CliError, CmdResult, Exit};
 
 const EXAMPLE: &str = "\
@@ -157,6 +158,27 @@ pub fn samples_from_raster(r: &Raster, name: &str) -> Result<(Samples, Georef, D
     let mask = DataMask { width: w, height: h, bits: z.iter().map(|v| !v.is_nan()).collect() };
     Ok((Samples { width: w, height: h, z }, Georef { x0, y0, dx: gt[1], dy, crs: r.crs.clone().unwrap_or_default() }, mask))
 }
+
+/// `--report`: what the fit did and how far it got.
+const REPORT: ReportKind = ReportKind {
+    schema: "geofit-fit-report/1",
+    units: &[
+        ("width", "cells"),
+        ("height", "cells"),
+        ("max_error", Z_UNIT),
+        ("max_error_from_uncertainty", "multiple of the uncertainty band"),
+        ("max_abs_error", Z_UNIT),
+        ("compression_ratio", "valid cells per control point"),
+        ("iterations[].mean", Z_UNIT),
+        ("iterations[].sigma", Z_UNIT),
+        ("iterations[].median", Z_UNIT),
+        ("iterations[].max", Z_UNIT),
+        ("iterations[].rms", Z_UNIT),
+        ("iterations[].seconds", "s"),
+        ("seconds", "s"),
+        ("peak_rss_mib", "MiB"),
+    ],
+};
 
 #[derive(serde::Serialize)]
 struct Report<'a> {
@@ -516,12 +538,14 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         MethodArg::Lsq => Method::Lsq,
         MethodArg::Drag => Method::Drag,
     };
-    let progress = config.progress("fit", args.max_iterations as u64);
+    // The bar counts the valid cells within the tolerance: it fills as refinement converges
+    // (iterations run to no fixed count, so counting them would jump to the end).
+    let progress = config.progress("fit", valid as u64);
     let e = &e_text;
     let mut cb = |st: &IterationStats| {
         let stage = if st.merged_cells > 0 { format!("coarsening ({} cells merged)", st.merged_cells) } else { "iteration".into() };
         progress.set(
-            st.iteration as u64,
+            (valid - st.error.over_tolerance.min(valid)) as u64,
             &format!(
                 "{stage} {}: {} control points, max {:.4}, mean {:.4}, RMS {:.4}, {} cells over {} ({:.2} s: build {:.2}, optimise {:.2}, check {:.2})",
                 st.iteration,
@@ -631,7 +655,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
             seconds: t_start.elapsed().as_secs_f64(),
             peak_rss_mib: peak_rss_mib(),
         };
-        write_json_report(path, &rep)?;
+        write_json_report(path, &REPORT, &rep)?;
     }
     Ok(exit)
 }

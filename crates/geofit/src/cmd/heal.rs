@@ -5,7 +5,8 @@ use clap::Args as ClapArgs;
 use serde::Serialize;
 
 use crate::cmd::args::{require_non_negative, require_positive};
-use crate::config::{write_json_report, Config, Input, Output};
+use crate::config::{Config, Input, Output};
+use crate::report::{write_json_report, ReportKind};
 use crate::error::{CliError, CmdResult, Exit};
 use heal::{HealError, HealOptions, HealReport};
 use normalize::conditions::ConditionOptions;
@@ -80,19 +81,23 @@ pub struct Args {
     pub report: Option<String>,
 }
 
-#[derive(Serialize)]
-struct Report<'a> {
-    schema: &'static str,
-    input: String,
-    units: Units,
-    #[serde(flatten)]
-    heal: &'a HealReport,
-}
+/// `--report`: what healing changed and what it kept (`tile report` sums these).
+const REPORT: ReportKind = ReportKind {
+    schema: "geofit-heal-report/1",
+    units: &[
+        ("area_before_m2", "m2"),
+        ("area_after_m2", "m2"),
+        ("back.max_move", "m"),
+        ("back.mean_move", "m"),
+        ("back.max_move_by_building.*", "m"),
+    ],
+};
 
 #[derive(Serialize)]
-struct Units {
-    area: &'static str,
-    moves: &'static str,
+struct Report<'a> {
+    input: String,
+    #[serde(flatten)]
+    heal: &'a HealReport,
 }
 
 fn options(a: &Args) -> Result<HealOptions, CliError> {
@@ -156,7 +161,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     }
     output.write_bytes(&healed.document)?;
     if let Some(p) = &args.report {
-        write_json_report(p, &Report { schema: "geofit-heal-report/1", input: name, units: Units { area: "m2", moves: "m" }, heal: r })?;
+        write_json_report(p, &REPORT, &Report { input: name, heal: r })?;
     }
     Ok(Exit::Ok)
 }

@@ -10,7 +10,8 @@ use implicit::model::{self, BuildOptions, BuildReport, Event, Model};
 use implicit::points::{self, DataPoint, SidePoint};
 use serde::Serialize;
 
-use crate::config::{write_json_report, Config, Input, Output};
+use crate::config::{Config, Input, Output};
+use crate::report::{write_json_report, ReportKind};
 use crate::error::{CliError, CmdResult, Exit};
 
 const HELP: &str = "\
@@ -341,6 +342,22 @@ fn forward(config: &Config) -> impl FnMut(Event) + '_ {
     }
 }
 
+/// Lengths of the implicit models are in the units of the input points' coordinates.
+const LENGTH: &str = "CRS units of the points";
+
+/// `implicit interpolate --report`.
+const REPORT: ReportKind = ReportKind {
+    schema: "geofit-implicit-report/1",
+    units: &[
+        ("cell", LENGTH),
+        ("misfit_mean", LENGTH),
+        ("misfit_max", LENGTH),
+        ("noise_sigma", LENGTH),
+        ("seconds", "s"),
+        ("cpu_seconds", "s"),
+    ],
+};
+
 #[derive(Serialize)]
 struct Report {
     points: usize,
@@ -463,7 +480,7 @@ fn write_report(path: &Option<String>, rep: &BuildReport, secs: Timing) -> Resul
             seconds: secs.wall,
             cpu_seconds: secs.cpu,
         };
-        write_json_report(p, &r)?;
+        write_json_report(p, &REPORT, &r)?;
     }
     Ok(())
 }
@@ -587,6 +604,12 @@ fn interpolate(a: InterpolateArgs, config: &Config) -> CmdResult {
     Ok(Exit::Ok)
 }
 
+/// `implicit update --report`.
+const UPDATE_REPORT: ReportKind = ReportKind {
+    schema: "geofit-implicit-update-report/1",
+    units: &[("misfit_mean", LENGTH), ("misfit_max", LENGTH), ("seconds", "s")],
+};
+
 #[derive(Serialize)]
 struct UpdateReport {
     warm_start: bool,
@@ -637,6 +660,7 @@ fn update(a: UpdateArgs, config: &Config) -> CmdResult {
     if let Some(p) = &a.report {
         write_json_report(
             p,
+            &UPDATE_REPORT,
             &UpdateReport {
                 warm_start: !a.cold,
                 cg_iterations: sol.iterations.clone(),
@@ -650,6 +674,12 @@ fn update(a: UpdateArgs, config: &Config) -> CmdResult {
     }
     Ok(Exit::Ok)
 }
+
+/// `implicit iso --report`.
+const ISO_REPORT: ReportKind = ReportKind {
+    schema: "geofit-implicit-iso-report/1",
+    units: &[("value", LENGTH), ("area", "CRS units squared"), ("volume", "CRS units cubed")],
+};
 
 #[derive(Serialize)]
 struct IsoReport {
@@ -678,7 +708,7 @@ fn iso(a: IsoArgs, config: &Config) -> CmdResult {
                 IsoReport { value: v, triangles: s.tris.len(), vertices: s.positions.len(), area: s.area(), closed, volume: closed.then(|| s.volume().abs()) }
             })
             .collect();
-        write_json_report(p, &r)?;
+        write_json_report(p, &ISO_REPORT, &r)?;
     }
     Ok(Exit::Ok)
 }
@@ -721,6 +751,12 @@ fn section(a: SectionArgs, config: &Config) -> CmdResult {
     Ok(Exit::Ok)
 }
 
+/// `implicit csg --report`.
+const CSG_REPORT: ReportKind = ReportKind {
+    schema: "geofit-implicit-csg-report/1",
+    units: &[("area", "CRS units squared"), ("volume", "CRS units cubed")],
+};
+
 #[derive(Serialize)]
 struct CsgReport {
     op: &'static str,
@@ -748,7 +784,7 @@ fn csg(a: CsgArgs, config: &Config) -> CmdResult {
         })?;
     }
     if let Some(p) = &a.report {
-        write_json_report(p, &CsgReport { op: name, triangles: s.tris.len(), closed, volume, area: s.area() })?;
+        write_json_report(p, &CSG_REPORT, &CsgReport { op: name, triangles: s.tris.len(), closed, volume, area: s.area() })?;
     }
     write_surfaces(&a.output, &[(name.to_string(), s)], config)?;
     Ok(Exit::Ok)

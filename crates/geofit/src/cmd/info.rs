@@ -5,6 +5,7 @@
 //! (XYZ/CSV text, LAS/LAZ: count, bounds, CRS). The kind comes from the extension where it is
 //! unambiguous, otherwise from the content (root element, then GDAL, then XYZ text).
 
+use crate::report::{print_report_with_units, tagged, ReportKind, Z_UNIT};
 use std::cell::RefCell;
 use std::collections::BTreeMap;
 use std::io::Write;
@@ -15,7 +16,7 @@ use clap::Args as ClapArgs;
 use serde::Serialize;
 
 use crate::config::{
-    batch_inputs, print_report, run_batch, worse_exit, write_batch_error, write_json_line, Config, Input, CITYGML_EXTENSIONS,
+    batch_inputs, run_batch, worse_exit, write_batch_error, write_json_line, Config, Input, CITYGML_EXTENSIONS,
 };
 use crate::error::{CliError, CmdResult, Exit};
 
@@ -148,7 +149,20 @@ enum Info {
     Points(PointsInfo),
 }
 
+/// `--json`: one input's summary, the same object as a line of a many-file run; its units
+/// depend on what the input is ([`Info::units`]).
+const REPORT: ReportKind = ReportKind { schema: "geofit-info/1", units: &[] };
+
 impl Info {
+    fn units(&self) -> &'static [(&'static str, &'static str)] {
+        match self {
+            Info::CityGml(_) => &[("envelope", "CRS units"), ("declared_envelope", "CRS units")],
+            Info::TMesh(_) => &[("domain", "raster cells (parameter units)"), ("georef", "CRS units (x0, y0, dx, dy)")],
+            Info::Raster(_) => &[("width", "cells"), ("height", "cells"), ("geotransform", "CRS units"), ("nodata", Z_UNIT), ("range", Z_UNIT)],
+            Info::Points(_) => &[("envelope", "CRS units")],
+        }
+    }
+
     fn write_text(&self, w: &mut dyn Write) -> std::io::Result<()> {
         match self {
             Info::CityGml(r) => write_text(w, r),
@@ -179,7 +193,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         return run_many(inputs, args.json, config, started);
     }
     let s = summarize(&Input::from_arg(&args.inputs[0]))?;
-    print_report(args.json, &s.info, |w| s.info.write_text(w))?;
+    print_report_with_units(args.json, &REPORT, s.info.units(), &s.info, |w| s.info.write_text(w))?;
     for f in &s.findings {
         crate::say!("{f}");
     }
@@ -508,15 +522,7 @@ fn short_crs(s: &str) -> &str {
 }
 
 /// Version of the JSON lines a many-file run writes (one object per file, then the summary).
-const JSON_LINES_SCHEMA: &str = "geofit-info/1";
-
-/// One line of `--json` output for a file: the one-file report plus the format version.
-#[derive(Serialize)]
-struct FileLine<'a> {
-    schema: &'static str,
-    #[serde(flatten)]
-    info: &'a Info,
-}
+const JSON_LINES_SCHEMA: &str = REPORT.schema;
 
 #[derive(Debug, Default, Serialize)]
 struct BatchSummary {
@@ -566,7 +572,7 @@ fn run_many(inputs: Vec<Input>, json: bool, config: &Config, started: Instant) -
                 *worst = worse_exit(*worst, Exit::Findings);
             }
             if json {
-                write_json_line(w, &FileLine { schema: JSON_LINES_SCHEMA, info: &s.info })
+                write_json_line(w, &tagged(&REPORT, s.info.units(), &s.info))
             } else {
                 s.info.write_text(w).and_then(|()| writeln!(w)).map_err(CliError::io_out)
             }

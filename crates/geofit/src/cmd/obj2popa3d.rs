@@ -5,7 +5,8 @@ use clap::Args as ClapArgs;
 use serde::Serialize;
 
 use crate::cmd::args::{require_positive, NormalizeArgs};
-use crate::config::{write_json_report, Config, Input, Output};
+use crate::config::{Config, Input, Output};
+use crate::report::{write_json_report, ReportKind};
 use crate::error::{CliError, CmdResult, Exit};
 use normalize::conditions::{self, Ranges, SketchOptions};
 use normalize::{Counts, Notice};
@@ -60,6 +61,9 @@ pub struct Args {
     #[arg(long)]
     pub report: Option<String>,
 }
+
+/// `--report`: what was derived from the mesh.
+const REPORT: ReportKind = ReportKind { schema: "geofit-obj2popa3d-report/1", units: &[("counts.max_node_shift", "m")] };
 
 #[derive(Serialize)]
 struct Report {
@@ -137,7 +141,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
             induced: nind,
             notices: n.notices,
         };
-        write_json_report(p, &rep)?;
+        write_json_report(p, &REPORT, &rep)?;
     }
     Ok(Exit::Ok)
 }

@@ -5,7 +5,8 @@ use clap::Args as ClapArgs;
 use serde::Serialize;
 
 use crate::cmd::args::require_positive;
-use crate::config::{write_json_report, Config, Input, Output};
+use crate::config::{Config, Input, Output};
+use crate::report::{write_json_report, ReportKind};
 use crate::error::{CliError, CmdResult, Exit};
 use normalize::to_citygml::{to_citygml, BackError, BackOptions, BackReport};
 
@@ -58,6 +59,19 @@ pub struct Args {
     #[arg(long)]
     pub report: Option<String>,
 }
+
+/// `--report`: what writing the model back changed.
+const REPORT: ReportKind = ReportKind {
+    schema: "geofit-popa3d2citygml-report/1",
+    units: &[
+        ("options.coplanar_tolerance", "m"),
+        ("options.collapse_tolerance", "m"),
+        ("options.area_tolerance", "m2"),
+        ("max_move", "m"),
+        ("mean_move", "m"),
+        ("max_move_by_building.*", "m"),
+    ],
+};
 
 #[derive(Serialize)]
 struct Report<'a> {
@@ -125,7 +139,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     }
     output.write_bytes(&out)?;
     if let Some(p) = &args.report {
-        write_json_report(p, &Report { template: tname, options: &opts, result: &report })?;
+        write_json_report(p, &REPORT, &Report { template: tname, options: &opts, result: &report })?;
     }
     Ok(Exit::Ok)
 }

@@ -12,7 +12,8 @@ use raster_proc::splat::{splat_points, SplatKernel};
 use raster_proc::tin::{tin_points, TinOptions};
 use raster_proc::ProcError;
 
-use crate::config::{write_json_report, Config, Input};
+use crate::config::{Config, Input};
+use crate::report::{write_json_report, ReportKind};
 use crate::terrain_io::{gdal_notices, proc_err, read_cloud, write_raster_arg, RasterOutArgs};
 use crate::error::{CliError, CmdResult, Exit};
 
@@ -85,6 +86,12 @@ pub struct Args {
     #[command(flatten)]
     pub raster_out: RasterOutArgs,
 }
+
+/// `--report`: the grid written and what went into it.
+const REPORT: ReportKind = ReportKind {
+    schema: "geofit-rasterize-report/1",
+    units: &[("width", "cells"), ("height", "cells"), ("geotransform", "GDAL geotransform in CRS units (origin x, cell width, 0, origin y, 0, -cell height)")],
+};
 
 #[derive(Debug, Serialize)]
 struct RasterizeReport {
@@ -227,7 +234,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
             tin_vertices: tin_stats.map(|s| s.vertices),
             merged_duplicates: tin_stats.map(|s| s.merged_duplicates),
         };
-        write_json_report(path, &rep)?;
+        write_json_report(path, &REPORT, &rep)?;
     }
     Ok(Exit::Ok)
 }

@@ -1,6 +1,7 @@
 //! `geofit validate`: XSD validation against the offline CityGML schemas (libxml2 in-process) and
 //! geometric validation with the val3dity / OGC QIE error codes (ring → polygon → shell → solid).
 
+use crate::report::{print_report, tagged, ReportKind};
 use std::cell::RefCell;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -13,7 +14,7 @@ use clap::Args as ClapArgs;
 use serde::Serialize;
 
 use crate::config::{
-    batch_inputs, print_report, run_batch, worse_exit, write_batch_error, write_json_line, Config, Input, CITYGML_EXTENSIONS,
+    batch_inputs, run_batch, worse_exit, write_batch_error, write_json_line, Config, Input, CITYGML_EXTENSIONS,
 };
 use crate::error::{CliError, CmdResult, Exit};
 
@@ -192,20 +193,18 @@ fn run_one(args: &Args, options: Options, config: &Config) -> CmdResult {
     } else {
         validate_document(&bytes, &name, &checks, &|_| {}).map_err(document_error)?
     };
-    print_report(args.json, &report, |w| write_text(w, &report))?;
+    print_report(args.json, &REPORT, &report, |w| write_text(w, &report))?;
     Ok(if report.valid { Exit::Ok } else { Exit::Findings })
 }
 
-/// Version of the JSON lines a many-file run writes (one object per file, then the summary).
-const JSON_LINES_SCHEMA: &str = "geofit-validate/1";
+/// `--json`: one file's report, the same object as a line of a many-file run.
+const REPORT: ReportKind = ReportKind {
+    schema: "geofit-validate/1",
+    units: &[("geometry.options.snap_tol", "CRS units (m)"), ("geometry.options.planarity_tol", "CRS units (m)"), ("geometry.options.normals_tol_deg", "deg")],
+};
 
-/// One line of `--json` output for a file: the one-file report plus the format version.
-#[derive(Serialize)]
-struct FileLine<'a> {
-    schema: &'static str,
-    #[serde(flatten)]
-    report: &'a Report,
-}
+/// Version of the JSON lines a many-file run writes (one object per file, then the summary).
+const JSON_LINES_SCHEMA: &str = REPORT.schema;
 
 #[derive(Serialize)]
 struct SummaryLine<'a> {
@@ -242,7 +241,7 @@ fn run_many(inputs: Vec<Input>, checks: &Checks, json: bool, config: &Config, st
                 Ok(report) => {
                     summary.borrow_mut().add_report(report);
                     if json {
-                        write_json_line(w, &FileLine { schema: JSON_LINES_SCHEMA, report })
+                        write_json_line(w, &tagged(&REPORT, REPORT.units, report))
                     } else {
                         write_text(w, report).map_err(CliError::io_out)
                     }

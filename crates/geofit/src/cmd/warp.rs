@@ -13,7 +13,8 @@ use raster_proc::warp::{warp_raster, WarpParams, WarpStats};
 
 use crate::terrain_io::{gdal_notices, proc_err, read_raster_arg_typed, write_raster_arg, RasterOutArgs};
 use raster_io::RasterFormat;
-use crate::config::{write_json_report, Config};
+use crate::config::Config;
+use crate::report::{write_json_report, ReportKind};
 use crate::error::{CliError, CmdResult, Exit};
 
 const EXAMPLE: &str = "\
@@ -75,6 +76,12 @@ pub struct Args {
     #[command(flatten)]
     pub raster_out: RasterOutArgs,
 }
+
+/// `--report`: the warp field's statistics.
+const REPORT: ReportKind = ReportKind {
+    schema: "geofit-warp-report/1",
+    units: &[("rotation_deg", "deg"), ("target_width", "cells"), ("target_height", "cells")],
+};
 
 #[derive(Serialize)]
 struct Report<'a> {
@@ -139,7 +146,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     ));
     write_raster_arg(&warped, args.output.as_deref(), &write_opts)?;
     if let Some(path) = &args.report {
-        write_json_report(path, &Report { input: &name, stats })?;
+        write_json_report(path, &REPORT, &Report { input: &name, stats })?;
     }
     Ok(Exit::Ok)
 }
