@@ -530,3 +530,35 @@ fn json_reports_carry_schema_and_units() {
     let bad: Value = serde_json::json!({ "schema": "geofit-x/1", "units": { "gone": "m" }, "here": 1.0 });
     assert!(!key_resolves(&bad, &["gone"]) && key_resolves(&bad, &["here"]));
 }
+
+/// Issue 15: `-o` into a missing directory failed with exit 4 ("internal") after all the work,
+/// naming a temporary file. Now every file output (`-o`, `--report`, `--png`, `--hist`,
+/// `--outliers-csv`, `--vtk`) of every subcommand is checked before the work: exit 2 naming
+/// the option and the missing directory, nothing written anywhere.
+#[test]
+fn output_paths_are_checked_before_the_work() {
+    let tmp = common::tempdir();
+    let d = tmp.path();
+    let pts = d.join("p.xyz");
+    noisy_points(&pts, 6);
+    let r = d.join("r.tif");
+    ok(&["-q", "rasterize", s(&pts), "--cell", "1", "-o", s(&r)]);
+    let missing = d.join("no/such/dir");
+    let m = |name: &str| missing.join(name).to_str().unwrap().to_string();
+    let (tm, png, rep, csv, vtk, out) = (m("x.tmb"), m("e.png"), m("r.json"), m("o.csv"), m("f.vtk"), d.join("ok.tmb"));
+    let cases: Vec<(Vec<&str>, &str)> = vec![
+        (vec!["fit", s(&r), "--max-error", "1", "-o", &tm], "-o"),
+        (vec!["fit", s(&r), "--max-error", "1", "-o", s(&out), "--report", &rep], "--report"),
+        (vec!["fit", s(&r), "--max-error", "1", "-o", s(&out), "--outliers-csv", &csv], "--outliers-csv"),
+        (vec!["diff", s(&r), s(&r), "--png", &png], "--png"),
+        (vec!["diff", s(&r), s(&r), "--hist", &png], "--hist"),
+        (vec!["implicit", "interpolate", s(&pts), "-o", s(&out), "--vtk", &vtk], "--vtk"),
+        (vec!["rasterize", s(&pts), "--cell", "1", "-o", &tm], "-o"),
+    ];
+    for (args, flag) in cases {
+        let e = fails(&args, 2, &[&format!("{flag} {}", missing.display()), "does not exist"]);
+        assert_eq!(e.trim().lines().count(), 1, "{args:?}: {e}");
+    }
+    assert!(!out.exists() && temp_leftovers(d).is_empty(), "nothing written");
+    fails(&["fit", s(&r), "--max-error", "1", "-o", s(d)], 2, &["is a directory"]);
+}

@@ -115,16 +115,21 @@ impl Output {
 
     /// Checks before the work starts that a file output can be created: its directory exists.
     pub fn check_target(&self) -> Result<(), CliError> {
+        self.check_target_of("-o")
+    }
+
+    /// [`Output::check_target`] naming the option that gave the path (`--report`, `--png`).
+    pub fn check_target_of(&self, flag: &str) -> Result<(), CliError> {
         let Output::Path(p) = self else { return Ok(()) };
         let dir = match p.parent() {
             Some(d) if !d.as_os_str().is_empty() => d,
             _ => Path::new("."),
         };
         if !dir.is_dir() {
-            return Err(CliError::usage(format!("-o {}: the directory {} does not exist", p.display(), dir.display())));
+            return Err(CliError::usage(format!("{flag} {}: the directory {} does not exist", p.display(), dir.display())));
         }
         if p.is_dir() {
-            return Err(CliError::usage(format!("-o {}: is a directory", p.display())));
+            return Err(CliError::usage(format!("{flag} {}: is a directory", p.display())));
         }
         Ok(())
     }
@@ -160,6 +165,25 @@ impl Output {
     pub fn write_bytes(&self, bytes: &[u8]) -> Result<(), CliError> {
         self.write_with(|w| w.write_all(bytes).map_err(CliError::io_out))
     }
+}
+
+/// The file outputs every subcommand names the same way (argument id, option as typed).
+const OUTPUT_OPTIONS: &[(&str, &str)] =
+    &[("output", "-o"), ("report", "--report"), ("png", "--png"), ("hist", "--hist"), ("outliers_csv", "--outliers-csv"), ("vtk", "--vtk")];
+
+/// Checks every file output of the parsed command line before any work starts, so a typo in
+/// an output directory is a usage error (exit 2) at once, not a failure after a long fit.
+pub fn check_output_args(matches: &clap::ArgMatches) -> Result<(), CliError> {
+    let mut m = matches;
+    while let Some((_, sub)) = m.subcommand() {
+        m = sub;
+    }
+    for (id, flag) in OUTPUT_OPTIONS {
+        if let Ok(Some(path)) = m.try_get_one::<String>(id) {
+            Output::from_arg(Some(path)).check_target_of(flag)?;
+        }
+    }
+    Ok(())
 }
 
 /// `--report -` puts the JSON report on stdout: refused before the work when the data goes

@@ -136,10 +136,18 @@ fn main() -> ExitCode {
     if args.iter().any(|a| a == "--version") {
         command = command.long_version(long_version());
     }
-    let cli = match command.clone().try_get_matches_from(&args).and_then(|m| Cli::from_arg_matches(&m)) {
+    let matches = match command.clone().try_get_matches_from(&args) {
+        Ok(m) => m,
+        Err(e) => e.exit(),
+    };
+    let cli = match Cli::from_arg_matches(&matches) {
         Ok(cli) => cli,
         Err(e) => e.exit(),
     };
+    if let Err(e) = config::check_output_args(&matches) {
+        crate::say!("geofit: error: {}", e.message);
+        return e.exit.into();
+    }
     let config = Config { quiet: cli.quiet, keep_partial: cli.keep_partial };
     let result = match cli.command {
         Command::Completions(a) => cmd::completions::run(a, Cli::command()),
