@@ -27,7 +27,7 @@ NPM_PREFIX := $(HOME)/.cache/geofit/npm
 export GEOFIT_NPM_PREFIX := $(NPM_PREFIX)
 GLTF_VALIDATOR_VERSION := 2.0.0-dev.3.10
 
-.PHONY: setup setup-apt setup-pip setup-bench setup-npm build release test demo bench clean-demo
+.PHONY: setup setup-apt setup-pip setup-bench setup-npm build release test demo bench clean-demo fuzz
 
 setup: setup-apt setup-pip setup-npm
 
@@ -81,3 +81,9 @@ demo: setup release
 
 bench: setup setup-bench release
 	@bash benches/run.sh "$(BIN)"
+
+# Fuzzing (issue 13): every parser target for FUZZ_SECONDS each, nightly toolchain + libFuzzer
+# (fuzz/run.sh; crash reproducers land in fuzz/artifacts/). CI runs it for 60 s per target.
+FUZZ_SECONDS ?= 60
+fuzz:
+	@bash fuzz/run.sh $(FUZZ_SECONDS)
