@@ -305,6 +305,23 @@ fn count_attributes(raw: &[u8]) -> usize {
     n
 }
 
+/// libxml2 quotes the document's values and names between single quotes ("'…' is not a valid
+/// value of …"): each quoted part is cut to ~200 bytes (`input_limits::quote`), the rest of the
+/// message (the schema's words, lists of expected elements) is kept.
+fn shorten_quoted(message: &str) -> String {
+    let parts: Vec<&str> = message.split('\'').collect();
+    if parts.len() < 3 || parts.iter().all(|p| p.len() <= input_limits::QUOTE_MAX_BYTES) {
+        return message.to_string();
+    }
+    // odd indices lie between a pair of quotes
+    parts
+        .iter()
+        .enumerate()
+        .map(|(i, p)| if i % 2 == 1 && i + 1 < parts.len() { input_limits::quote(p) } else { std::borrow::Cow::Borrowed(*p) })
+        .collect::<Vec<_>>()
+        .join("'")
+}
+
 fn finish(col: Collector, xml: &[u8]) -> Vec<XsdFinding> {
     let starts = line_starts(xml);
     col.findings
@@ -315,8 +332,7 @@ fn finish(col: Collector, xml: &[u8]) -> Vec<XsdFinding> {
             } else {
                 e.element.as_deref().and_then(|n| element_column(xml, &starts, e.line, n)).unwrap_or(0)
             };
-            // libxml2 quotes values and names of the document: at most ~200 bytes of each finding
-            XsdFinding { kind, line: e.line, column, element: e.element, message: input_limits::quote(&e.message).into_owned() }
+            XsdFinding { kind, line: e.line, column, element: e.element, message: shorten_quoted(&e.message) }
         })
         .collect()
 }
@@ -416,6 +432,20 @@ mod tests {
   </core:cityObjectMember>
 </core:CityModel>
 "#;
+
+    #[test]
+    fn long_quoted_values_are_shortened_and_attributes_counted() {
+        let v = "9".repeat(1000);
+        let m = shorten_quoted(&format!("Element 'pos': '{v}' is not a valid value of the atomic type 'xs:double'."));
+        assert!(m.starts_with("Element 'pos': '999") && m.contains("… (1000 bytes)' is not a valid value of the atomic type 'xs:double'."), "{m}");
+        assert_eq!(shorten_quoted("it's short"), "it's short");
+        assert_eq!(count_attributes(br#" a="1" b='x=y' c = "=""#), 3);
+        let many: String = (0..20).map(|i| format!(" a{i}=\"{i}\"")).collect();
+        let doc = format!("<r>\n <e{many}/></r>");
+        let f = too_many_attributes(doc.as_bytes(), 10).unwrap();
+        assert_eq!((f.line, f.column, f.element.as_deref()), (2, 2, Some("e")), "{f:?}");
+        assert!(too_many_attributes(doc.as_bytes(), 20).is_none());
+    }
 
     #[test]
     fn version_from_root_namespaces() {
