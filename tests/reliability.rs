@@ -151,12 +151,38 @@ fn las14(points: u64, stored: usize) -> Vec<u8> {
     h
 }
 
-/// A LAZ-flagged header whose chunk table (found through the offset at the start of the point
-/// data) claims 4·10⁹ chunks for 100 bytes of compressed data.
+/// A LAZ file (LAS 1.4, compressed point format 0 with its LASzip VLR: pointwise chunked
+/// compressor, one Point10 item) whose chunk table, found through the offset at the start of the
+/// point data, claims 4·10⁹ chunks for 100 bytes of compressed data: the laz crate
+/// pre-allocated 64 GB for the table and aborted (exit 134).
 fn laz_chunks() -> Vec<u8> {
+    let mut data = Vec::new();
+    for v in [2u16, 0] {
+        data.extend(v.to_le_bytes()); // compressor (pointwise chunked), coder
+    }
+    data.extend([2u8, 2]); // LASzip version 2.2
+    data.extend(0u16.to_le_bytes()); // revision
+    data.extend(0u32.to_le_bytes()); // options
+    data.extend(50_000u32.to_le_bytes()); // chunk size
+    data.extend((-1i64).to_le_bytes()); // special EVLRs: none
+    data.extend((-1i64).to_le_bytes());
+    data.extend(1u16.to_le_bytes()); // one item: Point10, 20 bytes, version 2
+    for v in [6u16, 20, 2] {
+        data.extend(v.to_le_bytes());
+    }
+    let mut vlr = vec![0u8; 2];
+    vlr.extend(b"laszip encoded\0\0");
+    vlr.extend(22204u16.to_le_bytes());
+    vlr.extend((data.len() as u16).to_le_bytes());
+    vlr.extend([0u8; 32]);
+    vlr.extend(data);
     let mut f = las14(10, 0);
     f[104] = 0x80; // compressed point format 0
-    let table = 375u64 + 8 + 100;
+    let offset = (f.len() + vlr.len()) as u32;
+    f[96..100].copy_from_slice(&offset.to_le_bytes());
+    f[100..104].copy_from_slice(&1u32.to_le_bytes());
+    f.extend(vlr);
+    let table = offset as u64 + 8 + 100;
     f.extend(table.to_le_bytes());
     f.extend(vec![0u8; 100]);
     f.extend(0u32.to_le_bytes());
