@@ -13,6 +13,7 @@ use quick_xml::events::{BytesStart, Event};
 use quick_xml::name::PrefixDeclaration;
 use quick_xml::Reader;
 
+use input_limits::quote;
 use crate::error::ReadError;
 use crate::lines::LineIndex;
 use crate::model::*;
@@ -444,10 +445,10 @@ impl<'a> Parser<'a> {
         let at = self.base + self.r.error_position() as usize;
         let msg = match &e {
             quick_xml::Error::IllFormed(IllFormedError::MissingEndTag(n)) => {
-                format!("unexpected end of file: <{n}> is not closed (truncated document?)")
+                format!("unexpected end of file: <{}> is not closed (truncated document?)", quote(n))
             }
             quick_xml::Error::IllFormed(IllFormedError::MismatchedEndTag { expected, found }) => {
-                format!("malformed XML: end tag </{found}> does not match the open <{expected}>")
+                format!("malformed XML: end tag </{}> does not match the open <{}>", quote(found), quote(expected))
             }
             quick_xml::Error::Syntax(SyntaxError::UnclosedTag) => {
                 "unexpected end of file inside a tag: `>` missing (truncated document?)".to_string()
@@ -457,8 +458,8 @@ impl<'a> Parser<'a> {
                 | SyntaxError::UnclosedCData
                 | SyntaxError::UnclosedDoctype
                 | SyntaxError::UnclosedPIOrXmlDecl,
-            ) => format!("unexpected end of file: {e} (truncated document?)"),
-            _ => format!("malformed XML: {e}"),
+            ) => format!("unexpected end of file: {} (truncated document?)", quote(&e.to_string())),
+            _ => format!("malformed XML: {}", quote(&e.to_string())),
         };
         self.err(at, msg)
     }
@@ -1129,7 +1130,7 @@ impl<'a> Parser<'a> {
                 format!(
                     "gml:{} {}has no exterior gml:LinearRing (missing coordinates)",
                     t.local_str(),
-                    id.as_ref().map(|i| format!("'{i}' ")).unwrap_or_default()
+                    id.as_ref().map(|i| format!("'{}' ", quote(i))).unwrap_or_default()
                 ),
             ));
         };
@@ -1701,7 +1702,7 @@ pub(crate) fn resolve_object(
                 let ph = v.pop().unwrap();
                 let href = ph.id.unwrap_or_default();
                 g.skipped_members.push(SkippedMember {
-                    reason: format!("xlink:href=\"{href}\" points to <{qname}>, not a geometry"),
+                    reason: format!("xlink:href=\"{}\" points to <{}>, not a geometry", quote(&href), quote(&qname)),
                     href: Some(href),
                     span: ph.via_xlink.unwrap_or_default(),
                 });
@@ -1859,14 +1860,14 @@ impl SolidCtx<'_, '_, '_, '_> {
         let skip = |reason: String| SkippedMember { href: Some(href.to_string()), reason, span: via.clone() };
         let nowhere = |unresolved: &mut Vec<XLinkRef>| {
             unresolved.push(XLinkRef::at(href.to_string(), via.clone()));
-            skip(format!("xlink:href=\"{href}\" points to nothing in the document"))
+            skip(format!("xlink:href=\"{}\" points to nothing in the document", quote(href)))
         };
         let Some(id) = href_id(href) else {
             out.1.push(nowhere(unresolved));
             return Ok(());
         };
         if depth > 8 {
-            out.1.push(skip(format!("xlink:href=\"{href}\": reference cycle")));
+            out.1.push(skip(format!("xlink:href=\"{}\": reference cycle", quote(href))));
             return Ok(());
         }
         let entry = find_id(self.local_ids, global, id)?;
@@ -1877,7 +1878,7 @@ impl SolidCtx<'_, '_, '_, '_> {
         let (solids, skipped) = match self.reparse.solids(&entry)? {
             Ok(r) => r,
             Err(name) => {
-                out.1.push(skip(format!("xlink:href=\"{href}\" points to <{name}>, not a solid")));
+                out.1.push(skip(format!("xlink:href=\"{}\" points to <{}>, not a solid", quote(href), quote(&name))));
                 return Ok(());
             }
         };

@@ -200,6 +200,9 @@ impl Schema {
         if xml.len() > i32::MAX as usize {
             return Err(XsdError::TooLarge(xml.len()));
         }
+        if let Some(f) = too_many_attributes(xml, MAX_ATTRIBUTES) {
+            return Ok(vec![f]);
+        }
         let url = CString::new(name.replace('\0', "")).unwrap_or_default();
         let mut col = Collector { findings: Vec::new(), kind: XsdErrorKind::NotWellFormed };
         unsafe {
@@ -248,6 +251,77 @@ impl Schema {
     }
 }
 
+/// The most attributes (namespace declarations included) one element may have for the schema
+/// check to run. libxml2's schema validation takes time quadratic in the attributes of one
+/// element (100 000 attributes: 100 s, 10⁶: more than 5 minutes); no CityGML element declares
+/// more than a handful, and real root elements carry a few dozen namespace declarations.
+pub const MAX_ATTRIBUTES: usize = 1000;
+
+/// A finding for the first element with more than `max` attributes (a linear pre-scan with
+/// quick-xml before libxml2 sees the document; docs/decisions.md#xsd-attribute-limit).
+/// Not well-formed XML passes: libxml2 reports it with its own message.
+fn too_many_attributes(xml: &[u8], max: usize) -> Option<XsdFinding> {
+    let mut reader = quick_xml::Reader::from_reader(xml);
+    reader.config_mut().check_end_names = false;
+    loop {
+        let pos = reader.buffer_position() as usize;
+        match reader.read_event() {
+            Ok(quick_xml::events::Event::Start(e)) | Ok(quick_xml::events::Event::Empty(e)) => {
+                let n = count_attributes(e.attributes_raw());
+                if n > max {
+                    let pos = pos.min(xml.len());
+                    let local = String::from_utf8_lossy(e.local_name().as_ref()).into_owned();
+                    return Some(XsdFinding {
+                        kind: XsdErrorKind::Invalid,
+                        line: 1 + xml[..pos].iter().filter(|&&c| c == b'\n').count(),
+                        column: pos - xml[..pos].iter().rposition(|&b| b == b'\n').map_or(0, |i| i + 1) + 1,
+                        message: format!(
+                            "Element '{}': {n} attributes, more than the {max} checked against the schema (the schema check was not run: libxml2 takes quadratic time on such an element)",
+                            input_limits::quote(&local)
+                        ),
+                        element: Some(local),
+                    });
+                }
+            }
+            Ok(quick_xml::events::Event::Eof) | Err(_) => return None,
+            Ok(_) => {}
+        }
+    }
+}
+
+/// Attributes in the raw bytes after an element name: `=` signs outside quoted values.
+fn count_attributes(raw: &[u8]) -> usize {
+    let mut n = 0;
+    let mut quote: Option<u8> = None;
+    for &b in raw {
+        match quote {
+            Some(q) if b == q => quote = None,
+            Some(_) => {}
+            None if b == b'"' || b == b'\'' => quote = Some(b),
+            None if b == b'=' => n += 1,
+            None => {}
+        }
+    }
+    n
+}
+
+/// libxml2 quotes the document's values and names between single quotes ("'…' is not a valid
+/// value of …"): each quoted part is cut to ~200 bytes (`input_limits::quote`), the rest of the
+/// message (the schema's words, lists of expected elements) is kept.
+fn shorten_quoted(message: &str) -> String {
+    let parts: Vec<&str> = message.split('\'').collect();
+    if parts.len() < 3 || parts.iter().all(|p| p.len() <= input_limits::QUOTE_MAX_BYTES) {
+        return message.to_string();
+    }
+    // odd indices lie between a pair of quotes
+    parts
+        .iter()
+        .enumerate()
+        .map(|(i, p)| if i % 2 == 1 && i + 1 < parts.len() { input_limits::quote(p) } else { std::borrow::Cow::Borrowed(*p) })
+        .collect::<Vec<_>>()
+        .join("'")
+}
+
 fn finish(col: Collector, xml: &[u8]) -> Vec<XsdFinding> {
     let starts = line_starts(xml);
     col.findings
@@ -258,7 +332,7 @@ fn finish(col: Collector, xml: &[u8]) -> Vec<XsdFinding> {
             } else {
                 e.element.as_deref().and_then(|n| element_column(xml, &starts, e.line, n)).unwrap_or(0)
             };
-            XsdFinding { kind, line: e.line, column, element: e.element, message: e.message }
+            XsdFinding { kind, line: e.line, column, element: e.element, message: shorten_quoted(&e.message) }
         })
         .collect()
 }
@@ -358,6 +432,20 @@ mod tests {
   </core:cityObjectMember>
 </core:CityModel>
 "#;
+
+    #[test]
+    fn long_quoted_values_are_shortened_and_attributes_counted() {
+        let v = "9".repeat(1000);
+        let m = shorten_quoted(&format!("Element 'pos': '{v}' is not a valid value of the atomic type 'xs:double'."));
+        assert!(m.starts_with("Element 'pos': '999") && m.contains("… (1000 bytes)' is not a valid value of the atomic type 'xs:double'."), "{m}");
+        assert_eq!(shorten_quoted("it's short"), "it's short");
+        assert_eq!(count_attributes(br#" a="1" b='x=y' c = "=""#), 3);
+        let many: String = (0..20).map(|i| format!(" a{i}=\"{i}\"")).collect();
+        let doc = format!("<r>\n <e{many}/></r>");
+        let f = too_many_attributes(doc.as_bytes(), 10).unwrap();
+        assert_eq!((f.line, f.column, f.element.as_deref()), (2, 2, Some("e")), "{f:?}");
+        assert!(too_many_attributes(doc.as_bytes(), 20).is_none());
+    }
 
     #[test]
     fn version_from_root_namespaces() {

@@ -204,8 +204,9 @@ where
         Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
         _ => PathBuf::from("."),
     };
+    clean_stale_temps(&dir);
     let tmp = tempfile::Builder::new()
-        .prefix(".geofit-")
+        .prefix(&format!(".geofit-{}-", std::process::id()))
         .suffix(".tmp")
         .tempfile_in(&dir)
         .map_err(|e| CliError::output(format!("cannot create a temporary file in {}: {e}", dir.display())))?;
@@ -230,6 +231,44 @@ where
     tmp.persist(path)
         .map_err(|e| CliError::output(format!("cannot write {}: {}", path.display(), e.error)))?;
     Ok(())
+}
+
+/// The process id in the name of a geofit temporary file or directory:
+/// `.geofit-[TAG-]PID-REST.tmp` (the atomic writer's `.geofit-PID-XXXXXX.tmp`, raster-io's
+/// staging directory `.geofit-raster-PID-N.tmp`). `None` for any other name.
+pub fn temp_owner(name: &str) -> Option<u32> {
+    let rest = name.strip_prefix(".geofit-")?.strip_suffix(".tmp")?;
+    let rest = rest.strip_prefix("raster-").unwrap_or(rest);
+    let (pid, tail) = rest.split_once('-')?;
+    if tail.is_empty() || pid.is_empty() || !pid.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    pid.parse().ok()
+}
+
+/// Removes the geofit temporaries in `dir` whose process is gone (no `/proc/PID`): what a
+/// `kill -9`, a power cut or `ulimit -f` left behind (docs/decisions.md#stale-temporaries).
+/// A temporary of a running process — any process with that id — is left alone, as is
+/// everything where `/proc` is not mounted. Errors are ignored: cleaning is a courtesy, and
+/// the write that follows reports a directory it cannot use.
+pub fn clean_stale_temps(dir: &Path) {
+    if !Path::new("/proc/self").exists() {
+        return;
+    }
+    let Ok(entries) = std::fs::read_dir(dir) else { return };
+    for e in entries.flatten() {
+        let name = e.file_name();
+        let Some(pid) = name.to_str().and_then(temp_owner) else { continue };
+        if pid == std::process::id() || Path::new(&format!("/proc/{pid}")).exists() {
+            continue;
+        }
+        let p = e.path();
+        let _ = match e.file_type() {
+            Ok(t) if t.is_dir() => std::fs::remove_dir_all(&p),
+            Ok(_) => std::fs::remove_file(&p),
+            Err(_) => continue,
+        };
+    }
 }
 
 /// Writes `args` and a newline to stderr, ignoring write errors.

@@ -148,7 +148,11 @@ fn raster_from_stdin_bytes_typed(bytes: &[u8]) -> Result<(Raster, SampleType), C
 pub fn write_raster_arg(r: &Raster, output: Option<&str>, opts: &WriteOptions) -> Result<(), CliError> {
     let out = Output::from_arg(output);
     match out.path() {
-        Some(p) => raster_io::write_raster(r, p, opts).map_err(raster_err),
+        Some(p) => {
+            // raster-io stages into `.geofit-raster-PID-N.tmp` beside the target
+            crate::config::clean_stale_temps(p.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(std::path::Path::new(".")));
+            raster_io::write_raster(r, p, opts).map_err(raster_err)
+        }
         None => {
             let bytes = raster_io::gdal_io::raster_to_bytes(r, opts).map_err(raster_err)?;
             out.write_bytes(&bytes)

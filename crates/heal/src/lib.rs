@@ -292,7 +292,7 @@ fn parse_tolerant(bytes: &[u8]) -> Result<(Vec<u8>, CityModel, Vec<BadNumber>), 
                 if len == 0 {
                     return Err(e);
                 }
-                let token = String::from_utf8_lossy(&copy[e.byte..e.byte + len]).into_owned();
+                let token = input_limits::quote_bytes(&copy[e.byte..e.byte + len]);
                 bad.push(BadNumber { byte: e.byte, line: e.line, column: e.column, token });
                 let nines = if copy[e.byte] == b'-' { 1 } else { 0 };
                 for c in &mut copy[e.byte + nines..e.byte + len] {

@@ -56,7 +56,7 @@ fn header_columns(fields: &[&str], source: &str, line: usize) -> Result<Columns,
     let miss = |c: &str| Error::Parse {
         file: source.to_string(),
         line,
-        msg: format!("header has no `{c}` column (found: {})", fields.join(",")),
+        msg: format!("header has no `{c}` column (found: {})", input_limits::quote(&fields.join(","))),
     };
     let x = find(&["x", "easting", "east"]).ok_or_else(|| miss("x"))?;
     let y = find(&["y", "northing", "north"]).ok_or_else(|| miss("y"))?;
@@ -97,10 +97,10 @@ fn parse_num(f: Option<&&str>, what: &str, source: &str, line: usize) -> Result<
     let v: f64 = s.parse().map_err(|_| Error::Parse {
         file: source.to_string(),
         line,
-        msg: format!("{what} `{s}` is not a number"),
+        msg: format!("{what} `{}` is not a number", input_limits::quote(s)),
     })?;
     if !v.is_finite() {
-        return Err(Error::Parse { file: source.to_string(), line, msg: format!("{what} is {s} (NaN or infinite)") });
+        return Err(Error::Parse { file: source.to_string(), line, msg: format!("{what} is {} (NaN or infinite)", input_limits::quote(s)) });
     }
     Ok(Some(v))
 }
@@ -221,22 +221,36 @@ pub fn parse_side_points(text: &[u8], source: &str) -> Result<Vec<SidePoint>, Er
 }
 
 /// Reads LAS or LAZ bytes (positions only: LAS carries no normals or values).
+///
+/// The header's counts are checked against the bytes first (`input_limits::las`), and points
+/// are read in batches: memory grows with the points decoded, never with the count a header
+/// claims (`read_all` pre-allocated 10¹² points for a 300-byte file).
 pub fn read_las(bytes: Vec<u8>, source: &str) -> Result<Vec<DataPoint>, Error> {
-    let mut reader = las::Reader::new(std::io::Cursor::new(bytes))
-        .map_err(|e| Error::Parse { file: source.to_string(), line: 0, msg: format!("LAS/LAZ: {e}") })?;
-    let data = reader
-        .read_all()
-        .map_err(|e| Error::Parse { file: source.to_string(), line: 0, msg: format!("LAS/LAZ points: {e}") })?;
-    let mut out = Vec::with_capacity(data.len());
-    for ((x, y), z) in data.x().zip(data.y()).zip(data.z()) {
-        if !(x.is_finite() && y.is_finite() && z.is_finite()) {
-            return Err(Error::Parse {
-                file: source.to_string(),
-                line: out.len() + 1,
-                msg: "LAS point with a non-finite coordinate".into(),
-            });
+    let perr = |msg: String| Error::Parse { file: source.to_string(), line: 0, msg };
+    let mut cursor = std::io::Cursor::new(bytes);
+    let len = cursor.get_ref().len() as u64;
+    input_limits::las::check(&mut cursor, len).map_err(|e| perr(format!("LAS/LAZ: {e}")))?;
+    cursor.set_position(0);
+    let mut reader = las::Reader::new(cursor).map_err(|e| perr(format!("LAS/LAZ: {e}")))?;
+    let total = reader.header().number_of_points();
+    let mut out = Vec::new();
+    let mut read = 0u64;
+    while read < total {
+        let data = reader.read_points(1 << 16).map_err(|e| perr(format!("LAS/LAZ points: {e}")))?;
+        if data.is_empty() {
+            break;
         }
-        out.push(DataPoint { pos: [x, y, z], value: None, normal: None, line: 0 });
+        read += data.len() as u64;
+        for ((x, y), z) in data.x().zip(data.y()).zip(data.z()) {
+            if !(x.is_finite() && y.is_finite() && z.is_finite()) {
+                return Err(Error::Parse {
+                    file: source.to_string(),
+                    line: out.len() + 1,
+                    msg: "LAS point with a non-finite coordinate".into(),
+                });
+            }
+            out.push(DataPoint { pos: [x, y, z], value: None, normal: None, line: 0 });
+        }
     }
     Ok(out)
 }

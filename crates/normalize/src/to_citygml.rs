@@ -95,6 +95,73 @@ fn dist(a: P3, b: P3) -> f64 {
     let d = sub(a, b);
     (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()
 }
+/// Union–find whose root is always the smallest index of its class: the labels the pairwise
+/// relabelling loops computed (smaller label wins), without relabelling every element per pair.
+fn uf_find(parent: &mut [usize], mut x: usize) -> usize {
+    while parent[x] != x {
+        parent[x] = parent[parent[x]];
+        x = parent[x];
+    }
+    x
+}
+fn uf_union(parent: &mut [usize], a: usize, b: usize) {
+    let (ra, rb) = (uf_find(parent, a), uf_find(parent, b));
+    if ra != rb {
+        parent[ra.max(rb)] = ra.min(rb);
+    }
+}
+
+/// For every node, the smallest index among the nodes within `tol` of it, transitively (the
+/// classes of the "within `tol`" relation, each named by its smallest member).
+///
+/// Linear in the number of nodes (docs/decisions.md#node-merging-union-find): exact duplicates
+/// are united through a hash of their coordinates first (765 identical buildings at one place
+/// put 765 nodes on each corner, and pairwise relabelling of every node made that cubic), the
+/// remaining positions through a hash grid of cells `2·tol` wide (a point within `tol` lies in
+/// a neighbouring cell), with a union–find whose root is always the smallest index.
+fn coincident_classes(pos: &[P3], tol: f64) -> Vec<usize> {
+    let mut parent: Vec<usize> = (0..pos.len()).collect();
+    if !(tol >= 0.0) {
+        return parent; // nothing is within a negative tolerance, not even a node of itself
+    }
+    // Exact duplicates (-0.0 and 0.0 alike): one representative each.
+    let key = |p: &P3| [(p[0] + 0.0).to_bits(), (p[1] + 0.0).to_bits(), (p[2] + 0.0).to_bits()];
+    let mut first: HashMap<[u64; 3], usize> = HashMap::with_capacity(pos.len());
+    let mut reps: Vec<usize> = Vec::new();
+    for (i, p) in pos.iter().enumerate() {
+        match first.entry(key(p)) {
+            std::collections::hash_map::Entry::Occupied(e) => uf_union(&mut parent, *e.get(), i),
+            std::collections::hash_map::Entry::Vacant(e) => {
+                e.insert(i);
+                reps.push(i);
+            }
+        }
+    }
+    if tol > 0.0 {
+        let cell = 2.0 * tol;
+        let at = |p: &P3| [(p[0] / cell).floor() as i64, (p[1] / cell).floor() as i64, (p[2] / cell).floor() as i64];
+        let mut grid: HashMap<[i64; 3], Vec<usize>> = HashMap::with_capacity(reps.len());
+        for &i in &reps {
+            let c = at(&pos[i]);
+            for dx in -1..=1i64 {
+                for dy in -1..=1i64 {
+                    for dz in -1..=1i64 {
+                        let n = [c[0].saturating_add(dx), c[1].saturating_add(dy), c[2].saturating_add(dz)];
+                        let Some(others) = grid.get(&n) else { continue };
+                        for &j in others {
+                            if dist(pos[i], pos[j]) <= tol {
+                                uf_union(&mut parent, i, j);
+                            }
+                        }
+                    }
+                }
+            }
+            grid.entry(c).or_default().push(i);
+        }
+    }
+    (0..pos.len()).map(|i| uf_find(&mut parent, i)).collect()
+}
+
 fn newell_area(pts: &[P3]) -> f64 {
     let n = popa3d_model::topology::newell(pts);
     0.5 * (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt()
@@ -672,26 +739,7 @@ pub fn back_edits(model: &Popa3d, tpl: &Template, opts: &BackOptions) -> Result<
     }
     if opts.merge {
         // canonical nodes by position
-        let mut canon: Vec<usize> = (0..pos.len()).collect();
-        {
-            let mut idx: Vec<usize> = (0..pos.len()).collect();
-            idx.sort_by(|&a, &b| pos[a][0].total_cmp(&pos[b][0]));
-            for a in 0..idx.len() {
-                for b in a + 1..idx.len() {
-                    if pos[idx[b]][0] - pos[idx[a]][0] > opts.collapse_tolerance {
-                        break;
-                    }
-                    if dist(pos[idx[a]], pos[idx[b]]) <= opts.collapse_tolerance {
-                        let (x, y) = (canon[idx[a]].min(canon[idx[b]]), canon[idx[a]].max(canon[idx[b]]));
-                        for c in canon.iter_mut() {
-                            if *c == y {
-                                *c = x;
-                            }
-                        }
-                    }
-                }
-            }
-        }
+        let canon = coincident_classes(&pos, opts.collapse_tolerance);
         let mut groups: BTreeMap<(usize, String, String, i8, Option<usize>), Vec<String>> = BTreeMap::new();
         for id in &mapped {
             if removed.contains(id) || external.contains(id) || merged_away.contains_key(id) {
@@ -723,21 +771,26 @@ pub fn back_edits(model: &Popa3d, tpl: &Template, opts: &BackOptions) -> Result<
                 e
             };
             let es: Vec<Vec<(usize, usize)>> = ids.iter().map(edges_of).collect();
+            // Polygons sharing an edge in opposite directions are one component (union–find over
+            // an edge index, linear where comparing every pair was quadratic).
             let n = ids.len();
             let mut comp: Vec<usize> = (0..n).collect();
-            for a in 0..n {
-                for b in a + 1..n {
-                    let sa: HashSet<(usize, usize)> = es[a].iter().copied().collect();
-                    if es[b].iter().any(|&(x, y)| sa.contains(&(y, x))) {
-                        let (x, y) = (comp[a].min(comp[b]), comp[a].max(comp[b]));
-                        for c in comp.iter_mut() {
-                            if *c == y {
-                                *c = x;
-                            }
+            let mut owners: HashMap<(usize, usize), Vec<usize>> = HashMap::new();
+            for (k, e) in es.iter().enumerate() {
+                for &d in e {
+                    owners.entry(d).or_default().push(k);
+                }
+            }
+            for (k, e) in es.iter().enumerate() {
+                for &(x, y) in e {
+                    for &o in owners.get(&(y, x)).map(Vec::as_slice).unwrap_or(&[]) {
+                        if o != k {
+                            uf_union(&mut comp, k, o);
                         }
                     }
                 }
             }
+            let comp: Vec<usize> = (0..n).map(|k| uf_find(&mut comp, k)).collect();
             let mut cs: BTreeMap<usize, Vec<usize>> = BTreeMap::new();
             for (k, &c) in comp.iter().enumerate() {
                 cs.entry(c).or_default().push(k);

@@ -71,9 +71,11 @@ pub fn parse_distances(text: &str, m: &Popa3d) -> Result<Vec<Observation>, CsvEr
         }
         let prim = |k: usize| -> Result<Prim, CsvError> {
             let s = fields[k].1;
+            let q = input_limits::quote(s);
+            let q = &q;
             let num = |p: &str, n: usize| -> Result<u32, CsvError> {
-                p.parse::<u32>().map_err(|_| err(k, format!("`{s}`: `{p}` is not an id")))
-                    .and_then(|v| if (v as usize) < n { Ok(v) } else { Err(err(k, format!("`{s}`: no such element (the model has {n})"))) })
+                p.parse::<u32>().map_err(|_| err(k, format!("`{q}`: `{}` is not an id", input_limits::quote(p))))
+                    .and_then(|v| if (v as usize) < n { Ok(v) } else { Err(err(k, format!("`{q}`: no such element (the model has {n})"))) })
             };
             if let Some(p) = s.strip_prefix("face:") {
                 return Ok(Prim::Face(FaceId(num(p, m.faces.len())?)));
@@ -85,24 +87,24 @@ pub fn parse_distances(text: &str, m: &Popa3d) -> Result<Vec<Observation>, CsvEr
                 return Ok(Prim::Node(NodeId(num(p, m.nodes.len())?)));
             }
             if let Some(p) = s.strip_prefix("v:") {
-                let v: u32 = p.parse().map_err(|_| err(k, format!("`{s}`: `{p}` is not a vertex number")))?;
+                let v: u32 = p.parse().map_err(|_| err(k, format!("`{q}`: `{}` is not a vertex number", input_limits::quote(p))))?;
                 return v
                     .checked_sub(1)
                     .and_then(|v| by_vertex.get(&v).copied())
                     .map(Prim::Node)
-                    .ok_or_else(|| err(k, format!("`{s}`: no node comes from OBJ vertex {v}")));
+                    .ok_or_else(|| err(k, format!("`{q}`: no node comes from OBJ vertex {v}")));
             }
             if s.is_empty() {
                 return Err(err(k, "empty primitive reference".into()));
             }
-            by_polygon.get(s).copied().map(Prim::Face).ok_or_else(|| err(k, format!("`{s}`: no face comes from a source polygon with this id")))
+            by_polygon.get(s).copied().map(Prim::Face).ok_or_else(|| err(k, format!("`{q}`: no face comes from a source polygon with this id")))
         };
         let (a, b) = (prim(1)?, prim(2)?);
         let val = |k: usize| -> Result<f64, CsvError> {
             let s = fields[k].1;
             match s.parse::<f64>() {
                 Ok(x) if x.is_finite() => Ok(x),
-                _ => Err(err(k, format!("`{s}` is not a finite number"))),
+                _ => Err(err(k, format!("`{}` is not a finite number", input_limits::quote(s)))),
             }
         };
         let (value, sigma) = (val(3)?, val(4)?);
@@ -131,7 +133,7 @@ pub fn parse_distances(text: &str, m: &Popa3d) -> Result<Vec<Observation>, CsvEr
         };
         let ty = fields[0].1;
         if ty != "distance" && ty != kind.class_name() {
-            return Err(err(0, format!("type `{ty}` does not match the primitives ({}); use `distance` or {}", kind.class_name(), kind.class_name())));
+            return Err(err(0, format!("type `{}` does not match the primitives ({}); use `distance` or {}", input_limits::quote(ty), kind.class_name(), kind.class_name())));
         }
         out.push(Observation::new(kind, ObsOrigin::Measured).with_label(format!("csv line {line}")));
     }

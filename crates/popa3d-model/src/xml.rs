@@ -357,7 +357,11 @@ struct El {
 
 impl El {
     fn err(&self, message: impl Into<String>) -> XmlError {
-        XmlError::Syntax { line: self.line, column: self.column, message: format!("<{}>: {}", self.name, message.into()) }
+        XmlError::Syntax { line: self.line, column: self.column, message: format!("<{}>: {}", input_limits::quote(&self.name), message.into()) }
+    }
+    /// An attribute whose value is wrong; the value is quoted at most ~200 bytes long.
+    fn bad(&self, k: &str, v: &str, what: &str) -> XmlError {
+        self.err(format!("attribute `{}`=\"{}\" {what}", input_limits::quote(k), input_limits::quote(v)))
     }
     fn opt(&self, k: &str) -> Option<&str> {
         self.attrs.iter().find(|(a, _)| a == k).map(|(_, v)| v.as_str())
@@ -367,7 +371,7 @@ impl El {
     }
     fn u32(&self, k: &str) -> Result<u32, XmlError> {
         let v = self.req(k)?;
-        v.trim().parse::<u32>().map_err(|_| self.err(format!("attribute `{k}`=\"{v}\" is not a non-negative integer id")))
+        v.trim().parse::<u32>().map_err(|_| self.bad(k, v, "is not a non-negative integer id"))
     }
     fn f64(&self, k: &str) -> Result<f64, XmlError> {
         let v = self.req(k)?;
@@ -375,22 +379,22 @@ impl El {
         // xs:double lexical form; Rust's parser also takes "inf"/"nan", which a popa3d document never holds.
         match t.parse::<f64>() {
             Ok(x) if x.is_finite() => Ok(x),
-            Ok(_) => Err(self.err(format!("attribute `{k}`=\"{v}\" is not a finite number"))),
-            Err(_) => Err(self.err(format!("attribute `{k}`=\"{v}\" is not a number"))),
+            Ok(_) => Err(self.bad(k, v, "is not a finite number")),
+            Err(_) => Err(self.bad(k, v, "is not a number")),
         }
     }
     fn sign(&self, k: &str) -> Result<Sign, XmlError> {
         match self.req(k)?.trim() {
             "1" | "+1" => Ok(Sign::Plus),
             "-1" => Ok(Sign::Minus),
-            v => Err(self.err(format!("attribute `{k}`=\"{v}\" must be 1 or -1"))),
+            v => Err(self.bad(k, v, "must be 1 or -1")),
         }
     }
     fn bool(&self, k: &str) -> Result<bool, XmlError> {
         match self.req(k)?.trim() {
             "true" | "1" => Ok(true),
             "false" | "0" => Ok(false),
-            v => Err(self.err(format!("attribute `{k}`=\"{v}\" must be true or false"))),
+            v => Err(self.bad(k, v, "must be true or false")),
         }
     }
     fn measured(&self, v: &str, s: &str) -> Result<Measured, XmlError> {
@@ -500,7 +504,7 @@ fn parse_observation(el: &El) -> Result<ObsKind, XmlError> {
         "NormQ" => NormQ { setup: SetupId(ab("setup")?) },
         "ParameterFix" => ParameterFix { unknown: parse_unknown(el)?, value: el.f64("value")? },
         "ParameterObs" => ParameterObs { unknown: parse_unknown(el)?, l: l()? },
-        other => return Err(el.err(format!("unknown observation class `{other}`"))),
+        other => return Err(el.err(format!("unknown observation class `{}`", input_limits::quote(other)))),
     })
 }
 
@@ -548,7 +552,7 @@ pub fn read(bytes: &[u8]) -> Result<Popa3d, XmlError> {
         let start_pos = reader.buffer_position() as usize;
         let ev = reader.read_event().map_err(|e| {
             let (line, column) = lines.at(reader.error_position() as usize);
-            XmlError::Syntax { line, column, message: format!("malformed XML: {e}") }
+            XmlError::Syntax { line, column, message: format!("malformed XML: {}", input_limits::quote(&e.to_string())) }
         })?;
         let (is_empty, start) = match &ev {
             Event::Start(s) => (false, Some(s)),

@@ -39,4 +39,8 @@ pub enum PointsError {
     /// The file held no usable point.
     #[error("{name}: {message}")]
     Empty { name: String, message: String },
+    /// More points than the point budget ([`crate::limits::PointBudget`]), or a LAS/LAZ header
+    /// claiming more than the file holds (checked before the `las` crate allocates by it).
+    #[error("{name}: {message}")]
+    TooLarge { name: String, message: String },
 }

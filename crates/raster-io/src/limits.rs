@@ -74,6 +74,49 @@ impl CellBudget {
     }
 }
 
+/// What one point read into a [`crate::PointCloud`] costs: three f64, twice over while the
+/// vector grows by doubling.
+pub const READ_BYTES_PER_POINT: u64 = 48;
+
+/// The environment variable that sets the point budget explicitly.
+pub const MAX_POINTS_ENV: &str = "GEOFIT_MAX_POINTS";
+
+/// The most points one point file may deliver, and why: the same rule as [`CellBudget`] (available
+/// memory over the cost of a point, `GEOFIT_MAX_POINTS`, or a fixed fallback), so an endless
+/// stream (`yes 1 2 3 | geofit rasterize -`) or a LAZ file decoding far more points than it can
+/// hold ends with a message instead of taking the machine's memory.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct PointBudget {
+    pub max_points: u64,
+    pub source: BudgetSource,
+}
+
+impl PointBudget {
+    /// The budget for points costing `bytes_per_point` each.
+    pub fn for_cost(bytes_per_point: u64) -> PointBudget {
+        if let Some(n) = std::env::var(MAX_POINTS_ENV).ok().and_then(|v| v.trim().parse::<u64>().ok()) {
+            return PointBudget { max_points: n, source: BudgetSource::Env };
+        }
+        match available_memory() {
+            Some(b) => PointBudget { max_points: b / bytes_per_point.max(1), source: BudgetSource::Memory(b) },
+            None => PointBudget { max_points: FALLBACK_MAX_CELLS, source: BudgetSource::Fallback },
+        }
+    }
+
+    /// Why the limit is what it is, for an error message ("… more than {this}").
+    pub fn describe(&self) -> String {
+        match self.source {
+            BudgetSource::Env => format!("{} points set by {MAX_POINTS_ENV}", self.max_points),
+            BudgetSource::Memory(b) => format!(
+                "{} points, what the {} of available memory hold; {MAX_POINTS_ENV} sets another limit",
+                self.max_points,
+                gib(b)
+            ),
+            BudgetSource::Fallback => format!("{} points; {MAX_POINTS_ENV} sets another limit", self.max_points),
+        }
+    }
+}
+
 /// `bytes` as "12.3 GiB".
 pub fn gib(bytes: u64) -> String {
     format!("{:.1} GiB", bytes as f64 / (1u64 << 30) as f64)

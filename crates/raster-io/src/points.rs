@@ -12,7 +12,11 @@
 use std::io::BufRead;
 use std::path::Path;
 
+use input_limits::lines::LineError;
+use input_limits::quote;
+
 use crate::error::PointsError;
+use crate::limits::{PointBudget, READ_BYTES_PER_POINT};
 
 /// Scattered 3D points with an optional CRS.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -77,15 +81,10 @@ pub fn read_xyz<R: BufRead>(mut reader: R, name: &str) -> Result<PointCloud, Poi
     let mut seen_content = false;
     let mut line_no = 0usize;
     let mut buf = String::new();
+    let budget = PointBudget::for_cost(READ_BYTES_PER_POINT);
     loop {
         buf.clear();
-        let n = reader.read_line(&mut buf).map_err(|e| {
-            if e.kind() == std::io::ErrorKind::InvalidData {
-                PointsError::Line { name: name.into(), line: line_no + 1, message: "not UTF-8 text (binary file?)".into() }
-            } else {
-                PointsError::Io { name: name.into(), message: e.to_string() }
-            }
-        })?;
+        let n = read_line(&mut reader, &mut buf, name, line_no)?;
         if n == 0 {
             break;
         }
@@ -119,12 +118,29 @@ pub fn read_xyz<R: BufRead>(mut reader: R, name: &str) -> Result<PointCloud, Poi
             return Err(PointsError::Line {
                 name: name.into(),
                 line: line_no,
-                message: format!("expected three numbers x y z, found {line:?}"),
+                message: format!("expected three numbers x y z, found {:?}", quote(line)),
             });
         }
+        check_budget(points.len(), &budget, name)?;
         points.push(parse_xyz_fields(&fields, columns, name, line_no)?);
     }
     finish(points, name)
+}
+
+/// One line through the bounded reader (`/dev/zero` has no newline): errors name the line.
+fn read_line<R: BufRead>(reader: &mut R, buf: &mut String, name: &str, line_no: usize) -> Result<usize, PointsError> {
+    input_limits::lines::read_line(reader, buf).map_err(|e| match e {
+        LineError::Io(e) => PointsError::Io { name: name.into(), message: e.to_string() },
+        e => PointsError::Line { name: name.into(), line: line_no + 1, message: e.to_string() },
+    })
+}
+
+/// Refuses the point after `n` when the budget is spent.
+fn check_budget(n: usize, budget: &PointBudget, name: &str) -> Result<(), PointsError> {
+    if n as u64 >= budget.max_points {
+        return Err(PointsError::TooLarge { name: name.into(), message: format!("more than {}", budget.describe()) });
+    }
+    Ok(())
 }
 
 /// Continues reading after a header that named the x/y/z columns.
@@ -137,9 +153,10 @@ fn read_xyz_columns<R: BufRead>(
     mut points: Vec<[f64; 3]>,
 ) -> Result<PointCloud, PointsError> {
     let mut buf = String::new();
+    let budget = PointBudget::for_cost(READ_BYTES_PER_POINT);
     loop {
         buf.clear();
-        let n = reader.read_line(&mut buf).map_err(|e| PointsError::Io { name: name.into(), message: e.to_string() })?;
+        let n = read_line(&mut reader, &mut buf, name, line_no)?;
         if n == 0 {
             break;
         }
@@ -153,6 +170,7 @@ fn read_xyz_columns<R: BufRead>(
         } else {
             split_fields(line).collect()
         };
+        check_budget(points.len(), &budget, name)?;
         points.push(parse_xyz_fields(&fields, columns, name, line_no)?);
     }
     finish(points, name)
@@ -170,10 +188,10 @@ fn parse_xyz_fields(fields: &[&str], columns: [usize; 3], name: &str, line: usiz
         let v: f64 = f.parse().map_err(|_| PointsError::Line {
             name: name.into(),
             line,
-            message: format!("{axis} = {f:?} is not a number"),
+            message: format!("{axis} = {:?} is not a number", quote(f)),
         })?;
         if !v.is_finite() {
-            return Err(PointsError::Line { name: name.into(), line, message: format!("{axis} = {f} is not a finite number") });
+            return Err(PointsError::Line { name: name.into(), line, message: format!("{axis} = {} is not a finite number", quote(f)) });
         }
         p[k] = v;
     }
@@ -192,6 +210,7 @@ fn finish(points: Vec<[f64; 3]>, name: &str) -> Result<PointCloud, PointsError> 
 pub fn read_las(path: &Path, class: Option<u8>) -> Result<PointCloud, PointsError> {
     let name = path.display().to_string();
     let las_err = |e: las::Error| PointsError::Las { name: name.clone(), message: e.to_string() };
+    guard_las(path, &name)?;
     let mut reader = las::Reader::from_path(path).map_err(las_err)?;
     let crs = reader
         .header()
@@ -203,6 +222,7 @@ pub fn read_las(path: &Path, class: Option<u8>) -> Result<PointCloud, PointsErro
     let mut points = Vec::new();
     let mut read = 0u64;
     let mut classes_seen = [0u64; 256];
+    let budget = PointBudget::for_cost(READ_BYTES_PER_POINT);
     while read < total {
         let batch = reader.read_points(1 << 16).map_err(las_err)?;
         if batch.is_empty() {
@@ -220,6 +240,7 @@ pub fn read_las(path: &Path, class: Option<u8>) -> Result<PointCloud, PointsErro
                     message: format!("point {} has a non-finite coordinate", read as usize - batch.len() + i),
                 });
             }
+            check_budget(points.len(), &budget, &name)?;
             points.push([x, y, z]);
         }
     }
@@ -236,6 +257,20 @@ pub fn read_las(path: &Path, class: Option<u8>) -> Result<PointCloud, PointsErro
         return Err(PointsError::Empty { name, message });
     }
     Ok(PointCloud { points, crs })
+}
+
+/// Checks what a LAS/LAZ header claims against the file's size before the `las` crate sizes
+/// allocations by it (a LAZ chunk table of 4·10⁹ entries aborted inside `laz`).
+fn guard_las(path: &Path, name: &str) -> Result<(), PointsError> {
+    let Ok(mut f) = std::fs::File::open(path) else { return Ok(()) }; // las names the error
+    let Ok(meta) = f.metadata() else { return Ok(()) };
+    if !meta.is_file() {
+        return Ok(());
+    }
+    input_limits::las::check(&mut f, meta.len()).map_err(|e| match e {
+        input_limits::las::LasClaim::Io(e) => PointsError::Las { name: name.into(), message: e.to_string() },
+        e => PointsError::TooLarge { name: name.into(), message: e.to_string() },
+    })
 }
 
 /// The CRS of LAS 1.0–1.3 files (GeoTIFF key VLRs): the projected or geographic EPSG code,
