@@ -179,7 +179,8 @@ pub fn check_output_args(matches: &clap::ArgMatches) -> Result<(), CliError> {
         m = sub;
     }
     for (id, flag) in OUTPUT_OPTIONS {
-        if let Ok(Some(path)) = m.try_get_one::<String>(id) {
+        // GDAL virtual paths (/vsi…) are the raster writer's to accept or refuse
+        if let Ok(Some(path)) = m.try_get_one::<String>(id).map(|p| p.filter(|p| !raster_io::gdal_io::is_gdal_virtual_path(Path::new(p)))) {
             Output::from_arg(Some(path)).check_target_of(flag)?;
         }
     }
