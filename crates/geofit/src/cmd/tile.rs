@@ -47,6 +47,52 @@ pub enum TileCommand {
     Tileset(TilesetArgs),
     /// Sum per-tile `heal --report` and `validate --json` outputs into one JSON report.
     Report(ReportArgs),
+    /// Make a raster tile's fitted surface C0 with its neighbours along every seam (shared seam
+    /// curves), refitting and refining until every valid cell is within --max-error again.
+    Stitch(StitchArgs),
+    /// Continuity report over every seam of a plan's tile meshes (max gap, normal-angle jump).
+    Seams(SeamsArgs),
+}
+
+#[derive(ClapArgs, Debug)]
+pub struct StitchArgs {
+    /// The raster the plan was made from (the tile's core window is read, nothing else).
+    pub source: String,
+    /// JSON-lines plan from `geofit tile plan`.
+    #[arg(long)]
+    pub plan: String,
+    /// Tile id.
+    #[arg(long)]
+    pub tile: String,
+    /// Where the first-pass tile meshes are: a path with `{id}` for the tile id.
+    #[arg(long, value_name = "TEMPLATE")]
+    pub meshes: String,
+    /// The tolerance of the tile fits (every valid cell within it after stitching).
+    #[arg(long)]
+    pub max_error: f64,
+    /// Stop after this many refit/refine rounds.
+    #[arg(long, default_value_t = 100)]
+    pub max_iterations: usize,
+    /// Output T-mesh (`.tmb`: binary form).
+    #[arg(short, long)]
+    pub output: String,
+    /// JSON report (per-iteration table, the seams' curves and deviations).
+    #[arg(long)]
+    pub report: Option<String>,
+}
+
+#[derive(ClapArgs, Debug)]
+pub struct SeamsArgs {
+    /// JSON-lines plan from `geofit tile plan`.
+    pub plan: String,
+    /// The tile meshes: a path with `{id}` for the tile id.
+    #[arg(long, value_name = "TEMPLATE")]
+    pub meshes: String,
+    /// Fail (exit 1) when a seam's gap relative to the heights exceeds this.
+    #[arg(long, default_value_t = 1e-9)]
+    pub max_gap_relative: f64,
+    #[arg(short, long)]
+    pub output: Option<String>,
 }
 
 #[derive(ValueEnum, Clone, Copy, Debug)]
@@ -240,11 +286,141 @@ fn report(a: ReportArgs, _config: &Config) -> CmdResult {
     Ok(Exit::Ok)
 }
 
+/// A plan's raster tiles and the mesh of each (read by `template` with `{id}`), placed in the
+/// plan's frame.
+fn placed_tiles(plan: &str, template: &str, ids: &[&str]) -> Result<Vec<(String, tspline::format::TMeshFile, tspline::seams::Placed)>, CliError> {
+    let tiles = tiling::plan::read_plan(&read_text(plan)?, plan).map_err(tiling_error)?;
+    let mut out = Vec::new();
+    for id in ids {
+        let t = tiling::plan::find_tile(&tiles, id, plan).map_err(tiling_error)?;
+        let path = template.replace("{id}", &t.id);
+        let file = crate::terrain_io::read_tmesh_arg(&path)?;
+        let g = &file.georef;
+        let offset = tiling::raster::frame_offset(&tiles, g.x0, g.y0, g.dx, g.dy);
+        let placed = tspline::seams::Placed { mesh: file.mesh.clone(), offset };
+        out.push((t.id.clone(), file, placed));
+    }
+    Ok(out)
+}
+
+#[derive(serde::Serialize)]
+struct StitchReport<'a> {
+    schema: &'static str,
+    tile: &'a str,
+    max_error: f64,
+    stop: &'a tspline::fit::StopReason,
+    control_points: usize,
+    seams: Vec<serde_json::Value>,
+    iterations: &'a [tspline::fit::IterationStats],
+    seconds: f64,
+}
+
+fn stitch(a: StitchArgs, config: &Config) -> CmdResult {
+    let output = Output::from_arg(Some(&a.output));
+    output.check_target()?;
+    if !(a.max_error > 0.0 && a.max_error.is_finite()) {
+        return Err(CliError::usage(format!("--max-error must be a positive number, got {}", a.max_error)));
+    }
+    let t0 = std::time::Instant::now();
+    let tiles = tiling::plan::read_plan(&read_text(&a.plan)?, &a.plan).map_err(tiling_error)?;
+    let tile = tiling::plan::find_tile(&tiles, &a.tile, &a.plan).map_err(tiling_error)?;
+    let px = tile.core.pixels.ok_or_else(|| CliError::usage(format!("{}: tile {} is not a raster tile", a.plan, a.tile)))?;
+    let mut ids = vec![tile.id.as_str()];
+    ids.extend(tile.neighbours.iter().map(|s| s.as_str()));
+    let mut placed = placed_tiles(&a.plan, &a.meshes, &ids)?;
+    let (_, own_file, own) = placed.remove(0);
+    let neighbours: Vec<tspline::seams::Placed> = placed.into_iter().map(|(_, _, p)| p).collect();
+    crate::terrain_io::gdal_notices(config);
+    let (raster, _) = raster_io::read_raster_window_typed(Path::new(&a.source), 1, Some(px)).map_err(crate::terrain_io::raster_err)?;
+    let name = format!("{} (tile {})", a.source, a.tile);
+    let (samples, georef, _) = crate::terrain_io::samples_from_raster(&raster, &name)?;
+    drop(raster);
+    if georef.x0 != own_file.georef.x0 || georef.y0 != own_file.georef.y0 {
+        return Err(CliError::usage(format!("{}: the mesh of tile {} was not fitted on this tile's window of {}", a.meshes.replace("{id}", &a.tile), a.tile, a.source)));
+    }
+    let mut opts = tspline::fit::FitOptions::new(own.mesh.degree, a.max_error);
+    opts.max_iterations = a.max_iterations;
+    let progress = config.progress("stitch", a.max_iterations as u64);
+    let mut cb = |st: &tspline::fit::IterationStats| {
+        progress.set(st.iteration as u64, &format!("round {}: {} control points, max {:.4}, {} cells over {}", st.iteration, st.control_points, st.error.max, st.error.over_tolerance, a.max_error));
+    };
+    let r = tspline::seams::stitch(&own, &neighbours, &samples, &opts, &tspline::fit::Backend::Cpu, &mut cb)
+        .map_err(|e| crate::terrain_io::tspline_err(&name, e))?;
+    let ok = r.stop == tspline::fit::StopReason::ToleranceReached;
+    progress.finish(&if ok { format!("every valid cell within {}, {} seams", a.max_error, r.seams.len()) } else { format!("stopped: {:?}", r.stop) });
+    let exit = if ok { Exit::Ok } else { Exit::Findings };
+    let file = tspline::format::TMeshFile { mesh: r.mesh, georef: own_file.georef.clone(), mask: own_file.mask.clone(), warp: None };
+    if config.keeps_output(exit, Some(&a.output)) {
+        let mut bytes = Vec::new();
+        tspline::format::write_as(&file, tspline::format::Encoding::for_path(Some(&a.output)), &mut bytes).map_err(CliError::io_out)?;
+        output.write_bytes(&bytes)?;
+    }
+    if let Some(path) = &a.report {
+        let neighbour_ids = &ids[1..];
+        let rep = StitchReport {
+            schema: "geofit.tile.stitch/1",
+            tile: &a.tile,
+            max_error: a.max_error,
+            stop: &r.stop,
+            control_points: r.iterations.last().map_or(0, |i| i.control_points),
+            seams: r
+                .seams
+                .iter()
+                .map(|s| serde_json::json!({"side": s.side, "neighbour": neighbour_ids[s.neighbour], "curve_vertices": s.curve_vertices, "max_curve_deviation": s.max_curve_deviation}))
+                .collect(),
+            iterations: &r.iterations,
+            seconds: t0.elapsed().as_secs_f64(),
+        };
+        crate::config::write_json_report(path, &rep)?;
+    }
+    if !ok {
+        crate::say!("geofit: {name}: stitching stopped before every valid cell was within {}: {:?}", a.max_error, r.stop);
+    }
+    Ok(exit)
+}
+
+fn seams(a: SeamsArgs, config: &Config) -> CmdResult {
+    let output = Output::from_arg(a.output.as_deref());
+    output.check_target()?;
+    let tiles = tiling::plan::read_plan(&read_text(&a.plan)?, &a.plan).map_err(tiling_error)?;
+    let ids: Vec<&str> = tiles.iter().map(|t| t.id.as_str()).collect();
+    let placed = placed_tiles(&a.plan, &a.meshes, &ids)?;
+    let mut rows = Vec::new();
+    let (mut gap, mut rel, mut ang) = (0.0f64, 0.0f64, 0.0f64);
+    for (i, (ia, fa, pa)) in placed.iter().enumerate() {
+        for (ib, _, pb) in &placed[i + 1..] {
+            let Some(c) = tspline::seams::continuity(pa, pb, [fa.georef.dx, fa.georef.dy]) else { continue };
+            gap = gap.max(c.max_gap);
+            rel = rel.max(c.max_gap_relative);
+            ang = ang.max(c.max_normal_angle_deg);
+            rows.push(serde_json::json!({"a": ia, "b": ib, "samples": c.samples, "max_gap": c.max_gap, "max_gap_relative": c.max_gap_relative, "max_normal_angle_deg": c.max_normal_angle_deg}));
+        }
+    }
+    let doc = serde_json::json!({
+        "schema": "geofit.tile.seams/1",
+        "units": {"max_gap": "height units of the raster", "max_gap_relative": "max_gap / max |z| on the seam", "max_normal_angle_deg": "degree"},
+        "tiles": tiles.len(),
+        "seams": rows.len(),
+        "max_gap": gap,
+        "max_gap_relative": rel,
+        "max_normal_angle_deg": ang,
+        "per_seam": rows,
+    });
+    let text = serde_json::to_string_pretty(&doc).map_err(|e| CliError::internal(format!("seams: {e}")))? + "\n";
+    output.write_bytes(text.as_bytes())?;
+    if !config.quiet {
+        crate::say!("tile seams: {} seams, max gap {gap:.3e} ({rel:.3e} relative), max normal-angle jump {ang:.4}°", rows.len());
+    }
+    Ok(if rel <= a.max_gap_relative { Exit::Ok } else { Exit::Findings })
+}
+
 pub fn run(args: Args, config: &Config) -> CmdResult {
     match args.command {
         TileCommand::Plan(a) => plan(a, config),
         TileCommand::Extract(a) => extract(a, config),
         TileCommand::Tileset(a) => tileset(a, config),
         TileCommand::Report(a) => report(a, config),
+        TileCommand::Stitch(a) => stitch(a, config),
+        TileCommand::Seams(a) => seams(a, config),
     }
 }
