@@ -78,17 +78,20 @@ fn snakemake_raster_tiles_keep_the_tolerance_and_meet_at_the_seams() {
         eprintln!("stitch {id}: {} control points, {} rounds, seams {}", rep["control_points"], rep["iterations"].as_array().unwrap().len(), rep["seams"]);
     }
 
-    // 2. the tiles' surfaces on a grid of quarter-pixel points (every pixel edge among them)
+    // 2. the tiles' surfaces on a grid of ⅛-pixel points: every pixel edge is a grid line (binary
+    //    fractions keep the positions exact), and along a seam every other point falls halfway
+    //    between two seam vertices (¼ px apart)
     let (w, h) = (WINDOW[2].parse::<f64>().unwrap(), WINDOW[3].parse::<f64>().unwrap());
     let info: Value = serde_json::from_slice(&Command::new("gdalinfo").arg("-json").arg(&src).output().unwrap().stdout).unwrap();
     let gt: Vec<f64> = info["geoTransform"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
-    let (q, n) = (gt[1] / 4.0, (4.0 * w) as usize + 1);
+    let (q, n, m) = (gt[1] / 8.0, (8.0 * w) as usize + 1, (8.0 * h) as usize + 1);
     let edges = work.path().join("edges.tif");
     let (ulx, uly) = (gt[0] - 0.5 * q, gt[3] + 0.5 * q);
-    let (lrx, lry) = (ulx + n as f64 * q, uly - ((4.0 * h) as usize + 1) as f64 * q);
+    let (lrx, lry) = (ulx + n as f64 * q, uly - m as f64 * q);
     let mut c = Command::new("gdal_create");
-    c.args(["-q", "-of", "GTiff", "-ot", "Float64", "-outsize"]).arg(n.to_string()).arg(((4.0 * h) as usize + 1).to_string());
-    c.args(["-a_ullr"]).args([ulx, uly, lrx, lry].map(|v| format!("{v:.10}"))).arg(&edges);
+    c.args(["-q", "-of", "GTiff", "-ot", "Float64", "-outsize"]).arg(n.to_string()).arg(m.to_string());
+    // shortest round-trip decimals: GDAL parses back the exact doubles
+    c.args(["-a_ullr"]).args([ulx, uly, lrx, lry].map(|v| format!("{v}"))).arg(&edges);
     ok(&c.output().unwrap(), "gdal_create (edge grid)");
     let mut edge_tifs = Vec::new();
     for id in &ids {
@@ -113,7 +116,7 @@ fn snakemake_raster_tiles_keep_the_tolerance_and_meet_at_the_seams() {
     ok(&o, "scaleout_raster.py");
     let r: Value = serde_json::from_str(text.lines().last().unwrap()).unwrap();
     assert_eq!(r["valid_cells"].as_u64().unwrap() as f64, w * h);
-    assert!(r["seam_points"].as_u64().unwrap() as f64 >= 4.0 * (4.0 * w), "{r}");
+    assert!(r["seam_points"].as_u64().unwrap() as f64 >= 4.0 * (8.0 * w), "{r}");
 
     // 4. geofit's own continuity report: C0 to 1e-9, the C1 figure reported
     let seams: Value = serde_json::from_slice(&std::fs::read(out.join("seams.json")).unwrap()).unwrap();

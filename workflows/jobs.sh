@@ -116,11 +116,11 @@ tile)
     ;;
 rplan)
     mkdir -p "$out"
-    "$GEOFIT" -q tile plan --tile-size "${GEOFIT_TILE_PIXELS:-1024}" --halo 0 -o "$out/plan.jsonl" "$1"
+    "$GEOFIT" -q tile plan --tile-size "${GEOFIT_TILE_PIXELS:-1024}" --halo 2 -o "$out/plan.jsonl" "$1"
     ;;
 rplanmk)
     mkdir -p "$out"
-    "$GEOFIT" -q tile plan --tile-size "${GEOFIT_TILE_PIXELS:-1024}" --halo 0 --format make -o "$out/plan.mk" "$1"
+    "$GEOFIT" -q tile plan --tile-size "${GEOFIT_TILE_PIXELS:-1024}" --halo 2 --format make -o "$out/plan.mk" "$1"
     ;;
 rfit)
     src=$1 t=$2

@@ -344,7 +344,21 @@ fn stitch(a: StitchArgs, config: &Config) -> CmdResult {
     let mut cb = |st: &tspline::fit::IterationStats| {
         progress.set(st.iteration as u64, &format!("round {}: {} control points, max {:.4}, {} cells over {}", st.iteration, st.control_points, st.error.max, st.error.over_tolerance, a.max_error));
     };
-    let r = tspline::seams::stitch(&own, &neighbours, &samples, &opts, &tspline::fit::Backend::Cpu, &mut cb)
+    // the source around the tile (its halo window): the data on both sides of every seam
+    let hp = tile.halo.pixels.unwrap_or(px);
+    let short = [px[0] - hp[0], px[1] - hp[1], (hp[0] + hp[2]) - (px[0] + px[2]), (hp[1] + hp[3]) - (px[1] + px[3])];
+    if !tile.neighbours.is_empty() && short.iter().all(|&m| m < 2) {
+        return Err(CliError::usage(format!("{}: the plan's halo is under 2 px; the seams need the cells on both sides: plan with --halo 2 (or more)", a.plan)));
+    }
+    let (halo, _) = raster_io::read_raster_window_typed(Path::new(&a.source), 1, Some(hp)).map_err(crate::terrain_io::raster_err)?;
+    let (hs, hg, _) = crate::terrain_io::samples_from_raster(&halo, &name)?;
+    drop(halo);
+    let ho = tiling::raster::frame_offset(&tiles, hg.x0, hg.y0, hg.dx, hg.dy);
+    let source = |s: i64, t: i64| -> f64 {
+        let (i, j) = (s - ho[0] as i64, t - ho[1] as i64);
+        if i < 0 || j < 0 || i as usize >= hs.width || j as usize >= hs.height { f64::NAN } else { hs.get(i as usize, j as usize) }
+    };
+    let r = tspline::seams::stitch(&own, &neighbours, &samples, &source, &opts, &tspline::fit::Backend::Cpu, &mut cb)
         .map_err(|e| crate::terrain_io::tspline_err(&name, e))?;
     let ok = r.stop == tspline::fit::StopReason::ToleranceReached;
     progress.finish(&if ok { format!("every valid cell within {}, {} seams", a.max_error, r.seams.len()) } else { format!("stopped: {:?}", r.stop) });
