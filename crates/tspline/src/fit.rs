@@ -1569,6 +1569,23 @@ mod tests {
         }
     }
 
+    /// A tile's domain ends on its window's pixel edges at the anchored corner and reaches over
+    /// the other sides by whole square cells; the fit's initial mesh is that grid.
+    #[test]
+    fn tile_domain_is_anchored_on_pixel_edges() {
+        let d = Domain::anchored(100, 60, 25.0, true);
+        assert_eq!((d.s0, d.ns, d.nt), (-0.5, 4, 3));
+        assert_eq!(d.t0 + d.nt as f64 * d.cell, 59.5); // the top edge (first raster row)
+        let d = Domain::anchored(100, 60, 25.0, false);
+        assert_eq!(d.t0, -0.5);
+        let samples = Samples { width: 100, height: 60, z: vec![1.0; 6000] };
+        let mut o = FitOptions::new(Degree::Cubic, 0.1);
+        o.domain = Some(Domain::anchored(100, 60, 25.0, true));
+        let m = initial_mesh(&samples, &o);
+        assert_eq!(m.bounds(), Rect::new(-0.5, -15.5, 99.5, 59.5));
+        assert_eq!(m.leaf_count(), 12);
+    }
+
     /// A plane is fitted with the initial mesh only (no refinement).
     #[test]
     fn plane_needs_only_the_initial_mesh() {

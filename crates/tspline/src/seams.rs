@@ -115,7 +115,7 @@ impl SeamCurve {
         let (a, b) = (self.knots[0], *self.knots.last().expect("a seam has two ends"));
         let mut v = vec![a; h];
         v.extend_from_slice(&self.knots);
-        v.extend(std::iter::repeat(b).take(h));
+        v.extend(std::iter::repeat_n(b, h));
         v
     }
 
@@ -213,11 +213,13 @@ fn seam_curve(p: &PbSpline, pm: &TMesh, q: &PbSpline, qm: &TMesh, line: Line, z_
     if knots.first() != Some(&line.u0) || knots.last() != Some(&line.u1) {
         return Err(TsplineError::Fit(format!("seam {line:?}: its ends are not vertices of both tiles (the tiles' domains do not meet at whole cells)")));
     }
-    // the seam strip: intervals halved down to STRIP (module doc, "boundary layer")
+    // the seam strip: intervals halved down to STRIP (module doc); degree 1 has no boundary
+    // layer (the border curve is the border vertices' polyline, which a held border keeps)
+    let strip = if pm.degree == Degree::Cubic { STRIP } else { f64::INFINITY };
     let mut fine = vec![knots[0]];
     for w in knots.windows(2) {
         let mut parts = 1usize;
-        while (w[1] - w[0]) / parts as f64 > STRIP {
+        while (w[1] - w[0]) / parts as f64 > strip {
             parts *= 2;
         }
         for k in 1..=parts {
