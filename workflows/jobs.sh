@@ -32,7 +32,8 @@
 #
 # Raster settings: GEOFIT_MAX_ERROR (0.5), GEOFIT_TILE_PIXELS (1024), GEOFIT_FIT_ARGS ('').
 #
-# Fault injection for tests: GEOFIT_FAIL_ONCE=TILE makes the heal job of TILE fail once: the
+# Fault injection for tests: GEOFIT_FAIL_ONCE=TILE makes the heal job (raster: the fit job) of
+# TILE fail once: the
 # first attempt creates the marker $GEOFIT_FAIL_ONCE_DIR/TILE (default OUT/.fail-once) and exits
 # 75; later attempts find the marker and run normally.
 set -euo pipefail

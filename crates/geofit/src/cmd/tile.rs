@@ -18,7 +18,11 @@ Example (what workflows/Snakefile runs; make -j, a Slurm array or GNU parallel r
   geofit export healed/x1296_y22916.gml -o glb/x1296_y22916.glb
   geofit tile report healed/*.heal.json reports/*.validate.json -o report.json
   geofit tile tileset glb/*.glb -o tileset.json
-  geofit tile plan dem.vrt --cells-per-tile 4194304 --halo 32 --format tsv
+  geofit tile plan dem.vrt --tile-size 1024 --halo 2 -o plan.jsonl
+  geofit fit dem.vrt --plan plan.jsonl --tile c3_r1 --max-error 0.5 -o fit/c3_r1.tmb
+  geofit tile stitch dem.vrt --plan plan.jsonl --tile c3_r1 --meshes fit/{id}.tmb -o st/c3_r1.tmb
+  geofit tile seams plan.jsonl --meshes 'st/{id}.tmb' -o seams.json
+  (stitch needs the fit's tolerance too: --max-error 0.5)
 
 Buildings: every top-level object holding a Building or BuildingPart belongs to exactly one tile,
 the cell of a grid (aligned at 0, power-of-two metres) that holds its footprint centroid (area
@@ -26,9 +30,13 @@ centroid of its GroundSurface polygons on xy, else its envelope centre). The ste
 that keeps every tile at or under --buildings-per-tile, or --tile-size. Buildings of other tiles
 that reach into a tile are its halo: listed in the plan, read-only, never extracted twice.
 Rasters: square core windows of about --cells-per-tile cells, halo grown by --halo pixels and
-clipped to the raster; only the size and geotransform are read.
+clipped to the raster; only the size and geotransform are read. `fit --plan --tile` fits a tile's
+core window; `stitch` makes it C0 with its neighbours' fits along every seam (reading its halo:
+plan with --halo 2 or more) and re-checks --max-error on every valid cell; `seams` reports the
+gap and the normal-angle jump per seam (exit 1 when a gap exceeds --max-gap-relative).
 
-Exit codes: 0 written; 2 bad options or a tile not in the plan; 3 unreadable input; 4 I/O.";
+Exit codes: 0 written; 1 stitch stopped before the tolerance held / a seam gap over the bound;
+2 bad options or a tile not in the plan; 3 unreadable input; 4 I/O.";
 
 #[derive(ClapArgs, Debug)]
 #[command(after_help = AFTER_HELP)]
