@@ -402,17 +402,53 @@ pub struct SeamInfo {
 pub struct Stitched {
     /// The tile's stitched mesh, in the tile's own frame.
     pub mesh: TMesh,
+    /// Whether the first inward column was held to the data's slope (approximate C1); false
+    /// where that missed the tolerance and the tile was refitted with the seams alone held.
+    pub c1_held: bool,
     pub stop: StopReason,
     pub iterations: Vec<IterationStats>,
     pub seams: Vec<SeamInfo>,
 }
 
 /// A seam of the tile being stitched, in its own frame.
+#[derive(Clone)]
 struct OwnSeam {
     line: Line,
     curve: SeamCurve,
     side: &'static str,
     neighbour: usize,
+    /// The data's slope across the seam at each curve knot (d z / d plan s or t), None where the
+    /// cells are missing: what the first inward column is held to (approximate C1).
+    slope: Vec<Option<f64>>,
+}
+
+/// The data's slope across the seam at u (per pixel, towards increasing s or t): the 4-point
+/// difference of the cells at −1.5 … +1.5 px (the 2-point one without the outer cells), linear
+/// along the seam as [`seam_value`].
+fn seam_slope(source: &Source, line: Line, u: f64) -> Option<f64> {
+    let across = |r: i64| -> Option<f64> {
+        let c0 = (line.c - 0.5).round() as i64;
+        let at = |k: i64| if line.vertical { source(c0 + k, r) } else { source(r, c0 + k) };
+        let (a, b, c, d) = (at(-1), at(0), at(1), at(2));
+        if !(b.is_finite() && c.is_finite()) {
+            return None;
+        }
+        if a.is_finite() && d.is_finite() {
+            Some((27.0 * (c - b) - (d - a)) / 24.0)
+        } else {
+            Some(c - b)
+        }
+    };
+    let (lo, hi) = ((line.u0 + 0.5).round() as i64, (line.u1 - 0.5).round() as i64);
+    let uc = u.clamp(lo as f64, hi as f64);
+    let r0 = (uc.floor() as i64).min(hi);
+    let f = uc - r0 as f64;
+    let v0 = across(r0)?;
+    if f == 0.0 || r0 == hi {
+        return Some(v0);
+    }
+    let v1 = across(r0 + 1)?;
+    Some((1.0 - f) * v0 + f * v1)
 }
 
 /// Stitches one tile: `own` and its plan neighbours (first-pass meshes, any of the 8 around it),
@@ -460,14 +496,14 @@ pub fn stitch(
         let back = [-own.offset[0], -own.offset[1]];
         let local = line.shift(back);
         let du = if line.vertical { back[1] } else { back[0] };
+        let slope = if degree == Degree::Cubic { curve.knots.iter().map(|&u| seam_slope(source, line, u)).collect() } else { Vec::new() };
         let mut c = curve;
         c.knots.iter_mut().for_each(|u| *u += du);
-        seams.push(OwnSeam { line: local, curve: c, side, neighbour: k });
+        seams.push(OwnSeam { line: local, curve: c, side, neighbour: k, slope });
     }
     drop(pbs);
     drop(all);
 
-    let (tol, tol_final) = crate::fit::tolerances(samples, None, opts)?;
     let mut mesh = own.mesh.compacted();
     // λ = 1 pixel: seam weights a_i ≥ 1, so the border row dominates the blend next to the seam
     let lambda = 1.0;
@@ -502,12 +538,40 @@ pub fn stitch(
         pb = PbSpline::build(&mesh);
     }
 
+    // first with the inward columns held to the data's slope (both sides: approximately C1);
+    // where that misses the tolerance, without (C0 only)
+    if degree == Degree::Cubic {
+        let r = refit_loop(mesh.clone(), seams.clone(), true, lambda, samples, opts, backend, progress)?;
+        if r.stop == StopReason::ToleranceReached {
+            return Ok(r);
+        }
+    }
+    refit_loop(mesh, seams, false, lambda, samples, opts, backend, progress)
+}
+
+/// The refit / check / refine loop of [`stitch`] with the seam vertices (and with `hold_c1` the
+/// first inward column) held.
+#[allow(clippy::too_many_arguments)]
+fn refit_loop(
+    mut mesh: TMesh,
+    mut seams: Vec<OwnSeam>,
+    hold_c1: bool,
+    lambda: f64,
+    samples: &Samples,
+    opts: &FitOptions,
+    backend: &Backend,
+    progress: &mut dyn FnMut(&IterationStats),
+) -> Result<Stitched, TsplineError> {
+    let (tol, tol_final) = crate::fit::tolerances(samples, None, opts)?;
     let mut iterations = Vec::new();
     let mut errs = vec![f64::NAN; samples.z.len()];
     let mut refined = 0;
     for it in 0.. {
         let t0 = std::time::Instant::now();
-        let on_seam = sync_seams(&mut mesh, &mut seams, lambda);
+        let mut on_seam = sync_seams(&mut mesh, &mut seams, lambda);
+        if hold_c1 {
+            hold_inward_columns(&mut mesh, &seams, &mut on_seam);
+        }
         let mut pb = PbSpline::build(&mesh);
         let free: Vec<bool> = pb.point_ids.iter().map(|&id| !on_seam[id as usize]).collect();
         let t_build = t0.elapsed().as_secs_f64();
@@ -546,10 +610,53 @@ pub fn stitch(
                 .iter()
                 .map(|s| SeamInfo { side: s.side, neighbour: s.neighbour, curve_vertices: s.curve.knots.len(), max_curve_deviation: curve_deviation(&pb, s) })
                 .collect();
-            return Ok(Stitched { mesh, stop, iterations, seams: infos });
+            return Ok(Stitched { mesh, stop, iterations, seams: infos, c1_held: hold_c1 });
         }
     }
     unreachable!("the loop returns")
+}
+
+/// Holds the first inward column of every cubic seam at z₁ = z_b + 3·g/c₁ (inward sign), g the
+/// data's slope across the seam and c₁ the u² coefficient of the column's blending function at
+/// the border: the cross-seam derivative of the border limit, (1/3)·Σ c₁ B (z₁ − z_b), is then
+/// g on both sides, to first order. Vertices on another seam stay as that seam holds them.
+fn hold_inward_columns(mesh: &mut TMesh, seams: &[OwnSeam], held: &mut [bool]) {
+    let pb = PbSpline::build(mesh);
+    let mut index = vec![u32::MAX; mesh.points.len()];
+    for (i, &id) in pb.point_ids.iter().enumerate() {
+        index[id as usize] = i as u32;
+    }
+    let on_seam: Vec<bool> = held.to_vec();
+    let b = mesh.bounds();
+    for seam in seams {
+        let l = seam.line;
+        // inward: towards the tile's interior
+        let dir = if l.vertical { if l.c == b.s_min { 1.0 } else { -1.0 } } else if l.c == b.t_min { 1.0 } else { -1.0 };
+        for (k, &u) in seam.curve.knots.iter().enumerate() {
+            let Some(g) = seam.slope.get(k).copied().flatten() else { continue };
+            let (s, t) = l.at(u);
+            let Some(bid) = mesh.point_id_at(s, t) else { continue };
+            let kb = &pb.knots[index[bid as usize] as usize];
+            let kn = if l.vertical { &kb[0..5] } else { &kb[5..10] };
+            let a = if kn[0] == l.c { kn[3] - l.c } else { l.c - kn[1] };
+            let (s1, t1) = if l.vertical { (s + dir * a, t) } else { (s, t + dir * a) };
+            let Some(id) = mesh.point_id_at(s1, t1) else { continue };
+            if on_seam[id as usize] || index[id as usize] == u32::MAX {
+                continue;
+            }
+            let k1 = &pb.knots[index[id as usize] as usize];
+            let k1 = if l.vertical { &k1[0..5] } else { &k1[5..10] };
+            // c₁ = lim B(c − dir·ε)/ε² (ε small against a: 10⁻³ relative)
+            let eps = 1e-3 * a;
+            let c1 = basis(k1, 3, l.c + dir * eps, dir < 0.0) / (eps * eps);
+            if !(c1 > 0.0 && c1.is_finite()) {
+                continue;
+            }
+            // the slope inwards: g is per +s / +t
+            mesh.points[id as usize].z = seam.curve.z[k] + 3.0 * dir * g / c1;
+            held[id as usize] = true;
+        }
+    }
 }
 
 fn finite_or_zero(z: f64) -> f64 {
@@ -645,6 +752,8 @@ pub struct Continuity {
     pub max_gap_relative: f64,
     /// max angle between the two surfaces' normals on the seam, degrees (C1 defect).
     pub max_normal_angle_deg: f64,
+    /// Its median over the positions checked (the max is often one corner or one noisy cell).
+    pub median_normal_angle_deg: f64,
 }
 
 /// [`Continuity`] of `a` and `b` along their shared border (None: they do not share one);
@@ -669,6 +778,7 @@ pub fn continuity(a: &Placed, b: &Placed, cell: [f64; 2]) -> Option<Continuity> 
     let into_a = if line.vertical { if line.c == ra.s_max { -1.0 } else { 1.0 } } else if line.c == ra.t_max { -1.0 } else { 1.0 };
     let h = 1e-3;
     let (mut gap, mut zmax, mut ang) = (0.0f64, 0.0f64, 0.0f64);
+    let mut angles = Vec::with_capacity(pos.len());
     let normal = |pb: &PbSpline, u: f64, dir: f64| -> [f64; 3] {
         let (s, t) = line.at(u);
         let z0 = pb.point(s, t)[2];
@@ -690,9 +800,13 @@ pub fn continuity(a: &Placed, b: &Placed, cell: [f64; 2]) -> Option<Continuity> 
         zmax = zmax.max(za.abs()).max(zb.abs());
         let (na, nb) = (normal(&pa, u, into_a), normal(&pb, u, -into_a));
         let dot = (na[0] * nb[0] + na[1] * nb[1] + na[2] * nb[2]).clamp(-1.0, 1.0);
-        ang = ang.max(dot.acos().to_degrees());
+        let a = dot.acos().to_degrees();
+        ang = ang.max(a);
+        angles.push(a);
     }
-    Some(Continuity { samples: pos.len(), max_gap: gap, max_gap_relative: gap / zmax.max(f64::MIN_POSITIVE), max_normal_angle_deg: ang })
+    angles.sort_by(f64::total_cmp);
+    let median = angles[angles.len() / 2];
+    Some(Continuity { samples: pos.len(), max_gap: gap, max_gap_relative: gap / zmax.max(f64::MIN_POSITIVE), max_normal_angle_deg: ang, median_normal_angle_deg: median })
 }
 
 #[cfg(test)]
@@ -766,6 +880,10 @@ mod tests {
             }
             let c = continuity(&out[0], &out[1], [1.0, 1.0]).unwrap();
             assert!(c.max_gap_relative <= 1e-9, "{degree:?}: {c:?}");
+            if degree == Degree::Cubic {
+                // the inward columns held to the data's slope on both sides: close to C1
+                assert!(c.max_normal_angle_deg < 1.0, "{c:?}");
+            }
             // and it was not C0 before
             let c0 = continuity(&placed[0], &placed[1], [1.0, 1.0]).unwrap();
             assert!(c0.max_gap > 1e-6, "{degree:?}: first pass already continuous? {c0:?}");

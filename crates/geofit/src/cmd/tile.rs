@@ -317,6 +317,8 @@ struct StitchReport<'a> {
     tile: &'a str,
     max_error: f64,
     stop: &'a tspline::fit::StopReason,
+    /// The first inward column held to the data's slope (approximately C1 with the neighbours).
+    c1_held: bool,
     control_points: usize,
     seams: Vec<serde_json::Value>,
     iterations: &'a [tspline::fit::IterationStats],
@@ -384,6 +386,7 @@ fn stitch(a: StitchArgs, config: &Config) -> CmdResult {
             tile: &a.tile,
             max_error: a.max_error,
             stop: &r.stop,
+            c1_held: r.c1_held,
             control_points: r.iterations.last().map_or(0, |i| i.control_points),
             seams: r
                 .seams
@@ -415,12 +418,12 @@ fn seams(a: SeamsArgs, config: &Config) -> CmdResult {
             gap = gap.max(c.max_gap);
             rel = rel.max(c.max_gap_relative);
             ang = ang.max(c.max_normal_angle_deg);
-            rows.push(serde_json::json!({"a": ia, "b": ib, "samples": c.samples, "max_gap": c.max_gap, "max_gap_relative": c.max_gap_relative, "max_normal_angle_deg": c.max_normal_angle_deg}));
+            rows.push(serde_json::json!({"a": ia, "b": ib, "samples": c.samples, "max_gap": c.max_gap, "max_gap_relative": c.max_gap_relative, "max_normal_angle_deg": c.max_normal_angle_deg, "median_normal_angle_deg": c.median_normal_angle_deg}));
         }
     }
     let doc = serde_json::json!({
         "schema": "geofit.tile.seams/1",
-        "units": {"max_gap": "height units of the raster", "max_gap_relative": "max_gap / max |z| on the seam", "max_normal_angle_deg": "degree"},
+        "units": {"max_gap": "height units of the raster", "max_gap_relative": "max_gap / max |z| on the seam", "max_normal_angle_deg": "degree", "median_normal_angle_deg": "degree"},
         "tiles": tiles.len(),
         "seams": rows.len(),
         "max_gap": gap,
