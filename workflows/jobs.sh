@@ -13,6 +13,15 @@
 #   jobs.sh tileset  OUT TILE...         → OUT/tileset.json
 #   jobs.sh tile     OUT TILE            → extract, validate, heal, export of one tile (skips done steps)
 #
+# The raster pipeline (docs/decisions.md#raster-tiles-and-seams), SRC any GDAL raster:
+#   jobs.sh rplan    OUT SRC             → OUT/plan.jsonl (core windows of GEOFIT_TILE_PIXELS)
+#   jobs.sh rplanmk  OUT SRC             → OUT/plan.mk
+#   jobs.sh rfit     OUT SRC TILE        → OUT/fit/TILE.tmb (the tile's window only, read by GDAL)
+#   jobs.sh stitch   OUT SRC TILE        → OUT/stitched/TILE.tmb (+ .json): C0 with its neighbours
+#   jobs.sh reval    OUT TILE            → OUT/eval/TILE.tif (the surface on the tile's cells)
+#   jobs.sh seams    OUT                 → OUT/seams.json (gap and normal-angle jump per seam)
+#   jobs.sh mosaic   OUT TILE...         → OUT/mosaic.vrt (gdalbuildvrt over the tiles' rasters)
+#
 # Every output is written atomically (geofit writes a temporary file and renames it; the one
 # stdout capture below does the same), so a killed job leaves no half-written file.
 #
@@ -21,7 +30,10 @@
 # document, and a tile mixes documents — fixing them keeps per-building bytes independent of the
 # tiling), GEOFIT_VALIDATE_ARGS, GEOFIT_TILESET_ARGS (e.g. `--crs EPSG:25832`).
 #
-# Fault injection for tests: GEOFIT_FAIL_ONCE=TILE makes the heal job of TILE fail once: the
+# Raster settings: GEOFIT_MAX_ERROR (0.5), GEOFIT_TILE_PIXELS (1024), GEOFIT_FIT_ARGS ('').
+#
+# Fault injection for tests: GEOFIT_FAIL_ONCE=TILE makes the heal job (raster: the fit job) of
+# TILE fail once: the
 # first attempt creates the marker $GEOFIT_FAIL_ONCE_DIR/TILE (default OUT/.fail-once) and exits
 # 75; later attempts find the marker and run normally.
 set -euo pipefail
@@ -102,6 +114,43 @@ tile)
     [ -e "$out/validate/$t.validate.json" ] || bash "$here" validate "$out" "$t"
     [ -e "$out/healed/$t.heal.json" ] || bash "$here" heal "$out" "$t"
     [ -e "$out/glb/$t.glb" ] || bash "$here" export "$out" "$t"
+    ;;
+rplan)
+    mkdir -p "$out"
+    "$GEOFIT" -q tile plan --tile-size "${GEOFIT_TILE_PIXELS:-1024}" --halo 2 -o "$out/plan.jsonl" "$1"
+    ;;
+rplanmk)
+    mkdir -p "$out"
+    "$GEOFIT" -q tile plan --tile-size "${GEOFIT_TILE_PIXELS:-1024}" --halo 2 --format make -o "$out/plan.mk" "$1"
+    ;;
+rfit)
+    src=$1 t=$2
+    fail_once "$t"
+    mkdir -p "$out/fit"
+    read -r -a FIT_ARGS <<<"${GEOFIT_FIT_ARGS:-}"
+    "$GEOFIT" -q fit "$src" --plan "$out/plan.jsonl" --tile "$t" --max-error "${GEOFIT_MAX_ERROR:-0.5}" "${FIT_ARGS[@]}" -o "$out/fit/$t.tmb"
+    ;;
+stitch)
+    src=$1 t=$2
+    mkdir -p "$out/stitched"
+    "$GEOFIT" -q tile stitch "$src" --plan "$out/plan.jsonl" --tile "$t" --meshes "$out/fit/{id}.tmb" --max-error "${GEOFIT_MAX_ERROR:-0.5}" -o "$out/stitched/$t.tmb" --report "$out/stitched/$t.json"
+    ;;
+reval)
+    t=$1
+    mkdir -p "$out/eval"
+    "$GEOFIT" -q eval "$out/stitched/$t.tmb" -o "$out/eval/$t.tif"
+    ;;
+seams)
+    "$GEOFIT" -q tile seams "$out/plan.jsonl" --meshes "$out/stitched/{id}.tmb" -o "$out/seams.json"
+    ;;
+mosaic)
+    args=()
+    for t in "$@"; do args+=("$out/eval/$t.tif"); done
+    tmp="$out/.mosaic.$$.vrt"
+    trap 'rm -f "$tmp"' EXIT
+    gdalbuildvrt -q "$tmp" "${args[@]}"
+    # the VRT names its sources relative to itself: same directory, so the rename keeps them valid
+    mv "$tmp" "$out/mosaic.vrt"
     ;;
 *)
     echo "jobs.sh: unknown step '$step'" >&2

@@ -16,8 +16,48 @@ export GEOFIT_HEAL_ARGS ?= --precision 3
 export GEOFIT_VALIDATE_ARGS ?=
 export GEOFIT_TILESET_ARGS ?=
 
+.DELETE_ON_ERROR:
+.SECONDARY:
+
+ifneq ($(strip $(RASTER)),)
+# The raster pipeline (workflows/raster.smk): RASTER=dem.tif, settings as in jobs.sh.
+#   make -j2 -f workflows/tiles.mk RASTER=dem.tif OUT=out GEOFIT_MAX_ERROR=0.5 GEOFIT_TILE_PIXELS=1024
+export GEOFIT_MAX_ERROR ?= 0.5
+export GEOFIT_TILE_PIXELS ?= 1024
+export GEOFIT_FIT_ARGS ?=
+
+TILES :=
+-include $(OUT)/plan.mk
+
+all: $(OUT)/mosaic.vrt $(OUT)/seams.json $(TILES:%=$(OUT)/eval/%.tif)
+.PHONY: all
+.DEFAULT_GOAL := all
+
+$(OUT)/plan.jsonl: $(RASTER)
+	bash $(JOBS) rplan $(OUT) $(RASTER)
+
+$(OUT)/plan.mk: $(RASTER)
+	bash $(JOBS) rplanmk $(OUT) $(RASTER)
+
+$(OUT)/fit/%.tmb: $(OUT)/plan.jsonl $(RASTER)
+	bash $(JOBS) rfit $(OUT) $(RASTER) $*
+
+# a stitch reads its neighbours' fits: make waits for all of them (Snakemake for the neighbours only)
+$(OUT)/stitched/%.tmb $(OUT)/stitched/%.json: $(TILES:%=$(OUT)/fit/%.tmb)
+	bash $(JOBS) stitch $(OUT) $(RASTER) $*
+
+$(OUT)/eval/%.tif: $(OUT)/stitched/%.tmb
+	bash $(JOBS) reval $(OUT) $*
+
+$(OUT)/seams.json: $(TILES:%=$(OUT)/stitched/%.tmb) $(OUT)/plan.mk
+	bash $(JOBS) seams $(OUT)
+
+$(OUT)/mosaic.vrt: $(TILES:%=$(OUT)/eval/%.tif) $(OUT)/plan.mk
+	bash $(JOBS) mosaic $(OUT) $(TILES)
+
+else
 ifeq ($(strip $(SOURCES)),)
-$(error give the CityGML files: make -f workflows/tiles.mk SOURCES="a.gml b.gml")
+$(error give the CityGML files: make -f workflows/tiles.mk SOURCES="a.gml b.gml", or a raster: RASTER=dem.tif)
 endif
 
 .DELETE_ON_ERROR:
@@ -57,3 +97,4 @@ $(OUT)/report.json: $(TILES:%=$(OUT)/healed/%.heal.json) $(TILES:%=$(OUT)/valida
 
 $(OUT)/tileset.json: $(TILES:%=$(OUT)/glb/%.glb) $(OUT)/plan.mk
 	bash $(JOBS) tileset $(OUT) $(TILES)
+endif

@@ -269,6 +269,14 @@ pub fn is_gdal_virtual_path(path: &Path) -> bool {
 /// Reads band `band` like [`read_raster_band`], with the float type that holds its values
 /// exactly (what an output derived from it is written as).
 pub fn read_raster_band_typed(path: &Path, band: usize) -> Result<(Raster, SampleType), RasterError> {
+    read_raster_window_typed(path, band, None)
+}
+
+/// Reads the pixel window `[col_off, row_off, width, height]` (GDAL's `-srcwin` convention) of
+/// band `band` through a GDAL windowed read: only the window's cells are read and held (a tile of
+/// a VRT or COG of any size costs the tile), the geotransform moved to the window's corner.
+/// `None`: the whole band.
+pub fn read_raster_window_typed(path: &Path, band: usize, window: Option<[usize; 4]>) -> Result<(Raster, SampleType), RasterError> {
     let open_err = |message: String| RasterError::Open { path: path.to_path_buf(), message };
     let content_err = |message: String| RasterError::Content { path: path.to_path_buf(), message };
     if !is_gdal_virtual_path(path) && !path.exists() {
@@ -301,9 +309,13 @@ pub fn read_raster_band_typed(path: &Path, band: usize) -> Result<(Raster, Sampl
     if band == 0 || band > count {
         return Err(content_err(format!("band {band} requested but the file has {count} band(s)")));
     }
-    let (width, height) = ds.raster_size();
-    if width == 0 || height == 0 {
-        return Err(content_err(format!("raster size {width}×{height} has no cells")));
+    let (full_w, full_h) = ds.raster_size();
+    if full_w == 0 || full_h == 0 {
+        return Err(content_err(format!("raster size {full_w}×{full_h} has no cells")));
+    }
+    let [xoff, yoff, width, height] = window.unwrap_or([0, 0, full_w, full_h]);
+    if width == 0 || height == 0 || xoff.checked_add(width).is_none_or(|e| e > full_w) || yoff.checked_add(height).is_none_or(|e| e > full_h) {
+        return Err(content_err(format!("window {xoff} {yoff} {width} {height} (xoff yoff xsize ysize) is not inside the raster's {full_w}×{full_h} pixels")));
     }
     // The size is the header's claim: check it before GDAL or Vec allocate for it.
     let budget = crate::limits::CellBudget::for_cost(crate::limits::READ_BYTES_PER_CELL);
@@ -319,8 +331,13 @@ pub fn read_raster_band_typed(path: &Path, band: usize) -> Result<(Raster, Sampl
     }
     // GDAL reports a missing geotransform as an error with the default identity-like transform;
     // pixel coordinates (origin top-left, unit cells, y down) are then the honest fallback.
-    let geotransform = ds.geo_transform().unwrap_or([0.0, 1.0, 0.0, 0.0, 0.0, 1.0]);
+    let mut geotransform = ds.geo_transform().unwrap_or([0.0, 1.0, 0.0, 0.0, 0.0, 1.0]);
     check_geotransform(&geotransform).map_err(|e| content_err(e.to_string()))?;
+    if window.is_some() {
+        let (c, r) = (xoff as f64, yoff as f64);
+        geotransform[0] += c * geotransform[1] + r * geotransform[2];
+        geotransform[3] += c * geotransform[4] + r * geotransform[5];
+    }
     let wkt = ds.projection();
     let crs = if wkt.trim().is_empty() { None } else { Some(wkt) };
 
@@ -328,7 +345,7 @@ pub fn read_raster_band_typed(path: &Path, band: usize) -> Result<(Raster, Sampl
     let band_type = rb.band_type();
     let nodata = rb.no_data_value();
     let buf = rb
-        .read_as::<f64>((0, 0), (width, height), (width, height), None)
+        .read_as::<f64>((xoff as isize, yoff as isize), (width, height), (width, height), None)
         .map_err(|e| content_err(format!("cannot read band {band}: {}", gdal_msg(&e))))?;
     let (_, mut data) = buf.into_shape_and_vec();
 
@@ -337,7 +354,7 @@ pub fn read_raster_band_typed(path: &Path, band: usize) -> Result<(Raster, Sampl
     if let Ok(flags) = rb.mask_flags() {
         if !flags.is_all_valid() && !flags.is_nodata() {
             if let Ok(mb) = rb.open_mask_band() {
-                if let Ok(m) = mb.read_as::<u8>((0, 0), (width, height), (width, height), None) {
+                if let Ok(m) = mb.read_as::<u8>((xoff as isize, yoff as isize), (width, height), (width, height), None) {
                     mask = Some(m.into_shape_and_vec().1);
                 }
             }

@@ -71,6 +71,29 @@ pub fn plan_grid(path: &str, w: usize, h: usize, gt: [f64; 6], opts: &RasterTili
     Ok(tiles)
 }
 
+/// The side of the square initial cells of a tile's fit (pixels): the plan's tile side halved
+/// until it is at most 32. Every full tile of a plan is then a whole number of such cells, so
+/// neighbouring tiles' domains meet exactly along their seams
+/// (docs/decisions.md#raster-tiles-and-seams).
+pub fn base_cell(tile_side: usize) -> f64 {
+    let mut c = tile_side.max(1) as f64;
+    while c > 32.0 {
+        c /= 2.0;
+    }
+    c
+}
+
+/// Where a tile's parameter frame sits in the plan's frame, in whole pixels: (x0, y0) is the
+/// world position of the tile's parameter origin (its first cell centre in s, its t = 0 row
+/// centre), (dx, dy) the cell size with dy > 0 towards +t. The plan's frame has its origin at
+/// the centre of the cell in the lower-left corner of the union of the cores, so every job that
+/// places a tile gets the same shift (and shifts by whole pixels are exact in f64).
+pub fn frame_offset(tiles: &[Tile], x0: f64, y0: f64, dx: f64, dy: f64) -> [f64; 2] {
+    let xmin = tiles.iter().map(|t| t.core.bounds[0]).fold(f64::INFINITY, f64::min);
+    let ymin = tiles.iter().map(|t| t.core.bounds[1]).fold(f64::INFINITY, f64::min);
+    [((x0 - xmin) / dx - 0.5).round(), ((y0 - ymin) / dy - 0.5).round()]
+}
+
 /// xy bounds of a pixel window (outer cell edges), whatever the geotransform's rotation.
 fn georef(gt: &[f64; 6], px: [usize; 4]) -> [f64; 4] {
     let at = |c: f64, r: f64| (gt[0] + c * gt[1] + r * gt[2], gt[3] + c * gt[4] + r * gt[5]);
@@ -97,5 +120,9 @@ mod tests {
         assert_eq!(last.core.bounds, [1040.0, 4976.0, 1050.0, 4980.0]);
         assert_eq!(last.neighbours, vec!["c1_r0", "c2_r0", "c1_r1"]);
         assert_eq!(tiles[4].neighbours.len(), 5);
+        // the lower-left core cell centre is the plan frame's origin
+        assert_eq!(frame_offset(&tiles, 1001.0, 4977.0, 2.0, 2.0), [0.0, 0.0]);
+        assert_eq!(frame_offset(&tiles, 1021.0, 4977.0 + 2.0 * 10.0, 2.0, 2.0), [10.0, 10.0]);
+        assert_eq!((base_cell(100), base_cell(32), base_cell(4096)), (25.0, 32.0, 32.0));
     }
 }

@@ -151,11 +151,40 @@ pub struct FitOptions {
     /// everywhere; `max_error` should then be the smallest of them (it scales the dragging
     /// threshold, the margin and the coarsening pre-filter). Rasters only.
     pub cell_tolerance: Option<CellTolerance>,
+    /// A fixed initial mesh instead of the overhang rule (A8): a tile of a plan, whose domain
+    /// must meet its neighbours' exactly along the seams (docs/decisions.md#raster-tiles-and-seams).
+    pub domain: Option<Domain>,
+}
+
+/// The initial mesh of a tile: `ns × nt` square cells of side `cell` from (s0, t0). Square
+/// cells of one size across a plan keep every later cell square (4-splits), which the seam
+/// stitch needs (`crate::seams`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Domain {
+    pub s0: f64,
+    pub t0: f64,
+    pub cell: f64,
+    pub ns: usize,
+    pub nt: usize,
+}
+
+impl Domain {
+    /// The domain of a `w` × `h` pixel window (cell centres at s = 0..w−1, t = 0..h−1)
+    /// anchored at the window's first pixel edge in s (s = −½) and, in t, at the edge of its
+    /// first raster row (`north_up`: the top, t = h − ½; else t = −½), reaching over the other
+    /// sides by whole cells: tiles of one plan then share their seams exactly (the last row and
+    /// column of a plan, shorter than the others, overhang the raster instead).
+    pub fn anchored(w: usize, h: usize, cell: f64, north_up: bool) -> Domain {
+        let ns = ((w as f64 / cell).ceil() as usize).max(1);
+        let nt = ((h as f64 / cell).ceil() as usize).max(1);
+        let t0 = if north_up { h as f64 - 0.5 - nt as f64 * cell } else { -0.5 };
+        Domain { s0: -0.5, t0, cell, ns, nt }
+    }
 }
 
 impl FitOptions {
     pub fn new(degree: Degree, max_error: f64) -> FitOptions {
-        FitOptions { degree, max_error, max_points: None, max_iterations: 100, method: Method::Lsq, overhang: 0.25, initial_cells: 4, drag_steps: 40, local_updates: true, opencl_assembly: false, coarsen: true, cell_tolerance: None }
+        FitOptions { degree, max_error, max_points: None, max_iterations: 100, method: Method::Lsq, overhang: 0.25, initial_cells: 4, drag_steps: 40, local_updates: true, opencl_assembly: false, coarsen: true, cell_tolerance: None, domain: None }
     }
 }
 
@@ -256,6 +285,14 @@ pub fn build_pb_incremental(mesh: &TMesh, old: &PbSpline, split: &[crate::mesh::
 
 /// The initial mesh (A8): returns it with x = s, y = t, z = mean of the data.
 pub fn initial_mesh(samples: &Samples, opts: &FitOptions) -> TMesh {
+    if let Some(d) = opts.domain {
+        let mut m = TMesh::grid(opts.degree, d.s0, d.t0, d.cell, d.ns, d.nt);
+        let mean = mean_of(samples);
+        for p in &mut m.points {
+            p.z = mean;
+        }
+        return m;
+    }
     let (w, h) = ((samples.width - 1).max(1) as f64, (samples.height - 1).max(1) as f64);
     let ext = w.max(h) * (1.0 + 2.0 * opts.overhang);
     let mut c0 = 1.0f64;
@@ -282,12 +319,16 @@ pub fn initial_mesh(samples: &Samples, opts: &FitOptions) -> TMesh {
     let s0 = place((samples.width - 1) as f64, &mut ns);
     let t0 = place((samples.height - 1) as f64, &mut nt);
     let mut m = TMesh::grid(opts.degree, s0, t0, c0, ns, nt);
-    let (sum, cnt) = samples.z.iter().filter(|v| !v.is_nan()).fold((0.0, 0usize), |(s, n), v| (s + v, n + 1));
-    let mean = if cnt == 0 { 0.0 } else { sum / cnt as f64 };
+    let mean = mean_of(samples);
     for p in &mut m.points {
         p.z = mean;
     }
     m
+}
+
+fn mean_of(samples: &Samples) -> f64 {
+    let (sum, cnt) = samples.z.iter().filter(|v| !v.is_nan()).fold((0.0, 0usize), |(s, n), v| (s + v, n + 1));
+    if cnt == 0 { 0.0 } else { sum / cnt as f64 }
 }
 
 /// The normal equations' storage: `crate::sparse`'s symmetric CSR.
@@ -1064,7 +1105,7 @@ pub(crate) fn local_update(old: &PbSpline, new: &PbSpline, n_points: usize, w: u
     Some((free, region))
 }
 
-enum Refined {
+pub(crate) enum Refined {
     Stop(StopReason),
     /// The refined mesh and the number of cells marked and split.
     Next(TMesh, usize),
@@ -1072,7 +1113,7 @@ enum Refined {
 
 /// One refinement: split the splittable leaves over the tolerance, repair; or the reason to
 /// stop (minimum cell size, control-point cap).
-fn refine(
+pub(crate) fn refine(
     mesh: &TMesh,
     pb: &PbSpline,
     opts: &FitOptions,
@@ -1187,7 +1228,7 @@ pub(crate) fn check(
 /// and its coarsening keep δ free, the check of the written mesh may use half of it for the
 /// rounding between the loop's and `eval`'s evaluation paths, and the other half stays for
 /// the paths not checked here (the OpenCL kernels).
-fn tolerances(samples: &Samples, pts: Option<&Scattered>, opts: &FitOptions) -> Result<(Tolerance, Tolerance), TsplineError> {
+pub(crate) fn tolerances(samples: &Samples, pts: Option<&Scattered>, opts: &FitOptions) -> Result<(Tolerance, Tolerance), TsplineError> {
     let data = pts.map_or(&samples.z, |p| &p.z);
     let zscale = data.iter().filter(|v| v.is_finite()).fold(0.0f64, |m, v| m.max(v.abs()));
     let (cells, min_tol) = match &opts.cell_tolerance {
@@ -1237,7 +1278,7 @@ fn eval_rows_as_eval(pb: &PbSpline, ex: Option<&crate::extraction::Extraction>, 
 /// The acceptance check: |Δz| of the mesh as written ([`as_written`]), evaluated as `geofit
 /// eval` does (raster: [`eval_rows_as_eval`] over every cell; scattered data: `eval_z` at the
 /// points), into `errs`; statistics and the leaves (of `mesh`, through its `pb`) over `tol`.
-fn check_written(
+pub(crate) fn check_written(
     mesh: &TMesh,
     pb: &PbSpline,
     samples: &Samples,
@@ -1526,6 +1567,23 @@ mod tests {
                 old = full;
             }
         }
+    }
+
+    /// A tile's domain ends on its window's pixel edges at the anchored corner and reaches over
+    /// the other sides by whole square cells; the fit's initial mesh is that grid.
+    #[test]
+    fn tile_domain_is_anchored_on_pixel_edges() {
+        let d = Domain::anchored(100, 60, 25.0, true);
+        assert_eq!((d.s0, d.ns, d.nt), (-0.5, 4, 3));
+        assert_eq!(d.t0 + d.nt as f64 * d.cell, 59.5); // the top edge (first raster row)
+        let d = Domain::anchored(100, 60, 25.0, false);
+        assert_eq!(d.t0, -0.5);
+        let samples = Samples { width: 100, height: 60, z: vec![1.0; 6000] };
+        let mut o = FitOptions::new(Degree::Cubic, 0.1);
+        o.domain = Some(Domain::anchored(100, 60, 25.0, true));
+        let m = initial_mesh(&samples, &o);
+        assert_eq!(m.bounds(), Rect::new(-0.5, -15.5, 99.5, 59.5));
+        assert_eq!(m.leaf_count(), 12);
     }
 
     /// A plane is fitted with the initial mesh only (no refinement).

@@ -10,6 +10,7 @@
 //! - [`fit`]: adaptive approximation (Alg. 3) with sparse least squares or dragging;
 //!   `coarsen`: merging back the splits the tolerance did not need; [`tolerance`]: what the
 //!   fit accepts per cell; [`blunders`]: spikes found before a fit.
+//! - [`seams`]: tiles of a raster plan made C0 across their seams (stitch, continuity).
 //!
 //! Where the spec's ambiguities are decided (doc comments there): A1, A2, A15 in [`eval`];
 //! A7–A12, A17, A19 in [`fit`]; A13, A14, A22 in [`mesh`]; A16 (formats: GDAL rasters in, the
@@ -34,6 +35,7 @@ mod ocl_device;
 pub mod ocl_eval;
 pub mod ocl_fit;
 pub mod rtree_pages;
+pub mod seams;
 pub mod tolerance;
 pub mod sparse;
 pub mod tmb;

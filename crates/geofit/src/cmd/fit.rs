@@ -5,11 +5,11 @@
 use clap::{Args as ClapArgs, ValueEnum};
 
 use raster_io::Raster;
-use tspline::fit::{Backend, FitOptions, IterationStats, Method, Samples, StopReason};
-use tspline::format::{DataMask, Encoding, Georef, TMeshFile};
+use tspline::fit::{Backend, Domain, FitOptions, IterationStats, Method, StopReason};
+use tspline::format::{Encoding, TMeshFile};
 use tspline::Degree;
 
-use crate::terrain_io::{read_raster_arg, select_device, tspline_err, Device};
+use crate::terrain_io::{read_raster_arg, samples_from_raster, select_device, tspline_err, Device};
 use crate::config::{Config, Input, Output};
 use crate::report::{write_json_report, ReportKind, Z_UNIT};
 use crate::error::{CliError, CmdResult, Exit};
@@ -132,31 +132,41 @@ pub struct Args {
     /// Write a JSON report (options, per-iteration table, stop reason) to this path.
     #[arg(long)]
     pub report: Option<String>,
+    /// Fit only this pixel window of the input (GDAL's -srcwin: column and row offset, width,
+    /// height), read through a GDAL windowed read: a tile of a raster of any size. The mesh
+    /// domain ends on the window's pixel edges (square cells of --tile-cell pixels), so the tiles
+    /// of a plan meet along their seams for `geofit tile stitch`.
+    #[arg(long, num_args = 4, value_names = ["XOFF", "YOFF", "XSIZE", "YSIZE"], conflicts_with = "tile")]
+    pub srcwin: Option<Vec<usize>>,
+    /// With --srcwin: side of the initial square cells in pixels (the same for every tile of a
+    /// plan; a full tile's side must be a whole number of them).
+    #[arg(long, value_name = "PIXELS", requires = "srcwin")]
+    pub tile_cell: Option<f64>,
+    /// Fit tile ID of a raster plan (`geofit tile plan --format jsonl`): its core window, with
+    /// the plan's cell size (the --srcwin of that tile).
+    #[arg(long, value_name = "ID", requires = "plan")]
+    pub tile: Option<String>,
+    /// The plan of --tile.
+    #[arg(long, value_name = "PLAN", requires = "tile")]
+    pub plan: Option<String>,
 }
 
-/// Raster → parameter layout (A21): s = column, t = row counted from the bottom, the affine map
-/// to world coordinates in the georeference. Needs an axis-aligned raster.
-pub fn samples_from_raster(r: &Raster, name: &str) -> Result<(Samples, Georef, DataMask), CliError> {
-    let gt = r.geotransform;
-    if gt[2] != 0.0 || gt[4] != 0.0 {
-        return Err(CliError::findings(format!("{name}: rotated rasters are not supported (geotransform {gt:?})")));
+/// The window and initial cell size of a tile fit (--srcwin/--tile-cell or --plan/--tile).
+fn tile_window(args: &Args) -> Result<Option<([usize; 4], f64)>, CliError> {
+    if let (Some(plan), Some(id)) = (&args.plan, &args.tile) {
+        let text = std::fs::read_to_string(plan).map_err(|e| CliError::unreadable(format!("{plan}: {e}")))?;
+        let tiles = tiling::plan::read_plan(&text, plan).map_err(|e| CliError::unreadable(e.to_string()))?;
+        let t = tiling::plan::find_tile(&tiles, id, plan).map_err(|e| CliError::usage(e.to_string()))?;
+        let px = t.core.pixels.ok_or_else(|| CliError::usage(format!("{plan}: tile {id} is not a raster tile")))?;
+        return Ok(Some((px, tiling::raster::base_cell(t.size as usize))));
     }
-    let (w, h) = (r.width, r.height);
-    let north_up = gt[5] < 0.0;
-    let mut z = vec![f64::NAN; w * h];
-    for row in 0..h {
-        let j = if north_up { h - 1 - row } else { row };
-        for i in 0..w {
-            let q = row * w + i;
-            if r.valid[q] {
-                z[j * w + i] = r.data[q];
-            }
-        }
+    let Some(w) = &args.srcwin else { return Ok(None) };
+    let win = [w[0], w[1], w[2], w[3]];
+    let cell = args.tile_cell.ok_or_else(|| CliError::usage("--srcwin needs --tile-cell PIXELS (the same for every tile of a plan)"))?;
+    if !(cell >= 1.0 && cell.is_finite()) {
+        return Err(CliError::usage(format!("--tile-cell must be at least 1 pixel, got {cell}")));
     }
-    let x0 = gt[0] + 0.5 * gt[1];
-    let (y0, dy) = if north_up { (gt[3] + (h as f64 - 0.5) * gt[5], -gt[5]) } else { (gt[3] + 0.5 * gt[5], gt[5]) };
-    let mask = DataMask { width: w, height: h, bits: z.iter().map(|v| !v.is_nan()).collect() };
-    Ok((Samples { width: w, height: h, z }, Georef { x0, y0, dx: gt[1], dy, crs: r.crs.clone().unwrap_or_default() }, mask))
+    Ok(Some((win, cell)))
 }
 
 /// `--report`: what the fit did and how far it got.
@@ -410,7 +420,18 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     }
     let t_start = std::time::Instant::now();
     crate::terrain_io::gdal_notices(config);
-    let (mut raster, name) = read_raster_arg(&args.input)?;
+    let window = tile_window(&args)?;
+    if window.is_some() && (args.indirect || args.max_error_from_uncertainty.is_some() || args.input == "-") {
+        return Err(CliError::usage("--srcwin / --tile fit a window of a raster file with the direct fit (not stdin, --indirect or --max-error-from-uncertainty)"));
+    }
+    let (mut raster, name) = match window {
+        Some((win, _)) => {
+            let (r, _) = raster_io::read_raster_window_typed(std::path::Path::new(&args.input), 1, Some(win)).map_err(crate::terrain_io::raster_err)?;
+            (r, format!("{} (window {} {} {} {})", args.input, win[0], win[1], win[2], win[3]))
+        }
+        None => read_raster_arg(&args.input)?,
+    };
+    let domain = window.map(|(_, cell)| Domain::anchored(raster.width, raster.height, cell, raster.geotransform[5] < 0.0));
     if let Some(v) = args.nodata {
         declare_nodata(&mut raster, v);
     }
@@ -534,6 +555,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     opts.overhang = args.overhang;
     opts.opencl_assembly = args.assembly == Assembly::Opencl;
     opts.coarsen = !args.no_coarsen;
+    opts.domain = domain;
     opts.method = match args.method {
         MethodArg::Lsq => Method::Lsq,
         MethodArg::Drag => Method::Drag,
