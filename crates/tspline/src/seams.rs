@@ -291,29 +291,28 @@ pub type Source<'a> = dyn Fn(i64, i64) -> f64 + Sync + 'a;
 /// missing), linear along the seam between the two nearest rows; None where the two cells next to
 /// the seam are not both valid. Only source cells, in a fixed order: the same bits in both jobs.
 fn seam_value(source: &Source, line: Line, u: f64) -> Option<f64> {
-    let across = |r: i64| -> Option<f64> {
-        let c0 = (line.c - 0.5).round() as i64; // the cell centre just below the seam
+    along_seam(source, line, u, |[a, b, c, d]| if a.is_finite() && d.is_finite() { (-a + 9.0 * b + 9.0 * c - d) / 16.0 } else { 0.5 * (b + c) })
+}
+
+/// `across` of the four cells at −1.5, −0.5, +0.5, +1.5 px from the seam (the inner two valid,
+/// the outer ones NaN where missing), interpolated linearly along the seam between the two
+/// nearest rows of cell centres inside it; None where an inner cell is missing.
+fn along_seam(source: &Source, line: Line, u: f64, across: impl Fn([f64; 4]) -> f64) -> Option<f64> {
+    let c0 = (line.c - 0.5).round() as i64; // the cell centre just below the seam
+    let row = |r: i64| -> Option<f64> {
         let at = |k: i64| if line.vertical { source(c0 + k, r) } else { source(r, c0 + k) };
-        let (a, b, c, d) = (at(-1), at(0), at(1), at(2));
-        if !(b.is_finite() && c.is_finite()) {
-            return None;
-        }
-        if a.is_finite() && d.is_finite() {
-            Some((-a + 9.0 * b + 9.0 * c - d) / 16.0)
-        } else {
-            Some(0.5 * (b + c))
-        }
+        let cells = [at(-1), at(0), at(1), at(2)];
+        (cells[1].is_finite() && cells[2].is_finite()).then(|| across(cells))
     };
-    // rows (cell centres along the seam) inside it
     let (lo, hi) = ((line.u0 + 0.5).round() as i64, (line.u1 - 0.5).round() as i64);
     let uc = u.clamp(lo as f64, hi as f64);
     let r0 = (uc.floor() as i64).min(hi);
     let f = uc - r0 as f64;
-    let v0 = across(r0)?;
+    let v0 = row(r0)?;
     if f == 0.0 || r0 == hi {
         return Some(v0);
     }
-    let v1 = across(r0 + 1)?;
+    let v1 = row(r0 + 1)?;
     Some((1.0 - f) * v0 + f * v1)
 }
 
@@ -426,29 +425,7 @@ struct OwnSeam {
 /// difference of the cells at −1.5 … +1.5 px (the 2-point one without the outer cells), linear
 /// along the seam as [`seam_value`].
 fn seam_slope(source: &Source, line: Line, u: f64) -> Option<f64> {
-    let across = |r: i64| -> Option<f64> {
-        let c0 = (line.c - 0.5).round() as i64;
-        let at = |k: i64| if line.vertical { source(c0 + k, r) } else { source(r, c0 + k) };
-        let (a, b, c, d) = (at(-1), at(0), at(1), at(2));
-        if !(b.is_finite() && c.is_finite()) {
-            return None;
-        }
-        if a.is_finite() && d.is_finite() {
-            Some((27.0 * (c - b) - (d - a)) / 24.0)
-        } else {
-            Some(c - b)
-        }
-    };
-    let (lo, hi) = ((line.u0 + 0.5).round() as i64, (line.u1 - 0.5).round() as i64);
-    let uc = u.clamp(lo as f64, hi as f64);
-    let r0 = (uc.floor() as i64).min(hi);
-    let f = uc - r0 as f64;
-    let v0 = across(r0)?;
-    if f == 0.0 || r0 == hi {
-        return Some(v0);
-    }
-    let v1 = across(r0 + 1)?;
-    Some((1.0 - f) * v0 + f * v1)
+    along_seam(source, line, u, |[a, b, c, d]| if a.is_finite() && d.is_finite() { (27.0 * (c - b) - (d - a)) / 24.0 } else { c - b })
 }
 
 /// Stitches one tile: `own` and its plan neighbours (first-pass meshes, any of the 8 around it),
