@@ -46,13 +46,8 @@ pub struct CellBudget {
 impl CellBudget {
     /// The budget for rasters costing `bytes_per_cell` each.
     pub fn for_cost(bytes_per_cell: u64) -> CellBudget {
-        if let Some(n) = std::env::var(MAX_CELLS_ENV).ok().and_then(|v| v.trim().parse::<u64>().ok()) {
-            return CellBudget { max_cells: n, source: BudgetSource::Env };
-        }
-        match available_memory() {
-            Some(b) => CellBudget { max_cells: b / bytes_per_cell.max(1), source: BudgetSource::Memory(b) },
-            None => CellBudget { max_cells: FALLBACK_MAX_CELLS, source: BudgetSource::Fallback },
-        }
+        let (max_cells, source) = budget(MAX_CELLS_ENV, bytes_per_cell);
+        CellBudget { max_cells, source }
     }
 
     /// Whether `width × height` cells fit (no overflow).
@@ -62,15 +57,7 @@ impl CellBudget {
 
     /// Why the limit is what it is, for an error message ("… more than {this}").
     pub fn describe(&self) -> String {
-        match self.source {
-            BudgetSource::Env => format!("{} cells set by {MAX_CELLS_ENV}", self.max_cells),
-            BudgetSource::Memory(b) => format!(
-                "{} cells, what the {} of available memory hold; {MAX_CELLS_ENV} sets another limit",
-                self.max_cells,
-                gib(b)
-            ),
-            BudgetSource::Fallback => format!("{} cells; {MAX_CELLS_ENV} sets another limit", self.max_cells),
-        }
+        describe(self.max_cells, "cells", self.source, MAX_CELLS_ENV)
     }
 }
 
@@ -94,26 +81,34 @@ pub struct PointBudget {
 impl PointBudget {
     /// The budget for points costing `bytes_per_point` each.
     pub fn for_cost(bytes_per_point: u64) -> PointBudget {
-        if let Some(n) = std::env::var(MAX_POINTS_ENV).ok().and_then(|v| v.trim().parse::<u64>().ok()) {
-            return PointBudget { max_points: n, source: BudgetSource::Env };
-        }
-        match available_memory() {
-            Some(b) => PointBudget { max_points: b / bytes_per_point.max(1), source: BudgetSource::Memory(b) },
-            None => PointBudget { max_points: FALLBACK_MAX_CELLS, source: BudgetSource::Fallback },
-        }
+        let (max_points, source) = budget(MAX_POINTS_ENV, bytes_per_point);
+        PointBudget { max_points, source }
     }
 
     /// Why the limit is what it is, for an error message ("… more than {this}").
     pub fn describe(&self) -> String {
-        match self.source {
-            BudgetSource::Env => format!("{} points set by {MAX_POINTS_ENV}", self.max_points),
-            BudgetSource::Memory(b) => format!(
-                "{} points, what the {} of available memory hold; {MAX_POINTS_ENV} sets another limit",
-                self.max_points,
-                gib(b)
-            ),
-            BudgetSource::Fallback => format!("{} points; {MAX_POINTS_ENV} sets another limit", self.max_points),
-        }
+        describe(self.max_points, "points", self.source, MAX_POINTS_ENV)
+    }
+}
+
+/// The one budget rule of cells and points: the number `env` sets, else what available memory
+/// holds at `bytes_per_unit`, else the fixed fallback.
+fn budget(env: &str, bytes_per_unit: u64) -> (u64, BudgetSource) {
+    if let Some(n) = std::env::var(env).ok().and_then(|v| v.trim().parse::<u64>().ok()) {
+        return (n, BudgetSource::Env);
+    }
+    match available_memory() {
+        Some(b) => (b / bytes_per_unit.max(1), BudgetSource::Memory(b)),
+        None => (FALLBACK_MAX_CELLS, BudgetSource::Fallback),
+    }
+}
+
+/// Why a budget is what it is, for an error message ("… more than {this}").
+fn describe(limit: u64, what: &str, source: BudgetSource, env: &str) -> String {
+    match source {
+        BudgetSource::Env => format!("{limit} {what} set by {env}"),
+        BudgetSource::Memory(b) => format!("{limit} {what}, what the {} of available memory hold; {env} sets another limit", gib(b)),
+        BudgetSource::Fallback => format!("{limit} {what}; {env} sets another limit"),
     }
 }
 
