@@ -561,4 +561,6 @@ fn output_paths_are_checked_before_the_work() {
     }
     assert!(!out.exists() && temp_leftovers(d).is_empty(), "nothing written");
     fails(&["fit", s(&r), "--max-error", "1", "-o", s(d)], 2, &["is a directory"]);
+    // the statistics go to stdout: a picture there would be mixed into them
+    fails(&["diff", s(&r), s(&r), "--png", "-"], 2, &["--png -: stdout carries the statistics"]);
 }

@@ -104,9 +104,6 @@ fn png_bytes(c: &Canvas) -> Result<Vec<u8>, CliError> {
 /// The map picture and, when it is a file and A is georeferenced, its world file and CRS.
 fn write_map(path: &str, a: &Raster, map: &Canvas, map_at: (usize, usize)) -> Result<(), CliError> {
     Output::from_arg(Some(path)).write_bytes(&png_bytes(map)?)?;
-    if path == "-" {
-        return Ok(());
-    }
     let (pgw, aux) = sidecar_paths(std::path::Path::new(path));
     Output::from_arg(pgw.to_str()).write_bytes(world_file(a.geotransform, map_at.0, map_at.1).as_bytes())?;
     if let Some(wkt) = &a.crs {
@@ -151,6 +148,12 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     gdal_notices(config);
     let opts = DiffOptions { tolerance: args.tolerance, class_bounds: args.classes.clone() };
     opts.validate().map_err(|e| CliError::usage(e.to_string()))?;
+    // stdout always carries the statistics (text, --json or --report -): a picture there would mix with them
+    for (flag, p) in [("--png", &args.png), ("--hist", &args.hist)] {
+        if p.as_deref() == Some("-") {
+            return Err(CliError::usage(format!("{flag} -: stdout carries the statistics; give a file name")));
+        }
+    }
     if args.a == "-" && args.b == "-" {
         return Err(CliError::usage("only one of A and B can be stdin"));
     }
