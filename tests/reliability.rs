@@ -6,6 +6,7 @@
 //!   (pairwise relabelling took 241 s), and the result is the input (a box converts to itself);
 //! - allocations are not sized by headers: a LAS header claiming 10¹² points, a LAZ chunk table
 //!   of 4·10⁹ entries, `/dev/zero` and an endless point stream end with exit 3 and a message;
+//! - inputs read whole stop at a byte budget (`info /dev/zero`, an endless stdin, a big file);
 //! - errors quote at most ~200 bytes of the input;
 //! - `info` with stdout closed fails, `info -` on empty stdin says the input is empty;
 //! - temporaries of dead processes are removed by the next run in the directory;
@@ -249,6 +250,46 @@ fn endless_inputs_end_with_a_message() {
     });
     let o = child.wait_with_output().unwrap();
     fails(&o, 3, &["<stdin>", "more than 1000 points set by GEOFIT_MAX_POINTS"]);
+    assert_eq!(std::fs::read(&out).unwrap(), old);
+}
+
+/// Commands that read an input whole (CityGML, popa3d, OBJ) grew without limit on a device or
+/// an endless stdin (`info /dev/zero`). They now stop at the byte budget (available memory, or
+/// GEOFIT_MAX_INPUT_BYTES as here); a regular file over the budget is refused by its size before
+/// it is read. The old output stays.
+#[test]
+fn inputs_read_whole_stop_at_the_byte_budget() {
+    let dir = common::tempdir();
+    let out = dir.path().join("out.gml");
+    let old = old_output(&out);
+    let budget = [("GEOFIT_MAX_INPUT_BYTES", "1000000")];
+    let run_with = |args: &[&str], stdin: Option<Vec<u8>>| {
+        let mut cmd = common::geofit();
+        cmd.args(args).envs(budget);
+        cmd.stdin(if stdin.is_some() { Stdio::piped() } else { Stdio::null() }).stdout(Stdio::piped()).stderr(Stdio::piped());
+        let mut child = cmd.spawn().unwrap();
+        if let Some(bytes) = stdin {
+            let mut si = child.stdin.take().unwrap();
+            std::thread::spawn(move || {
+                use std::io::Write;
+                let _ = si.write_all(&bytes);
+            });
+        }
+        child.wait_with_output().unwrap()
+    };
+    let t = Instant::now();
+    let o = run_with(&["info", "/dev/zero"], None);
+    fails(&o, 3, &["/dev/zero", "more than 1000000 bytes set by GEOFIT_MAX_INPUT_BYTES"]);
+    assert!(t.elapsed() < Duration::from_secs(20));
+    let endless_xml = b"<!-- a comment that never ends ".iter().copied().chain(std::iter::repeat(b'x').take(3_000_000)).collect();
+    let o = run_with(&["-q", "heal", "-", "-o", s(&out)], Some(endless_xml));
+    fails(&o, 3, &["<stdin>", "more than 1000000 bytes"]);
+    let big = dir.path().join("big.gml");
+    std::fs::write(&big, city(&box_building(0))).unwrap();
+    let f = std::fs::OpenOptions::new().append(true).open(&big).unwrap();
+    f.set_len(2_000_000).unwrap();
+    let o = run_with(&["-q", "heal", s(&big), "-o", s(&out)], None);
+    fails(&o, 3, &["big.gml", "more than 1000000 bytes"]);
     assert_eq!(std::fs::read(&out).unwrap(), old);
 }
 

@@ -60,12 +60,28 @@ impl Input {
         }
     }
 
-    /// Reads the whole input into memory.
+    /// Reads the whole input into memory, within the byte budget
+    /// (`input_limits::budget::ByteBudget`): a regular file is refused by its size before a byte
+    /// is read, a pipe or device (`/dev/zero`, an endless stdin) once it has delivered more than
+    /// the budget, with exit 3 naming the limit instead of the machine running out of memory.
     pub fn read_all(&self) -> Result<Vec<u8>, CliError> {
-        let mut buf = Vec::new();
+        self.read_all_within(input_limits::budget::ByteBudget::current())
+    }
+
+    fn read_all_within(&self, budget: input_limits::budget::ByteBudget) -> Result<Vec<u8>, CliError> {
+        let too_big = || CliError::unreadable(format!("{}: too large to read whole (more than {})", self.display_name(), budget.describe()));
+        let known_len = self.path().and_then(|p| std::fs::metadata(p).ok()).filter(|m| m.is_file()).map(|m| m.len());
+        if known_len.is_some_and(|len| !budget.allows(len)) {
+            return Err(too_big());
+        }
+        let mut buf = Vec::with_capacity(known_len.unwrap_or(0) as usize);
         self.open()?
+            .take(budget.max_bytes.saturating_add(1))
             .read_to_end(&mut buf)
             .map_err(|e| CliError::unreadable(format!("{}: {e}", self.display_name())))?;
+        if !budget.allows(buf.len() as u64) {
+            return Err(too_big());
+        }
         Ok(buf)
     }
 }

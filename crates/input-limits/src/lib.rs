@@ -5,10 +5,13 @@
 //! - [`lines`]: how long one text line may grow before the reader gives up (`/dev/zero` has no
 //!   newline and would otherwise fill the memory);
 //! - [`las`]: whether the counts and offsets a LAS/LAZ header claims fit the file, checked
-//!   before the `las`/`laz` crates size allocations by them.
+//!   before the `las`/`laz` crates size allocations by them;
+//! - [`budget`]: how many cells, points or bytes a command may hold, from the memory available
+//!   or an environment variable.
 //!
 //! No dependency on any format crate: every reader of untrusted text or binary can use it.
 
+pub mod budget;
 pub mod las;
 pub mod lines;
 

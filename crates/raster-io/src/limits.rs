@@ -8,7 +8,7 @@
 //! the budget with a cell count (to raise it on a machine with swap, or to lower it).
 
 /// The budget when available memory cannot be read: 2³³ cells (64 GiB of f64).
-pub const FALLBACK_MAX_CELLS: u64 = 1 << 33;
+pub const FALLBACK_MAX_CELLS: u64 = input_limits::budget::FALLBACK_MAX_UNITS;
 
 /// What one cell of a raster read through GDAL costs: the f64 value, the validity flag and
 /// GDAL's mask byte.
@@ -17,24 +17,8 @@ pub const READ_BYTES_PER_CELL: u64 = 10;
 /// The environment variable that sets the cell budget explicitly.
 pub const MAX_CELLS_ENV: &str = "GEOFIT_MAX_CELLS";
 
-/// Memory available to a new allocation, in bytes (`MemAvailable`), if the system says.
-pub fn available_memory() -> Option<u64> {
-    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
-    let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
-    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kb.saturating_mul(1024))
-}
-
-/// Where a [`CellBudget`] comes from, for the message that refuses a size.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum BudgetSource {
-    /// `GEOFIT_MAX_CELLS`.
-    Env,
-    /// Available memory (bytes) divided by the cost of a cell.
-    Memory(u64),
-    /// Neither: [`FALLBACK_MAX_CELLS`].
-    Fallback,
-}
+pub use input_limits::budget::{available_memory, gib, BudgetSource};
+use input_limits::budget::{budget, describe};
 
 /// The most cells one raster may have, and why.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -89,32 +73,6 @@ impl PointBudget {
     pub fn describe(&self) -> String {
         describe(self.max_points, "points", self.source, MAX_POINTS_ENV)
     }
-}
-
-/// The one budget rule of cells and points: the number `env` sets, else what available memory
-/// holds at `bytes_per_unit`, else the fixed fallback.
-fn budget(env: &str, bytes_per_unit: u64) -> (u64, BudgetSource) {
-    if let Some(n) = std::env::var(env).ok().and_then(|v| v.trim().parse::<u64>().ok()) {
-        return (n, BudgetSource::Env);
-    }
-    match available_memory() {
-        Some(b) => (b / bytes_per_unit.max(1), BudgetSource::Memory(b)),
-        None => (FALLBACK_MAX_CELLS, BudgetSource::Fallback),
-    }
-}
-
-/// Why a budget is what it is, for an error message ("… more than {this}").
-fn describe(limit: u64, what: &str, source: BudgetSource, env: &str) -> String {
-    match source {
-        BudgetSource::Env => format!("{limit} {what} set by {env}"),
-        BudgetSource::Memory(b) => format!("{limit} {what}, what the {} of available memory hold; {env} sets another limit", gib(b)),
-        BudgetSource::Fallback => format!("{limit} {what}; {env} sets another limit"),
-    }
-}
-
-/// `bytes` as "12.3 GiB".
-pub fn gib(bytes: u64) -> String {
-    format!("{:.1} GiB", bytes as f64 / (1u64 << 30) as f64)
 }
 
 #[cfg(test)]
