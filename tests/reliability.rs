@@ -311,9 +311,13 @@ fn errors_quote_at_most_200_bytes_of_the_input() {
     // CityGML: an end tag that does not match a huge start tag
     let g = d.join("c.gml");
     std::fs::write(&g, format!("<?xml version=\"1.0\"?>\n<core:CityModel xmlns:core=\"http://www.opengis.net/citygml/2.0\"><a{huge}></b></core:CityModel>\n")).unwrap();
+    // T-mesh XML: a degree that is not a number
+    let t = d.join("m.tmesh");
+    std::fs::write(&t, format!("<?xml version=\"1.0\"?>\n<tmesh xmlns=\"{}\" degree=\"{huge}\"/>\n", tspline_namespace())).unwrap();
     let (out, tif) = (d.join("out.gml"), d.join("out.tif"));
     let (old, old_tif) = (old_output(&out), old_output(&tif));
-    let cases: [(&[&str], &str); 4] = [
+    let cases: [(&[&str], &str); 5] = [
+        (&["info", s(&t)], "m.tmesh"),
         (&["adjust", s(&p), "-o", s(&out)], "m.popa3d"),
         (&["-q", "rasterize", s(&x), "--cell", "1", "-o", s(&tif)], "p.xyz:2"),
         (&["info", s(&g)], "c.gml"),
@@ -330,6 +334,13 @@ fn errors_quote_at_most_200_bytes_of_the_input() {
     }
     assert_eq!(std::fs::read(&out).unwrap(), old);
     assert_eq!(std::fs::read(&tif).unwrap(), old_tif);
+}
+
+/// The T-mesh XML namespace, read from the format's source so the test follows it.
+fn tspline_namespace() -> String {
+    let src = std::fs::read_to_string(common::repo_root().join("crates/tspline/src/format.rs")).unwrap();
+    let line = src.lines().find(|l| l.starts_with("pub const NAMESPACE")).unwrap();
+    line.split('"').nth(1).unwrap().to_string()
 }
 
 // ---------------------------------------------------------------------------------------------

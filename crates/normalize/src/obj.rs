@@ -63,7 +63,7 @@ pub fn read_sketch(bytes: &[u8], name: &str) -> Result<Soup, ObjError> {
                 vertex_sources: vec![src],
                 solid: si,
                 source: FaceSource { polygon: pid.clone(), ..FaceSource::default() },
-                locator: format!("{name}: object {oname} face {}", fi + 1),
+                locator: format!("{name}: object {} face {}", input_limits::quote(&oname), fi + 1),
                 parent: None,
             });
             soup.source_rings += 1;

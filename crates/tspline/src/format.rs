@@ -28,6 +28,7 @@ use std::io::Write;
 
 use quick_xml::events::Event;
 use quick_xml::Reader;
+use input_limits::quote;
 
 use crate::mesh::{ControlPoint, Degree, PointId, TMesh};
 use crate::TsplineError;
@@ -224,20 +225,20 @@ pub fn read(data: &[u8]) -> Result<TMeshFile, TsplineError> {
     let mut root_seen = false;
     loop {
         let pos = r.buffer_position() as usize;
-        let ev = r.read_event().map_err(|e| ferr(pos, format!("not well-formed XML: {e}")))?;
+        let ev = r.read_event().map_err(|e| ferr(pos, format!("not well-formed XML: {}", quote(&e.to_string()))))?;
         match ev {
             Event::Start(ref e) | Event::Empty(ref e) => {
-                let name = String::from_utf8_lossy(e.local_name().as_ref()).to_string();
+                let name = quote(&String::from_utf8_lossy(e.local_name().as_ref())).into_owned();
                 let mut attrs = Vec::new();
                 for a in e.attributes() {
-                    let a = a.map_err(|x| ferr(pos, format!("<{name}>: bad attribute: {x}")))?;
-                    let v = a.unescape_value().map_err(|x| ferr(pos, format!("<{name}>: bad attribute value: {x}")))?.to_string();
+                    let a = a.map_err(|x| ferr(pos, format!("<{name}>: bad attribute: {}", quote(&x.to_string()))))?;
+                    let v = a.unescape_value().map_err(|x| ferr(pos, format!("<{name}>: bad attribute value: {}", quote(&x.to_string()))))?.to_string();
                     attrs.push((String::from_utf8_lossy(a.key.local_name().as_ref()).to_string(), v));
                 }
                 let get = |k: &str| attrs.iter().find(|(n, _)| n == k).map(|(_, v)| v.clone());
                 let num = |k: &str| -> Result<f64, TsplineError> {
                     let v = get(k).ok_or_else(|| ferr(pos, format!("<{name}> lacks attribute {k}")))?;
-                    let x: f64 = v.trim().parse().map_err(|_| ferr(pos, format!("<{name}> {k}=\"{v}\" is not a number")))?;
+                    let x: f64 = v.trim().parse().map_err(|_| ferr(pos, format!("<{name}> {k}=\"{}\" is not a number", quote(&v))))?;
                     if !x.is_finite() {
                         return Err(ferr(pos, format!("<{name}> {k} is not finite")));
                     }
@@ -245,14 +246,14 @@ pub fn read(data: &[u8]) -> Result<TMeshFile, TsplineError> {
                 };
                 let uint = |k: &str| -> Result<usize, TsplineError> {
                     let v = get(k).ok_or_else(|| ferr(pos, format!("<{name}> lacks attribute {k}")))?;
-                    v.trim().parse().map_err(|_| ferr(pos, format!("<{name}> {k}=\"{v}\" is not a non-negative integer")))
+                    v.trim().parse().map_err(|_| ferr(pos, format!("<{name}> {k}=\"{}\" is not a non-negative integer", quote(&v))))
                 };
                 match (stack.len(), name.as_str()) {
                     (0, "tmesh") => {
                         root_seen = true;
                         let ns = attrs.iter().find(|(n, _)| n == "xmlns").map(|(_, v)| v.as_str()).unwrap_or("");
                         if ns != NAMESPACE {
-                            return Err(ferr(pos, format!("<tmesh> namespace is \"{ns}\", expected \"{NAMESPACE}\"")));
+                            return Err(ferr(pos, format!("<tmesh> namespace is \"{}\", expected \"{NAMESPACE}\"", quote(ns))));
                         }
                         let k = uint("degree")?;
                         degree = Some(Degree::from_u32(k as u32).ok_or_else(|| ferr(pos, format!("degree {k} is not supported (1 or 3)")))?);
@@ -302,7 +303,7 @@ pub fn read(data: &[u8]) -> Result<TMeshFile, TsplineError> {
                     "gt" => ">",
                     "quot" => "\"",
                     "apos" => "'",
-                    _ => return Err(ferr(pos, format!("unknown entity &{n};"))),
+                    _ => return Err(ferr(pos, format!("unknown entity &{};", quote(&n)))),
                 });
             }
             Event::End(_) => {
@@ -326,7 +327,7 @@ pub fn read(data: &[u8]) -> Result<TMeshFile, TsplineError> {
                         let (count, v) = cells.as_mut().unwrap();
                         let mut ids = Vec::with_capacity(*count * 4);
                         for tok in text.split_ascii_whitespace() {
-                            ids.push(tok.parse::<u32>().map_err(|_| ferr(tp, format!("<cells>: \"{tok}\" is not a point index")))?);
+                            ids.push(tok.parse::<u32>().map_err(|_| ferr(tp, format!("<cells>: \"{}\" is not a point index", quote(tok))))?);
                         }
                         if ids.len() != *count * 4 {
                             return Err(ferr(tp, format!("<cells count=\"{count}\"> holds {} indices, expected {}", ids.len(), *count * 4)));
@@ -338,7 +339,7 @@ pub fn read(data: &[u8]) -> Result<TMeshFile, TsplineError> {
                         let mut bit = false;
                         let total = m.width * m.height;
                         for tok in text.split_ascii_whitespace() {
-                            let n: usize = tok.parse().map_err(|_| ferr(tp, format!("<mask>: \"{tok}\" is not a run length")))?;
+                            let n: usize = tok.parse().map_err(|_| ferr(tp, format!("<mask>: \"{}\" is not a run length", quote(tok))))?;
                             if m.bits.len() + n > total {
                                 return Err(ferr(tp, format!("<mask>: runs exceed {}×{} cells", m.width, m.height)));
                             }
@@ -376,9 +377,9 @@ pub fn read(data: &[u8]) -> Result<TMeshFile, TsplineError> {
 fn parse_f64s(text: &str) -> Result<Vec<f64>, String> {
     let mut v = Vec::new();
     for tok in text.split_ascii_whitespace() {
-        let x: f64 = tok.parse().map_err(|_| format!("\"{tok}\" is not a number"))?;
+        let x: f64 = tok.parse().map_err(|_| format!("\"{}\" is not a number", quote(tok)))?;
         if !x.is_finite() {
-            return Err(format!("\"{tok}\" is not finite"));
+            return Err(format!("\"{}\" is not finite", quote(tok)));
         }
         v.push(x);
     }
