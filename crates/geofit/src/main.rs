@@ -6,6 +6,7 @@
 
 mod cmd;
 mod config;
+mod mesh_output;
 mod report;
 mod terrain_io;
 mod error;

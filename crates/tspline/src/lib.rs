@@ -11,6 +11,7 @@
 //!   `coarsen`: merging back the splits the tolerance did not need; [`tolerance`]: what the
 //!   fit accepts per cell; [`blunders`]: spikes found before a fit.
 //! - [`seams`]: tiles of a raster plan made C0 across their seams (stitch, continuity).
+//! - [`tessellate`]: the surface as a coloured triangle mesh with draped cell edges (glTF/OBJ scene).
 //!
 //! Where the spec's ambiguities are decided (doc comments there): A1, A2, A15 in [`eval`];
 //! A7–A12, A17, A19 in [`fit`]; A13, A14, A22 in [`mesh`]; A16 (formats: GDAL rasters in, the
@@ -38,6 +39,7 @@ pub mod rtree_pages;
 pub mod seams;
 pub mod tolerance;
 pub mod sparse;
+pub mod tessellate;
 pub mod tmb;
 #[cfg(test)]
 mod testing;

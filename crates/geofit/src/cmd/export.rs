@@ -1,20 +1,20 @@
 //! `geofit export`: CityGML buildings as triangle meshes (glb, glTF, OBJ) for viewers and CAD;
-//! a T-mesh (`.tmesh`, recognised by its root element) is tessellated by `geofit surface`'s code.
+//! a T-mesh (`.tmesh`, recognised by its root element) is tessellated as `geofit surface` does it
+//! (`crate::mesh_output`, shared by both commands).
 //!
 //! The CityGML → scene mapping lives here (which polygons, which node, which material); the
 //! triangulation and the file formats are `mesh_export`'s.
 
 use std::collections::HashSet;
-use std::path::{Path, PathBuf};
 
 use citygml_io::crs::proj_crs;
 use citygml_io::{CityModel, CityObject, Polygon, SurfaceType};
-use clap::{Args as ClapArgs, ValueEnum};
+use clap::Args as ClapArgs;
 use mesh_export::{GltfBuffer, Material, MeshNode, Scene};
 use serde::Serialize;
 
-use crate::cmd::surface::{tessellate, SurfaceOptions};
 use crate::config::{write_atomic, Config, Input, Output};
+use crate::mesh_output::{file_name, tessellate, Format, SurfaceOptions};
 use crate::report::{write_json_report, ReportKind};
 use crate::error::{CliError, CmdResult, Exit};
 
@@ -52,18 +52,6 @@ T-mesh input (a geofit .tmesh, root element <tmesh>) is tessellated exactly as `
 does it (same bytes): the surface with vertex colours by height or by |dz| against --reference,
 the T-mesh cell edges as a second node; --step, --reference, --no-mask and --device apply, the
 CityGML options do not.";
-
-/// Output format.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum, Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Format {
-    /// Binary glTF 2.0.
-    Glb,
-    /// glTF 2.0 JSON, buffer embedded as base64 (or in OUT.bin with --gltf-bin).
-    Gltf,
-    /// Wavefront OBJ, materials in OUT.mtl beside it.
-    Obj,
-}
 
 #[derive(ClapArgs, Debug)]
 #[command(about = "Export CityGML buildings (or a T-mesh surface) as triangle meshes: glb, glTF or OBJ (+MTL)", after_help = EXAMPLE)]
@@ -490,12 +478,6 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         crate::say!("{f}");
     }
     Ok(if findings.is_empty() { Exit::Ok } else { Exit::Findings })
-}
-
-fn file_name(p: &Path) -> Result<String, CliError> {
-    p.file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .ok_or_else(|| CliError::usage(format!("{}: not a file name", PathBuf::from(p).display())))
 }
 
 #[cfg(test)]

@@ -1,0 +1,128 @@
+//! Mesh outputs shared by `geofit surface` and `geofit export`: the output [`Format`], the
+//! T-mesh tessellation options and the glue around `tspline::tessellate` (device, reference
+//! raster, writing). Here rather than in either command so that no subcommand imports another.
+
+use std::path::Path;
+
+use clap::{Args as ClapArgs, ValueEnum};
+use raster_io::MissingCorners;
+use serde::Serialize;
+use tspline::format::TMeshFile;
+use tspline::tessellate::{Colouring, SampleGrid, TessellateError};
+use tspline::PbSpline;
+
+use crate::config::{write_atomic, Config, Output};
+use crate::error::{CliError, CmdResult, Exit};
+use crate::terrain_io::{read_raster_arg, select_device, tspline_err, Device};
+
+/// Output format.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Format {
+    /// Binary glTF 2.0.
+    Glb,
+    /// glTF 2.0 JSON, buffer embedded as base64 (or in OUT.bin with --gltf-bin).
+    Gltf,
+    /// Wavefront OBJ, materials in OUT.mtl beside it.
+    Obj,
+}
+
+/// How a T-mesh is tessellated; shared by `geofit surface` and `geofit export` (T-mesh input).
+#[derive(ClapArgs, Debug, Clone)]
+pub struct SurfaceOptions {
+    /// Sample spacing in parameter units (raster cells).
+    #[arg(long)]
+    pub step: Option<f64>,
+    /// Colour vertices by |dz| against this raster instead of by height.
+    #[arg(long)]
+    pub reference: Option<String>,
+    /// Ignore the data mask stored in the mesh.
+    #[arg(long)]
+    pub no_mask: bool,
+    /// Where the evaluation runs.
+    #[arg(long, value_enum, default_value_t = Device::Auto)]
+    pub device: Device,
+}
+
+impl SurfaceOptions {
+    /// The options a user set (for the error when they are given with CityGML input).
+    pub fn given(&self) -> Vec<&'static str> {
+        let mut v = Vec::new();
+        if self.step.is_some() {
+            v.push("--step");
+        }
+        if self.reference.is_some() {
+            v.push("--reference");
+        }
+        if self.no_mask {
+            v.push("--no-mask");
+        }
+        if !matches!(self.device, Device::Auto) {
+            v.push("--device");
+        }
+        v
+    }
+}
+
+/// Tessellates `file` (read from `name`) and writes it to `output` as `format`.
+pub fn tessellate(file: TMeshFile, name: &str, output: &Output, format: Format, opts: &SurfaceOptions, config: &Config) -> CmdResult {
+    if format == Format::Obj && output.path().is_none() {
+        return Err(CliError::usage("OBJ output of a surface needs a file (-o OUT.obj): its materials go to OUT.mtl beside it"));
+    }
+    let grid = SampleGrid::new(file.mesh.bounds(), opts.step).map_err(|e| match e {
+        TessellateError::Step(s) => CliError::usage(format!("--step must be positive, got {s}")),
+        TessellateError::TooManySamples { ns, nt } => CliError::usage(format!("{ns}×{nt} samples are too many; raise --step")),
+        e => CliError::internal(format!("surface: {e}")),
+    })?;
+    let ocl = select_device(opts.device, config)?;
+    let pb = match &ocl {
+        Some(o) => o.build_pbspline(&file.mesh).map_err(|e| tspline_err(name, e))?,
+        None => PbSpline::build(&file.mesh),
+    };
+    let z = match &ocl {
+        Some(o) => {
+            let sp = o.upload(&pb).map_err(|e| tspline_err(name, e))?;
+            o.eval_points(&sp, &grid.points).map_err(|e| tspline_err(name, e))?
+        }
+        None => pb.eval_z(&grid.points, true),
+    };
+    let reference = match &opts.reference {
+        Some(r) => Some(read_raster_arg(r)?.0),
+        None => None,
+    };
+    let sample_reference = |x: f64, y: f64| reference.as_ref().and_then(|r| r.sample(x, y, MissingCorners::Strict));
+    let colouring = if reference.is_some() { Colouring::ErrorAgainst(&sample_reference) } else { Colouring::Height };
+    let mut scene = tspline::tessellate::tessellate(&file, &pb, &grid, z, colouring, !opts.no_mask).map_err(|e| match e {
+        TessellateError::NoPointInMask => CliError::findings(format!("{name}: {e}")),
+        e => CliError::internal(format!("surface: {e}")),
+    })?;
+    scene.generator = Some("geofit surface".into());
+    write_surface(&scene, output, format)?;
+    Ok(Exit::Ok)
+}
+
+fn write_surface(scene: &mesh_export::Scene, output: &Output, format: Format) -> Result<(), CliError> {
+    let export_err = |e: mesh_export::ExportError| match e {
+        mesh_export::ExportError::Io(e) => CliError::io_out(e),
+        e => CliError::internal(format!("surface export: {e}")),
+    };
+    match format {
+        Format::Obj => {
+            let path = output.path().expect("checked by tessellate: OBJ goes to a file");
+            let mtl_path = path.with_extension("mtl");
+            let mtl_name = file_name(&mtl_path)?;
+            let (mut obj, mut mtl) = (Vec::new(), Vec::new());
+            mesh_export::write_obj(scene, &mut obj, Some((&mtl_name, &mut mtl))).map_err(export_err)?;
+            write_atomic(&mtl_path, |w| w.write_all(&mtl).map_err(CliError::io_out))?;
+            output.write_bytes(&obj)?;
+        }
+        Format::Gltf => output.write_with(|w| mesh_export::write_gltf(scene, w, mesh_export::GltfBuffer::Embedded).map_err(export_err))?,
+        Format::Glb => output.write_with(|w| mesh_export::write_glb(scene, w).map_err(export_err))?,
+    }
+    Ok(())
+}
+
+/// The last component of `p` (the name an OBJ's `mtllib` or a glTF's buffer `uri` refers to).
+pub fn file_name(p: &Path) -> Result<String, CliError> {
+    p.file_name().map(|n| n.to_string_lossy().into_owned()).ok_or_else(|| CliError::usage(format!("{}: not a file name", p.display())))
+}
