@@ -73,7 +73,12 @@ build: setup
 release: setup
 	$(CARGO) build --release -p geofit
 
+# The fuzz workspace (fuzz/) is built --locked by `make fuzz`: its lock must follow every path
+# dependency the library crates gain. Checked first (0.5 s) instead of after the tests.
 test: setup
+	@if cargo +nightly --version >/dev/null 2>&1; then \
+	  (cd fuzz && cargo +nightly metadata --locked --format-version 1 >/dev/null) || \
+	  { echo "test: fuzz/Cargo.lock is stale: run 'cd fuzz && cargo +nightly update --workspace --offline'" >&2; exit 1; }; fi
 	$(CARGO) test --workspace --no-fail-fast
 
 demo: setup release
