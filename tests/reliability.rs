@@ -10,7 +10,8 @@
 //! - errors quote at most ~200 bytes of the input;
 //! - `info` with stdout closed fails, `info -` on empty stdin says the input is empty;
 //! - temporaries of dead processes are removed by the next run in the directory;
-//! - `validate` with XSD refuses an element with 100,000 attributes in time.
+//! - `validate` with XSD refuses an element with 100,000 attributes in time;
+//! - `info` and `validate --no-xsd` of a 1 GiB CityGML tile stay under 200 MiB.
 
 mod common;
 
@@ -437,4 +438,92 @@ fn validate_refuses_an_element_with_100k_attributes_in_time() {
     assert!(t.elapsed() < Duration::from_secs(20), "{:?}", t.elapsed());
     assert!(e.contains("100001 attributes") && e.contains("Building"), "{}", &e[..e.len().min(2000)]);
     assert!(!e.contains("panicked"));
+}
+
+// ---------------------------------------------------------------------------------------------
+// 6. bounded memory
+
+/// Runs geofit with stdout and stderr to files in `dir`; returns the exit code, the child's peak
+/// resident set in MiB (wait4's rusage of that one process, so tests running beside it do not
+/// count) and its stdout.
+#[allow(clippy::zombie_processes)] // reaped by wait4, which std's Child::wait cannot replace
+fn run_measuring_rss(dir: &Path, args: &[&str]) -> (i32, f64, Vec<u8>) {
+    let out = dir.join("stdout");
+    let err = dir.join("stderr");
+    let child = common::geofit()
+        .args(args)
+        .stdin(Stdio::null())
+        .stdout(std::fs::File::create(&out).unwrap())
+        .stderr(std::fs::File::create(&err).unwrap())
+        .spawn()
+        .unwrap();
+    let pid = child.id() as libc::pid_t;
+    let mut status = 0;
+    // SAFETY: a zeroed rusage is a valid value for wait4 to fill; the child is ours and waited once.
+    let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
+    assert_eq!(unsafe { libc::wait4(pid, &mut status, 0, &mut usage) }, pid);
+    let stderr = std::fs::read_to_string(&err).unwrap();
+    assert!(libc::WIFEXITED(status), "{args:?} ended by a signal: {stderr}");
+    let peak_mib = usage.ru_maxrss as f64 / 1024.0; // kilobytes on Linux
+    (libc::WEXITSTATUS(status), peak_mib, std::fs::read(&out).unwrap())
+}
+
+/// NRW tile 332's 62 buildings repeated, each copy with its own gml:ids (and XLinks renamed
+/// with them), until the file has at least `min_bytes`; returns the number of copies.
+fn repeated_tile(tile: &Path, dest: &Path, min_bytes: u64) -> u64 {
+    use std::io::Write;
+    let src = std::fs::read_to_string(tile).unwrap();
+    let first = src.find("<core:cityObjectMember>").unwrap();
+    let end_tag = "</core:cityObjectMember>";
+    let last = src.rfind(end_tag).unwrap() + end_tag.len();
+    let (head, members, tail) = (&src[..first], &src[first..last], &src[last..]);
+    let mut w = std::io::BufWriter::with_capacity(1 << 20, std::fs::File::create(dest).unwrap());
+    w.write_all(head.as_bytes()).unwrap();
+    let mut copies = 0;
+    while (head.len() + tail.len()) as u64 + copies * members.len() as u64 + 1000 < min_bytes {
+        let renamed = members
+            .replace("gml:id=\"", &format!("gml:id=\"c{copies}_"))
+            .replace("xlink:href=\"#", &format!("xlink:href=\"#c{copies}_"));
+        w.write_all(renamed.as_bytes()).unwrap();
+        copies += 1;
+    }
+    w.write_all(tail.as_bytes()).unwrap();
+    w.flush().unwrap();
+    copies
+}
+
+fn json_number(report: &[u8], pointer: &str) -> u64 {
+    let v: serde_json::Value = serde_json::from_slice(report).unwrap();
+    v.pointer(pointer).and_then(|n| n.as_u64()).unwrap_or_else(|| panic!("no {pointer} in the report"))
+}
+
+/// `info` and `validate --no-xsd` read CityGML object by object from a memory map that releases
+/// the pages behind the reader, and the line index is built as the reader goes: on a 1 GiB tile
+/// (read whole, the RSS was the file plus ~110 MB) both stay under 200 MiB, and what they report
+/// is the single tile's counts and findings times the number of copies.
+#[test]
+fn citygml_of_1_gib_is_summarised_and_validated_in_200_mib() {
+    let Some(tile) = common::fixture("citygml/nrw/LoD2_32_332_5729_1_NW.gml") else { return };
+    let dir = common::tempdir();
+    let (_, _, one_info) = run_measuring_rss(dir.path(), &["info", "--json", s(&tile)]);
+    let (_, _, one_check) = run_measuring_rss(dir.path(), &["-q", "validate", "--no-xsd", "--json", s(&tile)]);
+    let big = dir.path().join("big.gml");
+    let copies = repeated_tile(&tile, &big, 1 << 30);
+    assert!(std::fs::metadata(&big).unwrap().len() >= 1 << 30);
+
+    let (code, peak, info) = run_measuring_rss(dir.path(), &["info", "--json", s(&big)]);
+    assert_eq!(code, 0);
+    eprintln!("info of {copies} copies of tile 332: peak RSS {peak:.0} MiB");
+    assert!(peak <= 200.0, "info: peak RSS {peak:.0} MiB for a 1 GiB file");
+    for key in ["/top_level_objects", "/polygons", "/points", "/xlinks_resolved"] {
+        assert_eq!(json_number(&info, key), copies * json_number(&one_info, key), "{key}");
+    }
+
+    let (code, peak, check) = run_measuring_rss(dir.path(), &["-q", "validate", "--no-xsd", "--json", s(&big)]);
+    assert_eq!(code, 1, "the tile has findings, so has the big file");
+    eprintln!("validate --no-xsd of the same: peak RSS {peak:.0} MiB");
+    assert!(peak <= 200.0, "validate --no-xsd: peak RSS {peak:.0} MiB for a 1 GiB file");
+    let findings = |r: &[u8]| serde_json::from_slice::<serde_json::Value>(r).unwrap()["geometry"]["findings"].as_array().unwrap().len() as u64;
+    assert_eq!(findings(&check), copies * findings(&one_check));
+    assert_eq!(json_number(&check, "/geometry/features"), copies * json_number(&one_check, "/geometry/features"));
 }

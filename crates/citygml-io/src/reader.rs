@@ -339,7 +339,7 @@ pub(crate) struct Parser<'a> {
     r: Reader<&'a [u8]>,
     pub src: &'a [u8],
     base: usize,
-    pub lines: Arc<LineIndex>,
+    pub lines: Arc<LineIndex<'a>>,
     bindings: Vec<Binding>,
     depth: usize,
     /// The thematic surface (type, gml:id) the parser is inside, given to its polygons.
@@ -388,11 +388,15 @@ fn prefix_key(p: &[u8]) -> Option<u64> {
     Some(k)
 }
 
+/// How far ahead of the reader the next namespace declaration is looked for (see
+/// `Parser::xmlns_bound`): one search per MiB of declaration-free document.
+const XMLNS_LOOKAHEAD: usize = 1 << 20;
+
 static XMLNS: std::sync::LazyLock<memchr::memmem::Finder<'static>> =
     std::sync::LazyLock::new(|| memchr::memmem::Finder::new(b"xmlns"));
 
 impl<'a> Parser<'a> {
-    pub fn new(src: &'a [u8], lines: Arc<LineIndex>, range: Range<usize>, bindings: Vec<Binding>) -> Parser<'a> {
+    pub fn new(src: &'a [u8], lines: Arc<LineIndex<'a>>, range: Range<usize>, bindings: Vec<Binding>) -> Parser<'a> {
         let mut r = Reader::from_reader(&src[range.clone()]);
         let c = r.config_mut();
         c.trim_text(false);
@@ -479,12 +483,12 @@ impl<'a> Parser<'a> {
     fn declare(&mut self, e: &BytesStart<'_>, depth: usize, start: usize) {
         let end = self.pos();
         if self.next_xmlns < start {
-            self.next_xmlns = XMLNS.find(&self.src[start..self.limit]).map_or(usize::MAX, |i| start + i);
+            self.next_xmlns = self.xmlns_bound(start);
         }
         if self.next_xmlns >= end {
             return;
         }
-        self.next_xmlns = XMLNS.find(&self.src[end..self.limit]).map_or(usize::MAX, |i| end + i);
+        self.next_xmlns = self.xmlns_bound(end);
         let raw = e.attributes_raw();
         if !memchr::memchr_iter(b'x', raw).any(|i| raw[i..].starts_with(b"xmlns")) {
             return;
@@ -498,6 +502,20 @@ impl<'a> Parser<'a> {
                 self.bindings.push(Binding { prefix, ns: classify_ns(&a.value), uri: a.value.to_vec(), depth });
                 self.ns_cache = NS_CACHE_EMPTY;
             }
+        }
+    }
+
+    /// A lower bound of the next `xmlns` at or after `from`: its offset when there is one within
+    /// [`XMLNS_LOOKAHEAD`] bytes, else the offset up to which there is none. Bounded, so that a
+    /// document without further declarations is not scanned to its end ahead of the reader
+    /// (that would touch every page of a memory-mapped tile: docs/decisions.md#streaming-citygml).
+    fn xmlns_bound(&self, from: usize) -> usize {
+        let window_end = from.saturating_add(XMLNS_LOOKAHEAD).min(self.limit);
+        match XMLNS.find(&self.src[from..window_end]) {
+            Some(i) => from + i,
+            None if window_end == self.limit => usize::MAX,
+            // an `xmlns` may straddle the window's end
+            None => window_end - (b"xmlns".len() - 1),
         }
     }
 
@@ -1579,7 +1597,7 @@ fn find_id(local_ids: &FxMap<String, IdEntry>, global: &mut dyn GlobalIds, id: &
 /// Context to re-parse an id'd element from its own bytes.
 pub(crate) struct Reparse<'s, 'a> {
     pub src: &'a [u8],
-    pub lines: &'s Arc<LineIndex>,
+    pub lines: &'s Arc<LineIndex<'a>>,
     pub bindings: &'s [Binding],
 }
 
@@ -2009,9 +2027,9 @@ pub(crate) fn finish_envelopes(obj: &mut CityObject) {
 /// semantics, and every other id'd element (so a reference to a city object can say what it
 /// points to; where an id repeats, a geometry wins). Built only when an XLink points outside
 /// its own top-level object.
-pub(crate) fn build_index(
-    src: &[u8],
-    lines: &Arc<LineIndex>,
+pub(crate) fn build_index<'a>(
+    src: &'a [u8],
+    lines: &Arc<LineIndex<'a>>,
     range: Range<usize>,
 ) -> Result<FxMap<String, IdEntry>, ReadError> {
     let mut p = Parser::new(src, lines.clone(), range, Vec::new());

@@ -21,7 +21,7 @@ const BOM: &[u8] = b"\xEF\xBB\xBF";
 pub struct ObjectStream<'a> {
     p: Parser<'a>,
     src: &'a [u8],
-    lines: Arc<LineIndex>,
+    lines: Arc<LineIndex<'a>>,
     root_bindings: Vec<Binding>,
     body: std::ops::Range<usize>,
     version: CityGmlVersion,
@@ -36,7 +36,7 @@ pub struct ObjectStream<'a> {
 struct LazyIndex<'s, 'a> {
     index: &'s mut Option<FxMap<String, IdEntry>>,
     src: &'a [u8],
-    lines: &'s Arc<LineIndex>,
+    lines: &'s Arc<LineIndex<'a>>,
     body: std::ops::Range<usize>,
 }
 
@@ -125,6 +125,15 @@ impl<'a> ObjectStream<'a> {
         self.declared_srs.clone().or_else(|| self.p.first_srs.clone())
     }
 
+    /// Bytes of the document the stream has read so far: what lies before this offset is not
+    /// needed again, except to re-parse the target of an XLink into an earlier object (and for
+    /// the one-off id index such a link builds). A caller holding the document in a memory map
+    /// can release the pages behind it (docs/decisions.md#streaming-citygml); it is also the
+    /// natural measure of progress.
+    pub fn consumed(&self) -> usize {
+        self.p.pos()
+    }
+
     /// XLinks met so far whose target is not in the document.
     pub fn unresolved_xlinks(&self) -> &[XLinkRef] {
         &self.unresolved
@@ -150,6 +159,10 @@ impl<'a> ObjectStream<'a> {
                             self.unresolved.extend(un);
                         }
                         finish_envelopes(&mut obj);
+                        // The line index counts from its last lookup: moved to the object's end
+                        // now, the next object's first lookup does not read back through bytes
+                        // the caller may have released meanwhile (see `consumed`).
+                        self.lines.line_col(self.p.pos());
                         return Ok(Some(obj));
                     }
                     let l = t.local();

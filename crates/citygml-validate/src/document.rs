@@ -110,10 +110,21 @@ pub enum DocumentError {
     Internal(String),
 }
 
-/// Validates one document held in memory. The XSD check runs on its own thread while the
-/// geometry is read and checked; `progress(features)` is called after each batch of checked
-/// features. `name` is used in the report and in error messages.
-pub fn validate_document(bytes: &[u8], name: &str, checks: &Checks, progress: &dyn Fn(usize)) -> Result<Report, DocumentError> {
+/// How far the geometry check has come, given to the progress callback of [`validate_document`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Progress {
+    /// Top-level features read and checked so far.
+    pub features: usize,
+    /// Bytes of the document read so far: the geometry check does not look before this offset
+    /// again (a memory-mapped document can release those pages), and against the file size it
+    /// gives an ETA.
+    pub bytes_read: usize,
+}
+
+/// Validates one document held in memory (or memory-mapped). The XSD check runs on its own
+/// thread while the geometry is read and checked; `progress` is called after each batch of
+/// checked features. `name` is used in the report and in error messages.
+pub fn validate_document(bytes: &[u8], name: &str, checks: &Checks, progress: &dyn Fn(Progress)) -> Result<Report, DocumentError> {
     let version = sniff_version(bytes);
     let (xsd, geometry) = std::thread::scope(|s| {
         let xsd_job = s.spawn(|| xsd_report(bytes, name, &checks.xsd, version));
@@ -159,18 +170,18 @@ fn xsd_report(bytes: &[u8], name: &str, schemas: &Result<SchemaSet, String>, ver
 }
 
 /// Objects are read one by one and checked in parallel batches: memory stays bounded.
-fn check_geometry(bytes: &[u8], opts: &Options, progress: &dyn Fn(usize)) -> Result<GeometryReport, ReadError> {
+fn check_geometry(bytes: &[u8], opts: &Options, progress: &dyn Fn(Progress)) -> Result<GeometryReport, ReadError> {
     let mut stream = ObjectStream::new(bytes)?;
     let mut findings = Vec::new();
     let mut batch = Vec::new();
     let mut features = 0usize;
-    for obj in stream.by_ref() {
+    while let Some(obj) = stream.next() {
         batch.push(obj?);
         if batch.len() == 256 {
             features += batch.len();
             findings.extend(validate_objects(&batch, opts));
             batch.clear();
-            progress(features);
+            progress(Progress { features, bytes_read: stream.consumed() });
         }
     }
     features += batch.len();

@@ -6,6 +6,7 @@ use std::io::{self, BufRead, BufReader, IsTerminal, Read, Write};
 use std::path::{Path, PathBuf};
 
 use crate::error::{CliError, Exit};
+use input_limits::mapped::InputBytes;
 
 /// Options shared by every subcommand.
 #[derive(Debug, Clone, Default)]
@@ -66,6 +67,21 @@ impl Input {
     /// the budget, with exit 3 naming the limit instead of the machine running out of memory.
     pub fn read_all(&self) -> Result<Vec<u8>, CliError> {
         self.read_all_within(input_limits::budget::ByteBudget::current())
+    }
+
+    /// The whole input for a reader that streams through it once (the CityGML object stream):
+    /// a regular file is memory-mapped, whatever its size, and the reader releases the pages
+    /// behind it (`InputBytes::release_before`), so memory stays bounded by the largest object
+    /// (docs/decisions.md#streaming-citygml); anything else is read whole within the byte budget.
+    pub fn map_or_read(&self) -> Result<InputBytes, CliError> {
+        let unreadable = |e: io::Error| CliError::unreadable(format!("{}: {e}", self.display_name()));
+        if let Some(p) = self.path() {
+            let file = File::open(p).map_err(unreadable)?;
+            if file.metadata().map_err(unreadable)?.is_file() {
+                return InputBytes::map(&file).map_err(unreadable);
+            }
+        }
+        self.read_all().map(InputBytes::Read)
     }
 
     fn read_all_within(&self, budget: input_limits::budget::ByteBudget) -> Result<Vec<u8>, CliError> {

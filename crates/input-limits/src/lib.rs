@@ -7,13 +7,15 @@
 //! - [`las`]: whether the counts and offsets a LAS/LAZ header claims fit the file, checked
 //!   before the `las`/`laz` crates size allocations by them;
 //! - [`budget`]: how many cells, points or bytes a command may hold, from the memory available
-//!   or an environment variable.
+//!   or an environment variable;
+//! - [`mapped`]: a whole input as one slice that a streaming reader holds only ahead of itself.
 //!
 //! No dependency on any format crate: every reader of untrusted text or binary can use it.
 
 pub mod budget;
 pub mod las;
 pub mod lines;
+pub mod mapped;
 
 use std::borrow::Cow;
 

@@ -213,7 +213,8 @@ fn summarize(input: &Input) -> Result<Summary, CliError> {
         }
         _ => {}
     }
-    let src = input.read_all()?;
+    // Mapped: the CityGML stream below holds only the pages ahead of it.
+    let src = input.map_or_read()?;
     // Nothing to summarise: say so, rather than what the first format tried found missing.
     let text = src.strip_prefix(b"\xEF\xBB\xBF".as_slice()).unwrap_or(&src);
     // (a `.gml` file gets the CityGML reader's located message instead)
@@ -246,8 +247,9 @@ fn summarize(input: &Input) -> Result<Summary, CliError> {
         (0, 0, 0, 0, 0, 0, 0usize);
     let mut findings: Vec<String> = Vec::new();
     let mut triangles = 0usize;
-    for obj in &mut stream {
+    while let Some(obj) = stream.next() {
         let obj: CityObject = obj.map_err(located)?;
+        src.release_before(stream.consumed());
         // One href may stand for several polygons (a CompositeSurface): count hrefs, not copies.
         let mut hrefs = std::collections::HashSet::new();
         top += 1;
