@@ -30,6 +30,7 @@ pub mod crs;
 pub mod error;
 pub mod gdal_io;
 pub mod limits;
+pub mod point_batches;
 pub mod points;
 pub mod raster;
 

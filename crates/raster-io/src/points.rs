@@ -17,6 +17,7 @@ use input_limits::quote;
 
 use crate::error::PointsError;
 use crate::limits::{PointBudget, READ_BYTES_PER_POINT};
+use crate::point_batches::{PointBatches, XyzBatches};
 
 /// Scattered 3D points with an optional CRS.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -75,56 +76,106 @@ fn column_role(name: &str) -> Option<usize> {
 }
 
 /// Reads XYZ/CSV text (see the module docs). `name` is used in error messages.
-pub fn read_xyz<R: BufRead>(mut reader: R, name: &str) -> Result<PointCloud, PointsError> {
-    let mut points = Vec::new();
-    let mut columns: [usize; 3] = [0, 1, 2];
-    let mut seen_content = false;
-    let mut line_no = 0usize;
-    let mut buf = String::new();
+pub fn read_xyz<R: BufRead>(reader: R, name: &str) -> Result<PointCloud, PointsError> {
+    collect(XyzBatches::new(reader, name), name, None)
+}
+
+/// The points of `batches` in one cloud, within the point budget.
+fn collect(batches: impl Iterator<Item = Result<Vec<[f64; 3]>, PointsError>>, name: &str, crs: Option<String>) -> Result<PointCloud, PointsError> {
     let budget = PointBudget::for_cost(READ_BYTES_PER_POINT);
-    loop {
-        buf.clear();
-        let n = read_line(&mut reader, &mut buf, name, line_no)?;
-        if n == 0 {
-            break;
+    let mut points = Vec::new();
+    for batch in batches {
+        let batch = batch?;
+        check_budget(points.len() + batch.len() - 1, &budget, name)?;
+        points.extend(batch);
+    }
+    Ok(PointCloud { points, crs })
+}
+
+/// The line-by-line state of an XYZ/CSV reader: which columns hold x, y, z once a header named
+/// them, and how data lines are split then.
+#[derive(Debug, Default)]
+pub(crate) struct XyzLines {
+    line_no: usize,
+    buf: String,
+    seen_content: bool,
+    /// `Some(csv)` after a header that named the columns: data lines are then split as the
+    /// header was (empty CSV fields count).
+    named: Option<(bool, [usize; 3])>,
+}
+
+impl XyzLines {
+    /// The next point, `None` at the end of the text.
+    pub(crate) fn next_point<R: BufRead>(&mut self, reader: &mut R, name: &str) -> Result<Option<[f64; 3]>, PointsError> {
+        loop {
+            self.buf.clear();
+            if read_line(reader, &mut self.buf, name, self.line_no)? == 0 {
+                return Ok(None);
+            }
+            self.line_no += 1;
+            let line = std::mem::take(&mut self.buf);
+            let point = match self.named {
+                Some((csv, columns)) => self.named_line(&line, csv, columns, name),
+                None => self.plain_line(&line, name),
+            };
+            self.buf = line;
+            if let Some(p) = point? {
+                return Ok(Some(p));
+            }
         }
-        line_no += 1;
-        let line = buf.trim_start_matches('\u{feff}').trim();
+    }
+
+    /// A line before any header named the columns: the first content line may be that header.
+    fn plain_line(&mut self, raw: &str, name: &str) -> Result<Option<[f64; 3]>, PointsError> {
+        let line = raw.trim_start_matches('\u{feff}').trim();
         if line.is_empty() || line.starts_with('#') || line.starts_with('%') || line.starts_with('>') {
-            continue;
+            return Ok(None);
         }
         let fields: Vec<&str> = split_fields(line).collect();
-        let first_content = !seen_content;
-        seen_content = true;
+        let first_content = !self.seen_content;
+        self.seen_content = true;
         if first_content && fields.iter().any(|f| f.parse::<f64>().is_err() && !f.is_empty()) {
-            // A header: map named columns; the CSV index column ("" or "id") is just skipped.
-            let raw: Vec<&str> = line.split(|c: char| c == ',' || c == ';' || (c.is_whitespace() && !line.contains(','))).collect();
-            let mut found = [None, None, None];
-            for (i, f) in raw.iter().enumerate() {
-                if let Some(role) = column_role(f) {
-                    if found[role].is_none() {
-                        found[role] = Some(i);
-                    }
+            self.header(line, name)?;
+            return Ok(None);
+        }
+        parse_xyz_fields(&fields, [0, 1, 2], name, self.line_no).map(Some)
+    }
+
+    /// A header: maps named columns (the CSV index column, "" or "id", is just skipped); a
+    /// header without recognisable names means the first three columns.
+    fn header(&mut self, line: &str, name: &str) -> Result<(), PointsError> {
+        let raw: Vec<&str> = line.split(|c: char| c == ',' || c == ';' || (c.is_whitespace() && !line.contains(','))).collect();
+        let mut found = [None, None, None];
+        for (i, f) in raw.iter().enumerate() {
+            if let Some(role) = column_role(f) {
+                if found[role].is_none() {
+                    found[role] = Some(i);
                 }
             }
-            if let [Some(x), Some(y), Some(z)] = found {
-                columns = [x, y, z];
-                // Header columns count empty CSV fields; data lines must then be split the same way.
-                return read_xyz_columns(reader, name, line_no, columns, line.contains(','), points);
-            }
-            if raw.iter().all(|f| f.trim().parse::<f64>().is_err()) {
-                continue; // a header without recognisable names: first three columns
-            }
-            return Err(PointsError::Line {
-                name: name.into(),
-                line: line_no,
-                message: format!("expected three numbers x y z, found {:?}", quote(line)),
-            });
         }
-        check_budget(points.len(), &budget, name)?;
-        points.push(parse_xyz_fields(&fields, columns, name, line_no)?);
+        if let [Some(x), Some(y), Some(z)] = found {
+            self.named = Some((line.contains(','), [x, y, z]));
+            return Ok(());
+        }
+        if raw.iter().all(|f| f.trim().parse::<f64>().is_err()) {
+            return Ok(());
+        }
+        Err(PointsError::Line {
+            name: name.into(),
+            line: self.line_no,
+            message: format!("expected three numbers x y z, found {:?}", quote(line)),
+        })
     }
-    finish(points, name)
+
+    /// A data line after a header that named the columns.
+    fn named_line(&self, raw: &str, csv: bool, columns: [usize; 3], name: &str) -> Result<Option<[f64; 3]>, PointsError> {
+        let line = raw.trim();
+        if line.is_empty() || line.starts_with('#') {
+            return Ok(None);
+        }
+        let fields: Vec<&str> = if csv { line.split([',', ';']).map(str::trim).collect() } else { split_fields(line).collect() };
+        parse_xyz_fields(&fields, columns, name, self.line_no).map(Some)
+    }
 }
 
 /// One line through the bounded reader (`/dev/zero` has no newline): errors name the line.
@@ -141,39 +192,6 @@ fn check_budget(n: usize, budget: &PointBudget, name: &str) -> Result<(), Points
         return Err(PointsError::TooLarge { name: name.into(), message: format!("more than {}", budget.describe()) });
     }
     Ok(())
-}
-
-/// Continues reading after a header that named the x/y/z columns.
-fn read_xyz_columns<R: BufRead>(
-    mut reader: R,
-    name: &str,
-    mut line_no: usize,
-    columns: [usize; 3],
-    csv: bool,
-    mut points: Vec<[f64; 3]>,
-) -> Result<PointCloud, PointsError> {
-    let mut buf = String::new();
-    let budget = PointBudget::for_cost(READ_BYTES_PER_POINT);
-    loop {
-        buf.clear();
-        let n = read_line(&mut reader, &mut buf, name, line_no)?;
-        if n == 0 {
-            break;
-        }
-        line_no += 1;
-        let line = buf.trim();
-        if line.is_empty() || line.starts_with('#') {
-            continue;
-        }
-        let fields: Vec<&str> = if csv {
-            line.split([',', ';']).map(str::trim).collect()
-        } else {
-            split_fields(line).collect()
-        };
-        check_budget(points.len(), &budget, name)?;
-        points.push(parse_xyz_fields(&fields, columns, name, line_no)?);
-    }
-    finish(points, name)
 }
 
 fn parse_xyz_fields(fields: &[&str], columns: [usize; 3], name: &str, line: usize) -> Result<[f64; 3], PointsError> {
@@ -198,65 +216,108 @@ fn parse_xyz_fields(fields: &[&str], columns: [usize; 3], name: &str, line: usiz
     Ok(p)
 }
 
-fn finish(points: Vec<[f64; 3]>, name: &str) -> Result<PointCloud, PointsError> {
-    if points.is_empty() {
-        return Err(PointsError::Empty { name: name.into(), message: "no points (empty file or only comments)".into() });
-    }
-    Ok(PointCloud { points, crs: None })
-}
-
 /// Reads a LAS/LAZ file; `class = Some(c)` keeps only points of ASPRS class `c`
 /// (2 = ground). Coordinates are the scaled/offset real-world values.
 pub fn read_las(path: &Path, class: Option<u8>) -> Result<PointCloud, PointsError> {
-    let name = path.display().to_string();
-    let las_err = |e: las::Error| PointsError::Las { name: name.clone(), message: e.to_string() };
-    guard_las(path, &name)?;
-    let mut reader = las::Reader::from_path(path).map_err(las_err)?;
-    let crs = reader
-        .header()
-        .get_wkt_crs_bytes()
-        .map(|b| String::from_utf8_lossy(b).trim_end_matches('\0').trim().to_string())
-        .filter(|s| !s.is_empty())
-        .or_else(|| geotiff_crs_wkt(reader.header()));
-    let total = reader.header().number_of_points();
-    let mut points = Vec::new();
-    let mut read = 0u64;
-    let mut classes_seen = [0u64; 256];
-    let budget = PointBudget::for_cost(READ_BYTES_PER_POINT);
-    while read < total {
-        let batch = reader.read_points(1 << 16).map_err(las_err)?;
-        if batch.is_empty() {
-            break;
-        }
-        read += batch.len() as u64;
-        for (i, ((x, y), (z, c))) in batch.x().zip(batch.y()).zip(batch.z().zip(batch.classification())).enumerate() {
-            classes_seen[c as usize] += 1;
-            if class.is_some_and(|k| k != c) {
-                continue;
-            }
-            if !(x.is_finite() && y.is_finite() && z.is_finite()) {
-                return Err(PointsError::Las {
-                    name: name.clone(),
-                    message: format!("point {} has a non-finite coordinate", read as usize - batch.len() + i),
-                });
-            }
-            check_budget(points.len(), &budget, &name)?;
-            points.push([x, y, z]);
-        }
+    let points = LasPoints::open(path, class)?;
+    let crs = points.crs.clone();
+    collect(points, &path.display().to_string(), crs)
+}
+
+/// A LAS/LAZ file in the `las` crate's batches, filtered by class (see `point_batches`).
+pub struct LasPoints {
+    reader: las::Reader,
+    name: String,
+    class: Option<u8>,
+    /// The file's CRS as WKT (WKT VLR, else GeoTIFF keys).
+    pub crs: Option<String>,
+    total: u64,
+    read: u64,
+    kept: u64,
+    classes_seen: [u64; 256],
+    done: bool,
+}
+
+impl LasPoints {
+    pub fn open(path: &Path, class: Option<u8>) -> Result<LasPoints, PointsError> {
+        let name = path.display().to_string();
+        guard_las(path, &name)?;
+        let reader = las::Reader::from_path(path).map_err(|e| PointsError::Las { name: name.clone(), message: e.to_string() })?;
+        let crs = reader
+            .header()
+            .get_wkt_crs_bytes()
+            .map(|b| String::from_utf8_lossy(b).trim_end_matches('\0').trim().to_string())
+            .filter(|s| !s.is_empty())
+            .or_else(|| geotiff_crs_wkt(reader.header()));
+        let total = reader.header().number_of_points();
+        Ok(LasPoints { reader, name, class, crs, total, read: 0, kept: 0, classes_seen: [0; 256], done: false })
     }
-    if read < total {
-        return Err(PointsError::Las { name, message: format!("header announces {total} points but the file holds {read}") });
+
+    /// The next batch of kept points; an empty batch at the end of the file.
+    fn batch(&mut self) -> Result<Vec<[f64; 3]>, PointsError> {
+        let las_err = |e: las::Error| PointsError::Las { name: self.name.clone(), message: e.to_string() };
+        let mut kept = Vec::new();
+        while kept.is_empty() && self.read < self.total {
+            let batch = self.reader.read_points(crate::point_batches::BATCH_POINTS as u64).map_err(las_err)?;
+            if batch.is_empty() {
+                break;
+            }
+            let first = self.read as usize;
+            self.read += batch.len() as u64;
+            for (i, ((x, y), (z, c))) in batch.x().zip(batch.y()).zip(batch.z().zip(batch.classification())).enumerate() {
+                self.classes_seen[c as usize] += 1;
+                if self.class.is_some_and(|k| k != c) {
+                    continue;
+                }
+                if !(x.is_finite() && y.is_finite() && z.is_finite()) {
+                    let message = format!("point {} has a non-finite coordinate", first + i);
+                    return Err(PointsError::Las { name: self.name.clone(), message });
+                }
+                kept.push([x, y, z]);
+            }
+        }
+        self.kept += kept.len() as u64;
+        Ok(kept)
     }
-    if points.is_empty() {
+
+    /// Why the stream ends without a point, or short of the points the header announced.
+    fn end_error(&self) -> Option<PointsError> {
+        let name = self.name.clone();
+        if self.read < self.total {
+            return Some(PointsError::Las { name, message: format!("header announces {} points but the file holds {}", self.total, self.read) });
+        }
+        if self.kept > 0 {
+            return None;
+        }
         let present: Vec<String> =
-            classes_seen.iter().enumerate().filter(|(_, n)| **n > 0).map(|(c, n)| format!("{c} ({n})")).collect();
-        let message = match class {
+            self.classes_seen.iter().enumerate().filter(|(_, n)| **n > 0).map(|(c, n)| format!("{c} ({n})")).collect();
+        let message = match self.class {
             Some(c) => format!("no point of class {c}; classes present: {}", present.join(", ")),
             None => "no points".into(),
         };
-        return Err(PointsError::Empty { name, message });
+        Some(PointsError::Empty { name, message })
     }
-    Ok(PointCloud { points, crs })
+}
+
+impl Iterator for LasPoints {
+    type Item = Result<Vec<[f64; 3]>, PointsError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        if self.done {
+            return None;
+        }
+        match self.batch() {
+            Ok(b) if b.is_empty() => {
+                self.done = true;
+                self.end_error().map(Err)
+            }
+            Ok(b) => Some(Ok(b)),
+            Err(e) => {
+                self.done = true;
+                Some(Err(e))
+            }
+        }
+    }
 }
 
 /// Checks what a LAS/LAZ header claims against the file's size before the `las` crate sizes
@@ -287,17 +348,9 @@ fn geotiff_crs_wkt(header: &las::Header) -> Option<String> {
 /// Reads a point file by extension: LAS/LAZ (with the class filter) or XYZ text.
 /// `class` on an XYZ file is an error (text points carry no class).
 pub fn read_points(path: &Path, class: Option<u8>) -> Result<PointCloud, PointsError> {
-    match PointFormat::from_path(path) {
-        PointFormat::Las => read_las(path, class),
-        PointFormat::Xyz => {
-            let name = path.display().to_string();
-            if class.is_some() {
-                return Err(PointsError::Io { name, message: "a class filter needs a LAS/LAZ file; XYZ text has no classes".into() });
-            }
-            let f = std::fs::File::open(path).map_err(|e| PointsError::Io { name: name.clone(), message: e.to_string() })?;
-            read_xyz(std::io::BufReader::new(f), &name)
-        }
-    }
+    let batches = PointBatches::open(path, class)?;
+    let crs = batches.crs().map(str::to_string);
+    collect(batches, &path.display().to_string(), crs)
 }
 
 #[cfg(test)]

@@ -111,24 +111,40 @@ impl SplatAccumulator {
         }
     }
 
-    /// Normalised values Z/G; NaN where no sample reached (G = 0).
+    /// Adds points given in world coordinates of `grid` (the grid the accumulator was made for).
+    pub fn add_points(&mut self, grid: &GridSpec, points: &[[f64; 3]]) {
+        for p in points {
+            let (px, py) = grid.world_to_pixel(p[0], p[1]);
+            self.add(px, py, p[2]);
+        }
+    }
+
+    /// Normalised values Z/G; NaN where no sample reached (G = 0). Computed in Z's own buffer,
+    /// so the peak stays at the two accumulators (16 bytes a cell).
     pub fn finish(self) -> Vec<f64> {
-        self.z.iter().zip(&self.g).map(|(z, g)| if *g > 0.0 { z / g } else { f64::NAN }).collect()
+        let SplatAccumulator { mut z, g, .. } = self;
+        for (z, g) in z.iter_mut().zip(&g) {
+            *z = if *g > 0.0 { *z / g } else { f64::NAN };
+        }
+        z
+    }
+
+    /// The raster of `grid` with the normalised values.
+    pub fn into_raster(self, grid: &GridSpec, crs: Option<String>) -> Result<Raster, ProcError> {
+        let data = self.finish();
+        Ok(Raster::from_values(grid.width, grid.height, grid.geotransform, crs, data)?)
     }
 }
 
-/// Rasterizes scattered points onto `grid` by splatting.
+/// Rasterizes scattered points onto `grid` by splatting (points arriving in batches:
+/// [`SplatAccumulator::add_points`], docs/decisions.md#streaming-points).
 pub fn splat_points(cloud: &PointCloud, grid: &GridSpec, kernel: SplatKernel, crs: Option<String>) -> Result<Raster, ProcError> {
     if cloud.points.is_empty() {
         return Err(ProcError::Input("no points to rasterize".into()));
     }
     let mut acc = SplatAccumulator::new(grid.width, grid.height, kernel)?;
-    for p in &cloud.points {
-        let (px, py) = grid.world_to_pixel(p[0], p[1]);
-        acc.add(px, py, p[2]);
-    }
-    let data = acc.finish();
-    Ok(Raster::from_values(grid.width, grid.height, grid.geotransform, crs, data)?)
+    acc.add_points(grid, &cloud.points);
+    acc.into_raster(grid, crs)
 }
 
 #[cfg(test)]

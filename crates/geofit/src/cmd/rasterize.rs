@@ -5,16 +5,19 @@
 use clap::{Args as ClapArgs, ValueEnum};
 use serde::Serialize;
 
+use std::path::Path;
+
 use raster_io::crs::Crs;
-use raster_io::PointCloud;
+use raster_io::Raster;
+use raster_io::point_batches::{BoundsXy, PointBatches};
 use raster_proc::grid::GridSpec;
-use raster_proc::splat::{splat_points, SplatKernel};
-use raster_proc::tin::{tin_points, TinOptions};
+use raster_proc::splat::{splat_points, SplatAccumulator, SplatKernel};
+use raster_proc::tin::{tin_points, TinOptions, TinStats};
 use raster_proc::ProcError;
 
 use crate::config::{Config, Input};
 use crate::report::{write_json_report, ReportKind};
-use crate::terrain_io::{gdal_notices, proc_err, read_cloud, write_raster_arg, RasterOutArgs};
+use crate::terrain_io::{gdal_notices, points_err, proc_err, read_cloud, write_raster_arg, RasterOutArgs};
 use crate::error::{CliError, CmdResult, Exit};
 
 const EXAMPLE: &str = "\
@@ -107,22 +110,34 @@ struct RasterizeReport {
     merged_duplicates: Option<usize>,
 }
 
-/// The CRS the grid is in: the points' own (`--s-srs`, else the file's), reprojected into
-/// `--t-srs` when given. Invalid strings are usage errors, as in gdalsrsinfo.
-fn grid_crs(args: &Args, cloud: &mut PointCloud) -> Result<Option<Crs>, CliError> {
-    let usage = |e: raster_io::crs::CrsError| CliError::usage(e.to_string());
-    let source = match (&args.s_srs, &cloud.crs) {
+/// The CRS the grid is in: the points' own (`--s-srs`, else the file's), or `--t-srs` with the
+/// reprojection into it. Invalid strings are usage errors, as in gdalsrsinfo.
+struct CrsPlan {
+    grid: Option<Crs>,
+    reproject: Option<(Crs, Crs)>,
+}
+
+fn crs_plan(args: &Args, file_crs: Option<&str>) -> Result<CrsPlan, CliError> {
+    let source = match (&args.s_srs, file_crs) {
         (Some(s), _) => Some(Crs::parse(s).map_err(|e| CliError::usage(format!("--s-srs: {e}")))?),
         (None, Some(wkt)) => Crs::from_wkt(wkt).ok(),
         (None, None) => None,
     };
-    let Some(t) = &args.t_srs else { return Ok(source) };
+    let Some(t) = &args.t_srs else { return Ok(CrsPlan { grid: source, reproject: None }) };
     let target = Crs::parse(t).map_err(|e| CliError::usage(format!("--t-srs: {e}")))?;
     let Some(source) = source else {
         return Err(CliError::usage(format!("{} names no CRS: give the points' CRS with --s-srs to reproject them", args.input)));
     };
-    raster_io::crs::reproject(&mut cloud.points, &source, &target).map_err(usage)?;
-    Ok(Some(target))
+    Ok(CrsPlan { grid: Some(target.clone()), reproject: Some((source, target)) })
+}
+
+impl CrsPlan {
+    fn apply(&self, points: &mut [[f64; 3]]) -> Result<(), CliError> {
+        match &self.reproject {
+            Some((from, to)) => raster_io::crs::reproject(points, from, to).map_err(|e| CliError::usage(e.to_string())),
+            None => Ok(()),
+        }
+    }
 }
 
 /// Refuses a cell size that is almost certainly metres on points in degrees: geographic
@@ -130,12 +145,12 @@ fn grid_crs(args: &Args, cloud: &mut PointCloud) -> Result<Option<Crs>, CliError
 /// cell of 1 or more, and a grid of fewer than 10 cells across with 10 or more points per cell
 /// (7000 lon/lat soundings at `--cell 25` made a 1×2 grid). A projected `--s-srs` lifts it.
 /// docs/decisions.md#raster-outputs-by-driver
-fn check_cell_units(args: &Args, cloud: &PointCloud, crs: Option<&Crs>, grid: &GridSpec) -> Result<(), CliError> {
-    let Some((x0, y0, x1, y1)) = cloud.bounds_xy() else { return Ok(()) };
+fn check_cell_units(args: &Args, seen: &BoundsXy, crs: Option<&Crs>, grid: &GridSpec) -> Result<(), CliError> {
+    let Some((x0, y0, x1, y1)) = seen.get() else { return Ok(()) };
     let declared = crs.map(|c| c.geographic);
     let degrees = declared.unwrap_or(x0 >= -180.0 && x1 <= 360.0 && y0 >= -90.0 && y1 <= 90.0);
     let (w, h) = (grid.width as f64, grid.height as f64);
-    let points = cloud.points.len();
+    let points = seen.count;
     if !(degrees && args.cell >= 1.0 && w.max(h) < 10.0 && points as f64 >= 10.0 * w * h) {
         return Ok(());
     }
@@ -172,41 +187,24 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
             return Err(CliError::unreadable(format!("{}: no such file", p.display())));
         }
     }
-    let mut cloud = read_cloud(&args.input, args.class)?;
-    config.notice(&format!(
-        "read {} points from {}{}",
-        cloud.points.len(),
-        args.input,
-        args.class.map(|c| format!(" (class {c})")).unwrap_or_default()
-    ));
-    let crs = grid_crs(&args, &mut cloud)?;
-    let grid = match &args.bounds {
-        Some(b) => GridSpec::from_edges(b[0], b[1], b[2], b[3], args.cell),
-        None => GridSpec::covering(cloud.bounds_xy().expect("non-empty cloud"), args.cell),
+    let kernel = match args.method {
+        Method::Gauss => Some(SplatKernel::Gauss { sigma: args.sigma, radius: args.radius }),
+        Method::GaussLiteral => Some(SplatKernel::Literal),
+        Method::Tin => None,
+    };
+    if let Some(k) = kernel {
+        k.validate().map_err(|e| CliError::usage(e.to_string()))?;
     }
-    .map_err(|e| match e {
-        ProcError::Input(m) => CliError::usage(m),
-        e @ ProcError::TooLarge { .. } => CliError::usage(format!("--cell {}: {e}", args.cell)),
-        other => proc_err(&args.input, other),
-    })?;
-    if args.bounds.is_none() {
-        check_cell_units(&args, &cloud, crs.as_ref(), &grid)?;
-    }
-    let crs = crs.map(|c| c.wkt).or_else(|| cloud.crs.clone());
-    let (raster, tin_stats) = match args.method {
-        Method::Gauss | Method::GaussLiteral => {
-            let kernel = if args.method == Method::Gauss {
-                SplatKernel::Gauss { sigma: args.sigma, radius: args.radius }
-            } else {
-                SplatKernel::Literal
-            };
-            kernel.validate().map_err(|e| CliError::usage(e.to_string()))?;
-            (splat_points(&cloud, &grid, kernel, crs).map_err(|e| proc_err(&args.input, e))?, None)
+    let streamed = match (kernel, Input::from_arg(&args.input).path()) {
+        (Some(k), Some(path)) => Some((k, path.to_path_buf())),
+        _ => None,
+    };
+    let (seen, raster, tin_stats) = match streamed {
+        Some((kernel, path)) => {
+            let (seen, raster) = splat_streamed(&args, &path, kernel, config)?;
+            (seen, raster, None)
         }
-        Method::Tin => {
-            let (r, s) = tin_points(&cloud, &grid, &TinOptions { max_edge: args.max_edge }, crs).map_err(|e| proc_err(&args.input, e))?;
-            (r, Some(s))
-        }
+        None => rasterize_held(&args, kernel, config)?,
     };
     let with_value = raster.valid_count();
     config.notice(&format!(
@@ -224,7 +222,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     if let Some(path) = &args.report {
         let rep = RasterizeReport {
             input: args.input.clone(),
-            points: cloud.points.len(),
+            points: seen.count,
             method: args.method,
             width: raster.width,
             height: raster.height,
@@ -237,4 +235,76 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         write_json_report(path, &REPORT, &rep)?;
     }
     Ok(Exit::Ok)
+}
+
+/// Gauss splatting of a point file in two passes over it (bounds and count, then the splat),
+/// holding one batch of points and the 16-byte-a-cell accumulators, never the cloud
+/// (docs/decisions.md#streaming-points).
+fn splat_streamed(args: &Args, path: &Path, kernel: SplatKernel, config: &Config) -> Result<(BoundsXy, Raster), CliError> {
+    let file_crs = PointBatches::open(path, args.class).map_err(points_err)?.crs().map(str::to_string);
+    let plan = crs_plan(args, file_crs.as_deref())?;
+    let batches = || -> Result<_, CliError> {
+        let batches = PointBatches::open(path, args.class).map_err(points_err)?;
+        Ok(batches.map(|b| {
+            let mut b = b.map_err(points_err)?;
+            plan.apply(&mut b)?;
+            Ok::<_, CliError>(b)
+        }))
+    };
+    let mut seen = BoundsXy::default();
+    for b in batches()? {
+        seen.extend(&b?);
+    }
+    let grid = plan_grid(args, &seen, plan.grid.as_ref(), config)?;
+    let mut acc = SplatAccumulator::new(grid.width, grid.height, kernel).map_err(|e| proc_err(&args.input, e))?;
+    for b in batches()? {
+        acc.add_points(&grid, &b?);
+    }
+    let crs = plan.grid.map(|c| c.wkt).or(file_crs);
+    Ok((seen, acc.into_raster(&grid, crs).map_err(|e| proc_err(&args.input, e))?))
+}
+
+/// TIN, and Gauss on stdin (which cannot be read twice): the whole cloud in memory, within the
+/// point budget.
+fn rasterize_held(args: &Args, kernel: Option<SplatKernel>, config: &Config) -> Result<(BoundsXy, Raster, Option<TinStats>), CliError> {
+    let mut cloud = read_cloud(&args.input, args.class)?;
+    let plan = crs_plan(args, cloud.crs.as_deref())?;
+    plan.apply(&mut cloud.points)?;
+    let mut seen = BoundsXy::default();
+    seen.extend(&cloud.points);
+    let grid = plan_grid(args, &seen, plan.grid.as_ref(), config)?;
+    let crs = plan.grid.map(|c| c.wkt).or_else(|| cloud.crs.clone());
+    let fail = |e| proc_err(&args.input, e);
+    Ok(match kernel {
+        Some(k) => (seen, splat_points(&cloud, &grid, k, crs).map_err(fail)?, None),
+        None => {
+            let (r, s) = tin_points(&cloud, &grid, &TinOptions { max_edge: args.max_edge }, crs).map_err(fail)?;
+            (seen, r, Some(s))
+        }
+    })
+}
+
+/// The grid: `--bounds` exactly, else the cells on multiples of `--cell` covering the points;
+/// says how many points were read first.
+fn plan_grid(args: &Args, seen: &BoundsXy, crs: Option<&Crs>, config: &Config) -> Result<GridSpec, CliError> {
+    config.notice(&format!(
+        "read {} points from {}{}",
+        seen.count,
+        args.input,
+        args.class.map(|c| format!(" (class {c})")).unwrap_or_default()
+    ));
+    let bounds = seen.get().ok_or_else(|| CliError::unreadable(format!("{}: no points", args.input)))?;
+    let grid = match &args.bounds {
+        Some(b) => GridSpec::from_edges(b[0], b[1], b[2], b[3], args.cell),
+        None => GridSpec::covering(bounds, args.cell),
+    }
+    .map_err(|e| match e {
+        ProcError::Input(m) => CliError::usage(m),
+        e @ ProcError::TooLarge { .. } => CliError::usage(format!("--cell {}: {e}", args.cell)),
+        other => proc_err(&args.input, other),
+    })?;
+    if args.bounds.is_none() {
+        check_cell_units(args, seen, crs, &grid)?;
+    }
+    Ok(grid)
 }
