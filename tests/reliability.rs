@@ -584,3 +584,30 @@ fn gauss_rasterize_memory_does_not_grow_with_the_points() {
     assert!(peaks[1] - peaks[0] < 20.0, "3·10⁶ more points cost {:.0} MiB more", peaks[1] - peaks[0]);
     assert!(peaks[1] <= 150.0, "peak {:.0} MiB", peaks[1]);
 }
+
+/// A 10 KB netCDF grid with one attribute count flipped to 2³¹ + 2 made GDAL's netCDF driver
+/// (libnetcdf) allocate 16 GB before it found the file too short (fuzzing the shipped GMT grids:
+/// 1.7–21 GB peaks, one hang). The classic header is now checked first: `info`, `fit` and
+/// `tile plan` end with exit 3 naming the attribute, in the memory of a small run, and leave an
+/// old output as it was.
+#[test]
+fn a_netcdf_header_claiming_billions_of_values_is_refused_before_gdal_reads_it() {
+    let Some(grid) = common::fixture("terrain/gmt_tut_bathy.nc") else { return };
+    let dir = common::tempdir();
+    let mut bytes = std::fs::read(&grid).unwrap();
+    let at = bytes.windows(12).position(|w| w == b"actual_range").unwrap() + 12 + 4;
+    bytes[at] = 0x80; // the attribute's value count, big-endian: 2 → 2³¹ + 2
+    let bad = dir.path().join("bad.nc");
+    std::fs::write(&bad, &bytes).unwrap();
+    let out = dir.path().join("out.tmesh");
+    let old = old_output(&out);
+    for args in [vec!["info", s(&bad)], vec!["-q", "fit", s(&bad), "--max-error", "10", "-o", s(&out)], vec!["-q", "tile", "plan", s(&bad)]] {
+        let (code, peak, _) = run_measuring_rss(dir.path(), &args);
+        let e = std::fs::read_to_string(dir.path().join("stderr")).unwrap();
+        assert_eq!(code, 3, "{args:?}: {e}");
+        assert_eq!(e.trim_end().lines().count(), 1, "{e}");
+        assert!(e.contains("bad.nc") && e.contains("values of attribute 'actual_range'"), "{e}");
+        assert!(peak < 300.0, "{args:?}: peak RSS {peak:.0} MiB");
+    }
+    assert_eq!(std::fs::read(&out).unwrap(), old);
+}

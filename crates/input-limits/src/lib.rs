@@ -8,6 +8,8 @@
 //!   before the `las`/`laz` crates size allocations by them;
 //! - [`budget`]: how many cells, points or bytes a command may hold, from the memory available
 //!   or an environment variable;
+//! - [`netcdf`]: whether the counts a netCDF classic header claims fit the file, checked before
+//!   libnetcdf sizes allocations by them;
 //! - [`mapped`]: a whole input as one slice that a streaming reader holds only ahead of itself.
 //!
 //! No dependency on any format crate: every reader of untrusted text or binary can use it.
@@ -16,6 +18,7 @@ pub mod budget;
 pub mod las;
 pub mod lines;
 pub mod mapped;
+pub mod netcdf;
 
 use std::borrow::Cow;
 

@@ -262,6 +262,17 @@ pub fn read_raster_band(path: &Path, band: usize) -> Result<Raster, RasterError>
 
 /// GDAL's virtual file systems (`/vsigzip/`, `/vsizip/`, `/vsicurl/`, ...): paths that exist
 /// for GDAL only, so no local existence check applies to them.
+/// Opens a dataset with GDAL after checking what a netCDF classic header claims against the
+/// file (`input_limits::netcdf`): libnetcdf sizes allocations by header counts first, and one
+/// flipped attribute count in a 10 KB grid made it take 16 GB (docs/decisions.md#input-limits).
+pub fn open_dataset(path: &Path, options: gdal::DatasetOptions<'_>) -> Result<Dataset, RasterError> {
+    let open_err = |message: String| RasterError::Open { path: path.to_path_buf(), message };
+    if !is_gdal_virtual_path(path) {
+        input_limits::netcdf::check_file(path).map_err(|e| open_err(e.to_string()))?;
+    }
+    Dataset::open_ex(path, options).map_err(|e| open_err(gdal_msg(&e)))
+}
+
 pub fn is_gdal_virtual_path(path: &Path) -> bool {
     path.to_str().is_some_and(|s| s.starts_with("/vsi"))
 }
@@ -287,11 +298,10 @@ pub fn read_raster_window_typed(path: &Path, band: usize, window: Option<[usize;
     let is_asc = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("asc"));
     let ds = if is_asc {
         let opts = gdal::DatasetOptions { open_options: Some(&["DATATYPE=Float64"]), ..Default::default() };
-        Dataset::open_ex(path, opts)
+        open_dataset(path, opts)?
     } else {
-        Dataset::open(path)
-    }
-    .map_err(|e| open_err(gdal_msg(&e)))?;
+        open_dataset(path, Default::default())?
+    };
     let count = ds.raster_count();
     if count == 0 {
         let subs = ds.metadata_domain("SUBDATASETS").unwrap_or_default();
@@ -398,7 +408,7 @@ pub fn read_raster_window_typed(path: &Path, band: usize, window: Option<[usize;
 /// masks, scale/offset as in [`read_raster_band`]); the caller checks it matches band 1's grid.
 pub fn read_uncertainty(path: &Path) -> Result<(Raster, usize), RasterError> {
     let content_err = |message: String| RasterError::Content { path: path.to_path_buf(), message };
-    let ds = Dataset::open(path).map_err(|e| RasterError::Open { path: path.to_path_buf(), message: gdal_msg(&e) })?;
+    let ds = open_dataset(path, Default::default())?;
     let count = ds.raster_count();
     let named = (1..=count).find(|&b| ds.rasterband(b).is_ok_and(|rb| rb.description().is_ok_and(|d| d.trim().eq_ignore_ascii_case("uncertainty"))));
     let band = match named {

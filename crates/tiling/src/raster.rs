@@ -20,6 +20,8 @@ pub struct RasterTiling {
 
 /// Plans the tiles of the raster at `path` (any GDAL source).
 pub fn plan(path: &str, opts: &RasterTiling) -> Result<Vec<Tile>, TilingError> {
+    // libnetcdf sizes allocations by header counts before checking them (input_limits::netcdf)
+    input_limits::netcdf::check_file(Path::new(path)).map_err(|e| TilingError::unreadable(path, e))?;
     let ds = gdal::Dataset::open(Path::new(path)).map_err(|e| TilingError::unreadable(path, e))?;
     let (w, h) = ds.raster_size();
     let gt = ds.geo_transform().map_err(|e| TilingError::unreadable(path, format!("no geotransform: {e}")))?;
