@@ -93,7 +93,7 @@ pub fn proc_err(what: &str, e: ProcError) -> CliError {
         ProcError::Raster(r) => raster_err(r),
         ProcError::Input(m) => CliError::findings(format!("{what}: {m}")),
         ProcError::FoldOver(_) => CliError::findings(format!("{what}: {e}")),
-        ProcError::TooLarge { .. } => CliError::unreadable(format!("{what}: {e}")),
+        ProcError::TooLarge { .. } | ProcError::TinTooLarge { .. } => CliError::unreadable(format!("{what}: {e}")),
         ProcError::Field(_) => CliError::unreadable(format!("{what}: {e}")),
     }
 }

@@ -27,6 +27,9 @@ pub enum ProcError {
     /// A grid with more cells than the machine can hold (checked before allocating it).
     #[error("grid of {width} × {height} cells ({size} as f64) is too large: more than the limit of {limit}; a cell size of {min_cell} or more fits")]
     TooLarge { width: usize, height: usize, size: String, limit: String, min_cell: f64 },
+    /// More points than a TIN of them fits in memory (checked before triangulating).
+    #[error("a TIN of {points} points needs about {size} ({bytes_per_point} bytes a point), more than the limit of {limit}; --method gauss streams the points in constant memory")]
+    TinTooLarge { points: usize, size: String, bytes_per_point: u64, limit: String },
     /// The warp field folds over (crossing displacement vectors).
     #[error("warp field folds over: {0}")]
     FoldOver(String),

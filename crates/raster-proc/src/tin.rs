@@ -9,6 +9,7 @@
 
 use spade::{DelaunayTriangulation, HasPosition, Point2, Triangulation};
 
+use raster_io::limits::{gib, PointBudget};
 use raster_io::{PointCloud, Raster};
 
 use crate::grid::GridSpec;
@@ -44,12 +45,37 @@ pub struct TinStats {
     pub triangles: usize,
 }
 
-/// Rasterizes `cloud` onto `grid` by linear interpolation in its Delaunay triangulation.
+/// What one point costs the TIN path at its peak: the cloud and its sorted copy (48 bytes),
+/// the vertex list and spade's triangulation (vertices, half-edges, faces: ~150 bytes) —
+/// ~218 bytes a point measured on 10⁷ points (issue 13), rounded up.
+pub const TIN_BYTES_PER_POINT: u64 = 220;
+
+/// Rasterizes `cloud` onto `grid` by linear interpolation in its Delaunay triangulation; refuses
+/// clouds whose triangulation would not fit the point budget (`GEOFIT_MAX_POINTS`, else the
+/// available memory over [`TIN_BYTES_PER_POINT`]).
 pub fn tin_points(cloud: &PointCloud, grid: &GridSpec, opts: &TinOptions, crs: Option<String>) -> Result<(Raster, TinStats), ProcError> {
+    tin_points_within(cloud, grid, opts, crs, PointBudget::for_cost(TIN_BYTES_PER_POINT))
+}
+
+fn tin_points_within(
+    cloud: &PointCloud,
+    grid: &GridSpec,
+    opts: &TinOptions,
+    crs: Option<String>,
+    budget: PointBudget,
+) -> Result<(Raster, TinStats), ProcError> {
     if let Some(m) = opts.max_edge {
         if !(m.is_finite() && m > 0.0) {
             return Err(ProcError::Input(format!("max edge {m} must be a positive length")));
         }
+    }
+    if cloud.points.len() as u64 > budget.max_points {
+        return Err(ProcError::TinTooLarge {
+            points: cloud.points.len(),
+            size: gib(cloud.points.len() as u64 * TIN_BYTES_PER_POINT),
+            bytes_per_point: TIN_BYTES_PER_POINT,
+            limit: budget.describe(),
+        });
     }
     // Merge exact duplicates (sorted, so the result does not depend on input order).
     let mut pts: Vec<[f64; 3]> = cloud.points.clone();
@@ -131,6 +157,20 @@ pub fn tin_points(cloud: &PointCloud, grid: &GridSpec, opts: &TinOptions, crs: O
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A cloud over the TIN's point budget is refused before triangulating, saying what it would
+    /// take; at the budget it is triangulated.
+    #[test]
+    fn clouds_beyond_the_tin_budget_are_refused() {
+        let points: Vec<[f64; 3]> = (0..100).map(|i| [(i % 10) as f64, (i / 10) as f64, i as f64]).collect();
+        let cloud = PointCloud { points, crs: None };
+        let grid = GridSpec::from_edges(0.0, 0.0, 10.0, 10.0, 1.0).unwrap();
+        let budget = |max_points| PointBudget { max_points, source: raster_io::limits::BudgetSource::Env };
+        let e = tin_points_within(&cloud, &grid, &TinOptions::default(), None, budget(99)).unwrap_err();
+        assert!(matches!(e, ProcError::TinTooLarge { points: 100, bytes_per_point: TIN_BYTES_PER_POINT, .. }), "{e}");
+        assert!(e.to_string().contains("--method gauss"), "{e}");
+        assert!(tin_points_within(&cloud, &grid, &TinOptions::default(), None, budget(100)).is_ok());
+    }
 
     #[test]
     fn reproduces_a_plane_inside_the_hull() {

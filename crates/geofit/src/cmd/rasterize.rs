@@ -29,12 +29,15 @@ Example:
 
 Methods:
   gauss          every point spreads over the cells within --radius (cells) with weight
-                 exp(-d²/2σ²), σ = --sigma (cells); cells no point reaches get nodata
+                 exp(-d²/2σ²), σ = --sigma (cells); cells no point reaches get nodata.
+                 A file is read twice in batches: memory is 16 bytes a cell, whatever the
+                 number of points (stdin is held whole)
   gauss-literal  the thesis as printed: nearest cell only, weight exp(-d/2) (holes where a cell
                  holds no point)
   tin            linear interpolation in the Delaunay triangulation (like gdal_grid -a
                  linear:radius=0); nodata outside the hull and, with --max-edge, in triangles
-                 with a longer edge
+                 with a longer edge. Holds every point: ~220 bytes each, refused (exit 3)
+                 beyond the available memory or GEOFIT_MAX_POINTS
 
 The grid's cell edges lie on multiples of --cell and cover every point, unless --bounds gives
 the outer edges exactly. Text input: whitespace, comma or semicolon separated x y z, optional
