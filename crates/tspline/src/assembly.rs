@@ -25,7 +25,7 @@
 
 use rayon::prelude::*;
 
-use crate::eval::{basis_poly, PbSpline};
+use crate::eval::PbSpline;
 use crate::extraction::{first_buckets, CellElements, BOTTOM_BORDER, LEFT_BORDER};
 use crate::fit::{Region, Samples, Scattered};
 use crate::sparse::SymCsr;
@@ -361,6 +361,33 @@ struct Elements<'a> {
     /// The element's BᵀB (upper tiles) and its Bᵀd, column sums ([`moments`]).
     gram: Vec<f64>,
     moments: Vec<f64>,
+    /// Element indices sorted by PB index, and the CSR position of each free pair.
+    by_index: Vec<usize>,
+    pos: Vec<usize>,
+}
+
+/// One basis factor on the span that holds an element (the knots strictly inside a leaf cut
+/// it into elements, so every element lies in one span of each of its functions): the span's
+/// piece found once per element instead of per cell, evaluated with `eval::basis_poly`'s
+/// operations (same bits at every cell of the element).
+struct SpanPiece<'p> {
+    knot: f64,
+    c: &'p [f64],
+}
+
+impl<'p> SpanPiece<'p> {
+    /// The piece of the span [kn[j], kn[j+1]) holding `lo` (the element's lower edge).
+    #[inline]
+    fn at(kn: &[f64], pc: &'p [f64], k: usize, lo: f64) -> SpanPiece<'p> {
+        let j = (0..=k).find(|&j| kn[j] <= lo && lo < kn[j + 1]).unwrap_or(k);
+        SpanPiece { knot: kn[j], c: &pc[5 * j..5 * j + 5] }
+    }
+
+    #[inline]
+    fn value(&self, u: f64) -> f64 {
+        let (c, x) = (self.c, (u - self.knot) * self.c[0]);
+        ((c[4] * x + c[3]) * x + c[2]) * x + c[1]
+    }
 }
 
 /// Sorts PB indices by their points' parameters (t, then s) as the bucket lists are, so that
@@ -401,6 +428,8 @@ impl<'a> Elements<'a> {
             den: Vec::new(),
             gram: Vec::new(),
             moments: Vec::new(),
+            by_index: Vec::new(),
+            pos: Vec::new(),
         }
     }
 
@@ -425,7 +454,7 @@ impl<'a> Elements<'a> {
         if i0 == i1 || j0 == j1 || !self.select_functions(e) {
             return;
         }
-        self.factor_tables(i0, i1, j0, j1);
+        self.factor_tables(e, i0, i1, j0, j1);
         if self.gather_cells(e, i0, i1, j0, j1) > 0 {
             self.scatter_block();
         }
@@ -446,15 +475,17 @@ impl<'a> Elements<'a> {
 
     /// w·N(s) per function and cell column i0..i1, N(t) per function and cell row j0..j1
     /// (the reference's factors: same pieces, half-open spans).
-    fn factor_tables(&mut self, i0: usize, i1: usize, j0: usize, j1: usize) {
+    fn factor_tables(&mut self, e: Element, i0: usize, i1: usize, j0: usize, j1: usize) {
         let pb = self.sys.pb;
         let k = pb.degree.k();
         self.ws.clear();
         self.nt.clear();
         for &p in &self.funcs {
             let (kn, pc, w) = (&pb.knots[p as usize], &pb.poly[p as usize], pb.geom[p as usize][3]);
-            self.ws.extend((i0..i1).map(|i| w * basis_poly(&kn[0..5], &pc[..20], k, i as f64, false)));
-            self.nt.extend((j0..j1).map(|j| basis_poly(&kn[5..10], &pc[20..], k, j as f64, false)));
+            let fs = SpanPiece::at(&kn[0..5], &pc[..20], k, e.s0);
+            let ft = SpanPiece::at(&kn[5..10], &pc[20..], k, e.t0);
+            self.ws.extend((i0..i1).map(|i| w * fs.value(i as f64)));
+            self.nt.extend((j0..j1).map(|j| ft.value(j as f64)));
         }
         let (m, nc) = (self.funcs.len(), i1 - i0);
         self.ws_by_col.clear();
@@ -521,6 +552,7 @@ impl<'a> Elements<'a> {
         let m4 = m.next_multiple_of(TILE);
         gram_upper(&self.b, m4, &mut self.gram);
         moments(&self.b, m4, &self.d, &mut self.moments);
+        self.pair_positions();
         let s = &mut self.rows.sums;
         for x in 0..m {
             let px = self.funcs[x] as usize;
@@ -534,11 +566,41 @@ impl<'a> Elements<'a> {
                 let y_free = sys.is_free(py);
                 let v = self.gram[x * m4 + y];
                 match (x_free, y_free) {
-                    (true, true) => s.vals[entry(sys.pattern, px.min(py), px.max(py) as u32)] += v,
+                    (true, true) => s.vals[self.pos[x * m + y]] += v,
                     (true, false) => s.rhs[px] -= v * sys.prior[py],
                     (false, true) => s.rhs[py] -= v * sys.prior[px],
                     (false, false) => {}
                 }
+            }
+        }
+    }
+}
+
+impl Elements<'_> {
+    /// CSR positions of the entries (min, max by PB index) of the element's free pairs into
+    /// `pos[x·m + y]` (x ≤ y in element order): one merge along each CSR row (its columns are
+    /// sorted) instead of a binary search per pair.
+    fn pair_positions(&mut self) {
+        let (sys, m) = (self.sys, self.funcs.len());
+        let funcs = &self.funcs;
+        self.by_index.clear();
+        self.by_index.extend(0..m);
+        self.by_index.sort_unstable_by_key(|&x| funcs[x]);
+        self.pos.clear();
+        self.pos.resize(m * m, usize::MAX);
+        for (r, &x) in self.by_index.iter().enumerate() {
+            let p = funcs[x] as usize;
+            if !sys.is_free(p) {
+                continue;
+            }
+            let (mut k, end) = (sys.pattern.start[p], sys.pattern.start[p + 1]);
+            for &y in self.by_index[r..].iter().filter(|&&y| sys.is_free(funcs[y] as usize)) {
+                let q = funcs[y];
+                while k < end && sys.pattern.cols[k] < q {
+                    k += 1;
+                }
+                assert!(k < end && sys.pattern.cols[k] == q, "pattern covers every overlapping pair");
+                self.pos[x.min(y) * m + x.max(y)] = k;
             }
         }
     }
@@ -579,9 +641,9 @@ fn moments(b: &[f64], m4: usize, d: &[f64], out: &mut Vec<f64>) {
     out.resize(2 * m4, 0.0);
     let (bd, sum) = out.split_at_mut(m4);
     for (row, &dc) in b.chunks_exact(m4).zip(d) {
-        for f in 0..m4 {
-            bd[f] += row[f] * dc;
-            sum[f] += row[f];
+        for ((x, s), &r) in bd.iter_mut().zip(sum.iter_mut()).zip(row) {
+            *x += r * dc;
+            *s += r;
         }
     }
 }
@@ -698,6 +760,29 @@ mod tests {
                     (0..n).flat_map(|i| (a.start[i]..a.start[i + 1]).map(move |k| (i, k))).map(|(i, k)| if free[i] && free[a.cols[k] as usize] { v[k] } else { 0.0 }).collect::<Vec<f64>>()
                 };
                 assert_close(&free_pair(&old.vals), &free_pair(&new.vals), "held vals");
+            }
+        }
+    }
+
+    /// Each cell's basis row is the reference's to the bit (same factors, same order of the
+    /// sum Σ w N): with a single valid cell, both assemblies hold exactly its products.
+    #[test]
+    fn one_cell_rows_are_bit_identical() {
+        for degree in [Degree::Linear, Degree::Cubic] {
+            let pb = PbSpline::build(&refined_mesh(degree));
+            let a = full_pattern(&pb);
+            let prior: Vec<f64> = pb.geom.iter().map(|g| g[2]).collect();
+            let sys = System { pattern: &a, pb: &pb, free: None, prior: &prior };
+            let (w, h) = (97, 81);
+            let mut seed = 11u64;
+            for _ in 0..200 {
+                let q = (lcg(&mut seed) * (w * h) as f64) as usize;
+                let mut z = vec![f64::NAN; w * h];
+                z[q] = 1.0 + lcg(&mut seed);
+                let s = Samples { width: w, height: h, z };
+                let old = per_cell(sys, &s, None, None, None).unwrap();
+                let new = by_elements(sys, &s, None);
+                assert!(old.vals == new.vals && old.rhs == new.rhs && old.support == new.support, "{degree:?} cell {q}");
             }
         }
     }
