@@ -361,9 +361,6 @@ struct Elements<'a> {
     /// The element's BᵀB (upper tiles) and its Bᵀd, column sums ([`moments`]).
     gram: Vec<f64>,
     moments: Vec<f64>,
-    /// Element indices sorted by PB index, and the CSR position of each free pair.
-    by_index: Vec<usize>,
-    pos: Vec<usize>,
 }
 
 /// One basis factor on the span that holds an element (the knots strictly inside a leaf cut
@@ -428,8 +425,6 @@ impl<'a> Elements<'a> {
             den: Vec::new(),
             gram: Vec::new(),
             moments: Vec::new(),
-            by_index: Vec::new(),
-            pos: Vec::new(),
         }
     }
 
@@ -552,7 +547,6 @@ impl<'a> Elements<'a> {
         let m4 = m.next_multiple_of(TILE);
         gram_upper(&self.b, m4, &mut self.gram);
         moments(&self.b, m4, &self.d, &mut self.moments);
-        self.pair_positions();
         let s = &mut self.rows.sums;
         for x in 0..m {
             let px = self.funcs[x] as usize;
@@ -566,41 +560,11 @@ impl<'a> Elements<'a> {
                 let y_free = sys.is_free(py);
                 let v = self.gram[x * m4 + y];
                 match (x_free, y_free) {
-                    (true, true) => s.vals[self.pos[x * m + y]] += v,
+                    (true, true) => s.vals[entry(sys.pattern, px.min(py), px.max(py) as u32)] += v,
                     (true, false) => s.rhs[px] -= v * sys.prior[py],
                     (false, true) => s.rhs[py] -= v * sys.prior[px],
                     (false, false) => {}
                 }
-            }
-        }
-    }
-}
-
-impl Elements<'_> {
-    /// CSR positions of the entries (min, max by PB index) of the element's free pairs into
-    /// `pos[x·m + y]` (x ≤ y in element order): one merge along each CSR row (its columns are
-    /// sorted) instead of a binary search per pair.
-    fn pair_positions(&mut self) {
-        let (sys, m) = (self.sys, self.funcs.len());
-        let funcs = &self.funcs;
-        self.by_index.clear();
-        self.by_index.extend(0..m);
-        self.by_index.sort_unstable_by_key(|&x| funcs[x]);
-        self.pos.clear();
-        self.pos.resize(m * m, usize::MAX);
-        for (r, &x) in self.by_index.iter().enumerate() {
-            let p = funcs[x] as usize;
-            if !sys.is_free(p) {
-                continue;
-            }
-            let (mut k, end) = (sys.pattern.start[p], sys.pattern.start[p + 1]);
-            for &y in self.by_index[r..].iter().filter(|&&y| sys.is_free(funcs[y] as usize)) {
-                let q = funcs[y];
-                while k < end && sys.pattern.cols[k] < q {
-                    k += 1;
-                }
-                assert!(k < end && sys.pattern.cols[k] == q, "pattern covers every overlapping pair");
-                self.pos[x.min(y) * m + x.max(y)] = k;
             }
         }
     }

@@ -342,6 +342,7 @@ fn pattern(pb: &PbSpline, extra: &[Vec<u32>], free: Option<&[bool]>) -> Csr {
     let k = pb.degree.k();
     let n = pb.knots.len();
     let is_free = |i: usize| free.is_none_or(|f| f[i]);
+    let first = crate::extraction::first_buckets(pb, true);
     let rows: Vec<Vec<u32>> = (0..n)
         .into_par_iter()
         .map(|i| {
@@ -356,6 +357,11 @@ fn pattern(pb: &PbSpline, extra: &[Vec<u32>], free: Option<&[bool]>) -> Csr {
                 for bi in i0..=i1 {
                     let b = (bj * pb.grid.ns + bi) as usize;
                     for &q in &pb.pt_items[pb.pt_start[b] as usize..pb.pt_start[b + 1] as usize] {
+                        // each support once: from the first bucket it shares with i's
+                        let f = first[q as usize];
+                        if bi != i0.max(f[0]) || bj != j0.max(f[1]) {
+                            continue;
+                        }
                         let c = &pb.knots[q as usize];
                         let ow = a[k + 1].min(c[k + 1]) - a[0].max(c[0]);
                         let oh = a[5 + k + 1].min(c[5 + k + 1]) - a[5].max(c[5]);
