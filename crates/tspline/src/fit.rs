@@ -34,8 +34,9 @@
 //!   all w = 1.
 //! - Minimum cell edge = 1 = sample spacing (§2.2 rule): cells of edge < 2 are never split.
 //! - **Memory / scale** (10⁸ cells): neither the model matrix nor a full-raster surface is held.
-//!   The normal equations are accumulated row by row (CSR positions cached between neighbouring
-//!   cells, upper triangle only); the error check evaluates the surface in row blocks into one
+//!   The normal equations are accumulated per Bézier element on rasters (`crate::assembly`:
+//!   a dense local block per element, scattered once into the CSR, upper triangle only) and
+//!   cell by cell for scattered points; the error check evaluates the surface in row blocks into one
 //!   f64 |Δz| per cell, kept across iterations. After a refinement that changes at most 20 % of
 //!   the blending functions (new points, changed knots), only those points and the points whose
 //!   supports overlap theirs are re-solved (the others held, their terms on the right-hand side)
