@@ -10,8 +10,11 @@
 #  eval   - grid evaluation throughput: a regular cubic mesh of N×N cells of size 8 evaluated
 #           on its integer grid by `geofit eval` (CPU) vs scipy's `bisplev` on a tensor spline
 #           with as many coefficients, both in points per CPU-second;
-#  memory - peak RSS per cell of a fit on a ~10^7-cell float32 raster (Kilauea resampled up).
-# usage: benches/tspline_speed.sh path/to/geofit [all|solve|eval|memory]  (markdown on stdout)
+#  memory - peak RSS per cell of a fit on a ~10^7-cell float32 raster (Kilauea resampled up);
+#  assembly - BEFORE=path/to/older/geofit against this one on the LiDAR DEM and Kilauea at two
+#           tolerances each: CPU time, control points, independent max error (the per-element
+#           normal-equation assembly, BENCHMARKS.md "Fit assembly per element").
+# usage: benches/tspline_speed.sh path/to/geofit [all|solve|eval|memory|assembly]  (markdown on stdout)
 set -uo pipefail
 BIN="$(realpath "${1:?usage: tspline_speed.sh path/to/geofit [all|solve|eval|memory]}")"
 PART="${2:-all}"
@@ -96,10 +99,31 @@ memory_section() {
   echo
 }
 
+assembly_section() {
+  local before="${BEFORE:?assembly: set BEFORE=path/to/older/geofit}"
+  echo "## Fit assembly per element: CPU s before/after, control points, independent max error"
+  echo
+  echo "Machine: $(nproc) cores shared with other jobs, load before: $(cut -d' ' -f1-3 /proc/loadavg); $(date -u +%Y-%m-%d)"
+  echo
+  echo '| raster | E | before CPU s | after CPU s | speed-up | control points before / after | max error before / after (independent) | check after |'
+  echo '|---|---|---|---|---|---|---|---|'
+  for spec in "giswqs-lidar_dem.tif 0.5" "giswqs-lidar_dem.tif 0.25" "gmt_Kilauea.utm.nc 20" "gmt_Kilauea.utm.nc 5"; do
+    set -- $spec
+    local f="$TER/$1" e="$2" b a
+    b=($(fit_row "$(realpath "$before")" "$f" "$e" before tmb))
+    a=($(fit_row "$BIN" "$f" "$e" after tmb))
+    echo "| $1 | $e | ${b[1]} | ${a[1]} | $(echo "${b[1]} / ${a[1]}" | bc -l | cut -c1-4)x | ${b[2]} / ${a[2]} | ${b[3]} / ${a[3]} | ${a[4]} |"
+  done
+  echo
+  echo "Load after: $(cut -d' ' -f1-3 /proc/loadavg)"
+  echo
+}
+
 case "$PART" in
   solve) solve_section ;;
   eval) eval_section ;;
   memory) memory_section ;;
+  assembly) assembly_section ;;
   all) solve_section; eval_section; memory_section ;;
   *) echo "unknown part $PART" >&2; exit 2 ;;
 esac

@@ -128,11 +128,7 @@ impl Extraction {
         // Chunks of cells with reused scratch buffers: one output allocation per chunk.
         const CHUNK: usize = 1024;
         let nchunks = pb.cells.len().div_ceil(CHUNK);
-        // First pt-grid bucket of every support: a candidate is taken from the first bucket
-        // its support shares with the cell only, so no sort/dedup is needed.
-        let first = |kn: &[f64; 10]| [pb.grid.index_range(kn[0], kn[0], true).0, pb.grid.index_range(kn[5], kn[5], false).0];
-        let first: Vec<[u32; 2]> =
-            if parallel { pb.knots.par_iter().map(first).collect() } else { pb.knots.iter().map(first).collect() };
+        let first = first_buckets(pb, parallel);
         let run = |q: usize| {
             let mut sc = Scratch { first: &first, ..Scratch::default() };
             let (mut data, mut flags) = (Vec::new(), Vec::new());
@@ -408,12 +404,123 @@ impl Extraction {
 #[derive(Default)]
 struct Scratch<'a> {
     first: &'a [[u32; 2]],
-    cand: Vec<u32>,
-    sb: Vec<f64>,
-    tb: Vec<f64>,
+    el: CellElements,
+}
+
+/// Per blending function, the first bucket of the PB-spline's grid that its support meets (s,
+/// t): [`CellElements::build`] takes a candidate from the first bucket its support shares with
+/// the cell only, so no sort/dedup is needed.
+pub(crate) fn first_buckets(pb: &PbSpline, parallel: bool) -> Vec<[u32; 2]> {
+    let first = |kn: &[f64; 10]| [pb.grid.index_range(kn[0], kn[0], true).0, pb.grid.index_range(kn[5], kn[5], false).0];
+    if parallel { pb.knots.par_iter().map(first).collect() } else { pb.knots.iter().map(first).collect() }
+}
+
+/// The elements of one leaf cell (shared by the extraction and the fit's per-element
+/// assembly, `crate::assembly`): the element (jt, is) is [sb[is], sb[is+1]) × [tb[jt], tb[jt+1]).
+#[derive(Default)]
+pub(crate) struct CellElements {
+    /// PB indices of the blending functions whose support meets the cell's interior, in
+    /// bucket order.
+    pub cand: Vec<u32>,
+    /// Element breaks in s and t: the cell's edges and every knot strictly inside, sorted.
+    pub sb: Vec<f64>,
+    pub tb: Vec<f64>,
+    /// Per element row (jt): whether its left edge may be an A1 border; per element column
+    /// (is): whether its lower edge may be one.
+    pub left: Vec<bool>,
+    pub bottom: Vec<bool>,
     ids: Vec<u32>,
-    left: Vec<bool>,
-    bottom: Vec<bool>,
+}
+
+impl CellElements {
+    /// Fills the lists for leaf cell `ci`; `first` from [`first_buckets`].
+    pub(crate) fn build(&mut self, pb: &PbSpline, ci: usize, first: &[[u32; 2]]) {
+        let k = pb.degree.k();
+        let c = pb.cells[ci];
+        let (s0, t0, s1, t1) = (c[0], c[1], c[2], c[3]);
+        // Blending functions whose support meets the cell's interior.
+        let (i0, i1) = pb.grid.index_range(s0, s1, true);
+        let (j0, j1) = pb.grid.index_range(t0, t1, false);
+        let cand = &mut self.cand;
+        cand.clear();
+        for bj in j0..=j1 {
+            for bi in i0..=i1 {
+                let b = (bj * pb.grid.ns + bi) as usize;
+                for &p in &pb.pt_items[pb.pt_start[b] as usize..pb.pt_start[b + 1] as usize] {
+                    let f = first[p as usize];
+                    if bi != i0.max(f[0]) || bj != j0.max(f[1]) {
+                        continue;
+                    }
+                    let kn = &pb.knots[p as usize];
+                    if kn[0] < s1 && kn[k + 1] > s0 && kn[5] < t1 && kn[5 + k + 1] > t0 {
+                        cand.push(p);
+                    }
+                }
+            }
+        }
+        // Element breaks: the cell's edges and every knot strictly inside.
+        let (sb, tb) = (&mut self.sb, &mut self.tb);
+        sb.clear();
+        tb.clear();
+        sb.extend([s0, s1]);
+        tb.extend([t0, t1]);
+        for &p in cand.iter() {
+            let kn = &pb.knots[p as usize];
+            for &x in &kn[..k + 2] {
+                if s0 < x && x < s1 && !sb.contains(&x) {
+                    sb.push(x);
+                }
+            }
+            for &x in &kn[5..5 + k + 2] {
+                if t0 < x && x < t1 && !tb.contains(&x) {
+                    tb.push(x);
+                }
+            }
+        }
+        if sb.len() > 2 {
+            sb.sort_by(|a, b| a.total_cmp(b));
+        }
+        if tb.len() > 2 {
+            tb.sort_by(|a, b| a.total_cmp(b));
+        }
+        self.find_borders(pb, s0, t0);
+    }
+
+    /// The A1 border flags of the element edges on the cell's left (s = s0) and lower (t = t0)
+    /// edges.
+    fn find_borders(&mut self, pb: &PbSpline, s0: f64, t0: f64) {
+        let (sb, tb) = (&self.sb, &self.tb);
+        let (s1, t1) = (sb[sb.len() - 1], tb[tb.len() - 1]);
+        let left_open = !edge_covered(pb, s0, t0, t1, true, &mut self.ids);
+        let bottom_open = !edge_covered(pb, t0, s0, s1, false, &mut self.ids);
+        self.left.clear();
+        self.left.resize(tb.len() - 1, left_open);
+        self.bottom.clear();
+        self.bottom.resize(sb.len() - 1, bottom_open);
+        // A partly covered edge: decide per element segment.
+        if left_open && tb.len() > 2 {
+            for q in 0..tb.len() - 1 {
+                self.left[q] = !edge_covered(pb, s0, tb[q], tb[q + 1], true, &mut self.ids);
+            }
+        }
+        if bottom_open && sb.len() > 2 {
+            for q in 0..sb.len() - 1 {
+                self.bottom[q] = !edge_covered(pb, t0, sb[q], sb[q + 1], false, &mut self.ids);
+            }
+        }
+    }
+
+    /// The flags ([`LEFT_BORDER`] | [`BOTTOM_BORDER`]) of element (jt, is).
+    pub(crate) fn flags(&self, jt: usize, is: usize) -> u32 {
+        let mut f = 0;
+        if is == 0 && self.left[jt] {
+            f |= LEFT_BORDER;
+        }
+        if jt == 0 && self.bottom[is] {
+            f |= BOTTOM_BORDER;
+        }
+        f
+    }
 }
 
 /// Appends the elements of leaf cell `ci` (records and flags, see [`Extraction::data`]).
@@ -422,70 +529,9 @@ fn extract_cell(pb: &PbSpline, ci: usize, sc: &mut Scratch<'_>, data: &mut Vec<f
     let n1 = k + 1;
     let nc = n1 * n1;
     let stride = 8 + 2 * nc;
-    let c = pb.cells[ci];
-    let (s0, t0, s1, t1) = (c[0], c[1], c[2], c[3]);
-    // Blending functions whose support meets the cell's interior.
-    let (i0, i1) = pb.grid.index_range(s0, s1, true);
-    let (j0, j1) = pb.grid.index_range(t0, t1, false);
-    let cand = &mut sc.cand;
-    cand.clear();
-    for bj in j0..=j1 {
-        for bi in i0..=i1 {
-            let b = (bj * pb.grid.ns + bi) as usize;
-            for &p in &pb.pt_items[pb.pt_start[b] as usize..pb.pt_start[b + 1] as usize] {
-                let f = sc.first[p as usize];
-                if bi != i0.max(f[0]) || bj != j0.max(f[1]) {
-                    continue;
-                }
-                let kn = &pb.knots[p as usize];
-                if kn[0] < s1 && kn[k + 1] > s0 && kn[5] < t1 && kn[5 + k + 1] > t0 {
-                    cand.push(p);
-                }
-            }
-        }
-    }
-    // Element breaks: the cell's edges and every knot strictly inside.
-    let (sb, tb) = (&mut sc.sb, &mut sc.tb);
-    sb.clear();
-    tb.clear();
-    sb.extend([s0, s1]);
-    tb.extend([t0, t1]);
-    for &p in cand.iter() {
-        let kn = &pb.knots[p as usize];
-        for &x in &kn[..k + 2] {
-            if s0 < x && x < s1 && !sb.contains(&x) {
-                sb.push(x);
-            }
-        }
-        for &x in &kn[5..5 + k + 2] {
-            if t0 < x && x < t1 && !tb.contains(&x) {
-                tb.push(x);
-            }
-        }
-    }
-    if sb.len() > 2 {
-        sb.sort_by(|a, b| a.total_cmp(b));
-    }
-    if tb.len() > 2 {
-        tb.sort_by(|a, b| a.total_cmp(b));
-    }
-    let left_open = !edge_covered(pb, s0, t0, t1, true, &mut sc.ids);
-    let bottom_open = !edge_covered(pb, t0, s0, s1, false, &mut sc.ids);
-    sc.left.clear();
-    sc.left.resize(tb.len() - 1, left_open);
-    sc.bottom.clear();
-    sc.bottom.resize(sb.len() - 1, bottom_open);
-    // A partly covered edge: decide per element segment.
-    if left_open && tb.len() > 2 {
-        for q in 0..tb.len() - 1 {
-            sc.left[q] = !edge_covered(pb, s0, tb[q], tb[q + 1], true, &mut sc.ids);
-        }
-    }
-    if bottom_open && sb.len() > 2 {
-        for q in 0..sb.len() - 1 {
-            sc.bottom[q] = !edge_covered(pb, t0, sb[q], sb[q + 1], false, &mut sc.ids);
-        }
-    }
+    sc.el.build(pb, ci, sc.first);
+    let el = &sc.el;
+    let (cand, sb, tb) = (&el.cand, &el.sb, &el.tb);
     for jt in 0..tb.len() - 1 {
         for is in 0..sb.len() - 1 {
             let (a, b, c_, d) = (sb[is], sb[is + 1], tb[jt], tb[jt + 1]);
@@ -493,14 +539,7 @@ fn extract_cell(pb: &PbSpline, ci: usize, sc: &mut Scratch<'_>, data: &mut Vec<f
             data.resize(base + stride, 0.0);
             let r = &mut data[base..];
             r[..6].copy_from_slice(&[a, c_, b, d, 1.0 / (b - a), 1.0 / (d - c_)]);
-            let mut f = 0;
-            if is == 0 && sc.left[jt] {
-                f |= LEFT_BORDER;
-            }
-            if jt == 0 && sc.bottom[is] {
-                f |= BOTTOM_BORDER;
-            }
-            flags.push(f);
+            flags.push(el.flags(jt, is));
             let (head, blocks) = r.split_at_mut(8);
             let (zw, ww) = blocks.split_at_mut(nc);
             for &p in cand.iter() {

@@ -34,8 +34,9 @@
 //!   all w = 1.
 //! - Minimum cell edge = 1 = sample spacing (§2.2 rule): cells of edge < 2 are never split.
 //! - **Memory / scale** (10⁸ cells): neither the model matrix nor a full-raster surface is held.
-//!   The normal equations are accumulated row by row (CSR positions cached between neighbouring
-//!   cells, upper triangle only); the error check evaluates the surface in row blocks into one
+//!   The normal equations are accumulated per Bézier element on rasters (`crate::assembly`:
+//!   a dense local block per element, scattered once into the CSR, upper triangle only) and
+//!   cell by cell for scattered points; the error check evaluates the surface in row blocks into one
 //!   f64 |Δz| per cell, kept across iterations. After a refinement that changes at most 20 % of
 //!   the blending functions (new points, changed knots), only those points and the points whose
 //!   supports overlap theirs are re-solved (the others held, their terms on the right-hand side)
@@ -334,11 +335,7 @@ fn mean_of(samples: &Samples) -> f64 {
 /// The normal equations' storage: `crate::sparse`'s symmetric CSR.
 type Csr = crate::sparse::SymCsr;
 
-/// Index of entry (i, j), which the pattern holds by construction (every overlapping pair).
-#[inline]
-fn entry(a: &Csr, i: usize, j: u32) -> usize {
-    a.find(i, j).expect("pattern covers every overlapping pair")
-}
+use crate::assembly::entry;
 
 /// Pattern: pairs of PB points whose supports overlap with positive area, plus mesh-line
 /// neighbours used by the regulariser.
@@ -346,6 +343,7 @@ fn pattern(pb: &PbSpline, extra: &[Vec<u32>], free: Option<&[bool]>) -> Csr {
     let k = pb.degree.k();
     let n = pb.knots.len();
     let is_free = |i: usize| free.is_none_or(|f| f[i]);
+    let first = crate::extraction::first_buckets(pb, true);
     let rows: Vec<Vec<u32>> = (0..n)
         .into_par_iter()
         .map(|i| {
@@ -360,6 +358,11 @@ fn pattern(pb: &PbSpline, extra: &[Vec<u32>], free: Option<&[bool]>) -> Csr {
                 for bi in i0..=i1 {
                     let b = (bj * pb.grid.ns + bi) as usize;
                     for &q in &pb.pt_items[pb.pt_start[b] as usize..pb.pt_start[b + 1] as usize] {
+                        // each support once: from the first bucket it shares with i's
+                        let f = first[q as usize];
+                        if bi != i0.max(f[0]) || bj != j0.max(f[1]) {
+                            continue;
+                        }
                         let c = &pb.knots[q as usize];
                         let ow = a[k + 1].min(c[k + 1]) - a[0].max(c[0]);
                         let oh = a[5 + k + 1].min(c[5 + k + 1]) - a[5].max(c[5]);
@@ -555,114 +558,13 @@ pub(crate) fn fit_lsq_local(
     }
     let mut a = pattern(pb, &extra, free);
     let prior: Vec<f64> = pb.geom.iter().map(|g| g[2]).collect();
-    let w = samples.width;
-    // units: raster rows, or the scattered points
-    let rows: Vec<usize> = (0..pts.map_or(samples.height, |p| p.z.len())).collect();
-    // A fixed number of row blocks (not the thread count) keeps the summation order, and so
-    // the output bytes, independent of the machine.
-    let chunk = rows.len().div_ceil(4).max(1);
-    let parts: Vec<(Vec<f64>, Vec<f64>, Vec<f64>)> = rows
-        .par_chunks(chunk)
-        .map(|js| -> Result<(Vec<f64>, Vec<f64>, Vec<f64>), TsplineError> {
-            let mut vals = vec![0.0; a.vals.len()];
-            let mut rhs = vec![0.0; n];
-            let mut support = vec![0.0; n];
-            let mut scratch = Vec::new();
-            let mut row: Vec<(u32, f64)> = Vec::with_capacity(32);
-            // Neighbouring cells mostly see the same basis functions in the same order (same
-            // bucket, same spans): their CSR positions are looked up once and reused. Only the
-            // upper triangle (by PB index) is accumulated; it is mirrored after the merge.
-            let mut prev: Vec<u32> = Vec::with_capacity(32);
-            let mut pos: Vec<usize> = Vec::with_capacity(32 * 33 / 2);
-            let mut cell = |q: usize, given: Option<(&[u32], &[f64])>| {
-                let (si, tj, d) = match pts {
-                    Some(p) => (p.st[q][0], p.st[q][1], p.z[q]),
-                    None => ((q % w) as f64, (q / w) as f64, samples.z[q]),
-                };
-                if d.is_nan() {
-                    return;
-                }
-                row.clear();
-                match given {
-                    Some((ix, v)) => {
-                        if ix.is_empty() {
-                            return; // outside the domain
-                        }
-                        row.extend(ix.iter().copied().zip(v.iter().copied()));
-                    }
-                    None => {
-                        if !pb.for_each_basis(si, tj, &mut scratch, |q, v| row.push((q, v))) {
-                            return;
-                        }
-                    }
-                }
-                let mut d = d;
-                if free.is_some() {
-                    // held points: their part of the model moves to the right-hand side
-                    row.retain(|&(q, v)| {
-                        if is_free(q as usize) {
-                            true
-                        } else {
-                            d -= v * prior[q as usize];
-                            false
-                        }
-                    });
-                }
-                {
-                    let m = row.len();
-                    if !(m == prev.len() && row.iter().zip(&prev).all(|(r, &q)| r.0 == q)) {
-                        prev.clear();
-                        prev.extend(row.iter().map(|r| r.0));
-                        pos.clear();
-                        for x in 0..m {
-                            for y in x..m {
-                                let (p, q) = (row[x].0.min(row[y].0), row[x].0.max(row[y].0));
-                                pos.push(entry(&a, p as usize, q));
-                            }
-                        }
-                    }
-                    let mut k = 0;
-                    for x in 0..m {
-                        let (p, vp) = row[x];
-                        rhs[p as usize] += vp * d;
-                        support[p as usize] += vp;
-                        for &(_, vq) in &row[x..] {
-                            vals[pos[k]] += vp * vq;
-                            k += 1;
-                        }
-                    }
-                }
-            };
-            let (j0, j1) = (js[0], js[js.len() - 1] + 1);
-            match (pts, region, &asm) {
-                (Some(_), _, _) => (j0..j1).for_each(|q| cell(q, None)),
-                (None, Some(r), _) => r.for_rows(j0, j1, |q| cell(q, None)),
-                (None, None, Some((o, sp))) => {
-                    // the kernel's rows for blocks of raster rows (2^16 cells of ELL at a time)
-                    let br = ((1usize << 16) / w.max(1)).max(1);
-                    let mut jb = j0;
-                    while jb < j1 {
-                        let nr = br.min(j1 - jb);
-                        let g = GridSpec { s0: 0.0, t0: jb as f64, ds: 1.0, dt: 1.0, ns: w, nt: nr };
-                        let t = o.model_rows(sp, &g)?;
-                        for r in 0..t.len() {
-                            cell(jb * w + r, Some(t.row(r)));
-                        }
-                        jb += nr;
-                    }
-                }
-                (None, None, None) => (j0 * w..j1 * w).for_each(|q| cell(q, None)),
-            }
-            Ok((vals, rhs, support))
-        })
-        .collect::<Result<_, _>>()?;
-    let mut rhs = vec![0.0; n];
-    let mut support = vec![0.0; n];
-    for (v, r, s) in parts {
-        a.vals.iter_mut().zip(&v).for_each(|(x, y)| *x += y);
-        rhs.iter_mut().zip(&r).for_each(|(x, y)| *x += y);
-        support.iter_mut().zip(&s).for_each(|(x, y)| *x += y);
-    }
+    let sys = crate::assembly::System { pattern: &a, pb, free, prior: &prior };
+    let sums = match (pts, &asm) {
+        (None, None) => crate::assembly::by_elements(sys, samples, region),
+        _ => crate::assembly::per_cell(sys, samples, pts, region, asm.as_ref().map(|(o, sp)| (*o, sp)))?,
+    };
+    let crate::assembly::Sums { vals, mut rhs, support } = sums;
+    a.vals = vals;
     // mirror the accumulated upper triangle
     for i in 0..n {
         for k in a.start[i]..a.start[i + 1] {

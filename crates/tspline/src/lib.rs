@@ -24,6 +24,7 @@
 //! counted from the bottom row, so raster cell centres sit at integer (s, t) and the sample
 //! spacing is 1. The affine map to world coordinates is stored with the mesh ([`format::Georef`]).
 
+mod assembly;
 pub mod blunders;
 pub mod eval;
 pub mod extraction;
