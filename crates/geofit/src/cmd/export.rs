@@ -5,12 +5,10 @@
 //! The CityGML → scene mapping lives here (which polygons, which node, which material); the
 //! triangulation and the file formats are `mesh_export`'s.
 
-use std::collections::HashSet;
-
 use citygml_io::crs::proj_crs;
-use citygml_io::{CityModel, CityObject, Polygon, SurfaceType};
+use city_scene::{build_scene, Reproject, SceneOptions};
 use clap::Args as ClapArgs;
-use mesh_export::{GltfBuffer, Material, MeshNode, Scene};
+use mesh_export::{GltfBuffer, Scene};
 use serde::Serialize;
 
 use crate::config::{write_atomic, Config, Input, Output};
@@ -133,43 +131,6 @@ pub struct ExportReport {
     pub skipped: Vec<String>,
 }
 
-/// The semantic materials, in a fixed order (the output does not depend on which come first).
-/// Colours follow common CityGML viewer conventions; closure surfaces and windows are translucent.
-fn materials() -> Vec<Material> {
-    let m = |name: &str, rgba: [f32; 4]| Material::new(name, rgba);
-    vec![
-        m("WallSurface", [0.86, 0.84, 0.78, 1.0]),
-        m("RoofSurface", [0.62, 0.18, 0.12, 1.0]),
-        m("GroundSurface", [0.35, 0.33, 0.30, 1.0]),
-        m("ClosureSurface", [0.70, 0.80, 0.90, 0.4]),
-        m("FloorSurface", [0.60, 0.50, 0.38, 1.0]),
-        m("CeilingSurface", [0.90, 0.90, 0.88, 1.0]),
-        m("InteriorWallSurface", [0.95, 0.93, 0.88, 1.0]),
-        m("OuterFloorSurface", [0.55, 0.53, 0.48, 1.0]),
-        m("OuterCeilingSurface", [0.78, 0.76, 0.72, 1.0]),
-        m("Window", [0.45, 0.70, 0.90, 0.6]),
-        m("Door", [0.45, 0.30, 0.16, 1.0]),
-        m("Unclassified", [0.75, 0.75, 0.75, 1.0]),
-    ]
-}
-
-fn material_index(s: Option<SurfaceType>) -> usize {
-    match s {
-        Some(SurfaceType::Wall) => 0,
-        Some(SurfaceType::Roof) => 1,
-        Some(SurfaceType::Ground) => 2,
-        Some(SurfaceType::Closure) => 3,
-        Some(SurfaceType::Floor) => 4,
-        Some(SurfaceType::Ceiling) => 5,
-        Some(SurfaceType::InteriorWall) => 6,
-        Some(SurfaceType::OuterFloor) => 7,
-        Some(SurfaceType::OuterCeiling) => 8,
-        Some(SurfaceType::Window) => 9,
-        Some(SurfaceType::Door) => 10,
-        None => 11,
-    }
-}
-
 fn parse_origin(s: &str) -> Result<Option<[f64; 3]>, CliError> {
     match s {
         "auto" => Ok(None),
@@ -186,142 +147,6 @@ fn parse_origin(s: &str) -> Result<Option<[f64; 3]>, CliError> {
             Ok(Some([v[0], v[1], v[2]]))
         }
     }
-}
-
-fn is_part(o: &CityObject) -> bool {
-    matches!(o.kind.as_str(), "BuildingPart" | "BridgePart" | "TunnelPart")
-}
-
-/// Highest LoD with polygons in this object and everything nested in it.
-fn max_lod(o: &CityObject) -> Option<u8> {
-    o.walk().iter().flat_map(|c| c.geometries.iter()).filter(|g| !g.polygons().is_empty()).filter_map(|g| g.lod).max()
-}
-
-/// Builds scenes from a model; keeps the dedup state and the findings.
-struct Builder<'a> {
-    name: &'a str,
-    /// Definition span starts of every polygon defined in an exported geometry.
-    defined: HashSet<usize>,
-    /// Definition span starts already written.
-    emitted: HashSet<usize>,
-    transform: Option<proj::Proj>,
-    skipped: Vec<String>,
-    polygons: usize,
-    planar: bool,
-}
-
-impl Builder<'_> {
-    fn polygon_label(p: &Polygon) -> String {
-        match &p.id {
-            Some(id) => format!("polygon gml:id=\"{id}\""),
-            None => "polygon".to_string(),
-        }
-    }
-
-    fn skip(&mut self, p: &Polygon, owner: &str, why: &str) {
-        self.skipped.push(format!(
-            "{}:{}:{}: {} of {owner} skipped: {why}",
-            self.name,
-            p.span.line,
-            p.span.column,
-            Self::polygon_label(p)
-        ));
-    }
-
-    fn reproject(&self, ring: &[[f64; 3]]) -> Result<Vec<[f64; 3]>, String> {
-        let Some(t) = &self.transform else { return Ok(ring.to_vec()) };
-        ring.iter()
-            .map(|p| {
-                let (x, y) = t.convert((p[0], p[1])).map_err(|e| format!("reprojection failed at ({}, {}): {e}", p[0], p[1]))?;
-                if !(x.is_finite() && y.is_finite()) {
-                    return Err(format!("reprojection of ({}, {}) gave no finite result", p[0], p[1]));
-                }
-                Ok([x, y, p[2]])
-            })
-            .collect()
-    }
-
-    fn add_polygon(&mut self, node: &mut MeshNode, p: &Polygon, owner: &str) {
-        let key = p.span.bytes.start;
-        if p.via_xlink.is_some() && self.defined.contains(&key) {
-            return; // exported where it is defined
-        }
-        if !self.emitted.insert(key) {
-            return;
-        }
-        let rings: Result<Vec<Vec<[f64; 3]>>, String> =
-            std::iter::once(&p.exterior).chain(p.interiors.iter()).map(|r| self.reproject(&r.points)).collect();
-        let rings = match rings {
-            Ok(r) => r,
-            Err(e) => return self.skip(p, owner, &e),
-        };
-        let holes: Vec<&[[f64; 3]]> = rings[1..].iter().map(|h| h.as_slice()).collect();
-        let mut t = match mesh_export::triangulate_polygon(&rings[0], &holes) {
-            Ok(t) => t,
-            Err(e) => return self.skip(p, owner, &e.to_string()),
-        };
-        if self.planar {
-            t.flatten();
-        }
-        self.polygons += 1;
-        let mesh = node.mesh_for(Some(material_index(p.semantic)));
-        let base = mesh.positions.len() as u32;
-        mesh.positions.extend_from_slice(&t.positions);
-        for tri in &t.triangles {
-            let [a, b, c] = tri.map(|i| base + i);
-            if p.reversed {
-                mesh.indices.extend_from_slice(&[a, c, b]);
-            } else {
-                mesh.indices.extend_from_slice(&[a, b, c]);
-            }
-        }
-    }
-
-    /// Adds the polygons of `o` and of its nested non-part objects into `node`, and returns the
-    /// nested parts (which become child nodes).
-    fn collect<'o>(&mut self, node: &mut MeshNode, o: &'o CityObject, lod: u8, owner: &str, parts: &mut Vec<&'o CityObject>) {
-        for g in o.geometries.iter().filter(|g| g.lod == Some(lod)) {
-            for p in g.polygons() {
-                self.add_polygon(node, p, owner);
-            }
-        }
-        for c in &o.children {
-            if is_part(c) {
-                parts.push(c);
-            } else {
-                self.collect(node, c, lod, owner, parts);
-            }
-        }
-    }
-
-    fn node(&mut self, o: &CityObject, lod: u8, index: usize) -> Option<MeshNode> {
-        let name = o.id.clone().unwrap_or_else(|| format!("{}_{index}", o.kind));
-        let owner = match &o.id {
-            Some(id) => format!("{} gml:id=\"{id}\"", o.kind),
-            None => o.kind.clone(),
-        };
-        let mut node = MeshNode::new(name);
-        let mut extras = serde_json::Map::new();
-        if let Some(id) = &o.id {
-            extras.insert("gml_id".into(), serde_json::json!(id));
-        }
-        extras.insert("type".into(), serde_json::json!(o.kind));
-        extras.insert("lod".into(), serde_json::json!(lod));
-        node.extras = Some(serde_json::Value::Object(extras));
-        let mut parts = Vec::new();
-        self.collect(&mut node, o, lod, &owner, &mut parts);
-        for (i, part) in parts.into_iter().enumerate() {
-            if let Some(child) = self.node(part, lod, i + 1) {
-                node.children.push(child);
-            }
-        }
-        (!node.meshes.is_empty() || !node.children.is_empty()).then_some(node)
-    }
-}
-
-/// The LoD each top-level object is exported at.
-fn object_lods(model: &CityModel, lod: Option<u8>) -> Vec<Option<u8>> {
-    model.objects.iter().map(|o| lod.or_else(|| max_lod(o))).collect()
 }
 
 pub fn run(args: Args, config: &Config) -> CmdResult {
@@ -379,44 +204,22 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         }
     };
 
-    let lods = object_lods(&model, args.lod);
-    let mut b = Builder {
-        name: &name,
-        defined: HashSet::new(),
-        emitted: HashSet::new(),
-        transform,
-        skipped: Vec::new(),
-        polygons: 0,
-        planar: args.planar,
-    };
-    for (o, lod) in model.objects.iter().zip(&lods) {
-        let Some(lod) = *lod else { continue };
-        for c in o.walk() {
-            for g in c.geometries.iter().filter(|g| g.lod == Some(lod)) {
-                b.defined.extend(g.polygons().iter().filter(|p| p.via_xlink.is_none()).map(|p| p.span.bytes.start));
-            }
-        }
-    }
-
-    let mut scene = Scene {
-        materials: materials(),
-        crs: args.t_srs.clone().or(source_crs),
-        generator: Some(format!("geofit {}", env!("CARGO_PKG_VERSION"))),
-        ..Default::default()
+    let reproject = |x: f64, y: f64| match &transform {
+        Some(t) => t.convert((x, y)).map_err(|e| e.to_string()),
+        None => Ok((x, y)),
     };
     let progress = config.progress("export: triangulate", model.objects.len() as u64);
-    for (i, (o, lod)) in model.objects.iter().zip(&lods).enumerate() {
-        if let Some(lod) = *lod {
-            if let Some(n) = b.node(o, lod, i + 1) {
-                scene.nodes.push(n);
-            }
-        }
-        progress.set(i as u64 + 1, "");
-    }
-    progress.finish(&format!("{} polygons, {} triangles", b.polygons, scene.triangle_count()));
+    let options = SceneOptions { lod: args.lod, planar: args.planar };
+    let built = build_scene(&model, &name, &options, transform.is_some().then_some(&reproject as Reproject), &|n| progress.set(n as u64, ""));
+    let mut scene = Scene {
+        crs: args.t_srs.clone().or(source_crs),
+        generator: Some(format!("geofit {}", env!("CARGO_PKG_VERSION"))),
+        ..built.scene
+    };
+    progress.finish(&format!("{} polygons, {} triangles", built.polygons, scene.triangle_count()));
     scene.origin = fixed_origin.unwrap_or_else(|| scene.auto_origin());
 
-    let mut findings = std::mem::take(&mut b.skipped);
+    let mut findings = built.skipped;
     for u in &model.unresolved_xlinks {
         findings.push(format!("{name}:{}:{}: {}", u.span.line, u.span.column, u.reason()));
     }
@@ -467,7 +270,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
             crs: scene.crs.clone(),
             origin: scene.origin,
             objects: scene.nodes.len(),
-            polygons: b.polygons,
+            polygons: built.polygons,
             triangles: scene.triangle_count(),
             area: scene.area(),
             skipped: findings.clone(),
