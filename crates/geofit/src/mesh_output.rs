@@ -97,18 +97,31 @@ pub fn tessellate(file: TMeshFile, name: &str, output: &Output, format: Format, 
         e => CliError::internal(format!("surface: {e}")),
     })?;
     scene.generator = Some("geofit surface".into());
-    write_surface(&scene, output, format)?;
+    write_scene(&scene, output, format, false, "surface export")?;
     Ok(Exit::Ok)
 }
 
-fn write_surface(scene: &mesh_export::Scene, output: &Output, format: Format) -> Result<(), CliError> {
+/// Writes a scene as `format` to `output`: glb; glTF with the buffer embedded or, with
+/// `external_bin`, in OUT.bin beside it; OBJ with its MTL beside a file output (on stdout the OBJ
+/// alone). Side files are written atomically before the main file. `what` prefixes the message
+/// of a failure of the writer itself.
+pub fn write_scene(scene: &mesh_export::Scene, output: &Output, format: Format, external_bin: bool, what: &str) -> Result<(), CliError> {
     let export_err = |e: mesh_export::ExportError| match e {
         mesh_export::ExportError::Io(e) => CliError::io_out(e),
-        e => CliError::internal(format!("surface export: {e}")),
+        e => CliError::internal(format!("{what}: {e}")),
     };
-    match format {
-        Format::Obj => {
-            let path = output.path().expect("checked by tessellate: OBJ goes to a file");
+    match (format, output.path()) {
+        (Format::Glb, _) => output.write_with(|w| mesh_export::write_glb(scene, w).map_err(export_err))?,
+        (Format::Gltf, Some(path)) if external_bin => {
+            let bin_path = path.with_extension("bin");
+            let uri = file_name(&bin_path)?;
+            let (mut json, mut bin) = (Vec::new(), Vec::new());
+            mesh_export::write_gltf(scene, &mut json, mesh_export::GltfBuffer::External { uri: &uri, bin: &mut bin }).map_err(export_err)?;
+            write_atomic(&bin_path, |w| w.write_all(&bin).map_err(CliError::io_out))?;
+            output.write_bytes(&json)?;
+        }
+        (Format::Gltf, _) => output.write_with(|w| mesh_export::write_gltf(scene, w, mesh_export::GltfBuffer::Embedded).map_err(export_err))?,
+        (Format::Obj, Some(path)) => {
             let mtl_path = path.with_extension("mtl");
             let mtl_name = file_name(&mtl_path)?;
             let (mut obj, mut mtl) = (Vec::new(), Vec::new());
@@ -116,8 +129,7 @@ fn write_surface(scene: &mesh_export::Scene, output: &Output, format: Format) ->
             write_atomic(&mtl_path, |w| w.write_all(&mtl).map_err(CliError::io_out))?;
             output.write_bytes(&obj)?;
         }
-        Format::Gltf => output.write_with(|w| mesh_export::write_gltf(scene, w, mesh_export::GltfBuffer::Embedded).map_err(export_err))?,
-        Format::Glb => output.write_with(|w| mesh_export::write_glb(scene, w).map_err(export_err))?,
+        (Format::Obj, None) => output.write_with(|w| mesh_export::write_obj(scene, w, None).map_err(export_err))?,
     }
     Ok(())
 }

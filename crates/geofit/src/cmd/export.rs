@@ -8,11 +8,11 @@
 use citygml_io::crs::proj_crs;
 use city_scene::{build_scene, Reproject, SceneOptions};
 use clap::Args as ClapArgs;
-use mesh_export::{GltfBuffer, Scene};
+use mesh_export::Scene;
 use serde::Serialize;
 
-use crate::config::{write_atomic, Config, Input, Output};
-use crate::mesh_output::{file_name, tessellate, Format, SurfaceOptions};
+use crate::config::{Config, Input, Output};
+use crate::mesh_output::{tessellate, write_scene, Format, SurfaceOptions};
 use crate::report::{write_json_report, ReportKind};
 use crate::error::{CliError, CmdResult, Exit};
 
@@ -230,37 +230,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         });
     }
 
-    let export_err = |e: mesh_export::ExportError| match e {
-        mesh_export::ExportError::Io(e) => CliError::io_out(e),
-        e => CliError::internal(format!("export: {e}")),
-    };
-    match format {
-        Format::Glb => output.write_with(|w| mesh_export::write_glb(&scene, w).map_err(export_err))?,
-        Format::Gltf if args.gltf_bin => {
-            let path = output.path().expect("checked above");
-            let bin_path = path.with_extension("bin");
-            let uri = file_name(&bin_path)?;
-            let (mut json, mut bin) = (Vec::new(), Vec::new());
-            mesh_export::write_gltf(&scene, &mut json, GltfBuffer::External { uri: &uri, bin: &mut bin })
-                .map_err(export_err)?;
-            write_atomic(&bin_path, |w| w.write_all(&bin).map_err(CliError::io_out))?;
-            output.write_bytes(&json)?;
-        }
-        Format::Gltf => {
-            output.write_with(|w| mesh_export::write_gltf(&scene, w, GltfBuffer::Embedded).map_err(export_err))?
-        }
-        Format::Obj => match output.path() {
-            Some(path) => {
-                let mtl_path = path.with_extension("mtl");
-                let mtl_name = file_name(&mtl_path)?;
-                let (mut obj, mut mtl) = (Vec::new(), Vec::new());
-                mesh_export::write_obj(&scene, &mut obj, Some((&mtl_name, &mut mtl))).map_err(export_err)?;
-                write_atomic(&mtl_path, |w| w.write_all(&mtl).map_err(CliError::io_out))?;
-                output.write_bytes(&obj)?;
-            }
-            None => output.write_with(|w| mesh_export::write_obj(&scene, w, None).map_err(export_err))?,
-        },
-    }
+    write_scene(&scene, &output, format, args.gltf_bin, "export")?;
 
     if let Some(path) = &args.report {
         let report = ExportReport {
