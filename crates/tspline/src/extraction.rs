@@ -439,23 +439,12 @@ impl CellElements {
         let c = pb.cells[ci];
         let (s0, t0, s1, t1) = (c[0], c[1], c[2], c[3]);
         // Blending functions whose support meets the cell's interior.
-        let (i0, i1) = pb.grid.index_range(s0, s1, true);
-        let (j0, j1) = pb.grid.index_range(t0, t1, false);
         let cand = &mut self.cand;
         cand.clear();
-        for bj in j0..=j1 {
-            for bi in i0..=i1 {
-                let b = (bj * pb.grid.ns + bi) as usize;
-                for &p in &pb.pt_items[pb.pt_start[b] as usize..pb.pt_start[b + 1] as usize] {
-                    let f = first[p as usize];
-                    if bi != i0.max(f[0]) || bj != j0.max(f[1]) {
-                        continue;
-                    }
-                    let kn = &pb.knots[p as usize];
-                    if kn[0] < s1 && kn[k + 1] > s0 && kn[5] < t1 && kn[5 + k + 1] > t0 {
-                        cand.push(p);
-                    }
-                }
+        for p in pb.points_in_buckets_once((s0, s1), (t0, t1), first) {
+            let kn = &pb.knots[p as usize];
+            if kn[0] < s1 && kn[k + 1] > s0 && kn[5] < t1 && kn[5 + k + 1] > t0 {
+                cand.push(p);
             }
         }
         // Element breaks: the cell's edges and every knot strictly inside.

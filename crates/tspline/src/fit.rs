@@ -351,25 +351,13 @@ fn pattern(pb: &PbSpline, extra: &[Vec<u32>], free: Option<&[bool]>) -> Csr {
                 return vec![i as u32]; // held: z_i = current value
             }
             let a = &pb.knots[i];
-            let (i0, i1) = pb.grid.index_range(a[0], a[k + 1], true);
-            let (j0, j1) = pb.grid.index_range(a[5], a[5 + k + 1], false);
             let mut v = Vec::new();
-            for bj in j0..=j1 {
-                for bi in i0..=i1 {
-                    let b = (bj * pb.grid.ns + bi) as usize;
-                    for &q in &pb.pt_items[pb.pt_start[b] as usize..pb.pt_start[b + 1] as usize] {
-                        // each support once: from the first bucket it shares with i's
-                        let f = first[q as usize];
-                        if bi != i0.max(f[0]) || bj != j0.max(f[1]) {
-                            continue;
-                        }
-                        let c = &pb.knots[q as usize];
-                        let ow = a[k + 1].min(c[k + 1]) - a[0].max(c[0]);
-                        let oh = a[5 + k + 1].min(c[5 + k + 1]) - a[5].max(c[5]);
-                        if ow > 0.0 && oh > 0.0 {
-                            v.push(q);
-                        }
-                    }
+            for q in pb.points_in_buckets_once((a[0], a[k + 1]), (a[5], a[5 + k + 1]), &first) {
+                let c = &pb.knots[q as usize];
+                let ow = a[k + 1].min(c[k + 1]) - a[0].max(c[0]);
+                let oh = a[5 + k + 1].min(c[5 + k + 1]) - a[5].max(c[5]);
+                if ow > 0.0 && oh > 0.0 {
+                    v.push(q);
                 }
             }
             v.push(i as u32);
