@@ -8,6 +8,7 @@
 //! - [`parse`]: a whole document into a [`CityModel`].
 //! - [`ObjectStream`]: top-level objects one at a time (bounded memory for big tiles).
 //! - [`write_with_edits`], [`format_coordinates`], [`ring_edits`]: lossless writing.
+//! - [`summary::DocumentCounts`]: what a document holds, counted object by object.
 //!
 //! What the reader understands: the version from the namespaces (never the file name), a UTF-8
 //! BOM, `gml:posList` / `gml:pos` / `gml:coordinates` with srsDimension 2 or 3, interior rings,
@@ -25,6 +26,7 @@ mod lines;
 pub mod model;
 mod reader;
 mod stream;
+pub mod summary;
 pub mod writer;
 
 pub use error::{ReadError, WriteError};

@@ -35,6 +35,13 @@ pub struct Envelope {
     pub max: Point3,
 }
 
+/// The empty envelope: what [`Envelope::merge`] starts from.
+impl Default for Envelope {
+    fn default() -> Self {
+        Envelope::empty()
+    }
+}
+
 impl Envelope {
     pub fn empty() -> Self {
         Envelope { min: [f64::INFINITY; 3], max: [f64::NEG_INFINITY; 3] }

@@ -11,7 +11,8 @@ use std::collections::BTreeMap;
 use std::io::Write;
 use std::time::Instant;
 
-use citygml_io::{CityObject, Envelope, ObjectStream, ReadError};
+use citygml_io::summary::{DocumentCounts, LodCounts};
+use citygml_io::{Envelope, ObjectStream, ReadError};
 use clap::Args as ClapArgs;
 use serde::Serialize;
 
@@ -70,14 +71,6 @@ pub struct Args {
     /// Print the report as JSON on stdout instead of text.
     #[arg(long)]
     pub json: bool,
-}
-
-#[derive(Debug, Default, Serialize)]
-pub struct LodCounts {
-    /// Geometry properties with this LoD (`lod2Solid`, `lod2MultiSurface`, ...).
-    pub geometries: usize,
-    /// Polygons defined in them.
-    pub polygons: usize,
 }
 
 #[derive(Debug, Serialize)]
@@ -240,65 +233,18 @@ fn summarize(input: &Input) -> Result<Summary, CliError> {
     let located = |e: ReadError| CliError::unreadable(format!("{name}:{e}"));
 
     let mut stream = ObjectStream::new(&src).map_err(located)?;
-    let mut feature_types = BTreeMap::new();
-    let mut lods: BTreeMap<String, LodCounts> = BTreeMap::new();
-    let mut envelope = Envelope::empty();
-    let (mut top, mut solids, mut polygons, mut rings, mut interior_rings, mut points, mut xlinks) =
-        (0, 0, 0, 0, 0, 0, 0usize);
-    let mut findings: Vec<String> = Vec::new();
-    let mut triangles = 0usize;
+    let mut counts = DocumentCounts::default();
     while let Some(obj) = stream.next() {
-        let obj: CityObject = obj.map_err(located)?;
+        counts.add(&obj.map_err(located)?);
         src.release_before(stream.consumed());
-        // One href may stand for several polygons (a CompositeSurface): count hrefs, not copies.
-        let mut hrefs = std::collections::HashSet::new();
-        top += 1;
-        envelope.merge(&obj.envelope);
-        for o in obj.walk() {
-            *feature_types.entry(o.kind.clone()).or_insert(0) += 1;
-            for g in &o.geometries {
-                let key = g.lod.map(|l| format!("lod{l}")).unwrap_or_else(|| "none".into());
-                let lc = lods.entry(key).or_default();
-                lc.geometries += 1;
-                // solids are counted where they are defined too: a copy reached by reference
-                // (`lod2Solid` / `solidMember` xlink:href) is marked so by the reader (NRW
-                // solids, whose faces point into the boundary surfaces one by one, are definitions)
-                let copy = |sh: &citygml_io::Shell| sh.via_xlink.is_some();
-                solids += match &g.kind {
-                    citygml_io::GeometryKind::Solid { exterior, .. } => usize::from(!copy(exterior)),
-                    citygml_io::GeometryKind::Solids(v) => v.iter().filter(|s| !copy(&s.0)).count(),
-                    citygml_io::GeometryKind::Surfaces(_) => 0,
-                };
-                let tin = matches!(g.gml_type.as_str(), "TriangulatedSurface" | "Tin");
-                for p in g.polygons() {
-                    if tin {
-                        triangles += 1;
-                        continue;
-                    }
-                    if let Some(v) = &p.via_xlink {
-                        hrefs.insert(v.bytes.start);
-                        continue;
-                    }
-                    lc.polygons += 1;
-                    polygons += 1;
-                    for r in std::iter::once(&p.exterior).chain(&p.interiors) {
-                        rings += 1;
-                        points += r.points.len();
-                        if r.points.len() < 4 {
-                            findings.push(format!(
-                                "{name}:{}:{}: gml:LinearRing has {} positions, at least 4 are needed (closed ring of 3 points)",
-                                r.span.line,
-                                r.span.column,
-                                r.points.len()
-                            ));
-                        }
-                    }
-                    interior_rings += p.interiors.len();
-                }
-            }
-        }
-        xlinks += hrefs.len();
     }
+    let mut findings: Vec<String> = counts
+        .short_rings
+        .iter()
+        .map(|(span, n)| {
+            format!("{name}:{}:{}: gml:LinearRing has {n} positions, at least 4 are needed (closed ring of 3 points)", span.line, span.column)
+        })
+        .collect();
     for u in stream.unresolved_xlinks() {
         findings.push(format!("{name}:{}:{}: {}", u.span.line, u.span.column, u.reason()));
     }
@@ -306,18 +252,18 @@ fn summarize(input: &Input) -> Result<Summary, CliError> {
         file: name.clone(),
         version: stream.version().as_str().to_string(),
         crs: stream.srs_name(),
-        envelope: env(&envelope),
+        envelope: env(&counts.envelope),
         declared_envelope: stream.declared_envelope().as_ref().and_then(env),
-        top_level_objects: top,
-        feature_types,
-        lods,
-        solids,
-        polygons,
-        rings,
-        triangles,
-        interior_rings,
-        points,
-        xlinks_resolved: xlinks,
+        top_level_objects: counts.top_level_objects,
+        feature_types: counts.feature_types,
+        lods: counts.lods,
+        solids: counts.solids,
+        polygons: counts.polygons,
+        rings: counts.rings,
+        triangles: counts.triangles,
+        interior_rings: counts.interior_rings,
+        points: counts.points,
+        xlinks_resolved: counts.xlinks_resolved,
         unresolved_xlinks: stream.unresolved_xlinks().len(),
     };
     Ok(Summary { info: Info::CityGml(report), findings })
