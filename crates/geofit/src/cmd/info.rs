@@ -73,6 +73,8 @@ pub struct Args {
     pub json: bool,
 }
 
+/// `info` of a CityGML file: the counts of `citygml_io::summary::DocumentCounts` (which says how
+/// each is counted) between what the document declares, in the report's field order.
 #[derive(Debug, Serialize)]
 pub struct InfoReport {
     pub file: String,
@@ -83,14 +85,11 @@ pub struct InfoReport {
     /// Envelope declared in the document's gml:boundedBy.
     pub declared_envelope: Option<[[f64; 3]; 2]>,
     pub top_level_objects: usize,
-    /// Every city object, nested ones included (Building, BuildingPart, WallSurface, ...).
     pub feature_types: BTreeMap<String, usize>,
-    /// Keyed `lod0`..`lod4`, or `none` for geometry without a LoD in its property name.
     pub lods: BTreeMap<String, LodCounts>,
     pub solids: usize,
     pub polygons: usize,
     pub rings: usize,
-    /// Triangles of TIN reliefs (gml:TriangulatedSurface / gml:Tin), not counted as polygons.
     pub triangles: usize,
     pub interior_rings: usize,
     pub points: usize,
