@@ -86,7 +86,7 @@ fn collect(batches: impl Iterator<Item = Result<Vec<[f64; 3]>, PointsError>>, na
     let mut points = Vec::new();
     for batch in batches {
         let batch = batch?;
-        check_budget(points.len() + batch.len() - 1, &budget, name)?;
+        check_budget((points.len() + batch.len()).saturating_sub(1), &budget, name)?;
         points.extend(batch);
     }
     Ok(PointCloud { points, crs })
