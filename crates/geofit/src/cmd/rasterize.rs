@@ -244,23 +244,24 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
 /// holding one batch of points and the 16-byte-a-cell accumulators, never the cloud
 /// (docs/decisions.md#streaming-points).
 fn splat_streamed(args: &Args, path: &Path, kernel: SplatKernel, config: &Config) -> Result<(BoundsXy, Raster), CliError> {
-    let file_crs = PointBatches::open(path, args.class).map_err(points_err)?.crs().map(str::to_string);
+    let open = || PointBatches::open(path, args.class).map_err(points_err);
+    let first_pass = open()?;
+    let file_crs = first_pass.crs().map(str::to_string);
     let plan = crs_plan(args, file_crs.as_deref())?;
-    let batches = || -> Result<_, CliError> {
-        let batches = PointBatches::open(path, args.class).map_err(points_err)?;
-        Ok(batches.map(|b| {
+    let reprojected = |batches: PointBatches| {
+        batches.map(|b| {
             let mut b = b.map_err(points_err)?;
             plan.apply(&mut b)?;
             Ok::<_, CliError>(b)
-        }))
+        })
     };
     let mut seen = BoundsXy::default();
-    for b in batches()? {
+    for b in reprojected(first_pass) {
         seen.extend(&b?);
     }
     let grid = plan_grid(args, &seen, plan.grid.as_ref(), config)?;
     let mut acc = SplatAccumulator::new(grid.width, grid.height, kernel).map_err(|e| proc_err(&args.input, e))?;
-    for b in batches()? {
+    for b in reprojected(open()?) {
         acc.add_points(&grid, &b?);
     }
     let crs = plan.grid.map(|c| c.wkt).or(file_crs);
