@@ -7,6 +7,7 @@
 mod cmd;
 mod config;
 mod mesh_output;
+mod process_stats;
 mod report;
 mod terrain_io;
 mod error;

@@ -415,6 +415,20 @@ impl Model {
         Locator::new(&self.mesh)
     }
 
+    /// The iso-values a user wants when none are named: each distinct constraint value when
+    /// there are 2 to 16 of them (the horizons of stratigraphic data), otherwise the surface
+    /// φ = 0 (points on one surface).
+    pub fn default_iso_values(&self) -> Vec<f64> {
+        let mut v: Vec<f64> = self.constraints.iter().filter_map(|c| c.value).collect();
+        v.sort_by(f64::total_cmp);
+        v.dedup();
+        if v.len() > 1 && v.len() <= 16 {
+            v
+        } else {
+            vec![0.0]
+        }
+    }
+
     /// φ at a world position (None outside the mesh).
     pub fn eval_world(&self, loc: &Locator, p: V3) -> Option<f64> {
         dsi::eval(&self.mesh, loc, &self.phi, sub(p, self.origin))

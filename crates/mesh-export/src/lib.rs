@@ -24,6 +24,7 @@
 //! NaN or out-of-range index is ever written ([`Scene::validate`] runs first); glTF output passes
 //! the Khronos glTF-Validator (see [`gltf`] for the layout and how the origin is recorded).
 
+pub mod colour;
 pub mod gltf;
 pub mod obj;
 pub mod scene;

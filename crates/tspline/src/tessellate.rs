@@ -154,7 +154,7 @@ fn surface_mesh(file: &TMeshFile, grid: &SampleGrid, z: &[f64], colouring: &Colo
         vid[q] = mesh.push_vertex([x, y, z[q]]);
         colours.push(match colouring {
             Colouring::ErrorAgainst(reference) => error_colour(reference(x, y).map(|v| (v - z[q]).abs()).unwrap_or(f64::NAN)),
-            Colouring::Height => ramp((z[q] - zmin) / (zmax - zmin).max(1e-300)),
+            Colouring::Height => mesh_export::colour::elevation((z[q] - zmin) / (zmax - zmin).max(1e-300)),
         });
     }
     let ns = grid.ns;
@@ -197,17 +197,6 @@ fn draped_cell_edges(file: &TMeshFile, pb: &PbSpline, mask: Option<&DataMask>) -
         }
     }
     lines
-}
-
-fn ramp(f: f64) -> [f32; 4] {
-    // blue (deep) → cyan → green → brown (high)
-    let f = f.clamp(0.0, 1.0) as f32;
-    let stops = [[0.05, 0.15, 0.55], [0.1, 0.6, 0.8], [0.2, 0.65, 0.25], [0.55, 0.4, 0.2]];
-    let x = f * 3.0;
-    let i = (x.floor() as usize).min(2);
-    let t = x - i as f32;
-    let (a, b) = (stops[i], stops[i + 1]);
-    [a[0] + (b[0] - a[0]) * t, a[1] + (b[1] - a[1]) * t, a[2] + (b[2] - a[2]) * t, 1.0]
 }
 
 fn error_colour(e: f64) -> [f32; 4] {

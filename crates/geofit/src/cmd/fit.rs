@@ -215,14 +215,6 @@ struct Report<'a> {
     peak_rss_mib: Option<f64>,
 }
 
-/// Peak resident set size of this process in MiB (Linux `/proc/self/status` VmHWM).
-fn peak_rss_mib() -> Option<f64> {
-    let s = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = s.lines().find(|l| l.starts_with("VmHWM:"))?;
-    let kib: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kib / 1024.0)
-}
-
 /// Blunders are reported at this K when `--reject-outliers` does not give one.
 const REPORT_OUTLIERS_K: f64 = 10.0;
 /// Blunders listed by position on stderr (all of them go to `--outliers-csv`).
@@ -606,7 +598,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         ),
     };
     progress.finish(&line);
-    if let Some(mib) = peak_rss_mib() {
+    if let Some(mib) = crate::process_stats::peak_rss_mib() {
         config.notice(&format!("fit: {:.1} s, peak memory {mib:.0} MiB", t_start.elapsed().as_secs_f64()));
     }
     let points = last.control_points;
@@ -675,7 +667,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
             compression_ratio: valid as f64 / points as f64,
             iterations: &result.iterations,
             seconds: t_start.elapsed().as_secs_f64(),
-            peak_rss_mib: peak_rss_mib(),
+            peak_rss_mib: crate::process_stats::peak_rss_mib(),
         };
         write_json_report(path, &REPORT, &rep)?;
     }
