@@ -80,6 +80,11 @@ geofit surface grid.tmesh -o grid-surface.obj --step 4
 geofit surface grid.tmesh -o grid-error.glb --reference grid.tif
 geofit warp grid.tif -o grid.warped.tif
 geofit unwarp grid.warped.tif -o grid.back.tif
+geofit fit grid.tif --max-error 0.5 --indirect -o grid-indirect.tmesh
+geofit eval grid-indirect.tmesh --device cpu -o grid-indirect.tif
+geofit fit grid.warped.tif --max-error 0.5 --indirect -o warped-indirect.tmesh
+geofit eval grid.tmesh --device cpu --no-mask -o grid-nomask.tif
+geofit fit grid.tif --max-error 0.5 --outliers-csv grid-blunders.csv -o /dev/null
 geofit tile plan "S/terrain/giswqs-lidar_dem.tif" --tile-size 200 --halo 2 -o raster-plan.jsonl
 geofit tile plan S/citygml/nrw/LoD2_32_33*.gml --buildings-per-tile 30 -o city-plan.jsonl
 geofit completions bash > completions.bash

@@ -6,8 +6,7 @@
 use clap::{Args as ClapArgs, ValueEnum};
 use raster_io::{read_xyz, PointCloud, PointsError, Raster, RasterError, RasterFormat, SampleType, WriteOptions};
 use raster_proc::ProcError;
-use tspline::fit::Samples;
-use tspline::format::{DataMask, Georef, TMeshFile};
+use tspline::format::TMeshFile;
 use tspline::ocl_eval::OclEvaluator;
 use tspline::TsplineError;
 
@@ -214,27 +213,7 @@ pub fn read_tmesh_arg(arg: &str) -> Result<TMeshFile, CliError> {
     tspline::format::read(&bytes).map_err(|e| CliError::unreadable(format!("{}: {e}", input.display_name())))
 }
 
-/// Raster → parameter layout (A21): s = column, t = row counted from the bottom, the affine map
-/// to world coordinates in the georeference. Needs an axis-aligned raster.
-pub fn samples_from_raster(r: &Raster, name: &str) -> Result<(Samples, Georef, DataMask), CliError> {
-    let gt = r.geotransform;
-    if gt[2] != 0.0 || gt[4] != 0.0 {
-        return Err(CliError::findings(format!("{name}: rotated rasters are not supported (geotransform {gt:?})")));
-    }
-    let (w, h) = (r.width, r.height);
-    let north_up = gt[5] < 0.0;
-    let mut z = vec![f64::NAN; w * h];
-    for row in 0..h {
-        let j = if north_up { h - 1 - row } else { row };
-        for i in 0..w {
-            let q = row * w + i;
-            if r.valid[q] {
-                z[j * w + i] = r.data[q];
-            }
-        }
-    }
-    let x0 = gt[0] + 0.5 * gt[1];
-    let (y0, dy) = if north_up { (gt[3] + (h as f64 - 0.5) * gt[5], -gt[5]) } else { (gt[3] + 0.5 * gt[5], gt[5]) };
-    let mask = DataMask { width: w, height: h, bits: z.iter().map(|v| !v.is_nan()).collect() };
-    Ok((Samples { width: w, height: h, z }, Georef { x0, y0, dx: gt[1], dy, crs: r.crs.clone().unwrap_or_default() }, mask))
+/// `r` in the fit's parameter layout (`tspline_raster::layout`), errors naming the input.
+pub fn raster_layout(r: &Raster, name: &str) -> Result<tspline_raster::layout::Layout, CliError> {
+    tspline_raster::layout::samples_from_raster(r).map_err(|e| CliError::findings(format!("{name}: {e}")))
 }

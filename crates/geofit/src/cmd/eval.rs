@@ -3,8 +3,10 @@
 
 use clap::Args as ClapArgs;
 
-use raster_io::Raster;
-use tspline::{GridSpec, PbSpline};
+use raster_io::{Raster, WriteOptions};
+use tspline::format::TMeshFile;
+use tspline::PbSpline;
+use tspline_raster::layout::{EvalGrid, Params};
 
 use crate::terrain_io::{read_tmesh_arg, select_device, tspline_err, Device};
 use crate::terrain_io::{read_raster_arg, read_raster_arg_typed, write_raster_arg, RasterOutArgs};
@@ -51,26 +53,8 @@ pub struct Args {
     pub raster_out: RasterOutArgs,
 }
 
-/// The parameter pairs of the output cells: a list, or a regular grid (row-major).
-enum Params {
-    List(Vec<[f64; 2]>),
-    Grid(GridSpec),
-}
-
-impl Params {
-    /// The pairs as a list (the timing's flop estimate samples them).
-    fn list(&self) -> std::borrow::Cow<'_, [[f64; 2]]> {
-        match self {
-            Params::List(v) => std::borrow::Cow::Borrowed(v),
-            Params::Grid(g) => (0..g.ns * g.nt).map(|q| [g.s0 + (q % g.ns) as f64 * g.ds, g.t0 + (q / g.ns) as f64 * g.dt]).collect(),
-        }
-    }
-}
-
-pub fn run(args: Args, config: &Config) -> CmdResult {
-    // The output's band type follows --like (a Float32 grid gets a Float32 surface).
-    let mut write_opts = args.raster_out.checked(args.output.as_deref(), None)?;
-    let file = read_tmesh_arg(&args.mesh)?;
+/// The output grid: --like's, the original raster of an indirect mesh, or the fitted raster's.
+fn output_grid(args: &Args, file: &TMeshFile, write_opts: &mut WriteOptions) -> Result<EvalGrid, CliError> {
     let g = &file.georef;
     // Indirect meshes: output cells are mapped forward through the stored field (spec §2.3.3)
     // and the default grid is the original raster's, masked by its footprint.
@@ -81,88 +65,44 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         None => None,
     };
     let mapper = field.as_ref().map(|f| f.mapper());
-    let to_param = |x: f64, y: f64| -> (f64, f64) {
-        match &mapper {
+    let crs = if g.crs.is_empty() { None } else { Some(g.crs.clone()) };
+    if let Some(like) = &args.like {
+        let (r, name, like_type) = read_raster_arg_typed(like)?;
+        // The output's band type follows --like (a Float32 grid gets a Float32 surface).
+        *write_opts = args.raster_out.checked(args.output.as_deref(), Some(like_type))?;
+        let to_param = |x: f64, y: f64| match &mapper {
             Some(m) => {
                 let q = m.forward([x, y]);
                 g.param(q[0], q[1])
             }
             None => g.param(x, y),
-        }
-    };
-    let crs = if g.crs.is_empty() { None } else { Some(g.crs.clone()) };
-    // Output grid and the parameter pair of each output cell.
-    let (mut out, st, stored_mask): (Raster, Params, Option<Vec<bool>>) = if let Some(like) = &args.like {
-        let (r, name, like_type) = read_raster_arg_typed(like)?;
-        write_opts = args.raster_out.checked(args.output.as_deref(), Some(like_type))?;
-        let gt = r.geotransform;
-        if gt[2] != 0.0 || gt[4] != 0.0 {
-            return Err(CliError::findings(format!("{name}: rotated rasters are not supported")));
-        }
-        let mut st = Vec::with_capacity(r.width * r.height);
-        for row in 0..r.height {
-            for col in 0..r.width {
-                let (x, y) = r.cell_centre(col, row);
-                let (s, t) = to_param(x, y);
-                st.push([s, t]);
-            }
-        }
-        let out = Raster::new_empty(r.width, r.height, gt, r.crs.clone().or(crs));
-        (out, Params::List(st), None)
-    } else if let Some(src) = field.as_ref().and_then(|f| f.source.as_ref()) {
-        let out = Raster::new_empty(src.width, src.height, src.geotransform, src.crs.clone().or(crs));
-        let mut st = Vec::with_capacity(src.width * src.height);
-        for row in 0..src.height {
-            for col in 0..src.width {
-                let (x, y) = out.cell_centre(col, row);
-                let (s, t) = to_param(x, y);
-                st.push([s, t]);
-            }
-        }
-        let mask = src.mask().map_err(|e| CliError::unreadable(format!("{}: <warp> source grid: {e}", args.mesh)))?;
-        (out, Params::List(st), Some(mask))
-    } else {
-        let (w, h, s0, t0) = match &file.mask {
-            Some(m) => (m.width, m.height, 0.0, 0.0),
-            None => {
-                let b = file.mesh.bounds();
-                let s0 = b.s_min.ceil();
-                let t0 = b.t_min.ceil();
-                ((b.s_max.floor() - s0) as usize + 1, (b.t_max.floor() - t0) as usize + 1, s0, t0)
-            }
         };
-        if w.saturating_mul(h) > 2_000_000_000 {
-            return Err(CliError::usage(format!("{}: the output grid {w}×{h} is too large; pass --like", args.mesh)));
+        return EvalGrid::like(&r, crs, to_param).map_err(|e| CliError::findings(format!("{name}: {e}")));
+    }
+    if let (Some(src), Some(m)) = (field.as_ref().and_then(|f| f.source.as_ref()), &mapper) {
+        return EvalGrid::of_warp_source(src, crs, m, g).map_err(|e| CliError::unreadable(format!("{}: <warp> source grid: {e}", args.mesh)));
+    }
+    match &file.mask {
+        Some(m) => Ok(EvalGrid::of_mask(g, m)),
+        None => {
+            let b = file.mesh.bounds();
+            EvalGrid::of_domain(g, b.s_min, b.s_max, b.t_min, b.t_max)
+                .ok_or_else(|| CliError::usage(format!("{}: the output grid of the mesh domain is too large; pass --like", args.mesh)))
         }
-        // North-up output: row r holds t = t0 + h − 1 − r. A regular grid: evaluated
-        // separably (rows of basis values reused, no per-cell parameter list).
-        let (x0, ytop) = g.world(s0, t0 + (h as f64 - 1.0));
-        let gt = Raster::geotransform_from_centres(x0, ytop, g.dx, -g.dy);
-        let st = Params::Grid(GridSpec { s0, t0: t0 + (h as f64 - 1.0), ds: 1.0, dt: -1.0, ns: w, nt: h });
-        let mask = file.mask.as_ref().map(|m| {
-            let mut v = vec![false; w * h];
-            for row in 0..h {
-                for col in 0..w {
-                    v[row * w + col] = m.get(col, h - 1 - row);
-                }
-            }
-            v
-        });
-        (Raster::new_empty(w, h, gt, crs), st, mask)
-    };
-    let extra_mask = match &args.mask {
-        Some(m) => {
-            let (r, name) = read_raster_arg(m)?;
-            if r.width != out.width || r.height != out.height {
-                return Err(CliError::usage(format!(
-                    "--mask {name} is {}×{}, the output grid is {}×{}",
-                    r.width, r.height, out.width, out.height
-                )));
-            }
-            Some(r.valid)
-        }
-        None => None,
-    };
+    }
+}
+
+/// --mask: the cells valid in a raster of the output's size.
+fn extra_mask(args: &Args, out: &Raster) -> Result<Option<Vec<bool>>, CliError> {
+    let Some(m) = &args.mask else { return Ok(None) };
+    let (r, name) = read_raster_arg(m)?;
+    if r.width != out.width || r.height != out.height {
+        return Err(CliError::usage(format!("--mask {name} is {}×{}, the output grid is {}×{}", r.width, r.height, out.width, out.height)));
+    }
+    Ok(Some(r.valid))
+}
+
+fn evaluate(args: &Args, config: &Config, file: &TMeshFile, params: &Params) -> Result<Vec<f64>, CliError> {
     let ocl = select_device(args.device, config)?;
     let pb = match &ocl {
         Some(o) => o.build_pbspline(&file.mesh).map_err(|e| tspline_err(&args.mesh, e))?,
@@ -170,21 +110,23 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     };
     let t0 = std::time::Instant::now();
     let parallel = tspline::worker_threads() > 1;
-    let z = match (&ocl, &st) {
-        (Some(o), _) => {
+    let z = match &ocl {
+        Some(o) => {
             let sp = o.upload(&pb).map_err(|e| tspline_err(&args.mesh, e))?;
-            match &st {
+            match params {
                 Params::List(st) => o.eval_points(&sp, st),
                 Params::Grid(gs) => o.eval_grid(&sp, gs),
             }
             .map_err(|e| tspline_err(&args.mesh, e))?
         }
-        (None, Params::List(st)) => pb.eval_z(st, parallel),
-        (None, Params::Grid(gs)) => pb.eval_grid(gs, parallel),
+        None => match params {
+            Params::List(st) => pb.eval_z(st, parallel),
+            Params::Grid(gs) => pb.eval_grid(gs, parallel),
+        },
     };
     if args.timing {
         let secs = t0.elapsed().as_secs_f64();
-        let st = st.list();
+        let st = params.list();
         let dev = match &ocl {
             Some(o) => format!("opencl {}", o.device_name()),
             None => format!("cpu, {} thread(s)", tspline::worker_threads()),
@@ -200,15 +142,16 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
             pb.degree.k()
         );
     }
-    for (q, v) in z.into_iter().enumerate() {
-        let keep = v.is_finite()
-            && (args.no_mask || stored_mask.as_ref().map(|m| m[q]).unwrap_or(true))
-            && extra_mask.as_ref().map(|m| m[q]).unwrap_or(true);
-        if keep {
-            out.data[q] = v;
-            out.valid[q] = true;
-        }
-    }
+    Ok(z)
+}
+
+pub fn run(args: Args, config: &Config) -> CmdResult {
+    let mut write_opts = args.raster_out.checked(args.output.as_deref(), None)?;
+    let file = read_tmesh_arg(&args.mesh)?;
+    let grid = output_grid(&args, &file, &mut write_opts)?;
+    let extra = extra_mask(&args, &grid.raster)?;
+    let z = evaluate(&args, config, &file, &grid.params)?;
+    let out = grid.fill(z, args.no_mask, extra.as_deref());
     write_raster_arg(&out, args.output.as_deref(), &write_opts)?;
     Ok(Exit::Ok)
 }
