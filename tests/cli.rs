@@ -101,11 +101,19 @@ fn a_full_or_closed_stderr_does_not_stop_the_work() {
 /// ignores write errors; a plain `eprintln!` would bring the panic above back.
 #[test]
 fn the_cli_has_no_eprintln() {
-    let src = common::repo_root().join("crates/geofit/src");
-    let mut files = vec![src.join("main.rs")];
-    for e in std::fs::read_dir(src.join("cmd")).unwrap() {
-        files.push(e.unwrap().path());
+    fn rust_files(dir: &std::path::Path, out: &mut Vec<std::path::PathBuf>) {
+        for e in std::fs::read_dir(dir).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                rust_files(&p, out);
+            } else if p.extension().is_some_and(|x| x == "rs") {
+                out.push(p);
+            }
+        }
     }
+    let mut files = Vec::new();
+    rust_files(&common::repo_root().join("crates/geofit/src"), &mut files);
+    assert!(files.len() > 30, "the CLI's sources: {files:?}");
     for f in files {
         let text = std::fs::read_to_string(&f).unwrap();
         for (i, line) in text.lines().enumerate() {
