@@ -1,0 +1,209 @@
+//! `Output`: a path written atomically (temporary file + rename) or stdout (`-`), with a
+//! closed stdout detected as a write failure.
+
+use std::io::{self, Write};
+use std::path::{Path, PathBuf};
+
+use crate::error::CliError;
+
+/// Whether file descriptor 1 was closed when the process started (`geofit info x.gml >&-`).
+///
+/// Rust's runtime reopens a closed stdout onto `/dev/null` before `main`, so every write would
+/// "succeed" and the command exit 0 having written nothing. A constructor in `.init_array` runs
+/// before that and records the closed descriptor; writes to stdout then fail like any other
+/// failed output (exit 4).
+static STDOUT_CLOSED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+#[cfg(target_os = "linux")]
+#[used]
+#[link_section = ".init_array"]
+static RECORD_CLOSED_STDOUT: extern "C" fn() = record_closed_stdout;
+
+#[cfg(target_os = "linux")]
+extern "C" fn record_closed_stdout() {
+    // SAFETY: F_GETFD only queries the descriptor's flags; it fails with EBADF when fd 1 is closed.
+    if unsafe { libc::fcntl(1, libc::F_GETFD) } == -1 {
+        STDOUT_CLOSED.store(true, std::sync::atomic::Ordering::Relaxed);
+    }
+}
+
+/// Where an output goes: stdout (`-` or no `-o`) or a file written atomically.
+#[derive(Debug, Clone)]
+pub enum Output {
+    Stdout,
+    Path(PathBuf),
+}
+
+impl Output {
+    pub fn from_arg(arg: Option<&str>) -> Output {
+        match arg {
+            None | Some("-") => Output::Stdout,
+            Some(p) => Output::Path(PathBuf::from(p)),
+        }
+    }
+
+    pub fn path(&self) -> Option<&Path> {
+        match self {
+            Output::Stdout => None,
+            Output::Path(p) => Some(p),
+        }
+    }
+
+    /// Checks before the work starts that a file output can be created: its directory exists.
+    pub fn check_target(&self) -> Result<(), CliError> {
+        self.check_target_of("-o")
+    }
+
+    /// [`Output::check_target`] naming the option that gave the path (`--report`, `--png`).
+    pub fn check_target_of(&self, flag: &str) -> Result<(), CliError> {
+        let Output::Path(p) = self else { return Ok(()) };
+        let dir = match p.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d,
+            _ => Path::new("."),
+        };
+        if !dir.is_dir() {
+            return Err(CliError::usage(format!("{flag} {}: the directory {} does not exist", p.display(), dir.display())));
+        }
+        if p.is_dir() {
+            return Err(CliError::usage(format!("{flag} {}: is a directory", p.display())));
+        }
+        Ok(())
+    }
+
+    /// The lower-case file extension, used to pick a format (`out.glb` → `glb`).
+    pub fn extension(&self) -> Option<String> {
+        self.path()
+            .and_then(|p| p.extension())
+            .map(|e| e.to_string_lossy().to_ascii_lowercase())
+    }
+
+    /// Writes through `f`; for a file, into a temporary file beside the target that is renamed
+    /// over it only when `f` succeeded, so a failure never leaves a half-written output.
+    pub fn write_with<F>(&self, f: F) -> Result<(), CliError>
+    where
+        F: FnOnce(&mut dyn Write) -> Result<(), CliError>,
+    {
+        match self {
+            Output::Stdout => {
+                if STDOUT_CLOSED.load(std::sync::atomic::Ordering::Relaxed) {
+                    return Err(CliError::output("write failed: stdout is closed (Bad file descriptor)"));
+                }
+                let stdout = io::stdout();
+                let mut lock = io::BufWriter::with_capacity(1 << 16, stdout.lock());
+                f(&mut lock)?;
+                lock.flush().map_err(CliError::io_out)
+            }
+            Output::Path(p) => write_atomic(p, f),
+        }
+    }
+
+    /// Writes a byte buffer (see [`Output::write_with`]).
+    pub fn write_bytes(&self, bytes: &[u8]) -> Result<(), CliError> {
+        self.write_with(|w| w.write_all(bytes).map_err(CliError::io_out))
+    }
+}
+
+/// The file outputs every subcommand names the same way (argument id, option as typed).
+const OUTPUT_OPTIONS: &[(&str, &str)] =
+    &[("output", "-o"), ("report", "--report"), ("png", "--png"), ("hist", "--hist"), ("outliers_csv", "--outliers-csv"), ("vtk", "--vtk")];
+
+/// Checks every file output of the parsed command line before any work starts, so a typo in
+/// an output directory is a usage error (exit 2) at once, not a failure after a long fit.
+pub fn check_output_args(matches: &clap::ArgMatches) -> Result<(), CliError> {
+    let mut m = matches;
+    while let Some((_, sub)) = m.subcommand() {
+        m = sub;
+    }
+    for (id, flag) in OUTPUT_OPTIONS {
+        // GDAL virtual paths (/vsi…) are the raster writer's to accept or refuse
+        if let Ok(Some(path)) = m.try_get_one::<String>(id).map(|p| p.filter(|p| !raster_io::gdal_io::is_gdal_virtual_path(Path::new(p)))) {
+            Output::from_arg(Some(path)).check_target_of(flag)?;
+        }
+    }
+    Ok(())
+}
+
+/// `--report -` puts the JSON report on stdout: refused before the work when the data goes
+/// there too (no `-o FILE`), since the two would be mixed in one stream.
+pub fn check_report_target(report: Option<&str>, output: Option<&str>) -> Result<(), CliError> {
+    if report == Some("-") && matches!(output, None | Some("-")) {
+        return Err(CliError::usage("--report - needs -o FILE: the data already goes to stdout"));
+    }
+    Ok(())
+}
+
+/// Writes `path` atomically: temp file in the same directory, fsync, rename.
+pub fn write_atomic<F>(path: &Path, f: F) -> Result<(), CliError>
+where
+    F: FnOnce(&mut dyn Write) -> Result<(), CliError>,
+{
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    clean_stale_temps(&dir);
+    let tmp = tempfile::Builder::new()
+        .prefix(&format!(".geofit-{}-", std::process::id()))
+        .suffix(".tmp")
+        .tempfile_in(&dir)
+        .map_err(|e| CliError::output(format!("cannot create a temporary file in {}: {e}", dir.display())))?;
+    // A write error names the target (`out.tif: File too large`), not the temporary file,
+    // which is removed when `tmp` drops on the error path.
+    let named = |e: CliError| match e.message.strip_prefix("write failed: ") {
+        Some(cause) => CliError::output(format!("cannot write {}: {cause}", path.display())),
+        None => e,
+    };
+    {
+        let mut w = io::BufWriter::with_capacity(1 << 16, tmp.as_file());
+        f(&mut w).map_err(named)?;
+        w.flush().map_err(|e| named(CliError::io_out(e)))?;
+    }
+    tmp.as_file().sync_all().map_err(|e| named(CliError::io_out(e)))?;
+    // tempfile creates 0600 files; an output is an ordinary file others may read.
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        std::fs::set_permissions(tmp.path(), std::fs::Permissions::from_mode(0o644)).map_err(CliError::io_out)?;
+    }
+    tmp.persist(path)
+        .map_err(|e| CliError::output(format!("cannot write {}: {}", path.display(), e.error)))?;
+    Ok(())
+}
+
+/// The process id in the name of a geofit temporary file or directory:
+/// `.geofit-[TAG-]PID-REST.tmp` (the atomic writer's `.geofit-PID-XXXXXX.tmp`, raster-io's
+/// staging directory `.geofit-raster-PID-N.tmp`). `None` for any other name.
+pub fn temp_owner(name: &str) -> Option<u32> {
+    let rest = name.strip_prefix(".geofit-")?.strip_suffix(".tmp")?;
+    let rest = rest.strip_prefix("raster-").unwrap_or(rest);
+    let (pid, tail) = rest.split_once('-')?;
+    if tail.is_empty() || pid.is_empty() || !pid.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    pid.parse().ok()
+}
+
+/// Removes the geofit temporaries in `dir` whose process is gone (no `/proc/PID`): what a
+/// `kill -9`, a power cut or `ulimit -f` left behind (docs/decisions.md#stale-temporaries).
+/// A temporary of a running process — any process with that id — is left alone, as is
+/// everything where `/proc` is not mounted. Errors are ignored: cleaning is a courtesy, and
+/// the write that follows reports a directory it cannot use.
+pub fn clean_stale_temps(dir: &Path) {
+    if !Path::new("/proc/self").exists() {
+        return;
+    }
+    let Ok(entries) = std::fs::read_dir(dir) else { return };
+    for e in entries.flatten() {
+        let name = e.file_name();
+        let Some(pid) = name.to_str().and_then(temp_owner) else { continue };
+        if pid == std::process::id() || Path::new(&format!("/proc/{pid}")).exists() {
+            continue;
+        }
+        let p = e.path();
+        let _ = match e.file_type() {
+            Ok(t) if t.is_dir() => std::fs::remove_dir_all(&p),
+            Ok(_) => std::fs::remove_file(&p),
+            Err(_) => continue,
+        };
+    }
+}
