@@ -1,22 +1,21 @@
 //! `geofit validate`: XSD validation against the offline CityGML schemas (libxml2 in-process) and
 //! geometric validation with the val3dity / OGC QIE error codes (ring → polygon → shell → solid).
+//! This file: options, schemas and one file; `many.rs` the many-file run; `text.rs` the text
+//! report.
 
-use crate::report::{print_report, tagged, ReportKind};
-use std::cell::RefCell;
-use std::io::Write;
+mod many;
+mod text;
+
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use citygml_validate::document::{validate_document, Checks, DocumentError, Progress, Report, SchemaSet, Summary};
-use citygml_validate::xsd::XsdErrorKind;
+use citygml_validate::document::{validate_document, Checks, DocumentError, Progress, SchemaSet};
 use citygml_validate::Options;
 use clap::Args as ClapArgs;
-use serde::Serialize;
 
-use crate::config::{
-    batch_inputs, run_batch, worse_exit, write_batch_error, write_json_line, Config, Input, CITYGML_EXTENSIONS,
-};
+use crate::config::{batch_inputs, Config, Input, CITYGML_EXTENSIONS};
 use crate::error::{CliError, CmdResult, Exit};
+use crate::report::{print_report, ReportKind};
 
 const EXAMPLE: &str = "\
 Example:
@@ -175,7 +174,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     }
     let sources = batch_inputs(&args.inputs, CITYGML_EXTENSIONS)?;
     let checks = checks(&args, options, config)?;
-    run_many(sources, &checks, args.json, config, started)
+    many::run(sources, &checks, args.json, config, started)
 }
 
 /// One file or `-`: the report as it always was (pretty JSON or text), exit 3 when unreadable.
@@ -198,7 +197,7 @@ fn run_one(args: &Args, options: Options, config: &Config) -> CmdResult {
     } else {
         validate_document(&bytes, &name, &checks, &|_| {}).map_err(document_error)?
     };
-    print_report(args.json, &REPORT, &report, |w| write_text(w, &report))?;
+    print_report(args.json, &REPORT, &report, |w| text::write(w, &report))?;
     Ok(if report.valid { Exit::Ok } else { Exit::Findings })
 }
 
@@ -207,131 +206,3 @@ const REPORT: ReportKind = ReportKind {
     schema: "geofit-validate/1",
     units: &[("geometry.options.snap_tol", "CRS units (m)"), ("geometry.options.planarity_tol", "CRS units (m)"), ("geometry.options.normals_tol_deg", "deg")],
 };
-
-/// Version of the JSON lines a many-file run writes (one object per file, then the summary).
-const JSON_LINES_SCHEMA: &str = REPORT.schema;
-
-#[derive(Serialize)]
-struct SummaryLine<'a> {
-    schema: &'static str,
-    summary: &'a Summary,
-}
-
-/// Reads and checks one file of a many-file run.
-fn check_source(input: &Input, checks: &Checks) -> Result<Report, CliError> {
-    let bytes = input.map_or_read()?;
-    validate_document(&bytes, &input.display_name(), checks, &|p: Progress| bytes.release_before(p.bytes_read))
-        .map_err(document_error)
-}
-
-/// Several files: checked in parallel (the schemas parsed once), reported in input order, one
-/// block (text) or one line (JSON) per file, then the summary. A file that cannot be read is
-/// reported in its place and the others are still checked; the exit status is the worst one.
-fn run_many(inputs: Vec<Input>, checks: &Checks, json: bool, config: &Config, started: Instant) -> CmdResult {
-    // shared by the per-file and the summary writer
-    let summary = RefCell::new(Summary::default());
-    let mut worst = Exit::Ok;
-    run_batch(
-        inputs,
-        "validate",
-        config,
-        |input| check_source(input, checks),
-        |w, name, result| {
-            let exit = match &result {
-                Ok(r) if r.valid => Exit::Ok,
-                Ok(_) => Exit::Findings,
-                Err(e) => e.exit,
-            };
-            worst = worse_exit(worst, exit);
-            match &result {
-                Ok(report) => {
-                    summary.borrow_mut().add_report(report);
-                    if json {
-                        write_json_line(w, &tagged(&REPORT, REPORT.units, report))
-                    } else {
-                        write_text(w, report).map_err(CliError::io_out)
-                    }
-                }
-                Err(e) => {
-                    summary.borrow_mut().add_unreadable();
-                    write_batch_error(w, json, JSON_LINES_SCHEMA, name, e)
-                }
-            }
-        },
-        |w| {
-            let mut summary = summary.borrow_mut();
-            summary.wall_seconds = started.elapsed().as_secs_f64();
-            write_summary(w, json, &summary)
-        },
-    )?;
-    Ok(worst)
-}
-
-fn write_summary(w: &mut dyn Write, json: bool, s: &Summary) -> Result<(), CliError> {
-    if json {
-        return write_json_line(w, &SummaryLine { schema: JSON_LINES_SCHEMA, summary: s });
-    }
-    let errors: Vec<String> = s.errors.iter().map(|(code, n)| format!("{code} ×{n}")).collect();
-    writeln!(
-        w,
-        "summary: {} file{}: {} valid, {} invalid, {} unreadable; errors: {}; {:.3} s",
-        s.files,
-        if s.files == 1 { "" } else { "s" },
-        s.valid,
-        s.invalid,
-        s.unreadable,
-        if errors.is_empty() { "none".to_string() } else { errors.join(", ") },
-        s.wall_seconds
-    )
-    .map_err(CliError::io_out)
-}
-
-fn write_text(w: &mut dyn Write, r: &Report) -> std::io::Result<()> {
-    let f = &r.file;
-    writeln!(w, "{f}: CityGML {}", r.version.as_deref().unwrap_or("(version unknown)"))?;
-    let schema_name = r.xsd.schema.as_deref().map(|s| Path::new(s).file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default());
-    if r.xsd.checked {
-        let sn = schema_name.unwrap_or_default();
-        if r.xsd.errors.is_empty() {
-            writeln!(w, "{f}: XSD ({sn}): valid")?;
-        } else {
-            for e in &r.xsd.errors {
-                let what = if e.kind == XsdErrorKind::NotWellFormed { "not well-formed" } else { "XSD" };
-                writeln!(w, "{f}:{}:{}: {what}: {}", e.line, e.column, e.message)?;
-            }
-            writeln!(w, "{f}: XSD ({sn}): {} error{}", r.xsd.errors.len(), if r.xsd.errors.len() == 1 { "" } else { "s" })?;
-        }
-    } else {
-        writeln!(w, "{f}: XSD: not checked ({})", r.xsd.reason.as_deref().unwrap_or(""))?;
-    }
-    let g = &r.geometry;
-    if g.checked {
-        for x in &g.findings {
-            let mut ids = String::new();
-            if let Some(id) = &x.feature {
-                ids.push_str(&format!(" feature={id}"));
-            } else {
-                ids.push_str(&format!(" feature=({})", x.feature_type));
-            }
-            if let Some(p) = &x.primitive {
-                ids.push_str(&format!(" primitive={p}"));
-            }
-            writeln!(w, "{f}:{}:{}: {} {}{} [{}]: {}", x.line, x.column, x.code, x.name, ids, x.geometry, x.detail)?;
-        }
-        let o = &g.options;
-        let n = g.findings.len();
-        writeln!(
-            w,
-            "{f}: geometry: {} in {} feature{} (snap {} m, planarity {} m, normals {}°)",
-            if n == 0 { "valid".to_string() } else { format!("{n} error{}", if n == 1 { "" } else { "s" }) },
-            g.features,
-            if g.features == 1 { "" } else { "s" },
-            o.snap_tol,
-            o.planarity_tol,
-            o.normals_tol_deg
-        )?;
-    } else {
-        writeln!(w, "{f}: geometry: not checked (--no-geometry)")?;
-    }
-    writeln!(w, "{f}: {}", if r.valid { "VALID" } else { "INVALID" })
-}
