@@ -118,6 +118,42 @@ fn check_cell(cell: f64) -> Result<(), ProcError> {
     Ok(())
 }
 
+/// How sure the degree heuristic is that the points are in degrees.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Degrees {
+    /// The points' CRS is geographic.
+    Declared,
+    /// No CRS is declared and every point lies within longitude/latitude bounds.
+    Guessed,
+}
+
+impl GridSpec {
+    /// A cell size that is almost certainly metres on points in degrees: geographic coordinates
+    /// (`geographic`: the declared CRS's kind, `None` = no CRS, then guessed from the bounds:
+    /// every x in −180…360, y in −90…90), a cell of 1 or more, and a grid of fewer than 10 cells
+    /// across with 10 or more points per cell (7000 lon/lat soundings at `--cell 25` made a 1×2
+    /// grid). docs/decisions.md#raster-outputs-by-driver
+    ///
+    /// # Examples
+    ///
+    /// ```
+    /// use raster_proc::grid::{Degrees, GridSpec};
+    /// let bounds = (5.0, 52.0, 5.01, 52.01);
+    /// let grid = GridSpec::covering(bounds, 25.0).unwrap();
+    /// assert_eq!(grid.cell_in_metres_on_degrees(bounds, 7000, None, 25.0), Some(Degrees::Guessed));
+    /// assert_eq!(grid.cell_in_metres_on_degrees(bounds, 7000, Some(false), 25.0), None);
+    /// ```
+    pub fn cell_in_metres_on_degrees(&self, bounds: (f64, f64, f64, f64), points: usize, geographic: Option<bool>, cell: f64) -> Option<Degrees> {
+        let (x0, y0, x1, y1) = bounds;
+        let degrees = geographic.unwrap_or(x0 >= -180.0 && x1 <= 360.0 && y0 >= -90.0 && y1 <= 90.0);
+        let (w, h) = (self.width as f64, self.height as f64);
+        if !(degrees && cell >= 1.0 && w.max(h) < 10.0 && points as f64 >= 10.0 * w * h) {
+            return None;
+        }
+        Some(if geographic == Some(true) { Degrees::Declared } else { Degrees::Guessed })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

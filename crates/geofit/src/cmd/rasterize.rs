@@ -1,6 +1,5 @@
 //! `geofit rasterize`: scattered points (XYZ/CSV text, LAS/LAZ) → a regular raster by Gauss
 //! splatting or TIN-linear interpolation, nodata where no point is near (spec §2.1).
-//! Also holds the raster-side error mapping the other terrain commands share.
 
 use clap::{Args as ClapArgs, ValueEnum};
 use serde::Serialize;
@@ -10,7 +9,7 @@ use std::path::Path;
 use raster_io::crs::Crs;
 use raster_io::Raster;
 use raster_io::point_batches::{BoundsXy, PointBatches};
-use raster_proc::grid::GridSpec;
+use raster_proc::grid::{Degrees, GridSpec};
 use raster_proc::splat::{splat_points, SplatAccumulator, SplatKernel};
 use raster_proc::tin::{tin_points, TinOptions, TinStats};
 use raster_proc::ProcError;
@@ -143,24 +142,14 @@ impl CrsPlan {
     }
 }
 
-/// Refuses a cell size that is almost certainly metres on points in degrees: geographic
-/// coordinates (a geographic CRS, or none declared and every x in −180…360, y in −90…90), a
-/// cell of 1 or more, and a grid of fewer than 10 cells across with 10 or more points per cell
-/// (7000 lon/lat soundings at `--cell 25` made a 1×2 grid). A projected `--s-srs` lifts it.
-/// docs/decisions.md#raster-outputs-by-driver
+/// Refuses a cell size that is almost certainly metres on points in degrees
+/// (`GridSpec::cell_in_metres_on_degrees`); a projected `--s-srs` lifts it.
 fn check_cell_units(args: &Args, seen: &BoundsXy, crs: Option<&Crs>, grid: &GridSpec) -> Result<(), CliError> {
-    let Some((x0, y0, x1, y1)) = seen.get() else { return Ok(()) };
-    let declared = crs.map(|c| c.geographic);
-    let degrees = declared.unwrap_or(x0 >= -180.0 && x1 <= 360.0 && y0 >= -90.0 && y1 <= 90.0);
-    let (w, h) = (grid.width as f64, grid.height as f64);
-    let points = seen.count;
-    if !(degrees && args.cell >= 1.0 && w.max(h) < 10.0 && points as f64 >= 10.0 * w * h) {
-        return Ok(());
-    }
-    let what = if declared == Some(true) {
-        "the points are in a geographic CRS (degrees)"
-    } else {
-        "the points declare no CRS and lie within longitude/latitude bounds"
+    let Some(bounds @ (x0, y0, x1, y1)) = seen.get() else { return Ok(()) };
+    let Some(degrees) = grid.cell_in_metres_on_degrees(bounds, seen.count, crs.map(|c| c.geographic), args.cell) else { return Ok(()) };
+    let what = match degrees {
+        Degrees::Declared => "the points are in a geographic CRS (degrees)",
+        Degrees::Guessed => "the points declare no CRS and lie within longitude/latitude bounds",
     };
     Err(CliError::usage(format!(
         "--cell {c} on {input}: {what} (x {x0}…{x1}, y {y0}…{y1}), and a cell of {c} makes a grid of only {w}×{h} \
@@ -168,8 +157,11 @@ fn check_cell_units(args: &Args, seen: &BoundsXy, crs: Option<&Crs>, grid: &Grid
          to grid in metres, reproject with --s-srs EPSG:4326 --t-srs <a projected CRS, e.g. a UTM zone>{hint}",
         c = args.cell,
         input = args.input,
+        w = grid.width as f64,
+        h = grid.height as f64,
+        points = seen.count,
         deg = args.cell / 111_320.0,
-        hint = if declared.is_none() { "; if they are not degrees, declare their CRS with --s-srs" } else { "" },
+        hint = if crs.is_none() { "; if they are not degrees, declare their CRS with --s-srs" } else { "" },
     )))
 }
 
