@@ -17,7 +17,8 @@ What counts as a citation, and where it must resolve:
 
 `--list` prints every citation found with the anchor it needs (for writing the docs).
 `--strict` also reports paths that point outside the repository (`shared/spec/...`, `seeds/...`,
-`spec/*.md`) and spec or decision numbers in the CLI's user-facing strings (clap help texts).
+`spec/*.md`) and spec or decision numbers in string literals of crates' src/ (help texts,
+notices and error messages a user reads).
 
 Only the Python standard library is used.
 """
@@ -124,7 +125,8 @@ class Lexer:
 
     def __init__(self) -> None:
         self.block = 0          # nesting depth of /* */
-        self.string = None      # None, '"' or the closing of a raw string ('"##')
+        self.string = None      # None, or the text that closes the open string ('"', '"##')
+        self.raw = False        # raw strings have no escapes
 
     def line(self, text: str) -> tuple[str, str]:
         comment, strings, i, n = [], [], 0, len(text)
@@ -142,7 +144,7 @@ class Lexer:
                     comment.append(c)
                     i += 1
             elif self.string:
-                if self.string == '"' and c == "\\":
+                if not self.raw and c == "\\":
                     strings.append(text[i:i + 2])
                     i += 2
                 elif text.startswith(self.string, i):
@@ -159,11 +161,11 @@ class Lexer:
                 self.block += 1
                 i += 2
             elif c == '"':
-                self.string = '"'
+                self.string, self.raw = '"', False
                 i += 1
-            elif c == "r" and re.match(r'r#*"', text[i:]) and (i == 0 or not text[i - 1].isalnum()):
+            elif c == "r" and re.match(r'r#*"', text[i:]) and raw_prefix_ok(text[:i]):
                 hashes = re.match(r'r(#*)"', text[i:]).group(1)
-                self.string = '"' + hashes
+                self.string, self.raw = '"' + hashes, True
                 i += 2 + len(hashes)
             elif c == "'":
                 m = re.match(r"'(\\.[^']*|[^'\\])'", text[i:])
@@ -171,6 +173,13 @@ class Lexer:
             else:
                 i += 1
         return "".join(comment), "".join(strings)
+
+
+def raw_prefix_ok(before: str) -> bool:
+    """An `r` opens a raw string when it starts a token, alone or after `b`."""
+    if before.endswith("b"):
+        before = before[:-1]
+    return not before or not (before[-1].isalnum() or before[-1] == "_")
 
 
 def hash_comment(text: str) -> str:
@@ -316,7 +325,7 @@ def main(argv: list[str]) -> int:
             continue
         in_docs = rel.startswith("docs/")
         spec = spec_of(rel)
-        cli = rel.startswith("crates/geofit/src/cmd/")
+        user_facing = rel.startswith("crates/") and "/src/" in rel  # help texts, notices, errors
         for no, line, comment, strings in texts(path, rel) if not in_docs else (
                 (n, l, "", "") for n, l in enumerate(path.read_text(encoding="utf-8").splitlines(), 1)):
             for m in DOC_LINK.finditer(line):
@@ -354,7 +363,7 @@ def main(argv: list[str]) -> int:
             if strict:
                 for m in OUTSIDE.finditer(comment + " " + strings):
                     report(rel, no, m.group(0), "points outside the repository: cite docs/sources.md")
-                if cli and strings and (re.search(r"§|seed eq|\b[AT]\d{1,2}\b", strings)):
+                if user_facing and strings and re.search(r"§|seed eq|\b[AT]\d{1,2}\b|Table [0-9B]", strings):
                     report(rel, no, strings.strip()[:60], "spec or decision number in a user-facing string")
     for p in problems:
         print(p)
