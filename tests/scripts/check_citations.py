@@ -15,6 +15,9 @@ What counts as a citation, and where it must resolve:
   A `§` that follows "seed" cites the DSI seed; one that follows an outside standard (glTF,
   3D Tiles, GML, ...) is not ours and is skipped.
 
+Before the real check it runs a self-test on a small tree with one good and one broken citation
+of every kind, and exits 2 when it does not report exactly the broken ones.
+
 `--list` prints every citation found with the anchor it needs (for writing the docs).
 `--strict` also reports paths that point outside the repository (`shared/spec/...`, `seeds/...`,
 `spec/*.md`) and spec or decision numbers in string literals of crates' src/ (help texts,
@@ -67,7 +70,7 @@ EXTERNAL = re.compile(
 DOC_LINK = re.compile(r"docs/([A-Za-z0-9_./-]+?\.md)(?:#([A-Za-z0-9_.-]+))?(?![A-Za-z0-9_/-])")
 REL_LINK = re.compile(r"\]\(([A-Za-z0-9_.-]+\.md)?(?:#([A-Za-z0-9_.-]+))?\)")
 DOC_TITLE = re.compile(r'docs/([A-Za-z0-9_./-]+?\.md),? \(?"([^"]+)"')
-DECISION = re.compile(r"(?<![\w.$])([AT])(\d{1,2})(?![\w]|\.\w)")
+DECISION = re.compile(r"(?<![\w.$#])([AT])(\d{1,2})(?![\w]|\.\w)")
 NUM = r"\d+(?:\.\d+)*"
 SECTION = re.compile(rf"§ ?({NUM})((?:\s*(?:[–/-]|and|,)\s*§ ?{NUM}|[–/-]{NUM})*)")
 EQUATION = re.compile(rf"\b(?:[Ee]qs?\.|[Ee]quations?|Gleichung) ?({NUM})((?:\s*(?:[–/-]|and|,)\s*{NUM})*)")
@@ -290,7 +293,8 @@ def decision_citations(comment: str):
         kind, n = m.group(1), int(m.group(2))
         r = re.search(rf"{kind}(\d{{1,2}})[–-]$", comment[:m.start()])
         first = int(r.group(1)) + 1 if r and int(r.group(1)) < n else n
-        found.extend((m.group(0), f"{kind}{k}") for k in range(first, n + 1))
+        shown = comment[r.start():m.end()] if first < n else m.group(0)
+        found.extend((shown, f"{kind}{k}") for k in range(first, n + 1))
     return found
 
 
@@ -307,9 +311,8 @@ def scanned_files(root: Path):
                     yield p
 
 
-def main(argv: list[str]) -> int:
-    root = Path.cwd()
-    listing, strict = "--list" in argv, "--strict" in argv
+def check(root: Path, listing: bool = False, strict: bool = False) -> list[str]:
+    """The broken citations under `root`, one `file:line: citation: why` line each."""
     docs = {p.relative_to(root).as_posix(): anchors_of(p) for p in (root / "docs").glob("**/*.md")}
     decisions = docs.get(DECISIONS_DOC, (set(), []))[0]
     sources = docs.get(SOURCES_DOC, (set(), []))[0]
@@ -365,9 +368,62 @@ def main(argv: list[str]) -> int:
                     report(rel, no, m.group(0), "points outside the repository: cite docs/sources.md")
                 if user_facing and strings and re.search(r"§|seed eq|\b[AT]\d{1,2}\b|Table [0-9B]", strings):
                     report(rel, no, strings.strip()[:60], "spec or decision number in a user-facing string")
+    return problems
+
+
+# The self-test: a small tree with one good and one broken citation of every kind. The check must
+# report exactly the broken ones, so a regression that makes it blind fails `make test` too.
+SELFTEST_TREE = {
+    "docs/decisions.md": '# Decisions\n\n## Raster tiles (issue 1)\n\n<a id="A21"></a>\n',
+    "docs/tspline-decisions.md": '<a id="A1"></a>\n<a id="T29"></a>\n[ok](sources.md#tspline-4.5) [bad](sources.md#tspline-9.9)\n',
+    "docs/sources.md": "".join(f'<a id="{a}"></a>\n' for a in [
+        "tspline-4.5", "tspline-eq-4.29", "tspline-table-5.2", "tspline-alg-3", "tspline-fig-5.6",
+        "popa3d-2.3", "popa3d-eq-3.15", "popa3d-P11", "dsi-2.2", "dsi-eq-9", "dsi-eq-1", "dsi-eq-2"]),
+    "crates/tspline/src/lib.rs": (
+        "//! ok: A1, T29, spec §4.5 eq. 4.29, Table 5.2, Alg. 3, Fig. 5.6, glTF 2.0 §4.4.3\n"
+        "//! ok: docs/decisions.md#raster-tiles-issue-1, docs/decisions.md#A21, docs/sources.md\n"
+        'let s = r"not a comment: A99 §9.9"; // bad: A23\n'
+        "/* bad: T27, §4.99, eq. 4.77, Table 9.9, Alg. 12, Fig. 1.2 */\n"
+        "// bad: docs/decisions.md#nope, docs/nothere.md, A7-A9\n"),
+    "crates/adjust/src/lib.rs": "// ok: §2.3, T 3.15, P11\n// bad: §2.4, T 3.16, P12\n",
+    "crates/implicit/src/lib.rs": "// ok: seed §2.2 / eq. 9, seed eq. 1-2\n// bad: seed eq. 13, §3\n",
+}
+SELFTEST_EXPECTED = [
+    "crates/adjust/src/lib.rs:2: §2.4", "crates/adjust/src/lib.rs:2: T 3.16", "crates/adjust/src/lib.rs:2: P12",
+    "crates/implicit/src/lib.rs:2: eq. 13", "crates/implicit/src/lib.rs:2: §3",
+    "crates/tspline/src/lib.rs:3: A23", "crates/tspline/src/lib.rs:4: T27", "crates/tspline/src/lib.rs:4: §4.99",
+    "crates/tspline/src/lib.rs:4: eq. 4.77", "crates/tspline/src/lib.rs:4: Table 9.9",
+    "crates/tspline/src/lib.rs:4: Alg. 12", "crates/tspline/src/lib.rs:4: Fig. 1.2",
+    "crates/tspline/src/lib.rs:5: docs/decisions.md#nope", "crates/tspline/src/lib.rs:5: docs/nothere.md",
+    "crates/tspline/src/lib.rs:5: A7", "crates/tspline/src/lib.rs:5: A7-A9", "crates/tspline/src/lib.rs:5: A7-A9",
+    "docs/tspline-decisions.md:3: ](sources.md#tspline-9.9)",
+]
+
+
+def selftest() -> list[str]:
+    """What the check got wrong on SELFTEST_TREE (empty when it found exactly the broken ones)."""
+    import tempfile
+    with tempfile.TemporaryDirectory() as tmp:
+        root = Path(tmp)
+        for rel, text in SELFTEST_TREE.items():
+            (root / rel).parent.mkdir(parents=True, exist_ok=True)
+            (root / rel).write_text(text, encoding="utf-8")
+        found = sorted(": ".join(p.split(": ")[:2]) for p in check(root))
+    expected = sorted(SELFTEST_EXPECTED)
+    missed = [e for e in expected if e not in found]
+    extra = [f for f in found if f not in expected]
+    return [f"self-test missed: {m}" for m in missed] + [f"self-test reported a good one: {x}" for x in extra]
+
+
+def main(argv: list[str]) -> int:
+    errors = selftest()
+    if errors:
+        print("\n".join(errors))
+        return 2
+    problems = check(Path.cwd(), listing="--list" in argv, strict="--strict" in argv)
     for p in problems:
         print(p)
-    return 1 if problems and not listing else 0
+    return 1 if problems and "--list" not in argv else 0
 
 
 if __name__ == "__main__":
