@@ -13,7 +13,8 @@ What counts as a citation, and where it must resolve:
   included), `eq. N`, `Table N.N`, `Alg. N`, `Fig. N.N` in a comment, and in popa3d files the
   thesis equations `T N.N` and checklist items `P N`: an anchor `<spec>-...` of docs/sources.md.
   A `§` that follows "seed" cites the DSI seed; one that follows an outside standard (glTF,
-  3D Tiles, GML, ...) is not ours and is skipped.
+  3D Tiles, GML, ...) is not ours and is skipped. A `§` or `eq.` in a crate whose source is not
+  known is reported too (say "seed", or add the crate to SPEC_OF_CRATE and docs/sources.md).
 
 Before the real check it runs a self-test on a small tree with one good and one broken citation
 of every kind, and exits 2 when it does not report exactly the broken ones.
@@ -250,7 +251,7 @@ def spec_citations(comment: str, spec: str | None, in_crate: bool = True):
         if re.search(r"seed\W{0,3}$", before):
             this = "dsi"
         elif EXTERNAL.search(before[-40:]):
-            this = None
+            this = ""  # an outside standard's section: not ours
         elif chained and last_end >= 0:
             this = last_spec
         else:
@@ -259,12 +260,16 @@ def spec_citations(comment: str, spec: str | None, in_crate: bool = True):
         if this:
             for n in expand(m.group(1), m.group(2), NUM):
                 found.append((m.group(0).strip(), f"{this}-{n.rstrip('.')}", this))
+        elif this is None and in_crate:
+            found.append((m.group(0).strip(), None, None))
     for m in EQUATION.finditer(comment):
         this = "dsi" if re.search(r"seed\W{0,3}$", comment[:m.start()]) or (
             re.search(r"seed §[\d.]+ ?/ ?$", comment[:m.start()])) else spec
         if this:
             for n in expand(m.group(1), m.group(2), NUM):
                 found.append((m.group(0).strip(), f"{this}-eq-{n}", this))
+        elif in_crate:
+            found.append((m.group(0).strip(), None, None))
     if spec and in_crate:
         for m in TABLE.finditer(comment):
             if EXTERNAL.search(comment[:m.start()][-40:]):
@@ -361,7 +366,10 @@ def check(root: Path, listing: bool = False, strict: bool = False) -> list[str]:
             for shown, anchor, this in spec_citations(comment, spec, rel.startswith("crates/")):
                 if listing:
                     print(f"spec\t{anchor}\t{rel}:{no}")
-                if anchor not in sources:
+                if anchor is None:
+                    report(rel, no, shown, f"no source is known for {rel}: add it to SPEC_OF_CRATE / "
+                           "SPEC_BY_NAME in this script and to the table in docs/sources.md, or say 'seed'")
+                elif anchor not in sources:
                     report(rel, no, shown, f"no <a id=\"{anchor}\"> in {SOURCES_DOC} ({this} spec)")
             if strict:
                 for m in OUTSIDE.finditer(comment + " " + strings):
@@ -387,10 +395,12 @@ SELFTEST_TREE = {
         "// bad: docs/decisions.md#nope, docs/nothere.md, A7-A9\n"),
     "crates/adjust/src/lib.rs": "// ok: §2.3, T 3.15, P11\n// bad: §2.4, T 3.16, P12\n",
     "crates/implicit/src/lib.rs": "// ok: seed §2.2 / eq. 9, seed eq. 1-2\n// bad: seed eq. 13, §3\n",
+    "crates/mesh-export/src/lib.rs": "// ok: glTF 2.0 §3.5, §5.10; seed §2.2\n// bad: spec §4.5\n",
 }
 SELFTEST_EXPECTED = [
     "crates/adjust/src/lib.rs:2: §2.4", "crates/adjust/src/lib.rs:2: T 3.16", "crates/adjust/src/lib.rs:2: P12",
     "crates/implicit/src/lib.rs:2: eq. 13", "crates/implicit/src/lib.rs:2: §3",
+    "crates/mesh-export/src/lib.rs:2: §4.5",
     "crates/tspline/src/lib.rs:3: A23", "crates/tspline/src/lib.rs:4: T27", "crates/tspline/src/lib.rs:4: §4.99",
     "crates/tspline/src/lib.rs:4: eq. 4.77", "crates/tspline/src/lib.rs:4: Table 9.9",
     "crates/tspline/src/lib.rs:4: Alg. 12", "crates/tspline/src/lib.rs:4: Fig. 1.2",
