@@ -79,6 +79,7 @@ test: setup
 	@if cargo +nightly --version >/dev/null 2>&1; then \
 	  (cd fuzz && cargo +nightly metadata --locked --format-version 1 >/dev/null) || \
 	  { echo "test: fuzz/Cargo.lock is stale: run 'cd fuzz && cargo +nightly update --workspace --offline'" >&2; exit 1; }; fi
+	python3 tests/scripts/check_citations.py
 	$(CARGO) test --workspace --no-fail-fast
 
 demo: setup release
