@@ -234,3 +234,44 @@ fn undocumented_options(help: &str) -> Vec<String> {
     }
     out
 }
+
+/// Help texts speak to users: no section, equation, table or decision numbers of the research
+/// documents behind the code (those are for developers, in docs/sources.md) and no "the spec".
+#[test]
+fn help_texts_cite_no_spec_sections_or_decision_numbers() {
+    let top = common::run(&["--help"], None);
+    let top = String::from_utf8_lossy(&top.stdout).to_string();
+    let commands: Vec<String> = top
+        .lines()
+        .skip_while(|l| !l.starts_with("Commands:"))
+        .skip(1)
+        .take_while(|l| l.starts_with("  "))
+        .filter(|l| !l.starts_with("   "))
+        .filter_map(|l| l.split_whitespace().next().map(str::to_string))
+        .filter(|c| c != "help")
+        .collect();
+    let subs = ["interpolate", "update", "iso", "section", "csg", "run", "plan", "extract", "tileset", "report", "stitch", "seams"];
+    let mut texts = vec![("geofit".to_string(), top.clone())];
+    for c in &commands {
+        for sub in std::iter::once(None).chain(subs.iter().map(Some)) {
+            let mut args = vec![c.as_str()];
+            args.extend(sub.copied());
+            args.push("--help");
+            let o = common::run(&args, None);
+            if o.status.success() {
+                texts.push((args[..args.len() - 1].join(" "), String::from_utf8_lossy(&o.stdout).to_string()));
+            }
+        }
+    }
+    assert!(texts.len() > 25, "help texts read: {}", texts.len());
+    let decision = |w: &str| {
+        let w = w.trim_matches(|c: char| !c.is_ascii_alphanumeric());
+        w.len() >= 2 && w.len() <= 3 && (w.starts_with('A') || w.starts_with('T')) && w[1..].chars().all(|c| c.is_ascii_digit())
+    };
+    for (cmd, text) in &texts {
+        for line in text.lines() {
+            let bad = line.contains('§') || line.contains("the spec") || line.contains("Table B") || line.contains(" eq. ") || line.split_whitespace().any(decision);
+            assert!(!bad, "`geofit {cmd} --help` cites a research document: {line}");
+        }
+    }
+}

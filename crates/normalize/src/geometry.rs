@@ -264,7 +264,7 @@ fn build_depth(soup: &Soup, topo: &Topo, tol: &Tolerances, origin: [f64; 3], dep
                         rule: "GA01-MERGE".into(),
                         element: pb.locator.clone(),
                         message: format!(
-                            "merged into face {} ({} / {}): the two are coplanar within {ILL_CONDITIONED_DEG}° and their common edge left a node without 3 independent planes (spec §7.4)",
+                            "merged into face {} ({} / {}): the two are coplanar within {ILL_CONDITIONED_DEG}° and their common edge left a node without 3 independent planes",
                             pa.locator,
                             sem(pa),
                             sem(pb)

@@ -1,5 +1,5 @@
-//! popa3d: a plane-parameterised 3D building model after Clemen (2010), as digested in
-//! `shared/spec/popa3d-adjustment.md` §1–§3.
+//! popa3d: a plane-parameterised 3D building model after Clemen (2010); the sections it follows
+//! (§1–§3) are summarised in docs/sources.md#popa3d.
 //!
 //! * Topology ([`Node`], [`Edge`], [`HalfEdge`], [`Face`], [`Solid`]) is explicit and stores no
 //!   coordinates: a node's position is the intersection of the planes of its faces (spec §2.2).

@@ -15,7 +15,7 @@
 //!   35454 → 33702).
 //! - **A8** initial mesh: square cells of a power-of-two size c0 (so every split lands on integer
 //!   parameters down to the sample spacing 1), about `initial_cells` cells along the longer side of
-//!   the data extent grown by `overhang` (default 25 %, §3.2.5) on every side; the mesh border lies
+//!   the data extent grown by `overhang` (default 25 %, thesis §3.2.5, spec §2.2) on every side; the mesh border lies
 //!   strictly outside the data.
 //! - **A9** least squares on all valid cells (streamed into the sparse normal equations, never the
 //!   model matrix), solved by a sparse Cholesky factorisation (`crate::sparse`; Jacobi-PCG as the
@@ -25,7 +25,7 @@
 //!   so planes stay exact) plus a weak pull to the current surface; a 1e-12 ridge keeps the system
 //!   definite. Well-supported points are not biased.
 //! - **A10** raster outside its extent or next to a no-data corner is NaN (no-data cells do not
-//!   count; dragging leaves such points in place).
+//!   count; dragging clamps such points to the raster's edge, see `fit_drag`).
 //! - **A11** refinement and least squares compare at the parameter pair (s, t) = raster cell; the
 //!   surface is a height field z(s, t) over the parameter plane, x, y of control points are kept
 //!   at their parameters (direct) and only matter for export/indirect back-mapping.

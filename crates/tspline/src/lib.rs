@@ -1,4 +1,5 @@
-//! T-spline surfaces for terrain reduction (digest `spec/tspline-bathymetry.md` of Asche 2016).
+//! T-spline surfaces for terrain reduction (Asche 2016; its sections and the decisions A1–A22 are
+//! summarised in docs/sources.md#tspline and docs/tspline-decisions.md).
 //!
 //! - [`mesh`]: the T-mesh in a rectangle R-tree (refinement, repair, merge, coarsen).
 //! - [`knots`]: local knot vectors by ray casting.

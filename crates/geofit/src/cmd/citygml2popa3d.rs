@@ -20,7 +20,7 @@ Example:
 Each Building / BuildingPart with geometry becomes one closed solid: points within --snap become
 nodes, edges are shared through half-edges, every face gets a least-squares plane; parallel normals
 (within --normal-angle) and coplanar planes (within --plane-distance) are merged, so nodes are plane
-intersections. Conditions are generated as in the spec's CityGML use case: parallelism and
+intersections. Conditions are generated as for measured CityGML buildings: parallelism and
 orthogonality between normals within --parallel-angle / --orthogonal-angle, coplanarity (distance 0)
 between parallel planes of the same semantic type closer than --epsilon, wall-window distances kept
 at their source value even below --epsilon, unit-norm conditions, and weak identity observations of

@@ -20,7 +20,7 @@ Example:
 The sketch is drawn by eye in any modeller (SketchUp, Blender, FreeCAD) and exported as OBJ; each
 object/group is a room (a closed solid); a wall drawn in both rooms becomes one shared face, named
 after the room that comes first in the file (OBJECT/fK of that room). It is
-normalized like CityGML input and gets the sketch priors of the spec (weak plane differences per
+normalized like CityGML input and gets the priors a sketch deserves (weak plane differences per
 normal, relative normal angles, unit norms).
 
 Distances CSV: `type,a,b,value,sigma` per line, `#` comments, optional header. type = `distance`

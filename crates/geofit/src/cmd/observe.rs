@@ -13,7 +13,7 @@ Example:
   geofit adjust rooms.popa3d -o rooms.popa3d --report rooms.json   # starts from the last solution
 
 CSV: one measurement per line, `type,a,b,value,sigma` (`#` comments, optional header). `type` is
-`distance` or a Table B.1 distance class (DistanceFaceFace, DistanceFaceEdge, ...); a primitive is
+`distance` or a typed distance class (DistanceFaceFace, DistanceFaceEdge, ...); a primitive is
 face:ID, edge:ID, node:ID, v:N (OBJ vertex), or a source polygon id (CityGML gml:id). Each
 measurement is checked against the topology (unknown ids and wrong primitive kinds are errors
 naming the CSV line); face-face, face-edge and edge-edge distances add their induced parallelism
