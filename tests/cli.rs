@@ -275,3 +275,44 @@ fn help_texts_cite_no_spec_sections_or_decision_numbers() {
         }
     }
 }
+
+/// Issue 16: the CLI stays thin. No file of the CLI crate is over 300 lines, and no subcommand
+/// imports another (`crate::cmd::args`, the option groups they share, is not a subcommand; a
+/// subcommand's own folder may share a `mod.rs`).
+#[test]
+fn the_cli_is_small_files_that_do_not_import_each_other() {
+    fn rust_files(dir: &std::path::Path, out: &mut Vec<std::path::PathBuf>) {
+        for e in std::fs::read_dir(dir).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                rust_files(&p, out);
+            } else if p.extension().is_some_and(|x| x == "rs") {
+                out.push(p);
+            }
+        }
+    }
+    let src = common::repo_root().join("crates/geofit/src");
+    let mut files = Vec::new();
+    rust_files(&src, &mut files);
+    let cmd = src.join("cmd");
+    let subcommands: Vec<String> = std::fs::read_dir(&cmd)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .map(|e| e.path().file_stem().unwrap().to_string_lossy().into_owned())
+        .filter(|n| n != "mod" && n != "args")
+        .collect();
+    assert!(subcommands.len() > 15, "{subcommands:?}");
+    for f in &files {
+        let text = std::fs::read_to_string(f).unwrap();
+        let lines = text.lines().count();
+        assert!(lines <= 300, "{}: {lines} lines; split it along its ideas (issue 16)", f.display());
+        let Ok(rel) = f.strip_prefix(&cmd) else { continue };
+        let own = rel.components().next().unwrap().as_os_str().to_string_lossy().trim_end_matches(".rs").to_string();
+        for (i, line) in text.lines().enumerate() {
+            for other in subcommands.iter().filter(|s| **s != own) {
+                let imports = line.contains(&format!("cmd::{other}::")) || line.contains(&format!("cmd::{other};")) || line.contains(&format!("super::{other}::"));
+                assert!(!imports, "{}:{}: subcommand `{own}` uses subcommand `{other}`; move the shared part to a library or the CLI's utility modules", f.display(), i + 1);
+            }
+        }
+    }
+}

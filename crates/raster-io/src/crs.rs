@@ -71,6 +71,61 @@ pub fn reproject(points: &mut [[f64; 3]], from: &Crs, to: &Crs) -> Result<(), Cr
     Ok(())
 }
 
+/// The CRS a grid of points is made in: the points' own (`--s-srs`, else the file's), or a
+/// target CRS with the reprojection into it.
+#[derive(Debug, Clone)]
+pub struct GridCrs {
+    pub grid: Option<Crs>,
+    pub reproject: Option<(Crs, Crs)>,
+}
+
+/// Why a [`GridCrs`] cannot be made, by the option at fault.
+#[derive(Debug, thiserror::Error)]
+pub enum GridCrsError {
+    #[error("--s-srs: {0}")]
+    Source(CrsError),
+    #[error("--t-srs: {0}")]
+    Target(CrsError),
+    /// A target CRS without any source CRS.
+    #[error("names no CRS: give the points' CRS with --s-srs to reproject them")]
+    NoSource,
+}
+
+impl GridCrs {
+    /// `source` (a user's string) overrides the file's WKT, which is ignored when unreadable;
+    /// `target` asks for a reprojection, which needs one of the two.
+    ///
+    /// # Examples
+    ///
+    /// ```
+    /// use raster_io::crs::GridCrs;
+    /// let plan = GridCrs::plan(Some("EPSG:4326"), None, Some("EPSG:32633")).unwrap();
+    /// let mut p = [[15.0, 0.0, 7.0]];
+    /// plan.apply(&mut p).unwrap();
+    /// assert!((p[0][0] - 500_000.0).abs() < 1e-6 && p[0][1].abs() < 1e-6 && p[0][2] == 7.0);
+    /// assert!(GridCrs::plan(None, None, Some("EPSG:32633")).is_err());
+    /// ```
+    pub fn plan(source: Option<&str>, file_wkt: Option<&str>, target: Option<&str>) -> Result<GridCrs, GridCrsError> {
+        let source = match (source, file_wkt) {
+            (Some(s), _) => Some(Crs::parse(s).map_err(GridCrsError::Source)?),
+            (None, Some(wkt)) => Crs::from_wkt(wkt).ok(),
+            (None, None) => None,
+        };
+        let Some(t) = target else { return Ok(GridCrs { grid: source, reproject: None }) };
+        let target = Crs::parse(t).map_err(GridCrsError::Target)?;
+        let source = source.ok_or(GridCrsError::NoSource)?;
+        Ok(GridCrs { grid: Some(target.clone()), reproject: Some((source, target)) })
+    }
+
+    /// Reprojects `points` in place when the plan says so.
+    pub fn apply(&self, points: &mut [[f64; 3]]) -> Result<(), CrsError> {
+        match &self.reproject {
+            Some((from, to)) => reproject(points, from, to),
+            None => Ok(()),
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -6,7 +6,7 @@ use serde::Serialize;
 
 use std::path::Path;
 
-use raster_io::crs::Crs;
+use raster_io::crs::{Crs, GridCrs, GridCrsError};
 use raster_io::Raster;
 use raster_io::point_batches::{BoundsXy, PointBatches};
 use raster_proc::grid::{Degrees, GridSpec};
@@ -112,34 +112,18 @@ struct RasterizeReport {
     merged_duplicates: Option<usize>,
 }
 
-/// The CRS the grid is in: the points' own (`--s-srs`, else the file's), or `--t-srs` with the
-/// reprojection into it. Invalid strings are usage errors, as in gdalsrsinfo.
-struct CrsPlan {
-    grid: Option<Crs>,
-    reproject: Option<(Crs, Crs)>,
+/// The grid's CRS and reprojection ([`GridCrs`]); a bad CRS string is a usage error, as in
+/// gdalsrsinfo.
+fn crs_plan(args: &Args, file_crs: Option<&str>) -> Result<GridCrs, CliError> {
+    GridCrs::plan(args.s_srs.as_deref(), file_crs, args.t_srs.as_deref()).map_err(|e| match e {
+        GridCrsError::NoSource => CliError::usage(format!("{} {e}", args.input)),
+        e => CliError::usage(e.to_string()),
+    })
 }
 
-fn crs_plan(args: &Args, file_crs: Option<&str>) -> Result<CrsPlan, CliError> {
-    let source = match (&args.s_srs, file_crs) {
-        (Some(s), _) => Some(Crs::parse(s).map_err(|e| CliError::usage(format!("--s-srs: {e}")))?),
-        (None, Some(wkt)) => Crs::from_wkt(wkt).ok(),
-        (None, None) => None,
-    };
-    let Some(t) = &args.t_srs else { return Ok(CrsPlan { grid: source, reproject: None }) };
-    let target = Crs::parse(t).map_err(|e| CliError::usage(format!("--t-srs: {e}")))?;
-    let Some(source) = source else {
-        return Err(CliError::usage(format!("{} names no CRS: give the points' CRS with --s-srs to reproject them", args.input)));
-    };
-    Ok(CrsPlan { grid: Some(target.clone()), reproject: Some((source, target)) })
-}
-
-impl CrsPlan {
-    fn apply(&self, points: &mut [[f64; 3]]) -> Result<(), CliError> {
-        match &self.reproject {
-            Some((from, to)) => raster_io::crs::reproject(points, from, to).map_err(|e| CliError::usage(e.to_string())),
-            None => Ok(()),
-        }
-    }
+/// Reprojects a batch as `plan` says; a point PROJ cannot transform is a usage error.
+fn reproject(plan: &GridCrs, points: &mut [[f64; 3]]) -> Result<(), CliError> {
+    plan.apply(points).map_err(|e| CliError::usage(e.to_string()))
 }
 
 /// Refuses a cell size that is almost certainly metres on points in degrees
@@ -243,7 +227,7 @@ fn splat_streamed(args: &Args, path: &Path, kernel: SplatKernel, config: &Config
     let reprojected = |batches: PointBatches| {
         batches.map(|b| {
             let mut b = b.map_err(points_err)?;
-            plan.apply(&mut b)?;
+            reproject(&plan, &mut b)?;
             Ok::<_, CliError>(b)
         })
     };
@@ -265,7 +249,7 @@ fn splat_streamed(args: &Args, path: &Path, kernel: SplatKernel, config: &Config
 fn rasterize_held(args: &Args, kernel: Option<SplatKernel>, config: &Config) -> Result<(BoundsXy, Raster, Option<TinStats>), CliError> {
     let mut cloud = read_cloud(&args.input, args.class)?;
     let plan = crs_plan(args, cloud.crs.as_deref())?;
-    plan.apply(&mut cloud.points)?;
+    reproject(&plan, &mut cloud.points)?;
     let mut seen = BoundsXy::default();
     seen.extend(&cloud.points);
     let grid = plan_grid(args, &seen, plan.grid.as_ref(), config)?;
