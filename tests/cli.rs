@@ -316,3 +316,25 @@ fn the_cli_is_small_files_that_do_not_import_each_other() {
         }
     }
 }
+
+/// Issue 16: every library crate's main page (its lib.rs) carries a runnable `# Examples`
+/// doctest (a ```` ``` ```` fence without `text`, `ignore` or another language), which
+/// `cargo test --doc` (part of `make test`) runs.
+#[test]
+fn every_library_crate_opens_with_a_runnable_example() {
+    let crates = common::repo_root().join("crates");
+    let mut missing = Vec::new();
+    let mut seen = 0;
+    for e in std::fs::read_dir(&crates).unwrap() {
+        let lib = e.unwrap().path().join("src/lib.rs");
+        let Ok(text) = std::fs::read_to_string(&lib) else { continue };
+        seen += 1;
+        let docs: Vec<&str> = text.lines().filter(|l| l.starts_with("//!")).map(|l| l.trim_start_matches("//!").trim()).collect();
+        let runnable = docs.iter().any(|l| *l == "```" || *l == "```rust" || *l == "```no_run");
+        if !(docs.contains(&"# Examples") && runnable) {
+            missing.push(lib.display().to_string());
+        }
+    }
+    assert!(seen >= 17, "library crates found: {seen}");
+    assert!(missing.is_empty(), "no runnable `# Examples` on the crate page: {missing:?}");
+}

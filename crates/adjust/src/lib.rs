@@ -12,7 +12,10 @@
 //! - Statistics: σ̂0 and the global χ² test, residuals, redundancy numbers, normalised residuals,
 //!   Baarda's data snooping with the largest suspect.
 //!
-//! Usable alone for fits with errors in all coordinates, see [`fits`]:
+//! Usable alone for fits with errors in all coordinates, see [`fits`].
+//!
+//! # Examples
+//!
 //! ```
 //! use adjust::fits::fit_line_2d;
 //! // points on y = 1 + 2x, equal σ in x and y

@@ -19,6 +19,38 @@
 //! opening nesting, and every other top-level feature as an opaque object with id, type and
 //! envelope. Geometric defects (a ring with 3 positions, an unclosed ring) are kept as written
 //! for the validator; only what cannot be decoded at all is a [`ReadError`].
+//!
+//! # Examples
+//!
+//! Read a document, move one vertex, write it back: only the coordinate text changes.
+//!
+//! ```
+//! let gml = br#"<?xml version="1.0" encoding="UTF-8"?>
+//! <CityModel xmlns="http://www.opengis.net/citygml/2.0" xmlns:bldg="http://www.opengis.net/citygml/building/2.0"
+//!   xmlns:gml="http://www.opengis.net/gml">
+//!   <cityObjectMember><bldg:Building gml:id="B1"><!-- kept -->
+//!     <bldg:lod2MultiSurface><gml:MultiSurface><gml:surfaceMember><gml:Polygon gml:id="roof">
+//!       <gml:exterior><gml:LinearRing><gml:posList>0 0 0 1 0 0 1 1 0 0 0 0</gml:posList></gml:LinearRing></gml:exterior>
+//!     </gml:Polygon></gml:surfaceMember></gml:MultiSurface></bldg:lod2MultiSurface>
+//!   </bldg:Building></cityObjectMember>
+//! </CityModel>"#;
+//! let model = citygml_io::parse(gml).unwrap();
+//! assert_eq!(model.version.as_str(), "2.0");
+//! let building = &model.objects[0];
+//! assert_eq!((building.id.as_deref(), building.kind.as_str()), (Some("B1"), "Building"));
+//! let ring = &building.all_polygons()[0].exterior;
+//! assert_eq!(ring.points.len(), 4);
+//!
+//! let mut moved = ring.points.clone();
+//! moved[2] = [1.0, 2.0, 0.0];
+//! let edits = citygml_io::ring_edits(ring, &moved).unwrap();
+//! let mut out = Vec::new();
+//! citygml_io::write_with_edits(gml, &edits, &mut out).unwrap();
+//! let text = String::from_utf8(out).unwrap();
+//! assert!(text.contains("<gml:posList>0 0 0 1 0 0 1 2 0 0 0 0</gml:posList>"));
+//! assert!(text.contains("<!-- kept -->"));
+//! assert_eq!(text.len(), gml.len()); // nothing else was re-serialised
+//! ```
 
 pub mod crs;
 pub mod error;

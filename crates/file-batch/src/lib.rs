@@ -13,6 +13,28 @@
 //! Whether arguments ask for this many-file form at all ([`is_batch`]) depends on their shape,
 //! never on how many files a directory or pattern happens to hold, so a script always gets the
 //! same kind of output from the same kind of call.
+//!
+//! # Examples
+//!
+//! A directory expands to its matching files sorted by path; the results come back in that
+//! order whatever the threads did:
+//!
+//! ```
+//! use file_batch::{expand, run_ordered, Source};
+//! let dir = std::env::temp_dir().join(format!("file-batch-doc-{}", std::process::id()));
+//! std::fs::create_dir_all(dir.join("sub")).unwrap();
+//! for name in ["b.gml", "a.gml", "sub/c.gml", "notes.txt"] {
+//!     std::fs::write(dir.join(name), name).unwrap();
+//! }
+//! let sources = expand(&[dir.display().to_string()], &["gml"]).unwrap();
+//! let names: Vec<String> = sources.iter().map(|s| s.display_name().rsplit('/').next().unwrap().to_string()).collect();
+//! assert_eq!(names, ["a.gml", "b.gml", "c.gml"]);
+//!
+//! let mut lengths = Vec::new();
+//! run_ordered(sources, |s: Source| std::fs::read(s.as_arg()).unwrap().len(), |i, r| lengths.push((i, r.unwrap())));
+//! assert_eq!(lengths, [(0, 5), (1, 5), (2, 9)]);
+//! std::fs::remove_dir_all(&dir).unwrap();
+//! ```
 
 use std::collections::BTreeMap;
 use std::panic::{catch_unwind, AssertUnwindSafe};

@@ -5,6 +5,22 @@
 //! ([`fault`]) → DSI constraints and the normal system solved by preconditioned CG ([`dsi`]) →
 //! a saved [`model::Model`] that can be re-interpolated with base + float constraints (seed §3) →
 //! iso-surfaces, sections and CSG by marching tetrahedra ([`contour`]) → VTK ([`vtk`]).
+//!
+//! # Examples
+//!
+//! Points with normals on a unit sphere become a field whose zero surface is closed and
+//! encloses about the sphere's volume:
+//!
+//! ```
+//! use implicit::{contour, generate, model};
+//! let points = generate::sphere(800, [0.0; 3], 1.0, 0.0, 0.0, 1);
+//! let (m, report) = model::build(&points, &[], &[], &model::BuildOptions::default(), &mut |_| {}).unwrap();
+//! assert!(report.misfit_max < report.cell);
+//! let surface = contour::iso_surface(&m.mesh, &m.phi, 0.0, None);
+//! assert!(surface.is_closed());
+//! let sphere = 4.0 / 3.0 * std::f64::consts::PI;
+//! assert!((surface.volume().abs() - sphere).abs() < 0.1 * sphere, "{}", surface.volume());
+//! ```
 
 pub mod contour;
 pub mod dsi;

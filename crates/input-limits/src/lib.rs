@@ -13,6 +13,25 @@
 //! - [`mapped`]: a whole input as one slice that a streaming reader holds only ahead of itself.
 //!
 //! No dependency on any format crate: every reader of untrusted text or binary can use it.
+//!
+//! # Examples
+//!
+//! An endless line (`/dev/zero` read as text) is refused after a bounded read, and a 100 kB
+//! token is quoted by its first bytes:
+//!
+//! ```
+//! use std::io::{BufReader, Read};
+//! use input_limits::lines::{read_line_max, LineError};
+//! let mut endless = BufReader::new(std::io::repeat(b'7').take(10 << 20));
+//! let mut line = String::new();
+//! let err = read_line_max(&mut endless, &mut line, 1 << 20).unwrap_err();
+//! assert!(matches!(err, LineError::TooLong { max } if max == 1 << 20));
+//! assert!(line.is_empty());
+//!
+//! let token = "9".repeat(100_000);
+//! let quoted = input_limits::quote(&token);
+//! assert!(quoted.len() < 250 && quoted.ends_with("(100000 bytes)"));
+//! ```
 
 pub mod budget;
 pub mod las;

@@ -2,7 +2,9 @@
 //!
 //! This crate knows nothing of buildings, splines or implicit surfaces: callers build a [`Scene`]
 //! — a tree of named [`MeshNode`]s, each with [`TriangleMesh`]es (one per material) and
-//! [`LineSet`]s, a [`Material`] table, and an `origin` — and hand it to a writer:
+//! [`LineSet`]s, a [`Material`] table, and an `origin` — and hand it to a writer.
+//!
+//! # Examples
 //!
 //! ```
 //! use mesh_export::{Material, MeshNode, Scene, TriangleMesh};

@@ -10,6 +10,25 @@
 //!
 //! [`citygml`] and [`obj`] turn the input formats into [`soup::Soup`]s; [`counts`] reports the
 //! before/after counts the way the spec's Tables 7.1 and 7.4 do.
+//!
+//! # Examples
+//!
+//! A box sketched as an OBJ solid becomes 8 nodes on 6 faces, 6 planes and 3 normals (parallel
+//! faces share a normal), each node the intersection of its three planes:
+//!
+//! ```
+//! use normalize::{normalize_into, obj::read_sketch, Tolerances};
+//! use popa3d_model::{Incidence, NodeId, Popa3d};
+//! let obj = b"o room\nv 0 0 0\nv 4 0 0\nv 4 3 0\nv 0 3 0\nv 0 0 2.5\nv 4 0 2.5\nv 4 3 2.5\nv 0 3 2.5\n\
+//! f 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\nf 3 4 8 7\nf 4 1 5 8\n";
+//! let soup = read_sketch(obj, "box.obj").unwrap();
+//! let mut model = Popa3d::new([0.0; 3]);
+//! let done = normalize_into(&mut model, &soup, &Tolerances::default()).unwrap();
+//! let last = done.counts.last();
+//! assert_eq!((last.nodes, last.faces, last.planes, last.normals), (8, 6, 6, 3));
+//! let corners = model.node_positions(&Incidence::new(&model)).unwrap();
+//! assert!(corners.iter().any(|p| (p[0] - 4.0).abs() < 1e-9 && (p[1] - 3.0).abs() < 1e-9 && (p[2] - 2.5).abs() < 1e-9));
+//! ```
 
 pub mod citygml;
 pub mod conditions;

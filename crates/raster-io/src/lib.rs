@@ -4,7 +4,10 @@
 //! [`PointCloud`]. Reading and writing only; processing (splatting, TIN, warping) lives in
 //! `raster-proc`.
 //!
+//! # Examples
+//!
 //! Typical use by the fitting and evaluation code:
+//!
 //! ```no_run
 //! use raster_io::{read_raster, write_raster, MissingCorners, Raster, WriteOptions};
 //! let r = read_raster(std::path::Path::new("bathy.nc")).unwrap();

@@ -14,6 +14,28 @@
 //!
 //! The rules (centroid assignment, halo buildings read-only, what a cut building does) are in
 //! docs/decisions.md#scale-out-tiles-and-workflows.
+//!
+//! # Examples
+//!
+//! A 1000×600 raster cut into core windows of 400 px with a 2 px halo: adjacent cores, halos
+//! clipped to the raster, 8-neighbourhoods, and the plan written as the JSON lines a workflow
+//! reads.
+//!
+//! ```
+//! use tiling::plan::{write_plan, PlanFormat};
+//! use tiling::raster::{plan_grid, RasterTiling};
+//! let gt = [500_000.0, 1.0, 0.0, 5_800_000.0, 0.0, -1.0];
+//! let opts = RasterTiling { tile_pixels: Some(400), cells_per_tile: 0, halo: 2 };
+//! let tiles = plan_grid("dem.tif", 1000, 600, gt, &opts).unwrap();
+//! assert_eq!(tiles.len(), 3 * 2);
+//! let cells: usize = tiles.iter().map(|t| t.work).sum();
+//! assert_eq!(cells, 1000 * 600); // every cell in exactly one core
+//! let first = &tiles[0];
+//! assert_eq!(first.core.pixels, Some([0, 0, 400, 400]));
+//! assert_eq!(first.halo.pixels, Some([0, 0, 402, 402])); // clipped at the raster's corner
+//! assert_eq!(first.neighbours.len(), 3);
+//! assert_eq!(write_plan(&tiles, PlanFormat::JsonLines).lines().count(), 6);
+//! ```
 
 pub mod buildings;
 pub mod extract;

@@ -24,6 +24,31 @@
 //! Parameterization (A21): parameter units are raster cells. s = column index, t = row index
 //! counted from the bottom row, so raster cell centres sit at integer (s, t) and the sample
 //! spacing is 1. The affine map to world coordinates is stored with the mesh ([`format::Georef`]).
+//!
+//! # Examples
+//!
+//! Reduce a 40×30 raster with a hole to a cubic T-spline whose every valid cell is within 0.05,
+//! and evaluate it where the raster has values:
+//!
+//! ```
+//! use tspline::fit::{fit, Backend, FitOptions, Samples, StopReason};
+//! use tspline::{Degree, PbSpline};
+//! let (w, h) = (40, 30);
+//! let height = |s: f64, t: f64| 10.0 + 0.3 * s + 2.0 * (s / 7.0).sin() * (t / 5.0).cos();
+//! let mut z: Vec<f64> = (0..w * h).map(|q| height((q % w) as f64, (q / w) as f64)).collect();
+//! z[15 * w + 20] = f64::NAN; // no data
+//! let samples = Samples { width: w, height: h, z };
+//! let result = fit(&samples, &FitOptions::new(Degree::Cubic, 0.05), &Backend::Cpu, &mut |_| {}).unwrap();
+//! assert_eq!(result.stop, StopReason::ToleranceReached);
+//!
+//! let surface = PbSpline::build(&result.mesh);
+//! let cells: Vec<[f64; 2]> = (0..w * h).map(|q| [(q % w) as f64, (q / w) as f64]).collect();
+//! let fitted = surface.eval_z(&cells, false);
+//! for (q, v) in samples.z.iter().enumerate().filter(|(_, v)| !v.is_nan()) {
+//!     assert!((fitted[q] - v).abs() <= 0.05);
+//! }
+//! assert!(result.mesh.points.len() < w * h / 2); // fewer control points than cells
+//! ```
 
 mod assembly;
 pub mod blunders;
