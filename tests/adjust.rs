@@ -1,4 +1,4 @@
-//! End-to-end tests of `geofit adjust`, `observe`, `popa3d2citygml` and `heal` (spec §8).
+//! End-to-end tests of `geofit adjust`, `observe` and `popa3d2citygml` (spec §8); `heal` is in tests/heal.rs.
 //! Independent truth: `tests/scripts/adjust_gml_check.py` (lxml + numpy, no geofit code) and
 //! `geofit validate` (schema + val3dity codes, another command's code path).
 mod common;
