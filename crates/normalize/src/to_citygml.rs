@@ -25,7 +25,7 @@
 //! `gml:posList` rings.
 
 use citygml_io::{CityModel, CityObject, Edit, Polygon, Ring};
-use popa3d_model::{FaceId, Incidence, NodeId, Popa3d, VertexSource};
+use popa3d_model::{FaceId, Incidence, NodeId, PlaneId, Popa3d, VertexSource};
 use serde::Serialize;
 use std::collections::{BTreeMap, BTreeSet, HashMap, HashSet};
 
@@ -517,105 +517,10 @@ pub fn back_edits(model: &Popa3d, tpl: &Template, opts: &BackOptions) -> Result<
     let (template, polys, refs, doc_order) = (tpl.bytes, &tpl.polys, &tpl.refs, &tpl.doc_order);
     let decimals = opts.precision.or(tpl.decimals);
     let mut m = model.clone();
-    // 1. Make near-coplanar planes on one normal exactly coplanar.
-    let mut by_normal: BTreeMap<u32, Vec<usize>> = BTreeMap::new();
-    for (i, p) in m.planes.iter().enumerate() {
-        by_normal.entry(p.normal.0).or_default().push(i);
-    }
-    let mut plane_cluster = vec![usize::MAX; m.planes.len()];
-    let mut nclusters = 0;
-    for (_, ids) in by_normal {
-        let mut v: Vec<(f64, usize)> = ids.iter().map(|&i| (m.planes[i].sign.f64() * m.planes[i].d, i)).collect();
-        v.sort_by(|a, b| a.0.total_cmp(&b.0));
-        let mut start = 0;
-        for k in 1..=v.len() {
-            if k == v.len() || v[k].0 - v[k - 1].0 > opts.coplanar_tolerance {
-                let mean = v[start..k].iter().map(|x| x.0).sum::<f64>() / (k - start) as f64;
-                for &(_, i) in &v[start..k] {
-                    m.planes[i].d = m.planes[i].sign.f64() * mean;
-                    plane_cluster[i] = nclusters;
-                }
-                nclusters += 1;
-                start = k;
-            }
-        }
-    }
-    // Template polygons (`tpl`, needed first: the original vertices anchor ill-conditioned nodes).
-    // 2. Node positions: the plane intersection (spec T 2.3/T 2.4). When the adjustment made a
-    //    node's planes (nearly) linearly dependent — e.g. two faces meeting at a slight kink became
-    //    parallel, spec §7.4 GA01/GA02 "can fail after adjustment" — the intersection is a line or
-    //    plane, and the node takes the point of it nearest to its original vertex (truncated
-    //    pseudo-inverse anchored at the source position, singular values below 1e-4 dropped).
+    let plane_cluster = snap_coplanar_planes(&mut m, opts.coplanar_tolerance);
     let inc = Incidence::new(&m);
-    let mut pos: Vec<P3> = Vec::with_capacity(m.nodes.len());
-    for i in 0..m.nodes.len() {
-        let node = NodeId::from(i);
-        let p0: P3 = m.nodes[i]
-            .sources
-            .iter()
-            .find_map(|s| match s {
-                VertexSource::CityGml { polygon, ring, index } => polys
-                    .get(polygon)
-                    .and_then(|pi| ring_of(pi.poly, *ring))
-                    .and_then(|r| r.points.get(*index as usize))
-                    .map(|q| [q[0] - m.origin[0], q[1] - m.origin[1], q[2] - m.origin[2]]),
-                _ => None,
-            })
-            .ok_or_else(|| BackError::Provenance {
-                element: format!("node {i}"),
-                message: match m.nodes[i].sources.first() {
-                    Some(VertexSource::CityGml { polygon, ring, index }) => format!("its source vertex (polygon `{polygon}` ring {ring} vertex {index}) is not in the template"),
-                    Some(VertexSource::Obj { vertex }) => format!("comes from OBJ vertex {vertex}, not from CityGML"),
-                    None => "has no source vertex".into(),
-                },
-            })?;
-        let planes = inc.node_planes(&m, node);
-        let mut ata = nalgebra::Matrix3::<f64>::zeros();
-        let mut atr = nalgebra::Vector3::<f64>::zeros();
-        let x0 = nalgebra::Vector3::new(p0[0], p0[1], p0[2]);
-        for q in &planes {
-            let pv = m.plane_value(*q);
-            let n = nalgebra::Vector3::new(pv.n[0], pv.n[1], pv.n[2]);
-            ata += n * n.transpose();
-            atr += n * (pv.d - n.dot(&x0));
-        }
-        let e = ata.symmetric_eigen();
-        let lmax = e.eigenvalues.iter().fold(0.0f64, |a, &b| a.max(b));
-        let mut p = x0;
-        for k in 0..3 {
-            if e.eigenvalues[k] > 1e-4 * lmax && lmax > 0.0 {
-                let v = e.eigenvectors.column(k);
-                p += v * (v.dot(&atr) / e.eigenvalues[k]);
-            }
-        }
-        if p.iter().any(|v| !v.is_finite()) {
-            return Err(BackError::Geometry { element: format!("node {i}"), message: "position is not finite".into() });
-        }
-        pos.push([p[0] + m.origin[0], p[1] + m.origin[1], p[2] + m.origin[2]]);
-    }
-    // Provenance → (polygon, ring, index) → node.
-    let mut vmap: HashMap<(String, u32, u32), NodeId> = HashMap::new();
-    for (i, n) in m.nodes.iter().enumerate() {
-        for s in &n.sources {
-            match s {
-                VertexSource::CityGml { polygon, ring, index } => {
-                    let Some(pi) = polys.get(polygon) else {
-                        return Err(BackError::Provenance { element: format!("node {i}"), message: format!("polygon `{polygon}` is not in the template") });
-                    };
-                    let Some(r) = ring_of(pi.poly, *ring) else {
-                        return Err(BackError::Provenance { element: format!("node {i}"), message: format!("polygon `{polygon}` has no ring {ring} in the template") });
-                    };
-                    if *index as usize >= ring_len(r) {
-                        return Err(BackError::Provenance { element: format!("node {i}"), message: format!("polygon `{polygon}` ring {ring} has {} vertices in the template, provenance names vertex {index}", ring_len(r)) });
-                    }
-                    vmap.insert((polygon.clone(), *ring, *index), NodeId::from(i));
-                }
-                VertexSource::Obj { .. } => {
-                    return Err(BackError::Provenance { element: format!("node {i}"), message: "comes from an OBJ sketch, not from CityGML".into() });
-                }
-            }
-        }
-    }
+    let pos = node_positions(&m, &inc, polys)?;
+    let vmap = vertex_map(&m, polys)?;
     // Polygons merged into another polygon's face by normalization: they belong to the model
     // even when none of their vertices kept a node.
     let absorbed: Vec<(String, Vec<String>)> = m
@@ -962,4 +867,124 @@ pub fn back_edits(model: &Popa3d, tpl: &Template, opts: &BackOptions) -> Result<
     report.removed_degenerate.sort();
     report.removed_surfaces.sort();
     Ok((edits, report))
+}
+
+/// Makes near-coplanar planes on one normal exactly coplanar: planes whose signed distances lie
+/// within `tolerance` of their neighbour's take their cluster's mean. Returns each plane's cluster.
+fn snap_coplanar_planes(m: &mut Popa3d, tolerance: f64) -> Vec<usize> {
+    let mut by_normal: BTreeMap<u32, Vec<usize>> = BTreeMap::new();
+    for (i, p) in m.planes.iter().enumerate() {
+        by_normal.entry(p.normal.0).or_default().push(i);
+    }
+    let mut plane_cluster = vec![usize::MAX; m.planes.len()];
+    let mut nclusters = 0;
+    for (_, ids) in by_normal {
+        let mut v: Vec<(f64, usize)> = ids.iter().map(|&i| (m.planes[i].sign.f64() * m.planes[i].d, i)).collect();
+        v.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let mut start = 0;
+        for k in 1..=v.len() {
+            if k == v.len() || v[k].0 - v[k - 1].0 > tolerance {
+                let mean = v[start..k].iter().map(|x| x.0).sum::<f64>() / (k - start) as f64;
+                for &(_, i) in &v[start..k] {
+                    m.planes[i].d = m.planes[i].sign.f64() * mean;
+                    plane_cluster[i] = nclusters;
+                }
+                nclusters += 1;
+                start = k;
+            }
+        }
+    }
+    plane_cluster
+}
+
+/// Node positions in world coordinates: the plane intersection (spec T 2.3/T 2.4). When the
+/// adjustment made a node's planes (nearly) linearly dependent — e.g. two faces meeting at a
+/// slight kink became parallel, spec §7.4 GA01/GA02 "can fail after adjustment" — the
+/// intersection is a line or plane, and the node takes the point of it nearest to its original
+/// vertex (truncated pseudo-inverse anchored at the source position, singular values below
+/// 1e-4 dropped).
+fn node_positions(m: &Popa3d, inc: &Incidence, polys: &HashMap<String, PolyInfo<'_>>) -> Result<Vec<P3>, BackError> {
+    (0..m.nodes.len())
+        .map(|i| {
+            let p0 = source_vertex(m, polys, i)?;
+            let p = anchored_intersection(m, &inc.node_planes(m, NodeId::from(i)), p0)
+                .ok_or_else(|| BackError::Geometry { element: format!("node {i}"), message: "position is not finite".into() })?;
+            Ok([p[0] + m.origin[0], p[1] + m.origin[1], p[2] + m.origin[2]])
+        })
+        .collect()
+}
+
+/// Node `i`'s original vertex in the template, relative to the model's origin.
+fn source_vertex(m: &Popa3d, polys: &HashMap<String, PolyInfo<'_>>, i: usize) -> Result<P3, BackError> {
+    m.nodes[i]
+        .sources
+        .iter()
+        .find_map(|s| match s {
+            VertexSource::CityGml { polygon, ring, index } => polys
+                .get(polygon)
+                .and_then(|pi| ring_of(pi.poly, *ring))
+                .and_then(|r| r.points.get(*index as usize))
+                .map(|q| [q[0] - m.origin[0], q[1] - m.origin[1], q[2] - m.origin[2]]),
+            _ => None,
+        })
+        .ok_or_else(|| BackError::Provenance {
+            element: format!("node {i}"),
+            message: match m.nodes[i].sources.first() {
+                Some(VertexSource::CityGml { polygon, ring, index }) => format!("its source vertex (polygon `{polygon}` ring {ring} vertex {index}) is not in the template"),
+                Some(VertexSource::Obj { vertex }) => format!("comes from OBJ vertex {vertex}, not from CityGML"),
+                None => "has no source vertex".into(),
+            },
+        })
+}
+
+/// The point of the planes' intersection nearest to `p0` (local coordinates): the truncated
+/// pseudo-inverse of the planes' normal equations, directions with an eigenvalue below 1e-4 of
+/// the largest left at `p0`. `None` when the result is not finite.
+fn anchored_intersection(m: &Popa3d, planes: &[PlaneId], p0: P3) -> Option<P3> {
+    let mut ata = nalgebra::Matrix3::<f64>::zeros();
+    let mut atr = nalgebra::Vector3::<f64>::zeros();
+    let x0 = nalgebra::Vector3::new(p0[0], p0[1], p0[2]);
+    for q in planes {
+        let pv = m.plane_value(*q);
+        let n = nalgebra::Vector3::new(pv.n[0], pv.n[1], pv.n[2]);
+        ata += n * n.transpose();
+        atr += n * (pv.d - n.dot(&x0));
+    }
+    let e = ata.symmetric_eigen();
+    let lmax = e.eigenvalues.iter().fold(0.0f64, |a, &b| a.max(b));
+    let mut p = x0;
+    for k in 0..3 {
+        if e.eigenvalues[k] > 1e-4 * lmax && lmax > 0.0 {
+            let v = e.eigenvectors.column(k);
+            p += v * (v.dot(&atr) / e.eigenvalues[k]);
+        }
+    }
+    p.iter().all(|v| v.is_finite()).then(|| [p[0], p[1], p[2]])
+}
+
+/// Provenance → (polygon, ring, index) → node; every source vertex must be in the template.
+fn vertex_map(m: &Popa3d, polys: &HashMap<String, PolyInfo<'_>>) -> Result<HashMap<(String, u32, u32), NodeId>, BackError> {
+    let mut vmap: HashMap<(String, u32, u32), NodeId> = HashMap::new();
+    for (i, n) in m.nodes.iter().enumerate() {
+        for s in &n.sources {
+            match s {
+                VertexSource::CityGml { polygon, ring, index } => {
+                    let Some(pi) = polys.get(polygon) else {
+                        return Err(BackError::Provenance { element: format!("node {i}"), message: format!("polygon `{polygon}` is not in the template") });
+                    };
+                    let Some(r) = ring_of(pi.poly, *ring) else {
+                        return Err(BackError::Provenance { element: format!("node {i}"), message: format!("polygon `{polygon}` has no ring {ring} in the template") });
+                    };
+                    if *index as usize >= ring_len(r) {
+                        return Err(BackError::Provenance { element: format!("node {i}"), message: format!("polygon `{polygon}` ring {ring} has {} vertices in the template, provenance names vertex {index}", ring_len(r)) });
+                    }
+                    vmap.insert((polygon.clone(), *ring, *index), NodeId::from(i));
+                }
+                VertexSource::Obj { .. } => {
+                    return Err(BackError::Provenance { element: format!("node {i}"), message: "comes from an OBJ sketch, not from CityGML".into() });
+                }
+            }
+        }
+    }
+    Ok(vmap)
 }
