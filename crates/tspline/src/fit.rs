@@ -262,8 +262,7 @@ pub fn build_pb_incremental(mesh: &TMesh, old: &PbSpline, split: &[crate::mesh::
     let k = old.degree.k();
     let active = mesh.active_points();
     let point_ids: Vec<u32> = (0..mesh.points.len() as u32).filter(|&i| active[i as usize]).collect();
-    let b = mesh.bounds();
-    let knots: Vec<crate::knots::LocalKnots> = point_ids
+    let knots: Vec<Option<crate::knots::LocalKnots>> = point_ids
         .par_iter()
         .map(|&i| {
             let o = old_of[i as usize];
@@ -274,13 +273,13 @@ pub fn build_pb_incremental(mesh: &TMesh, old: &PbSpline, split: &[crate::mesh::
                     let mut kn = crate::knots::LocalKnots { s: [0.0; 5], t: [0.0; 5] };
                     kn.s[..k + 2].copy_from_slice(&a[..k + 2]);
                     kn.t[..k + 2].copy_from_slice(&a[5..5 + k + 2]);
-                    return kn;
+                    return Some(kn);
                 }
             }
-            let p = mesh.points[i as usize];
-            crate::knots::infer_in(mesh, b, p.s, p.t)
+            None
         })
         .collect();
+    let knots = crate::knots::infer_missing(mesh, &point_ids, knots);
     PbSpline::from_parts(mesh, point_ids, knots)
 }
 

@@ -414,22 +414,20 @@ impl TMesh {
     /// Whether a leaf needs a split by the repair rules (A13, see module doc).
     pub fn needs_repair(&self, cell: CellId) -> bool {
         let r = self.cells[cell as usize].rect;
-        let mut hanging = [false; 4];
-        for (side, n) in self.neighbours(cell) {
-            let o = self.cells[n as usize].rect;
-            let (mine, theirs) = match side {
-                Side::West | Side::East => (r.height(), o.height()),
-                Side::South | Side::North => (r.width(), o.width()),
-            };
-            if theirs * 2.0 < mine {
-                return true; // 1:2 balance violated
-            }
-            if theirs < mine {
-                hanging[side as usize] = true;
-            }
+        violates_repair_rules(&r, self.neighbours(cell).into_iter().map(|(side, n)| (side, self.cells[n as usize].rect)))
+    }
+
+    /// [`TMesh::needs_repair`] of every leaf at once, indexed by cell id (false for non-leaves):
+    /// the neighbours come from the leaves' sides sorted by line ([`SideIndex`]) instead of an
+    /// R-tree query per leaf.
+    fn leaves_needing_repair(&self) -> Vec<bool> {
+        let sides = SideIndex::new(self);
+        let mut out = vec![false; self.cells.len()];
+        for c in self.leaves() {
+            let r = self.cells[c as usize].rect;
+            out[c as usize] = violates_repair_rules(&r, sides.neighbours(&r));
         }
-        // rule 2: vertices on opposite sides can be joined
-        (hanging[Side::West as usize] && hanging[Side::East as usize]) || (hanging[Side::South as usize] && hanging[Side::North as usize])
+        out
     }
 
     /// Alternating rule-2 / 1:2 repair until stable (A13). Cells smaller than `2·min_size` are
@@ -438,6 +436,13 @@ impl TMesh {
     pub fn repair(&mut self, min_size: f64, geom: &mut dyn FnMut(f64, f64) -> (f64, f64, f64)) -> usize {
         let mut splits = 0;
         let mut todo: Vec<CellId> = self.leaves().collect();
+        // The first round visits every leaf: its checks are answered from one batch over the
+        // mesh as it was (`flags`) unless a split of this round touched the leaf (`touched`:
+        // the neighbours of each split cell, the only leaves whose neighbourhood a split
+        // changes), so every answer is what `needs_repair` gives at that moment (same splits,
+        // same order).
+        let mut flags = Some(self.leaves_needing_repair());
+        let mut touched = vec![false; self.cells.len()];
         while !todo.is_empty() {
             let mut next = Vec::new();
             todo.sort_unstable();
@@ -447,15 +452,28 @@ impl TMesh {
                     continue;
                 }
                 let r = self.cells[c as usize].rect;
-                if r.width().min(r.height()) < 2.0 * min_size || !self.needs_repair(c) {
+                if r.width().min(r.height()) < 2.0 * min_size {
+                    continue;
+                }
+                let needs = match &flags {
+                    Some(f) if !touched[c as usize] => f[c as usize],
+                    _ => self.needs_repair(c),
+                };
+                if !needs {
                     continue;
                 }
                 let nbrs: Vec<CellId> = self.neighbours(c).into_iter().map(|(_, n)| n).collect();
+                for &n in &nbrs {
+                    if let Some(t) = touched.get_mut(n as usize) {
+                        *t = true;
+                    }
+                }
                 let kids = self.split(c, geom);
                 splits += 1;
                 next.extend(nbrs);
                 next.extend(kids);
             }
+            flags = None;
             todo = next;
         }
         splits
@@ -513,6 +531,73 @@ impl TMesh {
                 out.push(c.rect);
             }
         }
+    }
+}
+
+/// The repair rules (A13) for a leaf `r` with its leaf neighbours: a 1:2 violation on any
+/// side, or hanging vertices on two opposite sides (rule 2: they could be joined).
+fn violates_repair_rules(r: &Rect, neighbours: impl Iterator<Item = (Side, Rect)>) -> bool {
+    let mut hanging = [false; 4];
+    for (side, o) in neighbours {
+        let (mine, theirs) = match side {
+            Side::West | Side::East => (r.height(), o.height()),
+            Side::South | Side::North => (r.width(), o.width()),
+        };
+        if theirs * 2.0 < mine {
+            return true; // 1:2 balance violated
+        }
+        if theirs < mine {
+            hanging[side as usize] = true;
+        }
+    }
+    (hanging[Side::West as usize] && hanging[Side::East as usize]) || (hanging[Side::South as usize] && hanging[Side::North as usize])
+}
+
+/// The leaves' sides grouped by the line they lie on: for each [`Side`] `d`, the leaves whose
+/// side opposite to `d` lies on a line, so that a leaf's neighbours towards `d` are the entries
+/// of `d` on the line of its own `d` side that overlap it (leaves do not overlap, so those
+/// form one run of the entries sorted along the line).
+struct SideIndex {
+    /// Per side: (line coordinate, start along the line, end along the line, rect), sorted by
+    /// line then start; line coordinates with -0.0 made +0.0 (one line, as for the R-tree).
+    by_side: [Vec<(f64, f64, f64, Rect)>; 4],
+}
+
+impl SideIndex {
+    fn new(mesh: &TMesh) -> SideIndex {
+        let mut by_side: [Vec<(f64, f64, f64, Rect)>; 4] = Default::default();
+        for c in mesh.cells.iter().filter(|c| c.is_leaf()) {
+            let r = c.rect;
+            // a leaf is the West neighbour of leaves whose s_min is its s_max, ...
+            by_side[Side::West as usize].push((r.s_max + 0.0, r.t_min, r.t_max, r));
+            by_side[Side::East as usize].push((r.s_min + 0.0, r.t_min, r.t_max, r));
+            by_side[Side::South as usize].push((r.t_max + 0.0, r.s_min, r.s_max, r));
+            by_side[Side::North as usize].push((r.t_min + 0.0, r.s_min, r.s_max, r));
+        }
+        for v in &mut by_side {
+            v.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)));
+        }
+        SideIndex { by_side }
+    }
+
+    /// The leaf neighbours of `r` (sharing a side segment of positive length), as
+    /// [`TMesh::neighbours`] finds them.
+    fn neighbours<'a>(&'a self, r: &Rect) -> impl Iterator<Item = (Side, Rect)> + 'a {
+        let probes = [
+            (Side::West, r.s_min, r.t_min, r.t_max),
+            (Side::East, r.s_max, r.t_min, r.t_max),
+            (Side::South, r.t_min, r.s_min, r.s_max),
+            (Side::North, r.t_max, r.s_min, r.s_max),
+        ];
+        probes.into_iter().flat_map(move |(side, line, lo, hi)| {
+            let v = &self.by_side[side as usize];
+            let line = line + 0.0;
+            // entries on this line ending after `lo`: from the first one starting at or after
+            // `lo`, stepped back by one (the run's first may start before `lo`)
+            let first = v.partition_point(|e| e.0.total_cmp(&line).then(e.1.total_cmp(&lo)).is_lt());
+            let first = if first > 0 && v[first - 1].0 == line && v[first - 1].2 > lo { first - 1 } else { first };
+            v[first..].iter().take_while(move |e| e.0 == line && e.1 < hi).filter(move |e| e.2 > lo).map(move |e| (side, e.3))
+        })
     }
 }
 
@@ -598,5 +683,97 @@ mod tests {
         // overlapping meshes are refused
         let c = TMesh::grid(Degree::Linear, 1.0, 0.0, 1.0, 2, 2);
         assert!(a.merge(&c).is_err());
+    }
+    /// The repair loop as it was before the batched first round (every check an R-tree
+    /// neighbour query): the oracle of [`TMesh::repair`].
+    fn repair_one_by_one(m: &mut TMesh, min_size: f64, geom: &mut dyn FnMut(f64, f64) -> (f64, f64, f64)) -> usize {
+        let mut splits = 0;
+        let mut todo: Vec<CellId> = m.leaves().collect();
+        while !todo.is_empty() {
+            let mut next = Vec::new();
+            todo.sort_unstable();
+            todo.dedup();
+            for c in todo {
+                if !m.cells[c as usize].is_leaf() {
+                    continue;
+                }
+                let r = m.cells[c as usize].rect;
+                if r.width().min(r.height()) < 2.0 * min_size || !m.needs_repair(c) {
+                    continue;
+                }
+                let nbrs: Vec<CellId> = m.neighbours(c).into_iter().map(|(_, n)| n).collect();
+                let kids = m.split(c, geom);
+                splits += 1;
+                next.extend(nbrs);
+                next.extend(kids);
+            }
+            todo = next;
+        }
+        splits
+    }
+
+    /// The side index gives every leaf the neighbours that the R-tree query gives.
+    fn assert_side_index_finds_neighbours(m: &TMesh) {
+        let sides = SideIndex::new(m);
+        let key = |(side, r): (Side, Rect)| (side as u8, r.s_min.to_bits(), r.t_min.to_bits(), r.s_max.to_bits(), r.t_max.to_bits());
+        for c in m.leaves() {
+            let mut got: Vec<_> = sides.neighbours(&m.cells[c as usize].rect).map(key).collect();
+            let mut want: Vec<_> = m.neighbours(c).into_iter().map(|(side, n)| key((side, m.cells[n as usize].rect))).collect();
+            got.sort_unstable();
+            want.sort_unstable();
+            assert_eq!(got, want, "cell {c}");
+        }
+    }
+
+    #[test]
+    fn side_index_on_a_mesh_with_a_long_cell() {
+        // the thesis mesh: Z3 is the south neighbour of Z2 and starts before it (step back)
+        assert_side_index_finds_neighbours(&thesis_mesh(Degree::Linear));
+    }
+
+    /// Random unrepaired refinements (1:4 and rule-2 violations, coarsened parents, a merged
+    /// mesh with a gap): the batched checks equal the per-leaf ones, and the repair makes the
+    /// same splits in the same order as the one-by-one loop (same points, same cells).
+    #[test]
+    fn batched_repair_equals_one_by_one() {
+        let mut seed = 23u64;
+        let mut rnd = move || {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let base = TMesh::grid(Degree::Cubic, -16.0, 0.0, 16.0, 5, 4).merge(&TMesh::grid(Degree::Cubic, 96.0, 16.0, 16.0, 2, 2)).unwrap();
+        let mut g = |s: f64, t: f64| (s, t, s * t);
+        let mut checked = 0;
+        for trial in 0..6 {
+            let mut m = base.clone();
+            for _ in 0..4 {
+                for c in m.leaves().collect::<Vec<_>>() {
+                    if rnd() < 0.25 && m.cells[c as usize].rect.width() >= 2.0 {
+                        m.split(c, &mut g);
+                    }
+                }
+                if trial % 2 == 1 {
+                    let parents: Vec<CellId> = m.leaves().filter_map(|c| m.cells[c as usize].parent).collect();
+                    if let Some(&p) = parents.get(parents.len() / 2) {
+                        m.coarsen(p).unwrap();
+                    }
+                }
+            }
+            assert_side_index_finds_neighbours(&m);
+            let batch = m.leaves_needing_repair();
+            for c in m.leaves() {
+                assert_eq!(batch[c as usize], m.needs_repair(c), "trial {trial}, cell {c}");
+                checked += usize::from(batch[c as usize]);
+            }
+            let mut want = m.clone();
+            let n_want = repair_one_by_one(&mut want, 1.0, &mut g);
+            let n_got = m.repair(1.0, &mut g);
+            assert_eq!(n_got, n_want, "trial {trial}");
+            assert!(n_want > 0);
+            assert_eq!(m.points, want.points, "trial {trial}");
+            let cells = |m: &TMesh| m.cells.iter().map(|c| (c.corners, c.rect, c.parent, c.children, c.alive)).collect::<Vec<_>>();
+            assert_eq!(cells(&m), cells(&want), "trial {trial}");
+        }
+        assert!(checked > 10, "the meshes had leaves to repair");
     }
 }
