@@ -2,7 +2,8 @@
 //! summarised in docs/sources.md#tspline and docs/tspline-decisions.md).
 //!
 //! - [`mesh`]: the T-mesh in a rectangle R-tree (refinement, repair, merge, coarsen).
-//! - [`knots`]: local knot vectors by ray casting.
+//! - [`knots`]: local knot vectors by ray casting, one point at a time or all at once from the
+//!   sorted edges of each grid line ([`knots::infer_batch`]).
 //! - [`eval`]: the rational T-spline through its PB-spline form, CPU (rayon) evaluation.
 //! - [`ocl_eval`]: the same evaluation and the knot derivation as OpenCL kernels.
 //! - [`rtree_pages`]: the thesis' Nearest-X int8 page encoding (Tables 5.2, 6.3).

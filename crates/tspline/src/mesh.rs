@@ -479,7 +479,7 @@ impl TMesh {
         splits
     }
 
-    /// Merging (spec §3.9, T26): the union of two meshes' leaf cells (C0 seam). Points at equal
+    /// Merging (spec §3.9, T28): the union of two meshes' leaf cells (C0 seam). Points at equal
     /// parameter pairs are identified (their geometry is taken from `self`); overlapping cells are
     /// an error. Knot inference then treats the union like any other mesh; rays stop at gaps (A14).
     pub fn merge(&self, other: &TMesh) -> Result<TMesh, TsplineError> {
