@@ -101,18 +101,7 @@ fn a_full_or_closed_stderr_does_not_stop_the_work() {
 /// ignores write errors; a plain `eprintln!` would bring the panic above back.
 #[test]
 fn the_cli_has_no_eprintln() {
-    fn rust_files(dir: &std::path::Path, out: &mut Vec<std::path::PathBuf>) {
-        for e in std::fs::read_dir(dir).unwrap() {
-            let p = e.unwrap().path();
-            if p.is_dir() {
-                rust_files(&p, out);
-            } else if p.extension().is_some_and(|x| x == "rs") {
-                out.push(p);
-            }
-        }
-    }
-    let mut files = Vec::new();
-    rust_files(&common::repo_root().join("crates/geofit/src"), &mut files);
+    let files = common::rust_sources(&common::repo_root().join("crates/geofit/src"));
     assert!(files.len() > 30, "the CLI's sources: {files:?}");
     for f in files {
         let text = std::fs::read_to_string(&f).unwrap();
@@ -241,15 +230,7 @@ fn undocumented_options(help: &str) -> Vec<String> {
 fn help_texts_cite_no_spec_sections_or_decision_numbers() {
     let top = common::run(&["--help"], None);
     let top = String::from_utf8_lossy(&top.stdout).to_string();
-    let commands: Vec<String> = top
-        .lines()
-        .skip_while(|l| !l.starts_with("Commands:"))
-        .skip(1)
-        .take_while(|l| l.starts_with("  "))
-        .filter(|l| !l.starts_with("   "))
-        .filter_map(|l| l.split_whitespace().next().map(str::to_string))
-        .filter(|c| c != "help")
-        .collect();
+    let commands = common::subcommands();
     let subs = ["interpolate", "update", "iso", "section", "csg", "run", "plan", "extract", "tileset", "report", "stitch", "seams"];
     let mut texts = vec![("geofit".to_string(), top.clone())];
     for c in &commands {
@@ -281,19 +262,8 @@ fn help_texts_cite_no_spec_sections_or_decision_numbers() {
 /// subcommand's own folder may share a `mod.rs`).
 #[test]
 fn the_cli_is_small_files_that_do_not_import_each_other() {
-    fn rust_files(dir: &std::path::Path, out: &mut Vec<std::path::PathBuf>) {
-        for e in std::fs::read_dir(dir).unwrap() {
-            let p = e.unwrap().path();
-            if p.is_dir() {
-                rust_files(&p, out);
-            } else if p.extension().is_some_and(|x| x == "rs") {
-                out.push(p);
-            }
-        }
-    }
     let src = common::repo_root().join("crates/geofit/src");
-    let mut files = Vec::new();
-    rust_files(&src, &mut files);
+    let files = common::rust_sources(&src);
     let cmd = src.join("cmd");
     let subcommands: Vec<String> = std::fs::read_dir(&cmd)
         .unwrap()

@@ -36,18 +36,8 @@ fn parse_hashes(text: &str) -> BTreeMap<String, String> {
 }
 
 fn run_script(dir: &Path) {
-    let bin_dir = Path::new(env!("CARGO_BIN_EXE_geofit")).parent().unwrap().to_path_buf();
-    let mut path = format!("{}:{}", bin_dir.display(), std::env::var("PATH").unwrap_or_default());
-    if let Some(py) = std::env::var_os("GEOFIT_PYTHON") {
-        if let Some(py_dir) = Path::new(&py).parent() {
-            path = format!("{}:{path}", py_dir.display());
-        }
-    }
-    let o = Command::new("bash")
+    let o = common::bash_with_geofit(dir)
         .arg(common::repo_root().join(SCRIPT))
-        .current_dir(dir)
-        .env("PATH", path)
-        .env("GEOFIT_SHARED", common::shared_dir())
         .env("GEOFIT_REPO", common::repo_root())
         .output()
         .expect("bash runs");
@@ -96,18 +86,8 @@ fn every_output_is_byte_identical_to_its_golden_hash() {
 #[test]
 fn the_golden_list_covers_every_subcommand() {
     let script = std::fs::read_to_string(common::repo_root().join(SCRIPT)).unwrap();
-    let help = common::run(&["--help"], None);
-    let help = String::from_utf8_lossy(&help.stdout);
-    let commands: Vec<&str> = help
-        .lines()
-        .skip_while(|l| !l.starts_with("Commands:"))
-        .skip(1)
-        .take_while(|l| l.starts_with("  "))
-        .filter(|l| !l.starts_with("   "))
-        .filter_map(|l| l.split_whitespace().next())
-        .filter(|c| *c != "help")
-        .collect();
+    let commands = common::subcommands();
     assert!(commands.len() > 15, "subcommands read from --help: {commands:?}");
-    let missing: Vec<&&str> = commands.iter().filter(|c| !script.contains(&format!("geofit {c} "))).collect();
+    let missing: Vec<&String> = commands.iter().filter(|c| !script.contains(&format!("geofit {c} "))).collect();
     assert!(missing.is_empty(), "{SCRIPT} runs no `geofit {missing:?}`");
 }

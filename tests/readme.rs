@@ -3,7 +3,6 @@
 
 mod common;
 
-use std::process::Command;
 
 /// The first ```bash block after the "## Pipelines" heading.
 fn pipelines_block(readme: &str) -> String {
@@ -23,13 +22,8 @@ fn readme_pipelines_run_verbatim_on_the_shipped_data() {
     let readme = std::fs::read_to_string(common::repo_root().join("README.md")).unwrap();
     let script = pipelines_block(&readme);
     let dir = common::tempdir();
-    let bin_dir = std::path::Path::new(env!("CARGO_BIN_EXE_geofit")).parent().unwrap().to_path_buf();
-    let path = format!("{}:{}", bin_dir.display(), std::env::var("PATH").unwrap_or_default());
-    let o = Command::new("bash")
+    let o = common::bash_with_geofit(dir.path())
         .args(["-euo", "pipefail", "-c", &script])
-        .current_dir(dir.path())
-        .env("PATH", path)
-        .env("GEOFIT_SHARED", common::shared_dir())
         .output()
         .expect("bash");
     assert!(

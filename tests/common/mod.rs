@@ -105,3 +105,45 @@ pub fn tempdir() -> tempfile::TempDir {
 pub fn python() -> Command {
     Command::new(std::env::var_os("GEOFIT_PYTHON").unwrap_or_else(|| "python3".into()))
 }
+
+/// `bash` in `dir` with this run's `geofit` first on PATH (then the test Python's directory,
+/// when `GEOFIT_PYTHON` names one) and `GEOFIT_SHARED` set: how scripts and the README's
+/// lines meet the binary under test.
+pub fn bash_with_geofit(dir: &Path) -> Command {
+    let bin_dir = Path::new(env!("CARGO_BIN_EXE_geofit")).parent().unwrap().to_path_buf();
+    let mut path = format!("{}:{}", bin_dir.display(), std::env::var("PATH").unwrap_or_default());
+    if let Some(py_dir) = std::env::var_os("GEOFIT_PYTHON").as_deref().and_then(|p| Path::new(p).parent()) {
+        path = format!("{}:{path}", py_dir.display());
+    }
+    let mut cmd = Command::new("bash");
+    cmd.current_dir(dir).env("PATH", path).env("GEOFIT_SHARED", shared_dir());
+    cmd
+}
+
+/// Every `.rs` file below `dir`, recursively.
+pub fn rust_sources(dir: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    for e in std::fs::read_dir(dir).unwrap() {
+        let p = e.unwrap().path();
+        if p.is_dir() {
+            out.extend(rust_sources(&p));
+        } else if p.extension().is_some_and(|x| x == "rs") {
+            out.push(p);
+        }
+    }
+    out
+}
+
+/// The subcommands `geofit --help` lists (without `help`), in its order.
+pub fn subcommands() -> Vec<String> {
+    let o = run(&["--help"], None);
+    String::from_utf8_lossy(&o.stdout)
+        .lines()
+        .skip_while(|l| !l.starts_with("Commands:"))
+        .skip(1)
+        .take_while(|l| l.starts_with("  "))
+        .filter(|l| !l.starts_with("   "))
+        .filter_map(|l| l.split_whitespace().next().map(str::to_string))
+        .filter(|c| c != "help")
+        .collect()
+}
