@@ -536,44 +536,7 @@ pub fn back_edits(model: &Popa3d, tpl: &Template, opts: &BackOptions) -> Result<
     mapped_set.extend(absorbed.iter().flat_map(|(h, g)| std::iter::once(h).chain(g.iter())));
     let mapped: Vec<String> = doc_order.iter().filter(|id| mapped_set.contains(id)).cloned().collect();
     let mut report = BackReport { polygons_mapped: mapped.len(), ..Default::default() };
-    // New rings per mapped polygon, each point with its index in the template ring.
-    let mut new_rings: HashMap<String, Vec<Option<IndexedRing>>> = HashMap::new();
-    let (mut moves, mut nmoves, mut maxmove) = (0.0, 0usize, 0.0f64);
-    for id in &mapped {
-        let p = polys[id].poly;
-        let bname = building_name(polys[id].building);
-        let mut rings = Vec::new();
-        for (ri, r) in std::iter::once(&p.exterior).chain(p.interiors.iter()).enumerate() {
-            let n = ring_len(r);
-            let mut pts = Vec::with_capacity(n);
-            for k in 0..n {
-                // A vertex without node was merged into its neighbour by normalization (snap):
-                // it is written once, as the neighbour.
-                let Some(node) = vmap.get(&(id.clone(), ri as u32, k as u32)) else {
-                    report.vertices_dropped += 1;
-                    continue;
-                };
-                let q = pos[node.idx()];
-                let d = dist(q, r.points[k]);
-                if !d.is_finite() {
-                    return Err(BackError::Geometry { element: format!("polygon `{id}` of {bname}"), message: format!("vertex {k} of ring {ri} would move by {d} m (a coordinate is not finite or out of range)") });
-                }
-                moves += d;
-                nmoves += 1;
-                maxmove = maxmove.max(d);
-                let e = report.max_move_by_building.entry(bname.clone()).or_insert(0.0);
-                *e = e.max(d);
-                pts.push((q, k));
-            }
-            let c = collapse_indexed(pts, opts.collapse_tolerance);
-            let area_ok = c.len() >= 3 && newell_area(&c.iter().map(|x| x.0).collect::<Vec<_>>()) >= opts.area_tolerance;
-            rings.push(if area_ok { Some(c) } else { None });
-        }
-        new_rings.insert(id.clone(), rings);
-    }
-    report.max_move = maxmove;
-    report.mean_move = if nmoves > 0 { moves / nmoves as f64 } else { 0.0 };
-    report.vertices_written = nmoves;
+    let new_rings = rewritten_rings(&mapped, polys, &vmap, &pos, opts, &mut report)?;
 
     // 3./4. Degenerate polygons and merge groups.
     let mut removed: HashSet<String> = HashSet::new();
@@ -867,6 +830,58 @@ pub fn back_edits(model: &Popa3d, tpl: &Template, opts: &BackOptions) -> Result<
     report.removed_degenerate.sort();
     report.removed_surfaces.sort();
     Ok((edits, report))
+}
+
+/// The new rings of every mapped polygon, each point with its index in the template ring (a
+/// vertex without node was merged into its neighbour by normalization and is written once, as
+/// the neighbour); `None` for a ring that collapsed below 3 points or the area tolerance. Adds
+/// the vertex moves to `report`.
+fn rewritten_rings(
+    mapped: &[String],
+    polys: &HashMap<String, PolyInfo<'_>>,
+    vmap: &HashMap<(String, u32, u32), NodeId>,
+    pos: &[P3],
+    opts: &BackOptions,
+    report: &mut BackReport,
+) -> Result<HashMap<String, Vec<Option<IndexedRing>>>, BackError> {
+    let mut new_rings: HashMap<String, Vec<Option<IndexedRing>>> = HashMap::new();
+    let (mut moves, mut nmoves, mut maxmove) = (0.0, 0usize, 0.0f64);
+    for id in mapped {
+        let p = polys[id].poly;
+        let bname = building_name(polys[id].building);
+        let mut rings = Vec::new();
+        for (ri, r) in std::iter::once(&p.exterior).chain(p.interiors.iter()).enumerate() {
+            let n = ring_len(r);
+            let mut pts = Vec::with_capacity(n);
+            for k in 0..n {
+                // A vertex without node was merged into its neighbour by normalization (snap):
+                // it is written once, as the neighbour.
+                let Some(node) = vmap.get(&(id.clone(), ri as u32, k as u32)) else {
+                    report.vertices_dropped += 1;
+                    continue;
+                };
+                let q = pos[node.idx()];
+                let d = dist(q, r.points[k]);
+                if !d.is_finite() {
+                    return Err(BackError::Geometry { element: format!("polygon `{id}` of {bname}"), message: format!("vertex {k} of ring {ri} would move by {d} m (a coordinate is not finite or out of range)") });
+                }
+                moves += d;
+                nmoves += 1;
+                maxmove = maxmove.max(d);
+                let e = report.max_move_by_building.entry(bname.clone()).or_insert(0.0);
+                *e = e.max(d);
+                pts.push((q, k));
+            }
+            let c = collapse_indexed(pts, opts.collapse_tolerance);
+            let area_ok = c.len() >= 3 && newell_area(&c.iter().map(|x| x.0).collect::<Vec<_>>()) >= opts.area_tolerance;
+            rings.push(if area_ok { Some(c) } else { None });
+        }
+        new_rings.insert(id.clone(), rings);
+    }
+    report.max_move = maxmove;
+    report.mean_move = if nmoves > 0 { moves / nmoves as f64 } else { 0.0 };
+    report.vertices_written = nmoves;
+    Ok(new_rings)
 }
 
 /// Makes near-coplanar planes on one normal exactly coplanar: planes whose signed distances lie
