@@ -639,85 +639,11 @@ pub fn back_edits(model: &Popa3d, tpl: &Template, opts: &BackOptions) -> Result<
                 e
             };
             let es: Vec<Vec<(usize, usize)>> = ids.iter().map(edges_of).collect();
-            // Polygons sharing an edge in opposite directions are one component (union–find over
-            // an edge index, linear where comparing every pair was quadratic).
-            let n = ids.len();
-            let mut comp: Vec<usize> = (0..n).collect();
-            let mut owners: HashMap<(usize, usize), Vec<usize>> = HashMap::new();
-            for (k, e) in es.iter().enumerate() {
-                for &d in e {
-                    owners.entry(d).or_default().push(k);
-                }
-            }
-            for (k, e) in es.iter().enumerate() {
-                for &(x, y) in e {
-                    for &o in owners.get(&(y, x)).map(Vec::as_slice).unwrap_or(&[]) {
-                        if o != k {
-                            uf_union(&mut comp, k, o);
-                        }
-                    }
-                }
-            }
-            let comp: Vec<usize> = (0..n).map(|k| uf_find(&mut comp, k)).collect();
-            let mut cs: BTreeMap<usize, Vec<usize>> = BTreeMap::new();
-            for (k, &c) in comp.iter().enumerate() {
-                cs.entry(c).or_default().push(k);
-            }
-            for (_, members) in cs {
+            for (_, members) in edge_components(&es) {
                 if members.len() < 2 {
                     continue;
                 }
-                // Union boundary: cancel opposite directed edges.
-                let mut cnt: HashMap<(usize, usize), i32> = HashMap::new();
-                for &k in &members {
-                    for &(a, b) in &es[k] {
-                        if let Some(c) = cnt.get_mut(&(b, a)) {
-                            *c -= 1;
-                            if *c == 0 {
-                                cnt.remove(&(b, a));
-                            }
-                        } else {
-                            *cnt.entry((a, b)).or_insert(0) += 1;
-                        }
-                    }
-                }
-                let mut out: BTreeMap<usize, Vec<usize>> = BTreeMap::new();
-                for (&(a, b), &c) in &cnt {
-                    for _ in 0..c {
-                        out.entry(a).or_default().push(b);
-                    }
-                }
-                let mut loops: Vec<Vec<P3>> = Vec::new();
-                let mut ok = true;
-                while let Some((&s, _)) = out.iter().find(|(_, v)| !v.is_empty()) {
-                    let mut l = vec![s];
-                    let mut cur = s;
-                    loop {
-                        let Some(nx) = out.get_mut(&cur).and_then(|v| v.pop()) else {
-                            ok = false;
-                            break;
-                        };
-                        if nx == s {
-                            break;
-                        }
-                        l.push(nx);
-                        cur = nx;
-                        if l.len() > pos.len() + 1 {
-                            ok = false;
-                            break;
-                        }
-                    }
-                    if !ok {
-                        break;
-                    }
-                    let pts = collapse(l.iter().map(|&i| pos[i]).collect(), opts.collapse_tolerance);
-                    if pts.len() >= 3 && newell_area(&pts) >= opts.area_tolerance {
-                        loops.push(pts);
-                    }
-                }
-                if !ok || loops.is_empty() {
-                    continue;
-                }
+                let Some(mut loops) = union_boundary(&es, &members, &pos, opts) else { continue };
                 let imax = (0..loops.len()).max_by(|&a, &b| newell_area(&loops[a]).total_cmp(&newell_area(&loops[b]))).unwrap();
                 let outer = loops.remove(imax);
                 let kept = ids[members[0]].clone();
@@ -830,6 +756,89 @@ pub fn back_edits(model: &Popa3d, tpl: &Template, opts: &BackOptions) -> Result<
     report.removed_degenerate.sort();
     report.removed_surfaces.sort();
     Ok((edits, report))
+}
+
+/// Polygons (by their directed edges) that share an edge in opposite directions, grouped into
+/// connected components (union–find over an edge index, linear where comparing every pair was
+/// quadratic); each component lists its polygons' indices in `es`.
+fn edge_components(es: &[Vec<(usize, usize)>]) -> BTreeMap<usize, Vec<usize>> {
+    let n = es.len();
+    let mut comp: Vec<usize> = (0..n).collect();
+    let mut owners: HashMap<(usize, usize), Vec<usize>> = HashMap::new();
+    for (k, e) in es.iter().enumerate() {
+        for &d in e {
+            owners.entry(d).or_default().push(k);
+        }
+    }
+    for (k, e) in es.iter().enumerate() {
+        for &(x, y) in e {
+            for &o in owners.get(&(y, x)).map(Vec::as_slice).unwrap_or(&[]) {
+                if o != k {
+                    uf_union(&mut comp, k, o);
+                }
+            }
+        }
+    }
+    let comp: Vec<usize> = (0..n).map(|k| uf_find(&mut comp, k)).collect();
+    let mut cs: BTreeMap<usize, Vec<usize>> = BTreeMap::new();
+    for (k, &c) in comp.iter().enumerate() {
+        cs.entry(c).or_default().push(k);
+    }
+    cs
+}
+
+/// The boundary of the union of polygons `members` (directed edges over canonical node ids):
+/// opposite edges cancel, the rest is walked into loops at `pos`, collapsed and kept where they
+/// have area. `None` when the edges do not close into loops or no loop is left.
+fn union_boundary(es: &[Vec<(usize, usize)>], members: &[usize], pos: &[P3], opts: &BackOptions) -> Option<Vec<Vec<P3>>> {
+    let mut cnt: HashMap<(usize, usize), i32> = HashMap::new();
+    for &k in members {
+        for &(a, b) in &es[k] {
+            if let Some(c) = cnt.get_mut(&(b, a)) {
+                *c -= 1;
+                if *c == 0 {
+                    cnt.remove(&(b, a));
+                }
+            } else {
+                *cnt.entry((a, b)).or_insert(0) += 1;
+            }
+        }
+    }
+    let mut out: BTreeMap<usize, Vec<usize>> = BTreeMap::new();
+    for (&(a, b), &c) in &cnt {
+        for _ in 0..c {
+            out.entry(a).or_default().push(b);
+        }
+    }
+    let mut loops: Vec<Vec<P3>> = Vec::new();
+    let mut ok = true;
+    while let Some((&s, _)) = out.iter().find(|(_, v)| !v.is_empty()) {
+        let mut l = vec![s];
+        let mut cur = s;
+        loop {
+            let Some(nx) = out.get_mut(&cur).and_then(|v| v.pop()) else {
+                ok = false;
+                break;
+            };
+            if nx == s {
+                break;
+            }
+            l.push(nx);
+            cur = nx;
+            if l.len() > pos.len() + 1 {
+                ok = false;
+                break;
+            }
+        }
+        if !ok {
+            break;
+        }
+        let pts = collapse(l.iter().map(|&i| pos[i]).collect(), opts.collapse_tolerance);
+        if pts.len() >= 3 && newell_area(&pts) >= opts.area_tolerance {
+            loops.push(pts);
+        }
+    }
+    (ok && !loops.is_empty()).then_some(loops)
 }
 
 /// The new rings of every mapped polygon, each point with its index in the template ring (a
@@ -1002,4 +1011,38 @@ fn vertex_map(m: &Popa3d, polys: &HashMap<String, PolyInfo<'_>>) -> Result<HashM
         }
     }
     Ok(vmap)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Two unit squares side by side, counter-clockwise, over the nodes
+    /// 3 4 5 / 0 1 2 (y = 1 / y = 0).
+    fn two_squares() -> (Vec<Vec<(usize, usize)>>, Vec<P3>) {
+        let pos: Vec<P3> = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 1.0, 0.0], [2.0, 1.0, 0.0]];
+        let a = vec![(0, 1), (1, 4), (4, 3), (3, 0)];
+        let b = vec![(1, 2), (2, 5), (5, 4), (4, 1)];
+        (vec![a, b], pos)
+    }
+
+    #[test]
+    fn polygons_sharing_an_edge_form_one_component_and_merge_into_their_outline() {
+        let (mut es, pos) = two_squares();
+        let comps: Vec<Vec<usize>> = edge_components(&es).into_values().collect();
+        assert_eq!(comps, vec![vec![0, 1]]);
+        let loops = union_boundary(&es, &[0, 1], &pos, &BackOptions::default()).expect("one loop");
+        assert_eq!(loops.len(), 1);
+        assert!((newell_area(&loops[0]) - 2.0).abs() < 1e-12, "{loops:?}");
+        // a third square touching only at a corner is a component of its own
+        es.push(vec![(5, 6), (6, 7), (7, 8), (8, 5)]);
+        assert_eq!(edge_components(&es).len(), 2);
+    }
+
+    #[test]
+    fn edges_that_do_not_close_give_no_outline() {
+        let (es, pos) = two_squares();
+        let open = vec![es[0][..3].to_vec()];
+        assert!(union_boundary(&open, &[0], &pos, &BackOptions::default()).is_none());
+    }
 }
