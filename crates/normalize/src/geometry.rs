@@ -69,131 +69,13 @@ fn build_depth(soup: &Soup, topo: &Topo, tol: &Tolerances, origin: [f64; 3], dep
     let pts: Vec<[f64; 3]> =
         topo.points.iter().map(|p| [p[0] - origin[0], p[1] - origin[1], p[2] - origin[2]]).collect();
     let nf = topo.faces.len();
-    // 1. Least-squares plane per face.
-    let mut fnormal: Vec<Vector3<f64>> = Vec::with_capacity(nf);
-    let mut fcent: Vec<Vector3<f64>> = Vec::with_capacity(nf);
-    let mut farea: Vec<f64> = Vec::with_capacity(nf);
-    for f in &topo.faces {
-        let outer: Vec<[f64; 3]> = f.rings[0].iter().map(|&i| pts[i]).collect();
-        let nw = newell(&outer);
-        let all: Vec<Vector3<f64>> = f.rings.iter().flatten().map(|&i| Vector3::from(pts[i])).collect();
-        let c = all.iter().fold(Vector3::zeros(), |a, p| a + p) / all.len() as f64;
-        let mut s = Matrix3::zeros();
-        for p in &all {
-            let d = p - c;
-            s += d * d.transpose();
-        }
-        let eig = s.symmetric_eigen();
-        let imin = (0..3).min_by(|&a, &b| eig.eigenvalues[a].total_cmp(&eig.eigenvalues[b])).unwrap_or(0);
-        let mut n: Vector3<f64> = eig.eigenvectors.column(imin).into();
-        let area = nw.norm() / 2.0;
-        if area <= 0.0 || !n.iter().all(|x| x.is_finite()) {
-            return Err(Rejection::new(
-                "TA05",
-                &soup.polygons[f.polygon].locator,
-                "the polygon has no area (its points are collinear)",
-            ));
-        }
-        if n.dot(&nw) < 0.0 {
-            n = -n;
-        }
-        let dev = all.iter().map(|p| (p - c).dot(&n).abs()).fold(0.0, f64::max);
-        if dev > tol.planarity {
-            return Err(Rejection::new(
-                "GA-PLANAR",
-                &soup.polygons[f.polygon].locator,
-                format!("far from planar: a vertex lies {dev:.4} m from the best-fitting plane (tolerance {} m)", tol.planarity),
-            ));
-        }
-        fnormal.push(n);
-        fcent.push(c);
-        farea.push(area);
-    }
+    let (fnormal, fcent, farea) = face_planes(soup, topo, &pts, tol)?;
 
-    // 2. Cluster normals (parallel faces).
     let cos_tol = tol.normal_angle_deg.to_radians().cos();
-    let mut order: Vec<usize> = (0..nf).collect();
-    order.sort_by(|&a, &b| farea[b].total_cmp(&farea[a]).then(a.cmp(&b)));
-    let mut clusters: Vec<(Vector3<f64>, Vector3<f64>)> = Vec::new(); // (representative, weighted sum)
-    let mut fcluster = vec![0usize; nf];
-    for &f in &order {
-        let n = fnormal[f];
-        let mut found = None;
-        for (ci, (rep, _)) in clusters.iter().enumerate() {
-            if rep.dot(&n).abs() >= cos_tol {
-                found = Some(ci);
-                break;
-            }
-        }
-        match found {
-            Some(ci) => {
-                let s = if clusters[ci].0.dot(&n) >= 0.0 { 1.0 } else { -1.0 };
-                clusters[ci].1 += n * (s * farea[f]);
-                fcluster[f] = ci;
-            }
-            None => {
-                clusters.push((n, n * farea[f]));
-                fcluster[f] = clusters.len() - 1;
-            }
-        }
-    }
-    let mut cnormal: Vec<Vector3<f64>> = clusters.iter().map(|(_, s)| canonical(s.normalize())).collect();
+    let (mut cnormal, fcluster) = cluster_normals(&fnormal, &farea, cos_tol);
 
     // 4 (before 3, since it changes the normals): orthogonal sharing.
-    let sin_tol = tol.normal_angle_deg.to_radians().sin();
-    // partner[c] = Some((base, axis, flip)).
-    let mut partner: Vec<Option<(usize, usize)>> = vec![None; cnormal.len()];
-    let mut paired = vec![false; cnormal.len()];
-    let mut zero_axes: Vec<Vec<usize>> = vec![Vec::new(); cnormal.len()];
-    if tol.share_orthogonal {
-        for n in cnormal.iter_mut() {
-            let mut changed = false;
-            for k in 0..3 {
-                if n[k].abs() < sin_tol && n[k] != 0.0 {
-                    n[k] = 0.0;
-                    changed = true;
-                }
-            }
-            if changed {
-                *n = canonical(n.normalize());
-            }
-        }
-        for (c, n) in cnormal.iter().enumerate() {
-            zero_axes[c] = (0..3).filter(|&k| n[k] == 0.0).collect();
-        }
-        for b in 0..cnormal.len() {
-            if paired[b] {
-                continue;
-            }
-            'search: for m in b + 1..cnormal.len() {
-                if paired[m] {
-                    continue;
-                }
-                for &k in &zero_axes[b] {
-                    if !zero_axes[m].contains(&k) {
-                        continue;
-                    }
-                    let (i, j) = ((k + 1) % 3, (k + 2) % 3);
-                    let (nb, nm) = (cnormal[b], cnormal[m]);
-                    // rotated base: (−n_j, n_i) in the (i, j) components
-                    let rot = (-nb[j], nb[i]);
-                    let c = rot.0 * nm[i] + rot.1 * nm[j];
-                    if c.abs() >= cos_tol {
-                        partner[m] = Some((b, k));
-                        paired[b] = true;
-                        paired[m] = true;
-                        let mut v = Vector3::zeros();
-                        v[i] = rot.0;
-                        v[j] = rot.1;
-                        // The partner's value is now exactly the base rotated by 90°; if the drawn
-                        // normal pointed the other way, its planes take the sign (fsign below).
-                        cnormal[m] = v;
-                        break 'search;
-                    }
-                }
-            }
-        }
-    }
+    let partner = if tol.share_orthogonal { share_orthogonal(&mut cnormal, cos_tol, tol.normal_angle_deg.to_radians().sin()) } else { vec![None; cnormal.len()] };
 
     // 3. Planes per normal (coplanar faces).
     let fsign: Vec<f64> = (0..nf).map(|f| if cnormal[fcluster[f]].dot(&fnormal[f]) >= 0.0 { 1.0 } else { -1.0 }).collect();
@@ -360,53 +242,9 @@ fn build_depth(soup: &Soup, topo: &Topo, tol: &Tolerances, origin: [f64; 3], dep
         m.add_half_edge(HalfEdge { edge: EdgeId::from(e), sign: if s > 0 { Sign::Plus } else { Sign::Minus }, face: FaceId::from(f) });
     }
 
-    // TA04/TA07: a face boundary that runs along one edge twice (a slit or spike in the source
-    // ring) or does not chain into simple cycles cannot be a popa3d face.
     let inc = Incidence::new(&m);
-    for f in 0..m.faces.len() {
-        let mut es: Vec<EdgeId> = inc.face_half_edges[f].iter().map(|h| m.half_edges[h.idx()].edge).collect();
-        es.sort();
-        let n = es.len();
-        es.dedup();
-        if es.len() != n || inc.face_cycles(&m, FaceId::from(f)).is_none() {
-            let loc = m.faces[f].source.as_ref().map(|s| s.polygon.clone()).unwrap_or_else(|| soup.name.clone());
-            return Err(Rejection::new(
-                "TA04",
-                loc,
-                "the polygon's boundary runs along the same edge twice or touches itself (a slit or spike): its half-edges do not form simple cycles",
-            ));
-        }
-    }
-    // GA01 and the distance of every recomputed node from its source point.
-    let mut max_shift: f64 = 0.0;
-    for n in 0..m.nodes.len() {
-        let id = NodeId::from(n);
-        let p = m.node_position(&inc, id).map_err(|e| {
-            let faces = inc.node_faces(&m, id);
-            let loc = faces
-                .first()
-                .and_then(|f| m.faces[f.idx()].source.as_ref())
-                .map(|s| s.polygon.clone())
-                .unwrap_or_else(|| soup.name.clone());
-            let q = topo.points[n];
-            Rejection::new(
-                "GA01",
-                loc,
-                format!("the node at ({:.3} {:.3} {:.3}) is not the intersection of 3 independent planes: {e}", q[0], q[1], q[2]),
-            )
-        })?;
-        let d = ((p[0] - pts[n][0]).powi(2) + (p[1] - pts[n][1]).powi(2) + (p[2] - pts[n][2]).powi(2)).sqrt();
-        if d > tol.planarity {
-            let q = topo.points[n];
-            let loc = inc.node_faces(&m, id).first().and_then(|f| m.faces[f.idx()].source.as_ref()).map(|s| s.polygon.clone()).unwrap_or_else(|| soup.name.clone());
-            return Err(Rejection::new(
-                "GA01",
-                loc,
-                format!("the node at ({:.3} {:.3} {:.3}) recomputed from its planes lies {d:.3} m away (more than {} m): its planes are nearly dependent", q[0], q[1], q[2], tol.planarity),
-            ));
-        }
-        max_shift = max_shift.max(d);
-    }
+    check_simple_cycles(&m, &inc, soup)?;
+    let max_shift = max_node_shift(&m, &inc, topo, &pts, tol, soup)?;
 
     let n_nodes = m.nodes.len();
     let n_edges = m.edges.len();
@@ -428,6 +266,205 @@ fn build_depth(soup: &Soup, topo: &Topo, tol: &Tolerances, origin: [f64; 3], dep
         max_node_shift: max_shift,
     };
     Ok(Part { model: m, counts, zero_params, max_node_shift: max_shift, notices: Vec::new() })
+}
+
+/// Step 1: the least-squares plane of every face (normal oriented like the outer ring's Newell
+/// normal), its centroid and its area; refuses a face without area (TA05) or with a vertex
+/// farther than the planarity tolerance from its plane (GA-PLANAR).
+#[allow(clippy::type_complexity)]
+fn face_planes(soup: &Soup, topo: &Topo, pts: &[[f64; 3]], tol: &Tolerances) -> Result<(Vec<Vector3<f64>>, Vec<Vector3<f64>>, Vec<f64>), Rejection> {
+    let nf = topo.faces.len();
+    let mut fnormal: Vec<Vector3<f64>> = Vec::with_capacity(nf);
+    let mut fcent: Vec<Vector3<f64>> = Vec::with_capacity(nf);
+    let mut farea: Vec<f64> = Vec::with_capacity(nf);
+    for f in &topo.faces {
+        let outer: Vec<[f64; 3]> = f.rings[0].iter().map(|&i| pts[i]).collect();
+        let nw = newell(&outer);
+        let all: Vec<Vector3<f64>> = f.rings.iter().flatten().map(|&i| Vector3::from(pts[i])).collect();
+        let c = all.iter().fold(Vector3::zeros(), |a, p| a + p) / all.len() as f64;
+        let mut s = Matrix3::zeros();
+        for p in &all {
+            let d = p - c;
+            s += d * d.transpose();
+        }
+        let eig = s.symmetric_eigen();
+        let imin = (0..3).min_by(|&a, &b| eig.eigenvalues[a].total_cmp(&eig.eigenvalues[b])).unwrap_or(0);
+        let mut n: Vector3<f64> = eig.eigenvectors.column(imin).into();
+        let area = nw.norm() / 2.0;
+        if area <= 0.0 || !n.iter().all(|x| x.is_finite()) {
+            return Err(Rejection::new(
+                "TA05",
+                &soup.polygons[f.polygon].locator,
+                "the polygon has no area (its points are collinear)",
+            ));
+        }
+        if n.dot(&nw) < 0.0 {
+            n = -n;
+        }
+        let dev = all.iter().map(|p| (p - c).dot(&n).abs()).fold(0.0, f64::max);
+        if dev > tol.planarity {
+            return Err(Rejection::new(
+                "GA-PLANAR",
+                &soup.polygons[f.polygon].locator,
+                format!("far from planar: a vertex lies {dev:.4} m from the best-fitting plane (tolerance {} m)", tol.planarity),
+            ));
+        }
+        fnormal.push(n);
+        fcent.push(c);
+        farea.push(area);
+    }
+    Ok((fnormal, fcent, farea))
+}
+
+/// Step 2: parallel faces share a normal. Faces are taken largest first; each joins the first
+/// cluster whose representative is within the angle (cosine `cos_tol`, either direction), and a
+/// cluster's normal is the canonical direction of its area-weighted sum. Returns the normals and
+/// each face's cluster.
+fn cluster_normals(fnormal: &[Vector3<f64>], farea: &[f64], cos_tol: f64) -> (Vec<Vector3<f64>>, Vec<usize>) {
+    let nf = fnormal.len();
+    let mut order: Vec<usize> = (0..nf).collect();
+    order.sort_by(|&a, &b| farea[b].total_cmp(&farea[a]).then(a.cmp(&b)));
+    let mut clusters: Vec<(Vector3<f64>, Vector3<f64>)> = Vec::new(); // (representative, weighted sum)
+    let mut fcluster = vec![0usize; nf];
+    for &f in &order {
+        let n = fnormal[f];
+        let mut found = None;
+        for (ci, (rep, _)) in clusters.iter().enumerate() {
+            if rep.dot(&n).abs() >= cos_tol {
+                found = Some(ci);
+                break;
+            }
+        }
+        match found {
+            Some(ci) => {
+                let s = if clusters[ci].0.dot(&n) >= 0.0 { 1.0 } else { -1.0 };
+                clusters[ci].1 += n * (s * farea[f]);
+                fcluster[f] = ci;
+            }
+            None => {
+                clusters.push((n, n * farea[f]));
+                fcluster[f] = clusters.len() - 1;
+            }
+        }
+    }
+    let cnormal: Vec<Vector3<f64>> = clusters.iter().map(|(_, s)| canonical(s.normalize())).collect();
+    (cnormal, fcluster)
+}
+
+/// Step 4 (run before step 3, since it changes the normals): near-zero components (within the
+/// angle's sine) become zero, and two normals with a common zero axis that are orthogonal within
+/// the angle share parameters: the second becomes exactly the first rotated by 90° about that
+/// axis. Returns, per normal, its base normal and the axis (`None` for a base or an unpaired one).
+fn share_orthogonal(cnormal: &mut [Vector3<f64>], cos_tol: f64, sin_tol: f64) -> Vec<Option<(usize, usize)>> {
+    // partner[c] = Some((base, axis, flip)).
+    let mut partner: Vec<Option<(usize, usize)>> = vec![None; cnormal.len()];
+    let mut paired = vec![false; cnormal.len()];
+    let mut zero_axes: Vec<Vec<usize>> = vec![Vec::new(); cnormal.len()];
+    for n in cnormal.iter_mut() {
+        let mut changed = false;
+        for k in 0..3 {
+            if n[k].abs() < sin_tol && n[k] != 0.0 {
+                n[k] = 0.0;
+                changed = true;
+            }
+        }
+        if changed {
+            *n = canonical(n.normalize());
+        }
+    }
+    for (c, n) in cnormal.iter().enumerate() {
+        zero_axes[c] = (0..3).filter(|&k| n[k] == 0.0).collect();
+    }
+    for b in 0..cnormal.len() {
+        if paired[b] {
+            continue;
+        }
+        'search: for m in b + 1..cnormal.len() {
+            if paired[m] {
+                continue;
+            }
+            for &k in &zero_axes[b] {
+                if !zero_axes[m].contains(&k) {
+                    continue;
+                }
+                let (i, j) = ((k + 1) % 3, (k + 2) % 3);
+                let (nb, nm) = (cnormal[b], cnormal[m]);
+                // rotated base: (−n_j, n_i) in the (i, j) components
+                let rot = (-nb[j], nb[i]);
+                let c = rot.0 * nm[i] + rot.1 * nm[j];
+                if c.abs() >= cos_tol {
+                    partner[m] = Some((b, k));
+                    paired[b] = true;
+                    paired[m] = true;
+                    let mut v = Vector3::zeros();
+                    v[i] = rot.0;
+                    v[j] = rot.1;
+                    // The partner's value is now exactly the base rotated by 90°; if the drawn
+                    // normal pointed the other way, its planes take the sign (fsign below).
+                    cnormal[m] = v;
+                    break 'search;
+                }
+            }
+        }
+    }
+    partner
+}
+
+/// TA04/TA07: a face boundary that runs along one edge twice (a slit or spike in the source ring)
+/// or does not chain into simple cycles cannot be a popa3d face.
+fn check_simple_cycles(m: &Popa3d, inc: &Incidence, soup: &Soup) -> Result<(), Rejection> {
+    // ring) or does not chain into simple cycles cannot be a popa3d face.
+    for f in 0..m.faces.len() {
+        let mut es: Vec<EdgeId> = inc.face_half_edges[f].iter().map(|h| m.half_edges[h.idx()].edge).collect();
+        es.sort();
+        let n = es.len();
+        es.dedup();
+        if es.len() != n || inc.face_cycles(m, FaceId::from(f)).is_none() {
+            let loc = m.faces[f].source.as_ref().map(|s| s.polygon.clone()).unwrap_or_else(|| soup.name.clone());
+            return Err(Rejection::new(
+                "TA04",
+                loc,
+                "the polygon's boundary runs along the same edge twice or touches itself (a slit or spike): its half-edges do not form simple cycles",
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// GA01 and the largest distance of a node recomputed from its planes to its source point: a
+/// node that is not the intersection of 3 independent planes, or lies farther than the planarity
+/// tolerance from its point, is refused.
+fn max_node_shift(m: &Popa3d, inc: &Incidence, topo: &Topo, pts: &[[f64; 3]], tol: &Tolerances, soup: &Soup) -> Result<f64, Rejection> {
+    let mut max_shift: f64 = 0.0;
+    for n in 0..m.nodes.len() {
+        let id = NodeId::from(n);
+        let p = m.node_position(inc, id).map_err(|e| {
+            let faces = inc.node_faces(m, id);
+            let loc = faces
+                .first()
+                .and_then(|f| m.faces[f.idx()].source.as_ref())
+                .map(|s| s.polygon.clone())
+                .unwrap_or_else(|| soup.name.clone());
+            let q = topo.points[n];
+            Rejection::new(
+                "GA01",
+                loc,
+                format!("the node at ({:.3} {:.3} {:.3}) is not the intersection of 3 independent planes: {e}", q[0], q[1], q[2]),
+            )
+        })?;
+        let d = ((p[0] - pts[n][0]).powi(2) + (p[1] - pts[n][1]).powi(2) + (p[2] - pts[n][2]).powi(2)).sqrt();
+        if d > tol.planarity {
+            let q = topo.points[n];
+            let loc = inc.node_faces(m, id).first().and_then(|f| m.faces[f.idx()].source.as_ref()).map(|s| s.polygon.clone()).unwrap_or_else(|| soup.name.clone());
+            return Err(Rejection::new(
+                "GA01",
+                loc,
+                format!("the node at ({:.3} {:.3} {:.3}) recomputed from its planes lies {d:.3} m away (more than {} m): its planes are nearly dependent", q[0], q[1], q[2], tol.planarity),
+            ));
+        }
+        max_shift = max_shift.max(d);
+    }
+    Ok(max_shift)
 }
 
 /// Canonical direction of a normal (T 2.5): nx > 0; else ny > 0; else nz > 0.
