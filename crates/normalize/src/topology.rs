@@ -99,6 +99,54 @@ pub fn build(soup: &Soup, tol: &Tolerances, notices: &mut Vec<Notice>) -> Result
         return Err(Rejection::new("NO-GEOMETRY", &soup.name, "no polygons to convert"));
     }
     let mut t = Topo { soup_faces: soup.polygons.len(), ..Default::default() };
+    let mut rings_nodes = snap_rings(soup, tol, &mut t)?;
+    t.soup_nodes = t.points.len();
+    t.soup_edges = count_edges(&rings_nodes);
+    insert_t_junctions(&mut rings_nodes, &t.points, tol.snap);
+    merge_duplicate_faces(&rings_nodes, soup, &mut t, notices);
+    // Orientation per solid: breadth-first over faces sharing edges, then the sign of the volume.
+    let nsol = soup.solids.len();
+    // flip[f] for the face as seen from its back solid.
+    let mut flip = vec![false; t.faces.len()];
+    for s in 0..nsol {
+        let faces: Vec<usize> = (0..t.faces.len()).filter(|&f| t.faces[f].back == s || t.faces[f].front == Some(s)).collect();
+        if faces.is_empty() {
+            continue;
+        }
+        let uses = edge_uses(&t, &faces);
+        check_closed(&uses, &t, soup)?;
+        let (o, comps) = orient_components(&faces, &uses, &t, soup)?;
+        for comp in comps {
+            let outward = signed_volume(&t, &comp, &o) >= 0.0;
+            for &f in &comp {
+                let out_for_s = o[&f] == outward;
+                // Decide the stored orientation from the face's back solid only.
+                if t.faces[f].back == s {
+                    flip[f] = !out_for_s;
+                } else if t.faces[f].front == Some(s) && !faces_has_back_decided(&t.faces[f], s) {
+                    // A shared face first met from its front solid: seen from the back it is reversed.
+                    flip[f] = out_for_s;
+                }
+            }
+        }
+    }
+    for (f, fl) in flip.iter().enumerate() {
+        if *fl {
+            for r in t.faces[f].rings.iter_mut() {
+                r.reverse();
+            }
+        }
+    }
+
+    rebuild_edges(&mut t);
+    Ok(t)
+}
+
+/// Every ring as node ids: points within the snap tolerance are one node (hashed on a grid of the
+/// tolerance), consecutive repeats and the closing point dropped; a ring left with fewer than 3
+/// distinct nodes, or with a coordinate that is not finite, is refused (TA05). Fills the points,
+/// their sources and the soup's point count in `t`.
+fn snap_rings(soup: &Soup, tol: &Tolerances, t: &mut Topo) -> Result<Vec<Vec<Vec<usize>>>, Rejection> {
     // Reduce to a local frame before hashing so snapping works at the same resolution everywhere.
     let mut snap = Snapper { tol: tol.snap.max(1e-9), cells: HashMap::new() };
     let mut rings_nodes: Vec<Vec<Vec<usize>>> = Vec::with_capacity(soup.polygons.len());
@@ -144,36 +192,41 @@ pub fn build(soup: &Soup, tol: &Tolerances, notices: &mut Vec<Notice>) -> Result
         }
         rings_nodes.push(rings);
     }
-    t.soup_nodes = t.points.len();
-    {
-        let mut es = std::collections::HashSet::new();
-        for rings in &rings_nodes {
-            for r in rings {
-                for i in 0..r.len() {
-                    let (a, b) = (r[i], r[(i + 1) % r.len()]);
-                    es.insert((a.min(b), a.max(b)));
-                }
+    Ok(rings_nodes)
+}
+
+/// Distinct undirected edges of the rings.
+fn count_edges(rings_nodes: &[Vec<Vec<usize>>]) -> usize {
+    let mut es = std::collections::HashSet::new();
+    for rings in rings_nodes {
+        for r in rings {
+            for i in 0..r.len() {
+                let (a, b) = (r[i], r[(i + 1) % r.len()]);
+                es.insert((a.min(b), a.max(b)));
             }
         }
-        t.soup_edges = es.len();
     }
+    es.len()
+}
 
-    // T-junctions: a node lying on another face's edge is inserted into that edge, so both faces
-    // share the same edges (common in LoD2 data where a wall meets two roof polygons).
+/// T-junctions: a node lying on another face's edge (within `snap` of it) is inserted into that
+/// edge, so both faces share the same edges (common in LoD2 data where a wall meets two roof
+/// polygons).
+fn insert_t_junctions(rings_nodes: &mut [Vec<Vec<usize>>], points: &[[f64; 3]], snap: f64) {
     for rings in rings_nodes.iter_mut() {
         for r in rings.iter_mut() {
             let mut out = Vec::with_capacity(r.len());
             for i in 0..r.len() {
                 let (a, b) = (r[i], r[(i + 1) % r.len()]);
                 out.push(a);
-                let pa = t.points[a];
-                let ab = sub(&t.points[b], &pa);
+                let pa = points[a];
+                let ab = sub(&points[b], &pa);
                 let len2 = dot(&ab, &ab);
                 if len2 <= 0.0 {
                     continue;
                 }
                 let mut on: Vec<(f64, usize)> = Vec::new();
-                for (n, p) in t.points.iter().enumerate() {
+                for (n, p) in points.iter().enumerate() {
                     if n == a || n == b {
                         continue;
                     }
@@ -183,7 +236,7 @@ pub fn build(soup: &Soup, tol: &Tolerances, notices: &mut Vec<Notice>) -> Result
                         continue;
                     }
                     let c = cross(&ap, &ab);
-                    if dot(&c, &c) / len2 <= tol.snap * tol.snap {
+                    if dot(&c, &c) / len2 <= snap * snap {
                         on.push((s, n));
                     }
                 }
@@ -193,9 +246,11 @@ pub fn build(soup: &Soup, tol: &Tolerances, notices: &mut Vec<Notice>) -> Result
             *r = out;
         }
     }
+}
 
-    // Duplicate faces: the same cycle in either direction. In the same solid: removed with a notice;
-    // in two different solids: one face shared by both (it separates them, spec §3.1 item 5).
+/// Duplicate faces: the same cycle in either direction. In the same solid: removed with a notice;
+/// in two different solids: one face shared by both (it separates them, spec §3.1 item 5).
+fn merge_duplicate_faces(rings_nodes: &[Vec<Vec<usize>>], soup: &Soup, t: &mut Topo, notices: &mut Vec<Notice>) {
     let mut seen: HashMap<Vec<usize>, usize> = HashMap::new();
     for (pi, rings) in rings_nodes.iter().enumerate() {
         let key = cycle_key(&rings[0]);
@@ -222,131 +277,119 @@ pub fn build(soup: &Soup, tol: &Tolerances, notices: &mut Vec<Notice>) -> Result
         seen.insert(key, t.faces.len());
         t.faces.push(TopoFace { rings: rings.clone(), polygon: pi, absorbed: Vec::new(), back: solid, front: None });
     }
+}
 
-    // Orientation per solid: breadth-first over faces sharing edges, then the sign of the volume.
-    let nsol = soup.solids.len();
-    // flip[f] for the face as seen from its back solid.
-    let mut flip = vec![false; t.faces.len()];
-    for s in 0..nsol {
-        let faces: Vec<usize> = (0..t.faces.len()).filter(|&f| t.faces[f].back == s || t.faces[f].front == Some(s)).collect();
-        if faces.is_empty() {
+/// (face, stored direction a→b) per undirected edge of `faces`.
+#[allow(clippy::type_complexity)]
+fn edge_uses(t: &Topo, faces: &[usize]) -> HashMap<(usize, usize), Vec<(usize, bool)>> {
+    // (face, stored direction a→b) per undirected edge.
+    let mut uses: HashMap<(usize, usize), Vec<(usize, bool)>> = HashMap::new();
+    for &f in faces {
+        for r in &t.faces[f].rings {
+            for i in 0..r.len() {
+                let (a, b) = (r[i], r[(i + 1) % r.len()]);
+                uses.entry((a.min(b), a.max(b))).or_default().push((f, a < b));
+            }
+        }
+    }
+    uses
+}
+
+/// Closedness (TA03): every edge used an even number of times by the solid's faces (2-manifold: 2).
+fn check_closed(uses: &HashMap<(usize, usize), Vec<(usize, bool)>>, t: &Topo, soup: &Soup) -> Result<(), Rejection> {
+    let mut open: Vec<(&(usize, usize), &Vec<(usize, bool)>)> = uses.iter().filter(|(_, v)| v.len() % 2 == 1).collect();
+    if !open.is_empty() {
+        open.sort_by_key(|(k, _)| **k);
+        let (k, v) = open[0];
+        let p = &soup.polygons[t.faces[v[0].0].polygon];
+        let (a, b) = (t.points[k.0], t.points[k.1]);
+        return Err(Rejection::new(
+            "TA03",
+            &p.locator,
+            format!(
+                "open shell: the edge ({:.3} {:.3} {:.3})–({:.3} {:.3} {:.3}) of this polygon is used by no other face of the solid ({} such edge(s) in all); a closed solid needs every edge in two faces",
+                a[0], a[1], a[2], b[0], b[1], b[2], open.len()
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Orientation as seen from the solid: o[f] = the face's stored direction is consistent with
+/// the first face of its component (breadth-first over faces sharing a 2-manifold edge, which
+/// must run it in opposite directions; ORIENT when they cannot). Returns o and the components.
+#[allow(clippy::type_complexity)]
+fn orient_components(faces: &[usize], uses: &HashMap<(usize, usize), Vec<(usize, bool)>>, t: &Topo, soup: &Soup) -> Result<(HashMap<usize, bool>, Vec<Vec<usize>>), Rejection> {
+    let mut o: HashMap<usize, bool> = HashMap::new();
+    let mut edges_of: HashMap<usize, Vec<(usize, usize)>> = HashMap::new();
+    for (k, v) in uses {
+        for (f, _) in v {
+            edges_of.entry(*f).or_default().push(*k);
+        }
+    }
+    let mut comps: Vec<Vec<usize>> = Vec::new();
+    for &f0 in faces {
+        if o.contains_key(&f0) {
             continue;
         }
-        // (face, stored direction a→b) per undirected edge.
-        let mut uses: HashMap<(usize, usize), Vec<(usize, bool)>> = HashMap::new();
-        for &f in &faces {
-            for r in &t.faces[f].rings {
-                for i in 0..r.len() {
-                    let (a, b) = (r[i], r[(i + 1) % r.len()]);
-                    uses.entry((a.min(b), a.max(b))).or_default().push((f, a < b));
+        o.insert(f0, true);
+        let mut comp = vec![f0];
+        let mut queue = std::collections::VecDeque::from([f0]);
+        while let Some(f) = queue.pop_front() {
+            let mut ks = edges_of.get(&f).cloned().unwrap_or_default();
+            ks.sort();
+            ks.dedup();
+            for k in ks {
+                let v = &uses[&k];
+                if v.len() != 2 {
+                    continue; // non-manifold edge: leave to the neighbours through other edges
                 }
-            }
-        }
-        // Closedness: every edge used an even number of times by the solid's faces (2-manifold: 2).
-        let mut open: Vec<(&(usize, usize), &Vec<(usize, bool)>)> = uses.iter().filter(|(_, v)| v.len() % 2 == 1).collect();
-        if !open.is_empty() {
-            open.sort_by_key(|(k, _)| **k);
-            let (k, v) = open[0];
-            let p = &soup.polygons[t.faces[v[0].0].polygon];
-            let (a, b) = (t.points[k.0], t.points[k.1]);
-            return Err(Rejection::new(
-                "TA03",
-                &p.locator,
-                format!(
-                    "open shell: the edge ({:.3} {:.3} {:.3})–({:.3} {:.3} {:.3}) of this polygon is used by no other face of the solid ({} such edge(s) in all); a closed solid needs every edge in two faces",
-                    a[0], a[1], a[2], b[0], b[1], b[2], open.len()
-                ),
-            ));
-        }
-        // Orientation as seen from s: o[f] = the face's stored direction is outward for s.
-        let mut o: HashMap<usize, bool> = HashMap::new();
-        let mut edges_of: HashMap<usize, Vec<(usize, usize)>> = HashMap::new();
-        for (k, v) in &uses {
-            for (f, _) in v {
-                edges_of.entry(*f).or_default().push(*k);
-            }
-        }
-        let mut comps: Vec<Vec<usize>> = Vec::new();
-        for &f0 in &faces {
-            if o.contains_key(&f0) {
-                continue;
-            }
-            o.insert(f0, true);
-            let mut comp = vec![f0];
-            let mut queue = std::collections::VecDeque::from([f0]);
-            while let Some(f) = queue.pop_front() {
-                let mut ks = edges_of.get(&f).cloned().unwrap_or_default();
-                ks.sort();
-                ks.dedup();
-                for k in ks {
-                    let v = &uses[&k];
-                    if v.len() != 2 {
-                        continue; // non-manifold edge: leave to the neighbours through other edges
+                let (g, gdir) = if v[0].0 == f { v[1] } else { v[0] };
+                let fdir = if v[0].0 == f { v[0].1 } else { v[1].1 };
+                if g == f {
+                    continue;
+                }
+                // Consistent: the two faces run the edge in opposite directions.
+                let want = if fdir == gdir { !o[&f] } else { o[&f] };
+                match o.get(&g) {
+                    Some(&x) if x != want => {
+                        return Err(Rejection::new(
+                            "ORIENT",
+                            &soup.polygons[t.faces[g].polygon].locator,
+                            "the shell cannot be oriented consistently (non-orientable or self-overlapping faces)",
+                        ))
                     }
-                    let (g, gdir) = if v[0].0 == f { v[1] } else { v[0] };
-                    let fdir = if v[0].0 == f { v[0].1 } else { v[1].1 };
-                    if g == f {
-                        continue;
-                    }
-                    // Consistent: the two faces run the edge in opposite directions.
-                    let want = if fdir == gdir { !o[&f] } else { o[&f] };
-                    match o.get(&g) {
-                        Some(&x) if x != want => {
-                            return Err(Rejection::new(
-                                "ORIENT",
-                                &soup.polygons[t.faces[g].polygon].locator,
-                                "the shell cannot be oriented consistently (non-orientable or self-overlapping faces)",
-                            ))
-                        }
-                        Some(_) => {}
-                        None => {
-                            o.insert(g, want);
-                            comp.push(g);
-                            queue.push_back(g);
-                        }
+                    Some(_) => {}
+                    None => {
+                        o.insert(g, want);
+                        comp.push(g);
+                        queue.push_back(g);
                     }
                 }
             }
-            comps.push(comp);
         }
-        for comp in comps {
-            // Signed volume with the chosen orientation; negative → flip the whole component.
-            let c = t.points[t.faces[comp[0]].rings[0][0]];
-            let mut vol = 0.0;
-            for &f in &comp {
-                let sgn = if o[&f] { 1.0 } else { -1.0 };
-                for r in &t.faces[f].rings {
-                    let p0 = sub(&t.points[r[0]], &c);
-                    for i in 1..r.len() - 1 {
-                        let p1 = sub(&t.points[r[i]], &c);
-                        let p2 = sub(&t.points[r[i + 1]], &c);
-                        vol += sgn * dot(&p0, &cross(&p1, &p2)) / 6.0;
-                    }
-                }
-            }
-            let outward = vol >= 0.0;
-            for &f in &comp {
-                let out_for_s = o[&f] == outward;
-                // Decide the stored orientation from the face's back solid only.
-                if t.faces[f].back == s {
-                    flip[f] = !out_for_s;
-                } else if t.faces[f].front == Some(s) && !faces_has_back_decided(&t.faces[f], s) {
-                    // A shared face first met from its front solid: seen from the back it is reversed.
-                    flip[f] = out_for_s;
-                }
-            }
-        }
+        comps.push(comp);
     }
-    for (f, fl) in flip.iter().enumerate() {
-        if *fl {
-            for r in t.faces[f].rings.iter_mut() {
-                r.reverse();
-            }
-        }
-    }
+    Ok((o, comps))
+}
 
-    rebuild_edges(&mut t);
-    Ok(t)
+/// Signed volume of a component with the chosen orientation (negative: it faces inward).
+fn signed_volume(t: &Topo, comp: &[usize], o: &HashMap<usize, bool>) -> f64 {
+    // Signed volume with the chosen orientation; negative → flip the whole component.
+    let c = t.points[t.faces[comp[0]].rings[0][0]];
+    let mut vol = 0.0;
+    for &f in comp {
+        let sgn = if o[&f] { 1.0 } else { -1.0 };
+        for r in &t.faces[f].rings {
+            let p0 = sub(&t.points[r[0]], &c);
+            for i in 1..r.len() - 1 {
+                let p1 = sub(&t.points[r[i]], &c);
+                let p2 = sub(&t.points[r[i + 1]], &c);
+                vol += sgn * dot(&p0, &cross(&p1, &p2)) / 6.0;
+            }
+        }
+    }
+    vol
 }
 
 /// Shared faces always have their back solid processed first (solids in index order, the back solid
