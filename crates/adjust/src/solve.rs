@@ -327,144 +327,9 @@ pub fn adjust(problem: &Problem, opts: &Options) -> Result<Solution, AdjustError
     let nets: Vec<Net> = p.conditions.iter().map(|c| build_net(&c.x, &c.l)).collect();
     let rnets: Vec<Net> = p.restrictions.iter().map(|c| build_net(&c.x, &c.l)).collect();
 
-    // M blocks: conditions coupled through shared observations or covariance groups.
-    let nc = p.conditions.len();
-    let mut uf = UnionFind::new(nc);
-    {
-        let mut owner: Vec<Option<usize>> = vec![None; p.obs.len()];
-        let mut gowner: Vec<Option<usize>> = vec![None; p.cov_groups.len()];
-        for (ci, net) in nets.iter().enumerate() {
-            for &o in &net.obs {
-                if let Some(c2) = owner[o] {
-                    uf.union(ci, c2);
-                } else {
-                    owner[o] = Some(ci);
-                }
-                if let Some(g) = p.obs[o].group {
-                    if let Some(c2) = gowner[g] {
-                        uf.union(ci, c2);
-                    } else {
-                        gowner[g] = Some(ci);
-                    }
-                }
-            }
-        }
-    }
-    let mut block_of = vec![usize::MAX; nc];
-    let mut blocks: Vec<Block> = Vec::new();
-    for ci in 0..nc {
-        let r = uf.find(ci);
-        if block_of[r] == usize::MAX {
-            block_of[r] = blocks.len();
-            blocks.push(Block { conds: vec![], obs: vec![], q: DMatrix::zeros(0, 0) });
-        }
-        let b = block_of[r];
-        block_of[ci] = b;
-        blocks[b].conds.push(ci);
-    }
-    for b in blocks.iter_mut() {
-        let mut obs: Vec<usize> = Vec::new();
-        for &ci in &b.conds {
-            obs.extend(&nets[ci].obs);
-        }
-        // Correlated partners that no condition uses still belong to the group's Q; they get no
-        // residual (B column zero), so only the used ones matter. Keep used ones only.
-        obs.sort_unstable();
-        obs.dedup();
-        let n = obs.len();
-        let mut q = DMatrix::zeros(n, n);
-        for (i, &o) in obs.iter().enumerate() {
-            q[(i, i)] = p.obs[o].sigma * p.obs[o].sigma;
-            if let Some(g) = p.obs[o].group {
-                let grp = &p.cov_groups[g];
-                let gi = grp.obs.iter().position(|x| x.0 == o).unwrap();
-                let gn = grp.obs.len();
-                for (j, &o2) in obs.iter().enumerate() {
-                    if let Some(gj) = grp.obs.iter().position(|x| x.0 == o2) {
-                        q[(i, j)] = grp.cov[gi * gn + gj];
-                    }
-                }
-            }
-        }
-        let s2 = opts.sigma0 * opts.sigma0;
-        b.q = q / s2;
-        b.obs = obs;
-    }
-
-    // Components: union-find over active unknowns and blocks.
+    let blocks = condition_blocks(p, &nets, opts);
+    let comps = components(p, &nets, &rnets, &blocks)?;
     let nu = p.unknowns.len();
-    let nb = blocks.len();
-    let mut uf = UnionFind::new(nu + nb);
-    let active = |u: usize| !p.unknowns[u].fixed;
-    for (bi, b) in blocks.iter().enumerate() {
-        for &ci in &b.conds {
-            for &u in &nets[ci].unk {
-                if active(u) {
-                    uf.union(nu + bi, u);
-                }
-            }
-        }
-    }
-    for net in &rnets {
-        let act: Vec<usize> = net.unk.iter().copied().filter(|&u| active(u)).collect();
-        for w in act.windows(2) {
-            uf.union(w[0], w[1]);
-        }
-    }
-    let mut comp_of_root: std::collections::HashMap<usize, usize> = Default::default();
-    let mut comps: Vec<Component> = Vec::new();
-    let mut touched = vec![false; nu];
-    for b in &blocks {
-        for &ci in &b.conds {
-            for &u in &nets[ci].unk {
-                touched[u] = true;
-            }
-        }
-    }
-    for net in &rnets {
-        for &u in &net.unk {
-            touched[u] = true;
-        }
-    }
-    // Unknowns no equation touches: a configuration defect, named.
-    let untouched: Vec<String> = (0..nu).filter(|&u| active(u) && !touched[u]).map(|u| p.unknowns[u].name.clone()).collect();
-    if !untouched.is_empty() {
-        return Err(AdjustError::Defect { defect: untouched.len(), unknowns: untouched });
-    }
-    let mut comp_idx = |uf: &mut UnionFind, node: usize, comps: &mut Vec<Component>| -> usize {
-        let r = uf.find(node);
-        *comp_of_root.entry(r).or_insert_with(|| {
-            comps.push(Component { unknowns: vec![], blocks: vec![], restrictions: vec![] });
-            comps.len() - 1
-        })
-    };
-    for u in 0..nu {
-        if active(u) {
-            let c = comp_idx(&mut uf, u, &mut comps);
-            comps[c].unknowns.push(u);
-        }
-    }
-    for bi in 0..nb {
-        let c = comp_idx(&mut uf, nu + bi, &mut comps);
-        comps[c].blocks.push(bi);
-    }
-    for (ri, net) in rnets.iter().enumerate() {
-        match net.unk.iter().find(|&&u| active(u)) {
-            Some(&u) => {
-                let c = comp_idx(&mut uf, u, &mut comps);
-                comps[c].restrictions.push(ri);
-            }
-            None => {
-                // Restriction on fixed unknowns only: must hold already.
-                let def = &p.restrictions[ri];
-                let x: Vec<f64> = def.x.iter().map(|s| s.sign * p.unknowns[s.unknown.0].value).collect();
-                let g = def.eq.value(&x, &[]);
-                if g.abs() > 1e-9 {
-                    return Err(AdjustError::InconsistentRestriction { restriction: def.name.clone(), value: g });
-                }
-            }
-        }
-    }
 
     let ctx = Ctx { x0: p.unknowns.iter().map(|u| u.value).collect(), l0: p.obs.iter().map(|o| o.value).collect(), p, nets, rnets, blocks, opts };
     let datum_subset: Option<Vec<bool>> = match &opts.datum {
@@ -554,6 +419,154 @@ pub fn adjust(problem: &Problem, opts: &Options) -> Result<Solution, AdjustError
         components: comps.len(),
         null_space,
     })
+}
+
+/// M blocks: conditions coupled through shared observations or covariance groups, each with its
+/// observations and their cofactor matrix Q = C / σ0².
+fn condition_blocks(p: &Problem, nets: &[Net], opts: &Options) -> Vec<Block> {
+    let nc = p.conditions.len();
+    let mut uf = UnionFind::new(nc);
+    {
+        let mut owner: Vec<Option<usize>> = vec![None; p.obs.len()];
+        let mut gowner: Vec<Option<usize>> = vec![None; p.cov_groups.len()];
+        for (ci, net) in nets.iter().enumerate() {
+            for &o in &net.obs {
+                if let Some(c2) = owner[o] {
+                    uf.union(ci, c2);
+                } else {
+                    owner[o] = Some(ci);
+                }
+                if let Some(g) = p.obs[o].group {
+                    if let Some(c2) = gowner[g] {
+                        uf.union(ci, c2);
+                    } else {
+                        gowner[g] = Some(ci);
+                    }
+                }
+            }
+        }
+    }
+    let mut block_of = vec![usize::MAX; nc];
+    let mut blocks: Vec<Block> = Vec::new();
+    for ci in 0..nc {
+        let r = uf.find(ci);
+        if block_of[r] == usize::MAX {
+            block_of[r] = blocks.len();
+            blocks.push(Block { conds: vec![], obs: vec![], q: DMatrix::zeros(0, 0) });
+        }
+        let b = block_of[r];
+        block_of[ci] = b;
+        blocks[b].conds.push(ci);
+    }
+    for b in blocks.iter_mut() {
+        let mut obs: Vec<usize> = Vec::new();
+        for &ci in &b.conds {
+            obs.extend(&nets[ci].obs);
+        }
+        // Correlated partners that no condition uses still belong to the group's Q; they get no
+        // residual (B column zero), so only the used ones matter. Keep used ones only.
+        obs.sort_unstable();
+        obs.dedup();
+        let n = obs.len();
+        let mut q = DMatrix::zeros(n, n);
+        for (i, &o) in obs.iter().enumerate() {
+            q[(i, i)] = p.obs[o].sigma * p.obs[o].sigma;
+            if let Some(g) = p.obs[o].group {
+                let grp = &p.cov_groups[g];
+                let gi = grp.obs.iter().position(|x| x.0 == o).unwrap();
+                let gn = grp.obs.len();
+                for (j, &o2) in obs.iter().enumerate() {
+                    if let Some(gj) = grp.obs.iter().position(|x| x.0 == o2) {
+                        q[(i, j)] = grp.cov[gi * gn + gj];
+                    }
+                }
+            }
+        }
+        let s2 = opts.sigma0 * opts.sigma0;
+        b.q = q / s2;
+        b.obs = obs;
+    }
+    blocks
+}
+
+/// Components: union-find over the active unknowns and the blocks (and restrictions) that tie
+/// them; each is adjusted on its own. Refuses unknowns no equation touches (a configuration
+/// defect) and restrictions on fixed unknowns that do not hold.
+fn components(p: &Problem, nets: &[Net], rnets: &[Net], blocks: &[Block]) -> Result<Vec<Component>, AdjustError> {
+    let nu = p.unknowns.len();
+    let nb = blocks.len();
+    let mut uf = UnionFind::new(nu + nb);
+    let active = |u: usize| !p.unknowns[u].fixed;
+    for (bi, b) in blocks.iter().enumerate() {
+        for &ci in &b.conds {
+            for &u in &nets[ci].unk {
+                if active(u) {
+                    uf.union(nu + bi, u);
+                }
+            }
+        }
+    }
+    for net in rnets {
+        let act: Vec<usize> = net.unk.iter().copied().filter(|&u| active(u)).collect();
+        for w in act.windows(2) {
+            uf.union(w[0], w[1]);
+        }
+    }
+    let mut comp_of_root: std::collections::HashMap<usize, usize> = Default::default();
+    let mut comps: Vec<Component> = Vec::new();
+    let mut touched = vec![false; nu];
+    for b in blocks {
+        for &ci in &b.conds {
+            for &u in &nets[ci].unk {
+                touched[u] = true;
+            }
+        }
+    }
+    for net in rnets {
+        for &u in &net.unk {
+            touched[u] = true;
+        }
+    }
+    // Unknowns no equation touches: a configuration defect, named.
+    let untouched: Vec<String> = (0..nu).filter(|&u| active(u) && !touched[u]).map(|u| p.unknowns[u].name.clone()).collect();
+    if !untouched.is_empty() {
+        return Err(AdjustError::Defect { defect: untouched.len(), unknowns: untouched });
+    }
+    let mut comp_idx = |uf: &mut UnionFind, node: usize, comps: &mut Vec<Component>| -> usize {
+        let r = uf.find(node);
+        *comp_of_root.entry(r).or_insert_with(|| {
+            comps.push(Component { unknowns: vec![], blocks: vec![], restrictions: vec![] });
+            comps.len() - 1
+        })
+    };
+    for u in 0..nu {
+        if active(u) {
+            let c = comp_idx(&mut uf, u, &mut comps);
+            comps[c].unknowns.push(u);
+        }
+    }
+    for bi in 0..nb {
+        let c = comp_idx(&mut uf, nu + bi, &mut comps);
+        comps[c].blocks.push(bi);
+    }
+    for (ri, net) in rnets.iter().enumerate() {
+        match net.unk.iter().find(|&&u| active(u)) {
+            Some(&u) => {
+                let c = comp_idx(&mut uf, u, &mut comps);
+                comps[c].restrictions.push(ri);
+            }
+            None => {
+                // Restriction on fixed unknowns only: must hold already.
+                let def = &p.restrictions[ri];
+                let x: Vec<f64> = def.x.iter().map(|s| s.sign * p.unknowns[s.unknown.0].value).collect();
+                let g = def.eq.value(&x, &[]);
+                if g.abs() > 1e-9 {
+                    return Err(AdjustError::InconsistentRestriction { restriction: def.name.clone(), value: g });
+                }
+            }
+        }
+    }
+    Ok(comps)
 }
 
 struct CompResult {
