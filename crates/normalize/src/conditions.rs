@@ -78,6 +78,14 @@ pub struct Ranges {
     pub parameters: std::ops::Range<usize>,
 }
 
+impl Ranges {
+    /// Every element of `m`: for conditions over a whole model (one building in it) rather than
+    /// over the part one object added to a shared model.
+    pub fn whole(m: &Popa3d) -> Ranges {
+        Ranges { faces: 0..m.faces.len(), planes: 0..m.planes.len(), normals: 0..m.normals.len(), parameters: 0..m.parameters.len() }
+    }
+}
+
 fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
