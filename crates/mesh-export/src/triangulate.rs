@@ -56,6 +56,8 @@ pub enum TriangulateError {
 
 /// Newell's normal vector of a ring (not normalised; its length is twice the projected area).
 /// Computed relative to the first point so large (UTM) coordinates do not cancel digits.
+/// (The building-model crates centre on the centroid instead, `popa3d_model::vec3::newell_about`;
+/// this crate depends on none of them, and changing the origin would change output bits.)
 pub fn newell_normal(ring: &[P3]) -> P3 {
     let mut n = [0.0; 3];
     if ring.is_empty() {
