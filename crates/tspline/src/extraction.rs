@@ -740,7 +740,6 @@ mod tests {
 #[cfg(test)]
 mod probe {
     use super::*;
-    use crate::mesh::{Degree, Rect, TMesh};
     use std::time::Instant;
 
     #[test]

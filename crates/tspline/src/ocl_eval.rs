@@ -250,7 +250,7 @@ impl OclEvaluator {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::mesh::{Degree, Rect, TMesh};
+    use crate::mesh::{Degree, TMesh};
 
     use crate::testing::lcg;
 
