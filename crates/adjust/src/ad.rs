@@ -115,24 +115,24 @@ pub fn finite_difference_gradient<E: Equation>(eq: &E, x: &[f64], l: &[f64], h: 
     let mut xs = x.to_vec();
     let mut ls = l.to_vec();
     for i in 0..x.len() {
-        let step = h * (1.0 + x[i].abs());
-        xs[i] = x[i] + step;
-        let fp = eq.eval::<f64>(&xs, &ls);
-        xs[i] = x[i] - step;
-        let fm = eq.eval::<f64>(&xs, &ls);
-        xs[i] = x[i];
-        out.push((fp - fm) / (2.0 * step));
+        out.push(central_difference(&mut xs, i, h, |xs| eq.eval::<f64>(xs, &ls)));
     }
     for i in 0..l.len() {
-        let step = h * (1.0 + l[i].abs());
-        ls[i] = l[i] + step;
-        let fp = eq.eval::<f64>(&xs, &ls);
-        ls[i] = l[i] - step;
-        let fm = eq.eval::<f64>(&xs, &ls);
-        ls[i] = l[i];
-        out.push((fp - fm) / (2.0 * step));
+        out.push(central_difference(&mut ls, i, h, |ls| eq.eval::<f64>(&xs, ls)));
     }
     out
+}
+
+/// `(f(v + step·e_i) − f(v − step·e_i)) / (2·step)` with `step = h·(1 + |v_i|)`; `v` is restored.
+fn central_difference(v: &mut [f64], i: usize, h: f64, f: impl Fn(&[f64]) -> f64) -> f64 {
+    let vi = v[i];
+    let step = h * (1.0 + vi.abs());
+    v[i] = vi + step;
+    let fp = f(v);
+    v[i] = vi - step;
+    let fm = f(v);
+    v[i] = vi;
+    (fp - fm) / (2.0 * step)
 }
 
 /// AD gradient w.r.t. every slot (each slot its own variable, sign +1; test helper).

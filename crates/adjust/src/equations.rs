@@ -19,6 +19,8 @@
 
 use crate::ad::{Equation, Scalar};
 
+/// A 3-vector of automatic-differentiation scalars. The helpers below are generic over the
+/// scalar (value or dual number), which is why they are not `popa3d_model::vec3`'s `f64` ones.
 type V3<D> = [D; 3];
 
 fn dot<D: Scalar>(a: &V3<D>, b: &V3<D>) -> D {

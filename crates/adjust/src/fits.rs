@@ -121,14 +121,7 @@ pub fn fit_plane_with(points: &[[f64; 3]], sigma: &[f64], opts: &Options) -> Res
     // Starting normal: Newell's method over the points in the given order (robust for
     // polygon-like sequences), falling back to the widest triangle.
     let c = centroid(points);
-    let mut nrm = [0.0; 3];
-    for i in 0..n {
-        let p = points[i];
-        let q = points[(i + 1) % n];
-        nrm[0] += (p[1] - q[1]) * (p[2] + q[2]);
-        nrm[1] += (p[2] - q[2]) * (p[0] + q[0]);
-        nrm[2] += (p[0] - q[0]) * (p[1] + q[1]);
-    }
+    let mut nrm = popa3d_model::vec3::newell_about(points, [0.0; 3]);
     let mut len = (nrm[0] * nrm[0] + nrm[1] * nrm[1] + nrm[2] * nrm[2]).sqrt();
     if len < 1e-12 && n >= 3 {
         let (a, b, cc) = (points[0], points[n / 2], points[n - 1]);

@@ -15,6 +15,7 @@ use crate::problem::{Identity, Problem, Slot, UnknownId};
 use crate::solve::{adjust, Datum, Options, Solution};
 use crate::{AdjustError, Equation, Scalar};
 use popa3d_model::{self as pm, Incidence, ObsKind, ObsOrigin, Popa3d};
+use popa3d_model::vec3::dot;
 use serde::Serialize;
 use std::collections::BTreeMap;
 
@@ -199,7 +200,7 @@ fn reference_points_of(m: &Popa3d, pts: &[Vec<[f64; 3]>]) -> Vec<[f64; 3]> {
                 s.map(|v| v / xs.len() as f64)
             } else {
                 let pv = m.plane_value(pm::PlaneId::from(i));
-                let nn = dot3(&pv.n, &pv.n);
+                let nn = dot(pv.n, pv.n);
                 if nn > 0.0 {
                     pv.n.map(|v| v * pv.d / nn)
                 } else {
@@ -208,10 +209,6 @@ fn reference_points_of(m: &Popa3d, pts: &[Vec<[f64; 3]>]) -> Vec<[f64; 3]> {
             }
         })
         .collect()
-}
-
-fn dot3(a: &[f64; 3], b: &[f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
 /// The slots [n(3), d] of a plane (its signed normal from the shared parameters, and its d).
@@ -497,7 +494,7 @@ pub fn map_model(m: &Popa3d) -> Result<Mapped, ModelError> {
             // its normal rotates (spec §4.7: "these values depend on the datum").
             ObsKind::ParameterObs { unknown: pm::Unknown::PlaneD(q), l } if ob.origin == ObsOrigin::Datum && q.idx() < m.planes.len() => {
                 let c = reference_points[q.idx()];
-                let o = add_obs(&mut p, &mut origins, el, i, "", l.value - dot3(&observed_normal(*q), &c), l.sigma)?;
+                let o = add_obs(&mut p, &mut origins, el, i, "", l.value - dot(observed_normal(*q), c), l.sigma)?;
                 if let Some(last) = origins.last_mut() {
                     last.class = Some("PlaneOffsetObs");
                 }
@@ -612,7 +609,7 @@ pub fn adjust_model(m: &mut Popa3d, opts: &ModelOptions) -> Result<Report, Model
                 let c = mapped.reference_points[i];
                 let pv = m.plane_value(pm::PlaneId::from(i));
                 let name = format!("soft datum: plane {i} offset at its reference point");
-                let o = mapped.problem.add_observation(name.clone(), pv.d - dot3(&pv.n, &c), opts.soft_sigma_d)?;
+                let o = mapped.problem.add_observation(name.clone(), pv.d - dot(pv.n, c), opts.soft_sigma_d)?;
                 let x = plane_slots_of(m, &mapped.params, &mapped.plane_d, pm::PlaneId::from(i));
                 mapped.problem.add_condition(name, PlaneOffset { c }, x, vec![o])?;
                 mapped.origins.push(ObsOrigin2 { obs: usize::MAX, component: "", class: Some("PlaneOffsetObs") });
@@ -668,7 +665,7 @@ fn largest_plane_shift(m: &Popa3d, before: &[pm::geometry::PlaneValue], nodes: &
         let dn = [a.n[0] - b.n[0], a.n[1] - b.n[1], a.n[2] - b.n[2]];
         let xs: &[[f64; 3]] = if nodes[i].is_empty() { std::slice::from_ref(&refs[i]) } else { &nodes[i] };
         for x in xs {
-            let s = ((a.d - b.d) - dot3(&dn, x)).abs();
+            let s = ((a.d - b.d) - dot(dn, *x)).abs();
             // NaN counts as the largest shift, so a broken solution cannot hide behind it.
             if best.is_none_or(|(_, w, _)| s > w || (s.is_nan() && !w.is_nan())) {
                 best = Some((i, s, *x));
@@ -811,7 +808,7 @@ f 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\nf 3 4 8 7\nf 4 1 5 8\n";
     /// observations of d).
     fn shifted(m: &Popa3d, t: [f64; 3]) -> Popa3d {
         let mut s = m.clone();
-        let dt = |i: usize| dot3(&m.plane_value(pm::PlaneId::from(i)).n, &t);
+        let dt = |i: usize| dot(m.plane_value(pm::PlaneId::from(i)).n, t);
         for (i, p) in s.planes.iter_mut().enumerate() {
             p.d += dt(i);
         }

@@ -12,7 +12,7 @@ fn model() -> Popa3d {
     let soup = normalize::obj::read_sketch(&bytes, "rooms.obj").unwrap();
     let mut m = Popa3d::new([0.0; 3]);
     normalize::normalize_into(&mut m, &soup, &normalize::Tolerances::default()).unwrap();
-    let r = Ranges { faces: 0..m.faces.len(), planes: 0..m.planes.len(), normals: 0..m.normals.len(), parameters: 0..m.parameters.len() };
+    let r = Ranges::whole(&m);
     sketch_priors(&mut m, &r, &SketchOptions::default());
     m
 }

@@ -126,6 +126,11 @@ pub fn fit_plane(points: &[V3]) -> Option<Plane> {
 }
 
 /// Newell's normal of a closed ring (not normalised; its length is twice the area).
+///
+/// The plain sum on absolute coordinates, on the nalgebra vectors validation computes with. The
+/// other crate families keep their own variant with a different origin (bits differ):
+/// `popa3d_model::vec3::newell_about` (building model: the centroid) and
+/// `mesh_export::triangulate::newell_normal` (meshes: the first point).
 pub fn newell_normal(ring: &[V3]) -> V3 {
     let mut n = V3::zeros();
     for i in 0..ring.len() {

@@ -24,7 +24,7 @@ pub fn heal_unit(b: &CityObject, tpl: &Template, opts: &HealOptions) -> Result<(
     let mut m = Popa3d::new(origin);
     let soup = normalize::citygml::building_soup(b, opts.lod).map_err(|r| r.to_string())?;
     normalize::normalize_into(&mut m, &soup, &opts.tolerances).map_err(|r| r.to_string())?;
-    let all = Ranges { faces: 0..m.faces.len(), planes: 0..m.planes.len(), normals: 0..m.normals.len(), parameters: 0..m.parameters.len() };
+    let all = Ranges::whole(&m);
     conditions::semantic(&mut m, &all, &opts.conditions);
     adjust_model(&mut m, &model_options()).map_err(|e| format!("adjustment: {e}"))?;
     let (edits, report) = back_edits(&m, tpl, &opts.back).map_err(|e| e.to_string())?;

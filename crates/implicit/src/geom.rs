@@ -1,4 +1,8 @@
 //! Small 3-vector helpers (plain arrays keep the mesh and model files simple).
+//!
+//! The implicit-model crate's own copy of what `popa3d_model::vec3` and `mesh_export::vec3` hold
+//! for their families: this crate depends on neither (only on `input-limits`), and pulling in
+//! either for five one-line functions would tie the geology model to the building or export code.
 
 pub type V3 = [f64; 3];
 

@@ -4,6 +4,9 @@
 //! whitespace separated, as in LoopStructural's CSVs) or, without a header, from the column count:
 //! 3 = `x y z`, 4 = `x y z v`, 6 = `x y z nx ny nz`, 7 = `x y z v nx ny nz`. Empty CSV fields mean
 //! "absent" (a row with a normal but no value only orients φ).
+//!
+//! Not `raster_io::points` on purpose: that reader takes a `value` column as z, folds empty
+//! fields away and knows no normals (terrain soundings); this dialect is LoopStructural's.
 
 use crate::geom::{norm, scale, V3};
 use crate::Error;

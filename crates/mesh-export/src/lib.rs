@@ -31,6 +31,7 @@ pub mod gltf;
 pub mod obj;
 pub mod scene;
 pub mod triangulate;
+pub mod vec3;
 
 pub use gltf::{write_glb, write_gltf, GltfBuffer};
 pub use obj::{write_mtl, write_obj};

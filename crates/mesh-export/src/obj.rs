@@ -78,18 +78,9 @@ fn write_node(
     if has_geometry {
         writeln!(obj, "o {name}")?;
     }
-    let o = scene.origin;
     let mut shared = SharedVertices::default();
     for m in n.meshes.iter().filter(|m| !m.indices.is_empty()) {
-        let number = write_vertices(
-            obj,
-            o,
-            &m.positions,
-            m.colors.as_deref(),
-            fallback(scene, m.material),
-            next,
-            &mut shared,
-        )?;
+        let number = write_vertices(obj, scene, &m.positions, m.colors.as_deref(), m.material, next, &mut shared)?;
         let nbase = next.normal;
         if let Some(nr) = &m.normals {
             next.normal += nr.len() as u64;
@@ -104,9 +95,7 @@ fn write_node(
                 )?;
             }
         }
-        if let Some(mi) = m.material {
-            writeln!(obj, "usemtl {}", sanitize(&scene.materials[mi].name))?;
-        }
+        write_usemtl(obj, scene, m.material)?;
         for t in m.indices.chunks_exact(3) {
             let [a, b, c] = [t[0], t[1], t[2]].map(|i| number[i as usize]);
             if m.normals.is_some() {
@@ -119,18 +108,8 @@ fn write_node(
         }
     }
     for l in n.lines.iter().filter(|l| !l.indices.is_empty()) {
-        let number = write_vertices(
-            obj,
-            o,
-            &l.positions,
-            l.colors.as_deref(),
-            fallback(scene, l.material),
-            next,
-            &mut shared,
-        )?;
-        if let Some(mi) = l.material {
-            writeln!(obj, "usemtl {}", sanitize(&scene.materials[mi].name))?;
-        }
+        let number = write_vertices(obj, scene, &l.positions, l.colors.as_deref(), l.material, next, &mut shared)?;
+        write_usemtl(obj, scene, l.material)?;
         for s in l.indices.chunks_exact(2) {
             writeln!(obj, "l {} {}", number[s[0] as usize], number[s[1] as usize])?;
         }
@@ -138,6 +117,14 @@ fn write_node(
     let child_prefix = format!("{name}/");
     for c in &n.children {
         write_node(scene, c, &child_prefix, obj, next)?;
+    }
+    Ok(())
+}
+
+/// Switches to the material of the faces or lines that follow (nothing for an unmaterialled part).
+fn write_usemtl(obj: &mut dyn Write, scene: &Scene, material: Option<usize>) -> Result<(), ExportError> {
+    if let Some(mi) = material {
+        writeln!(obj, "usemtl {}", sanitize(&scene.materials[mi].name))?;
     }
     Ok(())
 }
@@ -154,16 +141,18 @@ fn fallback(scene: &Scene, material: Option<usize>) -> [f32; 4] {
 struct SharedVertices(std::collections::HashMap<([u64; 3], [u32; 3]), u64>);
 
 /// Writes the `v` lines (local = world − origin) of positions not yet written in this object and
-/// returns the OBJ number of every position, in order.
+/// returns the OBJ number of every position, in order. Uncoloured vertices take the colour of
+/// `material` when other vertices of the file have colours.
 fn write_vertices(
     obj: &mut dyn Write,
-    o: [f64; 3],
+    scene: &Scene,
     positions: &[[f64; 3]],
     colors: Option<&[[f32; 4]]>,
-    fallback: [f32; 4],
+    material: Option<usize>,
     next: &mut Counters,
     shared: &mut SharedVertices,
 ) -> Result<Vec<u64>, ExportError> {
+    let (o, fallback) = (scene.origin, fallback(scene, material));
     let mut numbers = Vec::with_capacity(positions.len());
     for (i, p) in positions.iter().enumerate() {
         let rgb = match (colors, next.any_colors) {

@@ -121,14 +121,7 @@ fn glb_reads_back_with_gltf_crate() {
         let idx: Vec<u32> = r.read_indices().unwrap().into_u32().collect();
         for t in idx.chunks(3) {
             let [a, b, c] = [t[0], t[1], t[2]].map(|i| pos[i as usize].map(f64::from));
-            let u = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
-            let v = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
-            let n = [
-                u[1] * v[2] - u[2] * v[1],
-                u[2] * v[0] - u[0] * v[2],
-                u[0] * v[1] - u[1] * v[0],
-            ];
-            area += 0.5 * (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+            area += crate::vec3::triangle_area(a, b, c);
             tris += 1;
         }
         // Local coordinates: world − origin.
@@ -235,14 +228,7 @@ fn obj_reads_back_with_tobj() {
                 let i = i as usize * 3;
                 [p[i] as f64, p[i + 1] as f64, p[i + 2] as f64]
             });
-            let u = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
-            let v = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
-            let n = [
-                u[1] * v[2] - u[2] * v[1],
-                u[2] * v[0] - u[0] * v[2],
-                u[0] * v[1] - u[1] * v[0],
-            ];
-            area += 0.5 * (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+            area += crate::vec3::triangle_area(a, b, c);
             tris += 1;
         }
     }

@@ -14,6 +14,7 @@
 //! ring (counter-clockwise seen from the side its Newell normal points to).
 
 use spade::{ConstrainedDelaunayTriangulation, Point2, Triangulation};
+use crate::vec3::{cross, dot, norm, sub, P3};
 
 /// A triangulated polygon: vertices (3D) and counter-clockwise triangles indexing them.
 #[derive(Debug, Clone, PartialEq)]
@@ -53,27 +54,10 @@ pub enum TriangulateError {
     Spade(String),
 }
 
-type P3 = [f64; 3];
-
-fn sub(a: P3, b: P3) -> P3 {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-fn dot(a: P3, b: P3) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-fn cross(a: P3, b: P3) -> P3 {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-fn norm(a: P3) -> f64 {
-    dot(a, a).sqrt()
-}
-
 /// Newell's normal vector of a ring (not normalised; its length is twice the projected area).
 /// Computed relative to the first point so large (UTM) coordinates do not cancel digits.
+/// (The building-model crates centre on the centroid instead, `popa3d_model::vec3::newell_about`;
+/// this crate depends on none of them, and changing the origin would change output bits.)
 pub fn newell_normal(ring: &[P3]) -> P3 {
     let mut n = [0.0; 3];
     if ring.is_empty() {
@@ -262,13 +246,14 @@ fn inside_even_odd(p: [f64; 2], rings: &[Vec<[f64; 2]>]) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::vec3::triangle_area;
 
     fn area(t: &PolygonTriangles) -> f64 {
         t.triangles
             .iter()
             .map(|tr| {
                 let [a, b, c] = tr.map(|i| t.positions[i as usize]);
-                0.5 * norm(cross(sub(b, a), sub(c, a)))
+                triangle_area(a, b, c)
             })
             .sum()
     }

@@ -17,6 +17,7 @@
 //!   permutation of an earlier one's (the same norm, spec §3.3).
 
 use popa3d_model::*;
+use popa3d_model::vec3::{dot, unit};
 use serde::Serialize;
 use std::collections::HashMap;
 
@@ -78,15 +79,11 @@ pub struct Ranges {
     pub parameters: std::ops::Range<usize>,
 }
 
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-fn unit(a: [f64; 3]) -> [f64; 3] {
-    let n = dot(a, a).sqrt();
-    if n > 0.0 {
-        [a[0] / n, a[1] / n, a[2] / n]
-    } else {
-        a
+impl Ranges {
+    /// Every element of `m`: for conditions over a whole model (one building in it) rather than
+    /// over the part one object added to a shared model.
+    pub fn whole(m: &Popa3d) -> Ranges {
+        Ranges { faces: 0..m.faces.len(), planes: 0..m.planes.len(), normals: 0..m.normals.len(), parameters: 0..m.parameters.len() }
     }
 }
 

@@ -177,7 +177,7 @@ fn validation_layers_pass_on_normalized_models_and_catch_breakage() {
     let soup = row_of_rooms(3);
     let mut m = Popa3d::new([0.0; 3]);
     normalize_into(&mut m, &soup, &Tolerances::default()).unwrap();
-    let r = Ranges { faces: 0..m.faces.len(), planes: 0..m.planes.len(), normals: 0..m.normals.len(), parameters: 0..m.parameters.len() };
+    let r = Ranges::whole(&m);
     conditions::sketch_priors(&mut m, &r, &conditions::SketchOptions::default());
     // Priors alone do not fix the datum: AA02 counts 6 + 2 + 3 + 3 = 14 equations for 8 + 9 unknowns.
     let v = validate(&m);

@@ -45,6 +45,7 @@ pub mod model;
 pub mod observation;
 pub mod topology;
 pub mod validate;
+pub mod vec3;
 pub mod xml;
 
 pub use geometry::GeometryError;

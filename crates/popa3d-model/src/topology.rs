@@ -176,11 +176,11 @@ impl Popa3d {
 }
 
 /// Newell's vector of a polygon: twice its area times its unit normal (right-hand rule).
+/// Zero for fewer than three points.
 pub fn newell(pts: &[[f64; 3]]) -> [f64; 3] {
-    let mut n = [0.0; 3];
     let k = pts.len();
     if k < 3 {
-        return n;
+        return [0.0; 3];
     }
     // Centre the points first: Newell on large coordinates loses digits.
     let mut c = [0.0; 3];
@@ -189,14 +189,5 @@ pub fn newell(pts: &[[f64; 3]]) -> [f64; 3] {
             c[i] += p[i] / k as f64;
         }
     }
-    for i in 0..k {
-        let a = pts[i];
-        let b = pts[(i + 1) % k];
-        let (ax, ay, az) = (a[0] - c[0], a[1] - c[1], a[2] - c[2]);
-        let (bx, by, bz) = (b[0] - c[0], b[1] - c[1], b[2] - c[2]);
-        n[0] += (ay - by) * (az + bz);
-        n[1] += (az - bz) * (ax + bx);
-        n[2] += (ax - bx) * (ay + by);
-    }
-    n
+    crate::vec3::newell_about(pts, c)
 }

@@ -8,6 +8,10 @@
 //!   without a header the first three fields are x, y, z and extra fields are ignored;
 //! - any later line that does not give three finite numbers is an error naming the line
 //!   (NaN and ±inf included: a sounding without a depth is a data error, not a hole).
+//!
+//! `implicit::points` reads XYZ/CSV and LAS too, in another dialect on purpose: there a `value`
+//! column is the scalar field φ (here it is z), empty CSV fields mean "absent", and rows may carry
+//! normals. Merging the two would change what files mean or which error a user sees.
 
 use std::io::BufRead;
 use std::path::Path;

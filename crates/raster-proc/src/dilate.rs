@@ -27,7 +27,10 @@ pub enum Neighbourhood {
 
 /// Fills every unknown cell of `r`; returns the number of passes. Errors on a raster without
 /// any known cell (nothing to extrapolate from).
-pub fn dilate_fill(r: &mut Raster, nb: Neighbourhood) -> Result<usize, ProcError> {
+///
+/// The tspline fit has a second, simpler fill (`tspline::fit::mean_dilation_fill`: the mean of
+/// valued neighbours, no extrapolation) for its dragging reference; the two differ on purpose.
+pub fn extrapolating_dilation_fill(r: &mut Raster, nb: Neighbourhood) -> Result<usize, ProcError> {
     let (lo, hi) = r.min_max().ok_or_else(|| ProcError::Input("cannot fill a raster without any valid cell".into()))?;
     let (lo, hi) = (lo - (hi - lo), hi + (hi - lo));
     let (w, h) = (r.width as isize, r.height as isize);
@@ -119,7 +122,7 @@ mod tests {
         // unknown target is (2,2): left neighbour (1,2)=1.45 beyond (0,2)=1.51; up (2,1)=1.42 beyond (2,0)=1.47
         let v = {
             let mut t = r.clone();
-            dilate_fill(&mut t, Neighbourhood::Four).unwrap();
+            extrapolating_dilation_fill(&mut t, Neighbourhood::Four).unwrap();
             t.get(2, 2).unwrap()
         };
         assert!((v - 1.38).abs() < 1e-12, "{v}");
@@ -130,24 +133,24 @@ mod tests {
             n,    1.47, 1.42,
             1.51, 1.45, n,
         ]);
-        dilate_fill(&mut r8, Neighbourhood::Eight).unwrap();
+        extrapolating_dilation_fill(&mut r8, Neighbourhood::Eight).unwrap();
         // ⅓(1.45−0.06) + ⅓(1.42−0.05) + ⅓(1.47−0.0) = 1.41
         assert!((r8.get(2, 2).unwrap() - 1.41).abs() < 1e-12, "{}", r8.get(2, 2).unwrap());
-        assert_eq!(dilate_fill(&mut r, Neighbourhood::Four).unwrap(), 2);
+        assert_eq!(extrapolating_dilation_fill(&mut r, Neighbourhood::Four).unwrap(), 2);
         assert_eq!(r.valid_count(), 9);
     }
 
     #[test]
     fn all_nodata_is_an_error() {
         let mut r = raster(2, 1, &[f64::NAN, f64::NAN]);
-        assert!(dilate_fill(&mut r, Neighbourhood::Eight).is_err());
+        assert!(extrapolating_dilation_fill(&mut r, Neighbourhood::Eight).is_err());
     }
 
     #[test]
     fn clamped_to_known_range() {
         let n = f64::NAN;
         let mut r = raster(6, 1, &[0.0, 1.0, n, n, n, n]);
-        dilate_fill(&mut r, Neighbourhood::Four).unwrap();
+        extrapolating_dilation_fill(&mut r, Neighbourhood::Four).unwrap();
         assert_eq!(r.get(2, 0), Some(2.0));
         assert_eq!(r.get(5, 0), Some(2.0));
     }

@@ -35,7 +35,7 @@ use spade::{DelaunayTriangulation, HasPosition, Point2, Triangulation};
 
 use raster_io::{MissingCorners, Raster};
 
-use crate::dilate::{dilate_fill, Neighbourhood};
+use crate::dilate::{extrapolating_dilation_fill, Neighbourhood};
 use crate::grid::GridSpec;
 use crate::pca::{principal_axes, Mass};
 use crate::splat::{SplatAccumulator, SplatKernel};
@@ -559,7 +559,7 @@ pub fn warp_raster(r: &Raster, params: &WarpParams) -> Result<(Raster, WarpField
     }
     let mut out = Raster::from_values(width, height, grid.geotransform, None, acc.finish())?;
     stats.cells_splatted = out.valid_count();
-    stats.dilation_passes = dilate_fill(&mut out, params.neighbourhood)?;
+    stats.dilation_passes = extrapolating_dilation_fill(&mut out, params.neighbourhood)?;
     stats.cells_filled = out.valid_count() - stats.cells_splatted;
     stats.target_width = width;
     stats.target_height = height;

@@ -740,25 +740,13 @@ mod tests {
 #[cfg(test)]
 mod probe {
     use super::*;
-    use crate::mesh::{Degree, Rect, TMesh};
     use std::time::Instant;
 
     #[test]
     #[ignore]
     fn throughput() {
         let n = 315;
-        let mut m = TMesh::grid(Degree::Cubic, 0.0, 0.0, 10.0, n, n);
-        let mut g = |s: f64, t: f64| (s, t, 20.0 * (s * 0.013).sin() * (t * 0.011).cos() + 0.01 * s);
-        let band = (n / 2) as f64 * 10.0;
-        for c in m.leaves_in(Rect::new(0.5, band + 0.5, n as f64 * 10.0 - 0.5, band + 9.5)) {
-            m.split(c, &mut g);
-        }
-        for p in &mut m.points {
-            p.z = 20.0 * (p.s * 0.013).sin() * (p.t * 0.011).cos() + 0.01 * p.s;
-        }
-        let pb = PbSpline::build(&m);
-        let side = n * 10 + 1;
-        let st: Vec<[f64; 2]> = (0..side * side).map(|q| [(q % side) as f64, (side - 1 - q / side) as f64]).collect();
+        let (pb, st) = crate::testing::benchmark_surface(n);
         let t = Instant::now();
         let ex = Extraction::new(&pb, true);
         let tex = t.elapsed().as_secs_f64();

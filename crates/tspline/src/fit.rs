@@ -615,7 +615,7 @@ pub fn fit_drag(pb: &PbSpline, samples: &Samples, steps: usize, threshold: f64, 
     let params: Vec<[f64; 2]> = pb.point_ids.iter().enumerate().map(|(i, _)| pb_param(pb, i)).collect();
     // Dragging needs a continuous reference (spec §4.6): holes are filled by dilation and
     // points outside the raster take the nearest edge value (A10: clamp to edge).
-    let filled = dilation_fill(samples);
+    let filled = mean_dilation_fill(samples);
     let (wm, hm) = ((samples.width - 1) as f64, (samples.height - 1) as f64);
     let refz: Vec<f64> = params.iter().map(|p| filled.bilinear(p[0].clamp(0.0, wm), p[1].clamp(0.0, hm))).collect();
     let mut pb = pb.clone();
@@ -652,7 +652,12 @@ pub fn fit_drag(pb: &PbSpline, samples: &Samples, steps: usize, threshold: f64, 
 /// Fills every no-data cell by wave-front dilation (spec §2.3.5, Alg. 2): each pass gives the
 /// cells next to valued ones the mean of their valued 8-neighbours from the previous pass, so the
 /// result does not depend on scan order.
-pub fn dilation_fill(samples: &Samples) -> Samples {
+///
+/// Not `raster_proc::dilate::extrapolating_dilation_fill` on purpose: that one (the warp's, A6)
+/// continues slopes by linear extrapolation and must clamp the result; dragging only needs a
+/// continuous reference surface, and a mean of known values never leaves their range. It also
+/// works on NaN-coded [`Samples`] rather than a `Raster` with a validity mask.
+pub fn mean_dilation_fill(samples: &Samples) -> Samples {
     let (w, h) = (samples.width, samples.height);
     let mut z = samples.z.clone();
     if z.iter().all(|v| v.is_nan()) {

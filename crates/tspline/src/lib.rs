@@ -19,7 +19,7 @@
 //! A7–A12, A17, A19 in [`fit`]; A13, A14, A22 in [`mesh`]; A16 (formats: GDAL rasters in, the
 //! documented `.tmesh` out) in [`format`]; A18 in `benches/tspline.sh`; A20 in the Table 5.2
 //! test of [`rtree_pages`]; A21 below. A3–A6 (PCA mass, warp details, splat footprint,
-//! dilation weights) belong to the warp in `raster-proc`; `fit::dilation_fill` follows A6's
+//! dilation weights) belong to the warp in `raster-proc`; `fit::mean_dilation_fill` follows A6's
 //! wave-front reading with equal weights over valued 8-neighbours.
 //!
 //! Parameterization (A21): parameter units are raster cells. s = column index, t = row index

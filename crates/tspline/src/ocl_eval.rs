@@ -250,7 +250,7 @@ impl OclEvaluator {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::mesh::{Degree, Rect, TMesh};
+    use crate::mesh::{Degree, TMesh};
 
     use crate::testing::lcg;
 
@@ -352,18 +352,8 @@ mod tests {
         use std::time::Instant;
         let ocl = OclEvaluator::new().expect("OpenCL");
         let n = 315;
-        let mut m = TMesh::grid(Degree::Cubic, 0.0, 0.0, 10.0, n, n);
-        let mut g = |s: f64, t: f64| (s, t, 0.0);
-        let band = (n / 2) as f64 * 10.0;
-        for c in m.leaves_in(Rect::new(0.5, band + 0.5, n as f64 * 10.0 - 0.5, band + 9.5)) {
-            m.split(c, &mut g);
-        }
-        for p in &mut m.points {
-            p.z = 20.0 * (p.s * 0.013).sin() * (p.t * 0.011).cos() + 0.01 * p.s;
-        }
-        let pb = PbSpline::build(&m);
+        let (pb, st) = crate::testing::benchmark_surface(n);
         let side = n * 10 + 1;
-        let st: Vec<[f64; 2]> = (0..side * side).map(|q| [(q % side) as f64, (side - 1 - q / side) as f64]).collect();
         // process CPU seconds (utime + stime, all threads incl. PoCL's): robust to a loaded machine
         let cpu = || -> f64 {
             let s = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();

@@ -25,3 +25,22 @@ pub(crate) fn refined_mesh(degree: Degree) -> TMesh {
     }
     m
 }
+
+/// The benchmark's mesh shape (`benches/tspline_mesh.py`: `n`² cubic cells of size 10, one band
+/// split, smooth wavy heights) and the raster-centre parameters of its whole domain, for the
+/// ignored throughput probes of the CPU and OpenCL evaluators (the same data for both).
+pub(crate) fn benchmark_surface(n: usize) -> (crate::eval::PbSpline, Vec<[f64; 2]>) {
+    let mut m = TMesh::grid(Degree::Cubic, 0.0, 0.0, 10.0, n, n);
+    let mut g = |s: f64, t: f64| (s, t, 0.0);
+    let band = (n / 2) as f64 * 10.0;
+    for c in m.leaves_in(Rect::new(0.5, band + 0.5, n as f64 * 10.0 - 0.5, band + 9.5)) {
+        m.split(c, &mut g);
+    }
+    for p in &mut m.points {
+        p.z = 20.0 * (p.s * 0.013).sin() * (p.t * 0.011).cos() + 0.01 * p.s;
+    }
+    let pb = crate::eval::PbSpline::build(&m);
+    let side = n * 10 + 1;
+    let st: Vec<[f64; 2]> = (0..side * side).map(|q| [(q % side) as f64, (side - 1 - q / side) as f64]).collect();
+    (pb, st)
+}
