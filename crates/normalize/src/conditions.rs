@@ -85,6 +85,18 @@ impl Ranges {
     pub fn whole(m: &Popa3d) -> Ranges {
         Ranges { faces: 0..m.faces.len(), planes: 0..m.planes.len(), normals: 0..m.normals.len(), parameters: 0..m.parameters.len() }
     }
+
+    /// What `m` gained since `before` (an earlier [`Ranges::whole`] of it): the elements one
+    /// object appended to a shared model.
+    pub fn since(m: &Popa3d, before: &Ranges) -> Ranges {
+        let now = Ranges::whole(m);
+        Ranges {
+            faces: before.faces.end..now.faces.end,
+            planes: before.planes.end..now.planes.end,
+            normals: before.normals.end..now.normals.end,
+            parameters: before.parameters.end..now.parameters.end,
+        }
+    }
 }
 
 /// Face areas (from the model's own geometry).

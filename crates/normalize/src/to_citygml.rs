@@ -26,6 +26,7 @@
 
 use citygml_io::{CityModel, CityObject, Edit, Polygon, Ring};
 use popa3d_model::{FaceId, Incidence, NodeId, PlaneId, Popa3d, VertexSource};
+use popa3d_model::vec3::sub;
 use serde::Serialize;
 use std::collections::{BTreeMap, BTreeSet, HashMap, HashSet};
 
@@ -88,9 +89,6 @@ type P3 = [f64; 3];
 /// A rewritten ring: each point with its index in the template ring.
 type IndexedRing = Vec<(P3, usize)>;
 
-fn sub(a: P3, b: P3) -> P3 {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
 fn dist(a: P3, b: P3) -> f64 {
     let d = sub(a, b);
     (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()

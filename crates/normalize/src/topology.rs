@@ -1,6 +1,7 @@
 //! Topological normalization (spec §3.1): polygon soup → nodes, directed edges, half-edges, faces
 //! referencing solids. Snap tolerance: [`crate::Tolerances::snap`] (spec [gap], decided there).
 
+use popa3d_model::vec3::{cross, dot, sub};
 use crate::soup::Soup;
 use crate::{Notice, Rejection, Tolerances};
 use popa3d_model::VertexSource;
@@ -81,15 +82,6 @@ fn dist(a: &[f64; 3], b: &[f64; 3]) -> f64 {
     ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
 }
 
-fn sub(a: &[f64; 3], b: &[f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-fn dot(a: &[f64; 3], b: &[f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-fn cross(a: &[f64; 3], b: &[f64; 3]) -> [f64; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-}
 
 /// Builds the topology of one soup. Rejects (naming the source polygon) rings with fewer than three
 /// distinct points (TA05), open shells (TA03) and shells that cannot be oriented consistently.
@@ -220,8 +212,8 @@ fn insert_t_junctions(rings_nodes: &mut [Vec<Vec<usize>>], points: &[[f64; 3]], 
                 let (a, b) = (r[i], r[(i + 1) % r.len()]);
                 out.push(a);
                 let pa = points[a];
-                let ab = sub(&points[b], &pa);
-                let len2 = dot(&ab, &ab);
+                let ab = sub(points[b], pa);
+                let len2 = dot(ab, ab);
                 if len2 <= 0.0 {
                     continue;
                 }
@@ -230,13 +222,13 @@ fn insert_t_junctions(rings_nodes: &mut [Vec<Vec<usize>>], points: &[[f64; 3]], 
                     if n == a || n == b {
                         continue;
                     }
-                    let ap = sub(p, &pa);
-                    let s = dot(&ap, &ab) / len2;
+                    let ap = sub(*p, pa);
+                    let s = dot(ap, ab) / len2;
                     if s <= 0.0 || s >= 1.0 {
                         continue;
                     }
-                    let c = cross(&ap, &ab);
-                    if dot(&c, &c) / len2 <= snap * snap {
+                    let c = cross(ap, ab);
+                    if dot(c, c) / len2 <= snap * snap {
                         on.push((s, n));
                     }
                 }
@@ -381,11 +373,11 @@ fn signed_volume(t: &Topo, comp: &[usize], o: &HashMap<usize, bool>) -> f64 {
     for &f in comp {
         let sgn = if o[&f] { 1.0 } else { -1.0 };
         for r in &t.faces[f].rings {
-            let p0 = sub(&t.points[r[0]], &c);
+            let p0 = sub(t.points[r[0]], c);
             for i in 1..r.len() - 1 {
-                let p1 = sub(&t.points[r[i]], &c);
-                let p2 = sub(&t.points[r[i + 1]], &c);
-                vol += sgn * dot(&p0, &cross(&p1, &p2)) / 6.0;
+                let p1 = sub(t.points[r[i]], c);
+                let p2 = sub(t.points[r[i + 1]], c);
+                vol += sgn * dot(p0, cross(p1, p2)) / 6.0;
             }
         }
     }

@@ -174,15 +174,10 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
                 continue;
             }
         };
-        let before = (model.faces.len(), model.planes.len(), model.normals.len(), model.parameters.len());
+        let before = Ranges::whole(&model);
         match normalize::normalize_into(&mut model, &soup, &tol) {
             Ok(n) => {
-                let ranges = Ranges {
-                    faces: before.0..model.faces.len(),
-                    planes: before.1..model.planes.len(),
-                    normals: before.2..model.normals.len(),
-                    parameters: before.3..model.parameters.len(),
-                };
+                let ranges = Ranges::since(&model, &before);
                 all_ranges.push(ranges);
                 reports.push(BuildingReport { id: bid, counts: n.counts, conditions: ConditionCounts::default(), notices: n.notices });
             }

@@ -107,7 +107,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     let mut model = Popa3d::new(origin);
     model.source = Some(SourceDocument { format: "obj".into(), file: name.clone() });
     let n = normalize::normalize_into(&mut model, &soup, &tol).map_err(|r| CliError::findings(format!("{name}: rejected: {r}")))?;
-    let r = Ranges { faces: 0..model.faces.len(), planes: 0..model.planes.len(), normals: 0..model.normals.len(), parameters: 0..model.parameters.len() };
+    let r = Ranges::whole(&model);
     let so = SketchOptions { sigma_plane_difference: args.sigma_plane_difference, sigma_relative_angle: args.sigma_relative_angle, sigma_norm: args.sigma_norm };
     let (nd, na, nn) = conditions::sketch_priors(&mut model, &r, &so);
     let (mut ndist, mut nind) = (0, 0);
