@@ -47,9 +47,12 @@ pub struct LodCounts {
     pub polygons: usize,
 }
 
-/// What a document holds, added up object by object (see the module docs).
-#[derive(Debug, Default, Clone)]
+/// What a document holds, added up object by object (see the module docs). Serialized as the
+/// counts alone, in this order (the envelope and the short rings are reported by their users
+/// in their own form).
+#[derive(Debug, Default, Clone, Serialize)]
 pub struct DocumentCounts {
+    #[serde(skip)]
     pub envelope: Envelope,
     pub top_level_objects: usize,
     /// Every city object, nested ones included (Building, BuildingPart, WallSurface, ...).
@@ -66,6 +69,7 @@ pub struct DocumentCounts {
     /// Distinct hrefs through which polygons were reached.
     pub xlinks_resolved: usize,
     /// Rings with fewer than 4 positions: where they are and how many they have.
+    #[serde(skip)]
     pub short_rings: Vec<(SourceSpan, usize)>,
 }
 

@@ -34,7 +34,4 @@ pub enum Error {
     /// The parameter layout needs rows and columns along the axes.
     #[error("rotated rasters are not supported (geotransform {0:?})")]
     Rotated([f64; 6]),
-    /// Values no fit can follow in f64 at the tolerance (an undeclared no-data marker).
-    #[error(transparent)]
-    Tspline(#[from] tspline::TsplineError),
 }

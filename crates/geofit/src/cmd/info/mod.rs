@@ -191,16 +191,7 @@ fn summarize(input: &Input) -> Result<Summary, CliError> {
         crs: stream.srs_name(),
         envelope: env(&counts.envelope),
         declared_envelope: stream.declared_envelope().as_ref().and_then(env),
-        top_level_objects: counts.top_level_objects,
-        feature_types: counts.feature_types,
-        lods: counts.lods,
-        solids: counts.solids,
-        polygons: counts.polygons,
-        rings: counts.rings,
-        triangles: counts.triangles,
-        interior_rings: counts.interior_rings,
-        points: counts.points,
-        xlinks_resolved: counts.xlinks_resolved,
+        counts,
         unresolved_xlinks: stream.unresolved_xlinks().len(),
     };
     Ok(Summary { info: Info::CityGml(report), findings })

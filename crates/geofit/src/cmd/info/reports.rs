@@ -1,10 +1,9 @@
 //! What `geofit info` reports per kind of input (CityGML, T-mesh, raster, points): the JSON
 //! object and the text block of each, with the units of the JSON fields.
 
-use std::collections::BTreeMap;
 use std::io::Write;
 
-use citygml_io::summary::LodCounts;
+use citygml_io::summary::DocumentCounts;
 use citygml_io::Envelope;
 use serde::Serialize;
 
@@ -21,16 +20,9 @@ pub struct InfoReport {
     pub envelope: Option<[[f64; 3]; 2]>,
     /// Envelope declared in the document's gml:boundedBy.
     pub declared_envelope: Option<[[f64; 3]; 2]>,
-    pub top_level_objects: usize,
-    pub feature_types: BTreeMap<String, usize>,
-    pub lods: BTreeMap<String, LodCounts>,
-    pub solids: usize,
-    pub polygons: usize,
-    pub rings: usize,
-    pub triangles: usize,
-    pub interior_rings: usize,
-    pub points: usize,
-    pub xlinks_resolved: usize,
+    /// Every count of the document, flattened into this object in `DocumentCounts`' order.
+    #[serde(flatten)]
+    pub counts: DocumentCounts,
     pub unresolved_xlinks: usize,
 }
 
@@ -77,6 +69,7 @@ fn write_text(w: &mut dyn Write, r: &InfoReport) -> std::io::Result<()> {
         Some([a, b]) => format!("{} {} {} .. {} {} {}", a[0], a[1], a[2], b[0], b[1], b[2]),
         None => "none".to_string(),
     };
+    let c = &r.counts;
     writeln!(w, "file:        {}", r.file)?;
     writeln!(w, "version:     CityGML {}", r.version)?;
     writeln!(w, "crs:         {}", r.crs.as_deref().unwrap_or("none"))?;
@@ -84,24 +77,24 @@ fn write_text(w: &mut dyn Write, r: &InfoReport) -> std::io::Result<()> {
     if r.declared_envelope.is_some() {
         writeln!(w, "declared:    {}", fmt_env(&r.declared_envelope))?;
     }
-    let all: usize = r.feature_types.values().sum();
-    writeln!(w, "objects:     {} top-level, {} in all", r.top_level_objects, all)?;
+    let all: usize = c.feature_types.values().sum();
+    writeln!(w, "objects:     {} top-level, {} in all", c.top_level_objects, all)?;
     writeln!(w, "feature types:")?;
-    for (k, v) in &r.feature_types {
+    for (k, v) in &c.feature_types {
         writeln!(w, "  {k:<28} {v:>8}")?;
     }
     writeln!(w, "levels of detail:            geometries polygons")?;
-    for (k, v) in &r.lods {
+    for (k, v) in &c.lods {
         writeln!(w, "  {k:<28} {:>8} {:>8}", v.geometries, v.polygons)?;
     }
-    writeln!(w, "solids:      {}", r.solids)?;
-    writeln!(w, "polygons:    {}", r.polygons)?;
-    writeln!(w, "rings:       {} ({} interior)", r.rings, r.interior_rings)?;
-    writeln!(w, "points:      {}", r.points)?;
-    if r.triangles > 0 {
-        writeln!(w, "triangles:   {} (TIN)", r.triangles)?;
+    writeln!(w, "solids:      {}", c.solids)?;
+    writeln!(w, "polygons:    {}", c.polygons)?;
+    writeln!(w, "rings:       {} ({} interior)", c.rings, c.interior_rings)?;
+    writeln!(w, "points:      {}", c.points)?;
+    if c.triangles > 0 {
+        writeln!(w, "triangles:   {} (TIN)", c.triangles)?;
     }
-    writeln!(w, "xlinks:      {} resolved, {} unresolved", r.xlinks_resolved, r.unresolved_xlinks)?;
+    writeln!(w, "xlinks:      {} resolved, {} unresolved", c.xlinks_resolved, r.unresolved_xlinks)?;
     Ok(())
 }
 
