@@ -20,7 +20,6 @@
 //! ```
 
 use raster_io::Raster;
-use raster_proc::warp::WarpMapper;
 use tspline::fit::Samples;
 use tspline::format::{DataMask, Georef};
 use tspline::GridSpec;
@@ -104,13 +103,11 @@ impl EvalGrid {
         Ok(EvalGrid { raster, params, mask: None })
     }
 
-    /// The original raster of an indirect fit (stored with the warp field) and its footprint.
-    pub fn of_warp_source(src: &raster_proc::warp::SourceGrid, crs: Option<String>, mapper: &WarpMapper<'_>, georef: &Georef) -> Result<EvalGrid, raster_proc::ProcError> {
+    /// The original raster of an indirect fit (stored with the warp field) and its footprint,
+    /// each cell centre mapped through `to_param` (the warp's forward map, then the georeference).
+    pub fn of_warp_source(src: &raster_proc::warp::SourceGrid, crs: Option<String>, to_param: impl Fn(f64, f64) -> (f64, f64)) -> Result<EvalGrid, raster_proc::ProcError> {
         let raster = Raster::new_empty(src.width, src.height, src.geotransform, src.crs.clone().or(crs));
-        let params = Params::List(cell_params(&raster, |x, y| {
-            let q = mapper.forward([x, y]);
-            georef.param(q[0], q[1])
-        }));
+        let params = Params::List(cell_params(&raster, to_param));
         Ok(EvalGrid { raster, params, mask: Some(src.mask()?) })
     }
 

@@ -65,22 +65,22 @@ fn output_grid(args: &Args, file: &TMeshFile, write_opts: &mut WriteOptions) -> 
         None => None,
     };
     let mapper = field.as_ref().map(|f| f.mapper());
+    let to_param = |x: f64, y: f64| match &mapper {
+        Some(m) => {
+            let q = m.forward([x, y]);
+            g.param(q[0], q[1])
+        }
+        None => g.param(x, y),
+    };
     let crs = if g.crs.is_empty() { None } else { Some(g.crs.clone()) };
     if let Some(like) = &args.like {
         let (r, name, like_type) = read_raster_arg_typed(like)?;
         // The output's band type follows --like (a Float32 grid gets a Float32 surface).
         *write_opts = args.raster_out.checked(args.output.as_deref(), Some(like_type))?;
-        let to_param = |x: f64, y: f64| match &mapper {
-            Some(m) => {
-                let q = m.forward([x, y]);
-                g.param(q[0], q[1])
-            }
-            None => g.param(x, y),
-        };
         return EvalGrid::like(&r, crs, to_param).map_err(|e| CliError::findings(format!("{name}: {e}")));
     }
-    if let (Some(src), Some(m)) = (field.as_ref().and_then(|f| f.source.as_ref()), &mapper) {
-        return EvalGrid::of_warp_source(src, crs, m, g).map_err(|e| CliError::unreadable(format!("{}: <warp> source grid: {e}", args.mesh)));
+    if let Some(src) = field.as_ref().and_then(|f| f.source.as_ref()) {
+        return EvalGrid::of_warp_source(src, crs, to_param).map_err(|e| CliError::unreadable(format!("{}: <warp> source grid: {e}", args.mesh)));
     }
     match &file.mask {
         Some(m) => Ok(EvalGrid::of_mask(g, m)),
