@@ -327,6 +327,11 @@ fn surface_export_validates() {
     assert_eq!(std::fs::read(&eglb).unwrap(), std::fs::read(&glb).unwrap(), "export MESH differs from surface MESH");
     let o = common::run(&["export", m.to_str().unwrap(), "-o", eglb.to_str().unwrap(), "--lod", "2"], None);
     assert_eq!(o.status.code(), Some(2));
+    for range in [["5", "1"], ["1", "inf"]] {
+        let o = common::run(&["surface", m.to_str().unwrap(), "-o", eglb.to_str().unwrap(), "--height-range", range[0], range[1]], None);
+        assert_eq!(o.status.code(), Some(2), "--height-range {range:?}");
+        assert!(String::from_utf8_lossy(&o.stderr).contains("--height-range needs MIN < MAX"));
+    }
     assert!(String::from_utf8_lossy(&o.stderr).contains("--lod applies to CityGML input only"));
     if common::tool("node") {
         let v = Command::new("node").args([script("gltf_validator.js").as_str(), glb.to_str().unwrap()]).output().unwrap();

@@ -39,6 +39,14 @@ pub struct SurfaceOptions {
     /// Ignore the data mask stored in the mesh.
     #[arg(long)]
     pub no_mask: bool,
+    /// Leave out node `tmesh` (the leaf cells' edges draped on the surface): the surface alone,
+    /// as 3D Tiles content wants it.
+    #[arg(long)]
+    pub no_cell_edges: bool,
+    /// Height colours run from MIN to MAX (z units) instead of the lowest to the highest sample,
+    /// so that the tiles of one area share one colour ramp.
+    #[arg(long, num_args = 2, value_names = ["MIN", "MAX"], allow_hyphen_values = true, conflicts_with = "reference")]
+    pub height_range: Option<Vec<f64>>,
     /// Where the evaluation runs.
     #[arg(long, value_enum, default_value_t = Device::Auto)]
     pub device: Device,
@@ -57,6 +65,12 @@ impl SurfaceOptions {
         if self.no_mask {
             v.push("--no-mask");
         }
+        if self.no_cell_edges {
+            v.push("--no-cell-edges");
+        }
+        if self.height_range.is_some() {
+            v.push("--height-range");
+        }
         if !matches!(self.device, Device::Auto) {
             v.push("--device");
         }
@@ -69,6 +83,7 @@ pub fn tessellate(file: TMeshFile, name: &str, output: &Output, format: Format, 
     if format == Format::Obj && output.path().is_none() {
         return Err(CliError::usage("OBJ output of a surface needs a file (-o OUT.obj): its materials go to OUT.mtl beside it"));
     }
+    let range = height_range(opts)?;
     let grid = SampleGrid::new(file.mesh.bounds(), opts.step).map_err(|e| match e {
         TessellateError::Step(s) => CliError::usage(format!("--step must be positive, got {s}")),
         TessellateError::TooManySamples { ns, nt } => CliError::usage(format!("{ns}×{nt} samples are too many; raise --step")),
@@ -91,14 +106,23 @@ pub fn tessellate(file: TMeshFile, name: &str, output: &Output, format: Format, 
         None => None,
     };
     let sample_reference = |x: f64, y: f64| reference.as_ref().and_then(|r| r.sample(x, y, MissingCorners::Strict));
-    let colouring = if reference.is_some() { Colouring::ErrorAgainst(&sample_reference) } else { Colouring::Height };
-    let mut scene = tspline::tessellate::tessellate(&file, &pb, &grid, z, colouring, !opts.no_mask).map_err(|e| match e {
+    let colouring = if reference.is_some() { Colouring::ErrorAgainst(&sample_reference) } else { Colouring::Height { range } };
+    let mut scene = tspline::tessellate::tessellate(&file, &pb, &grid, z, colouring, !opts.no_mask, !opts.no_cell_edges).map_err(|e| match e {
         TessellateError::NoPointInMask => CliError::findings(format!("{name}: {e}")),
         e => CliError::internal(format!("surface: {e}")),
     })?;
     scene.generator = Some("geofit surface".into());
     write_scene(&scene, output, format, false, "surface export")?;
     Ok(Exit::Ok)
+}
+
+/// `--height-range MIN MAX` as a pair; MIN < MAX, both finite.
+fn height_range(opts: &SurfaceOptions) -> Result<Option<(f64, f64)>, CliError> {
+    match opts.height_range.as_deref() {
+        None => Ok(None),
+        Some(&[lo, hi]) if lo.is_finite() && hi.is_finite() && lo < hi => Ok(Some((lo, hi))),
+        Some(r) => Err(CliError::usage(format!("--height-range needs MIN < MAX, both finite; got {r:?}"))),
+    }
 }
 
 /// Writes a scene as `format` to `output`: glb; glTF with the buffer embedded or, with

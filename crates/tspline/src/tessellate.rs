@@ -66,8 +66,10 @@ impl SampleGrid {
 
 /// How the surface vertices are coloured.
 pub enum Colouring<'a> {
-    /// A blue → cyan → green → brown ramp from the lowest to the highest sample.
-    Height,
+    /// A blue → cyan → green → brown ramp from `range.0` to `range.1` (heights outside it take
+    /// the end colours), or without a range from the lowest to the highest sample. Tiles of one
+    /// area are given one range so that a height has one colour on both sides of a seam.
+    Height { range: Option<(f64, f64)> },
     /// Classes of |reference(x, y) − z| (green < 0.1, yellow < 0.5, orange < 1, red);
     /// grey where the reference has no value (`None`).
     ErrorAgainst(&'a dyn Fn(f64, f64) -> Option<f64>),
@@ -77,7 +79,8 @@ pub enum Colouring<'a> {
 /// surface has none); with `use_mask`, samples outside the file's data mask are dropped.
 ///
 /// Node `surface` holds the triangles (material 0, vertex colours), node `tmesh` the leaf-cell
-/// edges (material 1). The scene's origin is its automatic one; the generator is left unset.
+/// edges (material 1) when `cell_edges` (they outweigh the surface of a finely refined mesh: a
+/// 3D Tiles tile wants the surface alone). The scene's origin is its automatic one; the generator is left unset.
 ///
 /// # Examples
 ///
@@ -91,7 +94,7 @@ pub enum Colouring<'a> {
 /// let pb = PbSpline::build(&file.mesh);
 /// let grid = SampleGrid::new(file.mesh.bounds(), Some(2.0)).unwrap(); // 5 × 5 samples
 /// let z = pb.eval_z(&grid.points, false);
-/// let scene = tessellate(&file, &pb, &grid, z, Colouring::Height, true).unwrap();
+/// let scene = tessellate(&file, &pb, &grid, z, Colouring::Height { range: None }, true, true).unwrap();
 /// assert_eq!(scene.nodes[0].name, "surface");
 /// assert_eq!(scene.triangle_count(), 2 * 4 * 4);
 /// ```
@@ -102,6 +105,7 @@ pub fn tessellate(
     mut z: Vec<f64>,
     colouring: Colouring,
     use_mask: bool,
+    cell_edges: bool,
 ) -> Result<Scene, TessellateError> {
     let mask = file.mask.as_ref().filter(|_| use_mask);
     if let Some(m) = mask {
@@ -112,7 +116,7 @@ pub fn tessellate(
         }
     }
     let surface = surface_mesh(file, grid, &z, &colouring)?;
-    let lines = draped_cell_edges(file, pb, mask);
+    let lines = if cell_edges { draped_cell_edges(file, pb, mask) } else { LineSet::default() };
     let g = &file.georef;
     let mut surface_node = MeshNode::new("surface");
     surface_node.meshes.push(surface);
@@ -126,23 +130,35 @@ pub fn tessellate(
         ..Default::default()
     };
     scene.nodes.push(surface_node);
-    scene.nodes.push(tmesh_node);
+    if cell_edges {
+        scene.nodes.push(tmesh_node);
+    }
     scene.origin = scene.auto_origin();
     Ok(scene)
 }
 
-/// Whether parameter point (s, t) falls on a data cell (nearest cell centre).
+/// Whether parameter point (s, t) falls on a data cell (nearest cell centre). The mask's outer
+/// edge (s = −½ or s = width − ½, likewise t) belongs to the cells along it: rounding alone sends
+/// −½ and width − ½ outside, which dropped the outermost ring of samples and left a gap of one
+/// step between the glb of adjacent tiles (docs/decisions.md#terrain-tilesets).
 fn inside_mask(m: &DataMask, s: f64, t: f64) -> bool {
-    let (i, j) = (s.round(), t.round());
-    i >= 0.0 && j >= 0.0 && (i as usize) < m.width && (j as usize) < m.height && m.get(i as usize, j as usize)
+    let cell = |u: f64, n: usize| (n > 0 && u >= -0.5 && u <= n as f64 - 0.5).then(|| (u.round().max(0.0) as usize).min(n - 1));
+    match (cell(s, m.width), cell(t, m.height)) {
+        (Some(i), Some(j)) => m.get(i, j),
+        _ => false,
+    }
 }
 
 /// The valued samples as coloured vertices, two triangles per quad whose four corners have values.
 fn surface_mesh(file: &TMeshFile, grid: &SampleGrid, z: &[f64], colouring: &Colouring) -> Result<TriangleMesh, TessellateError> {
-    let (zmin, zmax) = z.iter().filter(|v| v.is_finite()).fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
-    if !zmin.is_finite() {
+    let (lowest, highest) = z.iter().filter(|v| v.is_finite()).fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+    if !lowest.is_finite() {
         return Err(TessellateError::NoPointInMask);
     }
+    let (zmin, zmax) = match colouring {
+        Colouring::Height { range: Some(r) } => *r,
+        _ => (lowest, highest),
+    };
     let mut mesh = TriangleMesh::new(Some(0));
     let mut colours = Vec::new();
     let mut vid = vec![u32::MAX; z.len()];
@@ -154,7 +170,7 @@ fn surface_mesh(file: &TMeshFile, grid: &SampleGrid, z: &[f64], colouring: &Colo
         vid[q] = mesh.push_vertex([x, y, z[q]]);
         colours.push(match colouring {
             Colouring::ErrorAgainst(reference) => error_colour(reference(x, y).map(|v| (v - z[q]).abs()).unwrap_or(f64::NAN)),
-            Colouring::Height => mesh_export::colour::elevation((z[q] - zmin) / (zmax - zmin).max(1e-300)),
+            Colouring::Height { .. } => mesh_export::colour::elevation((z[q] - zmin) / (zmax - zmin).max(1e-300)),
         });
     }
     let ns = grid.ns;
@@ -210,5 +226,58 @@ fn error_colour(e: f64) -> [f32; 4] {
         [0.95, 0.5, 0.1, 1.0]
     } else {
         [0.85, 0.1, 0.1, 1.0]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::format::Georef;
+    use crate::{Degree, TMesh};
+
+    /// A 4 × 4-cell raster's mesh (domain −½ … 3½, cell centres on the integers) with every cell
+    /// valid, sampled every cell edge: 5 × 5 samples.
+    fn four_by_four(mask_bits: Vec<bool>, colouring: Colouring) -> Scene {
+        let mesh = TMesh::grid(Degree::Cubic, -0.5, -0.5, 4.0, 1, 1);
+        let mask = DataMask { width: 4, height: 4, bits: mask_bits };
+        let file = TMeshFile { mesh, georef: Georef::identity(), mask: Some(mask), warp: None };
+        let pb = PbSpline::build(&file.mesh);
+        let grid = SampleGrid::new(file.mesh.bounds(), Some(1.0)).unwrap();
+        assert_eq!((grid.ns, grid.nt), (5, 5));
+        let z = pb.eval_z(&grid.points, false);
+        tessellate(&file, &pb, &grid, z, colouring, true, false).unwrap()
+    }
+
+    #[test]
+    fn a_full_mask_keeps_the_samples_on_the_domain_edge() {
+        let scene = four_by_four(vec![true; 16], Colouring::Height { range: None });
+        let surface = &scene.nodes[0].meshes[0];
+        assert_eq!(surface.positions.len(), 25, "every sample, the outer ring included");
+        assert_eq!(scene.triangle_count(), 2 * 4 * 4, "every cell covered");
+        assert_eq!(scene.nodes.len(), 1, "no cell-edge node when not asked for");
+    }
+
+    #[test]
+    fn an_empty_border_column_still_drops_its_samples() {
+        // column i = 0 without data: the samples at s = −½ (nearest centre i = 0) go, those at
+        // s = ½ belong to i = 1 (rounding half away from zero) and stay
+        let bits = (0..16).map(|q| q % 4 != 0).collect();
+        let scene = four_by_four(bits, Colouring::Height { range: None });
+        assert_eq!(scene.nodes[0].meshes[0].positions.len(), 20);
+    }
+
+    #[test]
+    fn a_given_height_range_fixes_the_colours() {
+        let flat = |range| {
+            let s = four_by_four(vec![true; 16], Colouring::Height { range });
+            s.nodes[0].meshes[0].colors.clone().unwrap()
+        };
+        // the grid mesh's heights are all 0: without a range the ramp starts there (blue end),
+        // within [-1, 1] a height of 0 sits mid-ramp; far below a range it clamps to the low end
+        let own = flat(None);
+        assert_eq!(own[0], mesh_export::colour::elevation(0.0));
+        assert_eq!(flat(Some((-1.0, 1.0)))[0], mesh_export::colour::elevation(0.5));
+        assert_eq!(flat(Some((5.0, 6.0)))[0], mesh_export::colour::elevation(0.0));
+        assert_ne!(flat(Some((-1.0, 1.0)))[0], own[0]);
     }
 }
