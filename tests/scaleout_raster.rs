@@ -4,8 +4,12 @@
 //! (tests/scripts/scaleout_raster.py): every valid source cell within --max-error of the merged
 //! surface (seams included), and the tiles' surfaces, evaluated by `geofit eval` on a grid of
 //! points on every pixel edge, equal to 1e-9 relative wherever two tiles meet. The C1 figure
-//! (normal-angle jump across the seams) is reported. `make -j2 -f workflows/tiles.mk` runs the
-//! same lines and gives the same bytes. Rules: docs/decisions.md#raster-tiles-and-seams.
+//! (normal-angle jump across the seams) is reported. The per-tile glb and their 3D Tiles
+//! tileset: the Khronos glTF validator, the independent tileset reader with PROJ's cs2cs
+//! (tests/scripts/scaleout_tileset.py), and tests/scripts/tileset_seams.py: the tiles' triangles
+//! cover the cores exactly once and share height and colour at every seam vertex.
+//! `make -j2 -f workflows/tiles.mk` runs the same lines and gives the same bytes. Rules:
+//! docs/decisions.md#raster-tiles-and-seams, docs/decisions.md#terrain-tilesets.
 
 mod common;
 
@@ -20,6 +24,10 @@ const DEM: &str = "terrain/giswqs-lidar_dem.tif";
 const WINDOW: [&str; 4] = ["140", "140", "120", "120"];
 const TILE: &str = "40";
 const MAX_ERROR: &str = "0.25";
+/// Cells between glb vertices (the workflow's default; divides TILE).
+const SURFACE_STEP: &str = "4";
+/// The source window's CRS (NAD83 / UTM 15N), for the independent ECEF check.
+const CRS: &str = "EPSG:26915";
 
 fn ok(o: &Output, what: &str) {
     assert!(o.status.success(), "{what} failed ({:?}):\nstdout: {}\nstderr: {}", o.status, String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
@@ -39,10 +47,11 @@ fn tools() -> bool {
 
 fn files(dir: &Path) -> BTreeMap<String, Vec<u8>> {
     let mut out = BTreeMap::new();
-    for sub in ["fit", "stitched", "eval"] {
+    out.insert("tileset.json".into(), std::fs::read(dir.join("tileset.json")).unwrap());
+    for sub in ["fit", "stitched", "eval", "glb"] {
         for e in std::fs::read_dir(dir.join(sub)).unwrap() {
             let p = e.unwrap().path();
-            if p.extension().is_some_and(|x| x == "tmb" || x == "tif") {
+            if p.extension().is_some_and(|x| x == "tmb" || x == "tif" || x == "glb") {
                 out.insert(format!("{sub}/{}", p.file_name().unwrap().to_string_lossy()), std::fs::read(&p).unwrap());
             }
         }
@@ -129,7 +138,37 @@ fn snakemake_raster_tiles_keep_the_tolerance_and_meet_at_the_seams() {
         seams["max_gap"], seams["max_gap_relative"], seams["max_normal_angle_deg"]
     );
 
-    // 5. make -j2 runs the same lines: the same bytes
+    // 5. the terrain tileset: glb valid, tileset read back independently, tiles meeting at seams
+    let o = common::python().arg(common::repo_root().join("tests/scripts/tileset_seams.py")).arg(out.join("plan.jsonl")).arg(out.join("glb")).arg(SURFACE_STEP).output().unwrap();
+    let text = String::from_utf8_lossy(&o.stdout).into_owned();
+    eprintln!("glb seams: {text}");
+    ok(&o, "tileset_seams.py");
+    let r: Value = serde_json::from_str(text.lines().last().unwrap()).unwrap();
+    let along = |cells: f64| cells / SURFACE_STEP.parse::<f64>().unwrap() + 1.0;
+    // 2 inner vertical and 2 inner horizontal seam lines, their 4 crossings counted once
+    assert_eq!(r["shared_vertices"].as_f64().unwrap(), 2.0 * along(h) + 2.0 * along(w) - 4.0, "{r}");
+    assert!(r["max_seam_dz"].as_f64().unwrap() <= 1e-4, "{r}");
+    assert!(r["max_seam_colour_diff"].as_f64().unwrap() <= 1e-6, "one colour ramp over all tiles: {r}");
+    if common::tool("node") && common::tool("cs2cs") {
+        for id in &ids {
+            let glb = out.join(format!("glb/{id}.glb"));
+            let o = Command::new("node").arg(common::repo_root().join("tests/scripts/gltf_validator.js")).arg(&glb).output().unwrap();
+            ok(&o, "gltf_validator.js");
+            let v: Value = serde_json::from_slice(&o.stdout).expect("validator report is JSON");
+            assert_eq!(v["issues"]["numErrors"], 0, "{}: {}", glb.display(), v["issues"]["messages"]);
+        }
+        let o = common::python().arg(common::repo_root().join("tests/scripts/scaleout_tileset.py")).arg(out.join("tileset.json")).args(["--crs", CRS]).output().unwrap();
+        let text = String::from_utf8_lossy(&o.stdout).into_owned();
+        ok(&o, "scaleout_tileset.py");
+        let r: Value = serde_json::from_str(text.lines().last().unwrap()).unwrap();
+        assert!(r["errors"].as_array().unwrap().is_empty(), "{r}");
+        assert_eq!(r["tiles"].as_u64().unwrap() as usize, ids.len());
+        eprintln!("tileset: {r}");
+    } else if common::in_ci() {
+        panic!("node (Khronos glTF validator) or cs2cs missing in CI");
+    }
+
+    // 6. make -j2 runs the same lines: the same bytes
     let first = files(&out);
     let work2 = common::tempdir();
     let mut c = Command::new("make");

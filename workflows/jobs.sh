@@ -21,6 +21,10 @@
 #   jobs.sh reval    OUT TILE            → OUT/eval/TILE.tif (the surface on the tile's cells)
 #   jobs.sh seams    OUT                 → OUT/seams.json (gap and normal-angle jump per seam)
 #   jobs.sh mosaic   OUT TILE...         → OUT/mosaic.vrt (gdalbuildvrt over the tiles' rasters)
+#   jobs.sh rrange   OUT SRC             → OUT/zrange.txt (the source's min and max: one colour ramp)
+#   jobs.sh rglb     OUT TILE            → OUT/glb/TILE.glb (the stitched surface, every
+#                                          GEOFIT_SURFACE_STEP cells; tiles share their seam vertices)
+#   jobs.sh rtileset OUT TILE...         → OUT/tileset.json (3D Tiles 1.1 over the tiles' glb)
 #
 # Every output is written atomically (geofit writes a temporary file and renames it; the one
 # stdout capture below does the same), so a killed job leaves no half-written file.
@@ -30,7 +34,9 @@
 # document, and a tile mixes documents — fixing them keeps per-building bytes independent of the
 # tiling), GEOFIT_VALIDATE_ARGS, GEOFIT_TILESET_ARGS (e.g. `--crs EPSG:25832`).
 #
-# Raster settings: GEOFIT_MAX_ERROR (0.5), GEOFIT_TILE_PIXELS (1024), GEOFIT_FIT_ARGS ('').
+# Raster settings: GEOFIT_MAX_ERROR (0.5), GEOFIT_TILE_PIXELS (1024), GEOFIT_FIT_ARGS (''),
+# GEOFIT_SURFACE_STEP (4; must divide GEOFIT_TILE_PIXELS so that adjacent tiles' glb share the
+# vertices along their seam), GEOFIT_TILESET_ARGS as for buildings.
 #
 # Fault injection for tests: GEOFIT_FAIL_ONCE=TILE makes the heal job (raster: the fit job) of
 # TILE fail once: the
@@ -151,6 +157,26 @@ mosaic)
     gdalbuildvrt -q "$tmp" "${args[@]}"
     # the VRT names its sources relative to itself: same directory, so the rename keeps them valid
     mv "$tmp" "$out/mosaic.vrt"
+    ;;
+rrange)
+    src=$1
+    tmp=$(mktemp "$out/.zrange.XXXXXX")
+    trap 'rm -f "$tmp"' EXIT
+    # GDAL computes the exact min/max block by block (bounded memory, no .aux.xml written)
+    gdalinfo -mm "$src" | sed -n 's/.*Computed Min\/Max=\([^,]*\),\(.*\)$/\1 \2/p' | head -n 1 >"$tmp"
+    [ -s "$tmp" ] || { echo "jobs.sh rrange: gdalinfo -mm gave no Min/Max for $src" >&2; exit 1; }
+    chmod 644 "$tmp" && mv "$tmp" "$out/zrange.txt"
+    ;;
+rglb)
+    t=$1 step=${GEOFIT_SURFACE_STEP:-4}
+    read -r zmin zmax <"$out/zrange.txt"
+    mkdir -p "$out/glb"
+    "$GEOFIT" -q surface "$out/stitched/$t.tmb" --step "$step" --no-cell-edges --height-range "$zmin" "$zmax" -o "$out/glb/$t.glb"
+    ;;
+rtileset)
+    args=()
+    for t in "$@"; do args+=("$out/glb/$t.glb"); done
+    "$GEOFIT" -q tile tileset "${TILESET_ARGS[@]}" "${args[@]}" -o "$out/tileset.json"
     ;;
 *)
     echo "jobs.sh: unknown step '$step'" >&2

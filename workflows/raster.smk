@@ -1,6 +1,7 @@
 # The raster pipeline of workflows/Snakefile (docs/decisions.md#raster-tiles-and-seams):
 #   plan → fit(t) → stitch(t) [needs the fits of t and its neighbours] → eval(t) → mosaic.vrt
-#                                                                      └→ seams.json
+#                                                                      ├→ seams.json
+#   zrange ──────────────────────────────────────────────────────────→ glb(t) → tileset.json
 # Every job is one line of workflows/jobs.sh.
 
 import json
@@ -16,6 +17,8 @@ ENV = " ".join(
         ("GEOFIT_MAX_ERROR", config.get("max_error", 0.5)),
         ("GEOFIT_TILE_PIXELS", config.get("tile_pixels", 1024)),
         ("GEOFIT_FIT_ARGS", config.get("fit_args", "")),
+        ("GEOFIT_SURFACE_STEP", config.get("surface_step", 4)),
+        ("GEOFIT_TILESET_ARGS", config.get("tileset_args", "")),
     ]
 )
 
@@ -38,7 +41,13 @@ def stitch_inputs(wildcards):
 
 # the targets of `rule all` (workflows/Snakefile); the per-tile rasters too, so a deleted one is
 # made again
-TARGETS = [f"{OUT}/mosaic.vrt", f"{OUT}/seams.json", lambda wc: expand(f"{OUT}/eval/{{tile}}.tif", tile=tile_ids())]
+TARGETS = [
+    f"{OUT}/mosaic.vrt",
+    f"{OUT}/seams.json",
+    f"{OUT}/tileset.json",
+    lambda wc: expand(f"{OUT}/eval/{{tile}}.tif", tile=tile_ids()),
+    lambda wc: expand(f"{OUT}/glb/{{tile}}.glb", tile=tile_ids()),
+]
 
 
 checkpoint plan:
@@ -122,3 +131,44 @@ rule mosaic:
         tiles=lambda wc: " ".join(tile_ids()),
     shell:
         "env {params.env} bash {params.jobs} mosaic {params.out} {params.tiles}"
+
+
+rule zrange:
+    input:
+        RASTER,
+    output:
+        f"{OUT}/zrange.txt",
+    params:
+        env=ENV,
+        jobs=JOBS,
+        out=OUT,
+    shell:
+        "env {params.env} bash {params.jobs} rrange {params.out} {input}"
+
+
+rule glb:
+    input:
+        mesh=f"{OUT}/stitched/{{tile}}.tmb",
+        zrange=f"{OUT}/zrange.txt",
+    output:
+        f"{OUT}/glb/{{tile}}.glb",
+    params:
+        env=ENV,
+        jobs=JOBS,
+        out=OUT,
+    shell:
+        "env {params.env} bash {params.jobs} rglb {params.out} {wildcards.tile}"
+
+
+rule tileset:
+    input:
+        lambda wc: expand(f"{OUT}/glb/{{tile}}.glb", tile=tile_ids()),
+    output:
+        f"{OUT}/tileset.json",
+    params:
+        env=ENV,
+        jobs=JOBS,
+        out=OUT,
+        tiles=lambda wc: " ".join(tile_ids()),
+    shell:
+        "env {params.env} bash {params.jobs} rtileset {params.out} {params.tiles}"

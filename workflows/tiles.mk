@@ -25,11 +25,12 @@ ifneq ($(strip $(RASTER)),)
 export GEOFIT_MAX_ERROR ?= 0.5
 export GEOFIT_TILE_PIXELS ?= 1024
 export GEOFIT_FIT_ARGS ?=
+export GEOFIT_SURFACE_STEP ?= 4
 
 TILES :=
 -include $(OUT)/plan.mk
 
-all: $(OUT)/mosaic.vrt $(OUT)/seams.json $(TILES:%=$(OUT)/eval/%.tif)
+all: $(OUT)/mosaic.vrt $(OUT)/seams.json $(OUT)/tileset.json $(TILES:%=$(OUT)/eval/%.tif) $(TILES:%=$(OUT)/glb/%.glb)
 .PHONY: all
 .DEFAULT_GOAL := all
 
@@ -54,6 +55,15 @@ $(OUT)/seams.json: $(TILES:%=$(OUT)/stitched/%.tmb) $(OUT)/plan.mk
 
 $(OUT)/mosaic.vrt: $(TILES:%=$(OUT)/eval/%.tif) $(OUT)/plan.mk
 	bash $(JOBS) mosaic $(OUT) $(TILES)
+
+$(OUT)/zrange.txt: $(RASTER)
+	bash $(JOBS) rrange $(OUT) $(RASTER)
+
+$(OUT)/glb/%.glb: $(OUT)/stitched/%.tmb $(OUT)/zrange.txt
+	bash $(JOBS) rglb $(OUT) $*
+
+$(OUT)/tileset.json: $(TILES:%=$(OUT)/glb/%.glb) $(OUT)/plan.mk
+	bash $(JOBS) rtileset $(OUT) $(TILES)
 
 else
 ifeq ($(strip $(SOURCES)),)
