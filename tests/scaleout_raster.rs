@@ -182,3 +182,29 @@ fn snakemake_raster_tiles_keep_the_tolerance_and_meet_at_the_seams() {
         assert!(second[k] == *v, "{k} differs between snakemake and make");
     }
 }
+
+/// A rotated raster is refused by the plan, before any tile job runs (each tile's fit would
+/// refuse it anyway), with the way out in the message.
+#[test]
+fn a_rotated_raster_is_refused_by_the_plan() {
+    let Some(dem) = common::fixture(DEM) else { return };
+    if !common::tool("gdal_translate") {
+        assert!(!common::in_ci(), "gdal_translate missing in CI");
+        return;
+    }
+    let work = common::tempdir();
+    let vrt = work.path().join("rot.vrt");
+    let mut c = Command::new("gdal_translate");
+    c.args(["-q", "-of", "VRT"]).arg(&dem).arg(&vrt);
+    ok(&c.output().unwrap(), "gdal_translate -of VRT");
+    let text = std::fs::read_to_string(&vrt).unwrap();
+    let (a, rest) = text.split_once("<GeoTransform>").unwrap();
+    let (_, b) = rest.split_once("</GeoTransform>").unwrap();
+    std::fs::write(&vrt, format!("{a}<GeoTransform>429392.3, 0.8660254, -0.5, 5150745.4, -0.5, -0.8660254</GeoTransform>{b}")).unwrap();
+    let plan = work.path().join("plan.jsonl");
+    let o = common::run(&["tile", "plan", "--tile-size", "40", "-o", plan.to_str().unwrap(), vrt.to_str().unwrap()], None);
+    assert_eq!(o.status.code(), Some(3), "{}", String::from_utf8_lossy(&o.stderr));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("rot.vrt") && err.contains("rotated rasters are not supported") && err.contains("gdalwarp"), "{err}");
+    assert!(!plan.exists(), "no plan written");
+}

@@ -25,6 +25,10 @@ pub fn plan(path: &str, opts: &RasterTiling) -> Result<Vec<Tile>, TilingError> {
     let ds = gdal::Dataset::open(Path::new(path)).map_err(|e| TilingError::unreadable(path, e))?;
     let (w, h) = ds.raster_size();
     let gt = ds.geo_transform().map_err(|e| TilingError::unreadable(path, format!("no geotransform: {e}")))?;
+    if gt[2] != 0.0 || gt[4] != 0.0 {
+        // the fit of every tile would refuse it (tspline_raster::Error::Rotated): say so once, here
+        return Err(TilingError::unreadable(path, format!("rotated rasters are not supported (geotransform {gt:?}); gdalwarp it to a north-up grid first")));
+    }
     plan_grid(path, w, h, gt, opts)
 }
 
