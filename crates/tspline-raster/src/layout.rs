@@ -126,12 +126,15 @@ impl EvalGrid {
     }
 
     /// The integer (s, t) of a mesh domain `[s_min, s_max] × [t_min, t_max]` at the parameter
-    /// spacing, north-up; `None` when it would exceed [`MAX_GRID_CELLS`].
-    pub fn of_domain(georef: &Georef, s_min: f64, s_max: f64, t_min: f64, t_max: f64) -> Option<EvalGrid> {
+    /// spacing, north-up; an error naming the size when it would exceed [`MAX_GRID_CELLS`].
+    pub fn of_domain(georef: &Georef, s_min: f64, s_max: f64, t_min: f64, t_max: f64) -> Result<EvalGrid, Error> {
         let (s0, t0) = (s_min.ceil(), t_min.ceil());
         let w = (s_max.floor() - s0) as usize + 1;
         let h = (t_max.floor() - t0) as usize + 1;
-        (w.saturating_mul(h) <= MAX_GRID_CELLS).then(|| EvalGrid::regular(georef, w, h, s0, t0))
+        if w.saturating_mul(h) > MAX_GRID_CELLS {
+            return Err(Error::GridTooLarge { width: w, height: h });
+        }
+        Ok(EvalGrid::regular(georef, w, h, s0, t0))
     }
 
     /// A north-up `w × h` grid whose bottom-left cell is (s0, t0): row r holds t = t0 + h − 1 − r.
@@ -182,6 +185,15 @@ mod tests {
         r.data = (0..6).map(f64::from).collect();
         r.valid = vec![true, true, false, true, true, true];
         r
+    }
+
+    #[test]
+    fn a_domain_grid_over_the_limit_is_named_by_its_size() {
+        let g = Georef::identity();
+        let e = EvalGrid::of_domain(&g, 0.0, 99_999.0, 0.0, 99_999.0).err().expect("10¹⁰ cells refused");
+        assert_eq!(e.to_string(), "the output grid 100000×100000 is too large");
+        let ok = EvalGrid::of_domain(&g, -0.5, 3.5, -0.5, 2.5).unwrap();
+        assert_eq!((ok.raster.width, ok.raster.height), (4, 3));
     }
 
     #[test]

@@ -34,4 +34,7 @@ pub enum Error {
     /// The parameter layout needs rows and columns along the axes.
     #[error("rotated rasters are not supported (geotransform {0:?})")]
     Rotated([f64; 6]),
+    /// An output grid over the limit ([`layout::MAX_GRID_CELLS`]), named by its size.
+    #[error("the output grid {width}×{height} is too large")]
+    GridTooLarge { width: usize, height: usize },
 }

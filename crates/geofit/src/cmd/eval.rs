@@ -87,7 +87,7 @@ fn output_grid(args: &Args, file: &TMeshFile, write_opts: &mut WriteOptions) -> 
         None => {
             let b = file.mesh.bounds();
             EvalGrid::of_domain(g, b.s_min, b.s_max, b.t_min, b.t_max)
-                .ok_or_else(|| CliError::usage(format!("{}: the output grid of the mesh domain is too large; pass --like", args.mesh)))
+                .map_err(|e| CliError::usage(format!("{}: {e}; pass --like", args.mesh)))
         }
     }
 }
