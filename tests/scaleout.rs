@@ -188,31 +188,6 @@ fn tree(dir: &Path) -> BTreeMap<String, Vec<u8>> {
     m
 }
 
-/// (rule, tile) of every job a Snakemake dry run lists.
-fn dry_run_jobs(o: &Output) -> BTreeSet<(String, String)> {
-    ok(o, "snakemake -n");
-    let text = String::from_utf8_lossy(&o.stdout).into_owned() + &String::from_utf8_lossy(&o.stderr);
-    let mut jobs = BTreeSet::new();
-    let mut rule: Option<String> = None;
-    for line in text.lines() {
-        let l = line.trim();
-        if let Some(r) = l.strip_prefix("rule ").or_else(|| l.strip_prefix("localrule ")).or_else(|| l.strip_prefix("checkpoint ")) {
-            if let Some(r) = r.strip_suffix(':') {
-                if let Some(prev) = rule.replace(r.to_string()) {
-                    jobs.insert((prev, String::new()));
-                }
-            }
-        } else if let (Some(w), Some(r)) = (l.strip_prefix("wildcards: tile="), rule.as_ref()) {
-            jobs.insert((r.clone(), w.to_string()));
-            rule = None;
-        }
-    }
-    if let Some(r) = rule {
-        jobs.insert((r, String::new()));
-    }
-    jobs
-}
-
 #[test]
 fn snakemake_tiled_run_matches_whole_file_retries_and_make() {
     let Some(sources) = nrw_sources() else { return };
@@ -283,13 +258,13 @@ fn snakemake_tiled_run_matches_whole_file_retries_and_make() {
 
     // 5. a second run does nothing
     let o = snakemake(work.path(), &config, &["-n"], &[]);
-    let jobs = dry_run_jobs(&o);
+    let jobs = common::snakemake_dry_run_jobs(&o);
     assert!(jobs.is_empty(), "second run would do {jobs:?}");
 
     // 6. delete one tile output: the dry run lists exactly that tile's job and what depends on it
     let victim = &tiles[tiles.len() / 2];
     std::fs::remove_file(out.join(format!("healed/{victim}.gml"))).unwrap();
-    let jobs = dry_run_jobs(&snakemake(work.path(), &config, &["-n"], &[]));
+    let jobs = common::snakemake_dry_run_jobs(&snakemake(work.path(), &config, &["-n"], &[]));
     let want: BTreeSet<(String, String)> = [("heal", victim.as_str()), ("export", victim.as_str()), ("report", ""), ("tileset", ""), ("all", "")]
         .iter()
         .map(|(r, t)| (r.to_string(), t.to_string()))

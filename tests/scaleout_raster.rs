@@ -72,11 +72,19 @@ fn snakemake_raster_tiles_keep_the_tolerance_and_meet_at_the_seams() {
     c.args(["-q", "-srcwin"]).args(WINDOW).arg(&dem).arg(&src).env("GDAL_PAM_ENABLED", "NO");
     ok(&c.output().unwrap(), "gdal_translate -srcwin");
 
-    // 1. the workflow
+    // 1. the workflow, with the centre tile's fit failing once (injected) and retried
     let config = [format!("raster={}", src.display()), "out=out".into(), format!("geofit={geofit}"), format!("max_error={MAX_ERROR}"), format!("tile_pixels={TILE}")];
-    let mut c = Command::new("snakemake");
-    c.arg("-s").arg(common::repo_root().join("workflows/Snakefile")).arg("--directory").arg(work.path()).args(["--cores", "2", "--config"]).args(&config);
-    ok(&c.output().unwrap(), "snakemake --cores 2 (raster)");
+    let snakemake = |extra: &[&str]| {
+        let mut c = Command::new("snakemake");
+        c.arg("-s").arg(common::repo_root().join("workflows/Snakefile")).arg("--directory").arg(work.path()).args(["--cores", "2"]).args(extra).arg("--config").args(&config);
+        c.env_remove("GEOFIT_FAIL_ONCE");
+        c
+    };
+    let marker = work.path().join("fail-once");
+    let mut c = snakemake(&["--retries", "1"]);
+    c.env("GEOFIT_FAIL_ONCE", "c1_r1").env("GEOFIT_FAIL_ONCE_DIR", &marker);
+    ok(&c.output().unwrap(), "snakemake --cores 2 --retries 1 (raster, one injected failure)");
+    assert!(marker.join("c1_r1").exists(), "the injected failure happened");
     let out = work.path().join("out");
     let plan: Vec<Value> = std::fs::read_to_string(out.join("plan.jsonl")).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
     assert_eq!(plan.len(), 9, "a 3×3 plan");
@@ -168,8 +176,18 @@ fn snakemake_raster_tiles_keep_the_tolerance_and_meet_at_the_seams() {
         panic!("node (Khronos glTF validator) or cs2cs missing in CI");
     }
 
-    // 6. make -j2 runs the same lines: the same bytes
+    // 6. nothing left to do; a deleted tile glb is made again with the tileset, nothing else
     let first = files(&out);
+    let jobs = common::snakemake_dry_run_jobs(&snakemake(&["-n"]).output().unwrap());
+    assert!(jobs.is_empty(), "second run would do {jobs:?}");
+    std::fs::remove_file(out.join("glb/c1_r1.glb")).unwrap();
+    let jobs = common::snakemake_dry_run_jobs(&snakemake(&["-n"]).output().unwrap());
+    let want: std::collections::BTreeSet<(String, String)> = [("glb", "c1_r1"), ("tileset", ""), ("all", "")].iter().map(|(r, t)| (r.to_string(), t.to_string())).collect();
+    assert_eq!(jobs, want);
+    ok(&snakemake(&[]).output().unwrap(), "snakemake (one glb made again)");
+    assert!(files(&out) == first, "the remade glb and tileset are the same bytes");
+
+    // 7. make -j2 runs the same lines: the same bytes
     let work2 = common::tempdir();
     let mut c = Command::new("make");
     c.current_dir(work2.path()).args(["-j2", "-s", "-f"]).arg(common::repo_root().join("workflows/tiles.mk"));

@@ -147,3 +147,28 @@ pub fn subcommands() -> Vec<String> {
         .filter(|c| c != "help")
         .collect()
 }
+
+/// (rule, tile) of every job a Snakemake dry run lists.
+pub fn snakemake_dry_run_jobs(o: &Output) -> std::collections::BTreeSet<(String, String)> {
+    assert!(o.status.success(), "snakemake -n failed: {}", String::from_utf8_lossy(&o.stderr));
+    let text = String::from_utf8_lossy(&o.stdout).into_owned() + &String::from_utf8_lossy(&o.stderr);
+    let mut jobs = std::collections::BTreeSet::new();
+    let mut rule: Option<String> = None;
+    for line in text.lines() {
+        let l = line.trim();
+        if let Some(r) = l.strip_prefix("rule ").or_else(|| l.strip_prefix("localrule ")).or_else(|| l.strip_prefix("checkpoint ")) {
+            if let Some(r) = r.strip_suffix(':') {
+                if let Some(prev) = rule.replace(r.to_string()) {
+                    jobs.insert((prev, String::new()));
+                }
+            }
+        } else if let (Some(w), Some(r)) = (l.strip_prefix("wildcards: tile="), rule.as_ref()) {
+            jobs.insert((r.clone(), w.to_string()));
+            rule = None;
+        }
+    }
+    if let Some(r) = rule {
+        jobs.insert((r, String::new()));
+    }
+    jobs
+}
