@@ -21,6 +21,10 @@ export PATH := $(VENV)/bin:$(PATH)
 export GEOFIT_PYTHON := $(VENV)/bin/python3
 PIP_TEST_PACKAGES := numpy scipy lxml pymeshlab snakemake
 PIP_BENCH_PACKAGES := loopstructural pydelatin pymartini
+# py3dtiles reads the 3D Tiles tilesets back in the scale-out tests. Installed without its
+# dependencies: it pins numpy < 2 (for numba in its point-cloud converter, which the tests do not
+# use); its tileset model needs only pyproj and pygltflib.
+PY3DTILES_VERSION := 9.0.0
 # npm: the Khronos glTF validator. It is a library: tests run it through the small CLI
 # tests/scripts/gltf_validator.js, which finds the package in $(NPM_PREFIX) (no PATH wrapper).
 NPM_PREFIX := $(HOME)/.cache/geofit/npm
@@ -47,6 +51,11 @@ setup-pip:
 	  && echo "setup: Python packages present in $(VENV)" \
 	  || { echo "setup: installing into $(VENV): $(PIP_TEST_PACKAGES)"; \
 	       $(VENV)/bin/python3 -m pip install -q --disable-pip-version-check $(PIP_TEST_PACKAGES); }
+	@$(VENV)/bin/python3 -c "import py3dtiles.tileset" 2>/dev/null \
+	  && echo "setup: py3dtiles present in $(VENV)" \
+	  || { echo "setup: installing into $(VENV): py3dtiles $(PY3DTILES_VERSION) (without its numpy<2 pin), pyproj, pygltflib"; \
+	       $(VENV)/bin/python3 -m pip install -q --disable-pip-version-check pyproj pygltflib \
+	       && $(VENV)/bin/python3 -m pip install -q --disable-pip-version-check --no-deps py3dtiles==$(PY3DTILES_VERSION); }
 	@# FreeCAD's Python modules (Debian freecad-python3) are built for Debian's own interpreter,
 	@# which the FreeCAD checks call as /usr/bin/python3 (read only: nothing is installed into it).
 	@/usr/bin/python3 tests/scripts/export_freecad.py --check >/dev/null 2>&1 \

@@ -255,6 +255,10 @@ fn snakemake_tiled_run_matches_whole_file_retries_and_make() {
         assert_eq!(r["tiles"].as_u64().unwrap() as usize, tiles.len());
         eprintln!("tileset: {r}");
     }
+    if let Some(r) = common::tileset_read_by_py3dtiles(&out.join("tileset.json")) {
+        assert_eq!(r["contents"].as_u64().unwrap() as usize, tiles.len(), "{r}");
+        eprintln!("py3dtiles: {r}");
+    }
 
     // 5. a second run does nothing
     let o = snakemake(work.path(), &config, &["-n"], &[]);

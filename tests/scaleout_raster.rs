@@ -175,6 +175,10 @@ fn snakemake_raster_tiles_keep_the_tolerance_and_meet_at_the_seams() {
     } else if common::in_ci() {
         panic!("node (Khronos glTF validator) or cs2cs missing in CI");
     }
+    if let Some(r) = common::tileset_read_by_py3dtiles(&out.join("tileset.json")) {
+        assert_eq!(r["contents"].as_u64().unwrap() as usize, ids.len(), "{r}");
+        eprintln!("py3dtiles: {r}");
+    }
 
     // 6. nothing left to do; a deleted tile glb is made again with the tileset, nothing else
     let first = files(&out);

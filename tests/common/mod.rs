@@ -172,3 +172,19 @@ pub fn snakemake_dry_run_jobs(o: &Output) -> std::collections::BTreeSet<(String,
     }
     jobs
 }
+
+/// The tileset read back by py3dtiles (tests/scripts/tileset_py3dtiles.py): its JSON report, or
+/// `None` (a printed skip) where py3dtiles is not installed outside CI. Panics on a report with
+/// errors, or in CI without py3dtiles.
+pub fn tileset_read_by_py3dtiles(tileset: &Path) -> Option<serde_json::Value> {
+    let have = python().args(["-c", "import py3dtiles.tileset"]).output().is_ok_and(|o| o.status.success());
+    if !have {
+        assert!(!in_ci(), "py3dtiles missing in CI (make setup installs it)");
+        eprintln!("SKIP: py3dtiles not installed");
+        return None;
+    }
+    let o = python().arg(repo_root().join("tests/scripts/tileset_py3dtiles.py")).arg(tileset).output().expect("python runs");
+    let text = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(o.status.success(), "py3dtiles on {}: {text}{}", tileset.display(), String::from_utf8_lossy(&o.stderr));
+    Some(serde_json::from_str(text.lines().last().unwrap_or("")).expect("one JSON line"))
+}
