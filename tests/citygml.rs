@@ -17,19 +17,7 @@ fn citygml_root() -> Option<PathBuf> {
 /// Every `.gml` under fixtures/citygml, sorted.
 fn all_fixtures() -> Vec<PathBuf> {
     let Some(root) = citygml_root() else { return Vec::new() };
-    let mut out = Vec::new();
-    let mut dirs = vec![root];
-    while let Some(d) = dirs.pop() {
-        for e in std::fs::read_dir(&d).unwrap() {
-            let p = e.unwrap().path();
-            if p.is_dir() {
-                dirs.push(p);
-            } else if p.extension().is_some_and(|x| x == "gml") {
-                out.push(p);
-            }
-        }
-    }
-    out.sort();
+    let out = common::gml_files(&root);
     assert!(out.len() >= 60, "expected the 66 CityGML fixtures, found {}", out.len());
     out
 }

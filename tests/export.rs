@@ -384,19 +384,7 @@ fn bad_input_and_usage_errors() {
 #[test]
 fn every_fixture_exports_to_a_valid_glb() {
     let Some(root) = common::fixture("citygml") else { return };
-    let mut files = Vec::new();
-    let mut stack = vec![root];
-    while let Some(d) = stack.pop() {
-        for e in std::fs::read_dir(&d).unwrap() {
-            let p = e.unwrap().path();
-            if p.is_dir() {
-                stack.push(p);
-            } else if p.extension().is_some_and(|x| x == "gml") {
-                files.push(p);
-            }
-        }
-    }
-    files.sort();
+    let files = common::gml_files(&root);
     assert!(files.len() >= 60, "{} fixtures", files.len());
     let validate = validator_ok();
     let dir = common::tempdir();

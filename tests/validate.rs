@@ -32,23 +32,6 @@ fn codes(report: &Value) -> BTreeSet<u64> {
     report["geometry"]["findings"].as_array().unwrap().iter().map(|f| f["code"].as_u64().unwrap()).collect()
 }
 
-fn all_gml(dir: &Path) -> Vec<PathBuf> {
-    let mut out = Vec::new();
-    let mut stack = vec![dir.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        for e in std::fs::read_dir(&d).unwrap() {
-            let p = e.unwrap().path();
-            if p.is_dir() {
-                stack.push(p);
-            } else if p.extension().is_some_and(|x| x == "gml") {
-                out.push(p);
-            }
-        }
-    }
-    out.sort();
-    out
-}
-
 /// CityGML version from the namespace bound in the first 20 kB (independent of geofit's sniffing).
 fn version_of(bytes: &[u8]) -> &'static str {
     let head = String::from_utf8_lossy(&bytes[..bytes.len().min(20000)]);
@@ -95,7 +78,7 @@ fn xsd_agrees_with_xmllint_on_every_fixture() {
     if !common::tool("xmllint") {
         return;
     }
-    let files = all_gml(&dir);
+    let files = common::gml_files(&dir);
     assert!(files.len() >= 60, "expected the whole fixture set, found {}", files.len());
     let mut invalid = 0;
     for f in &files {
@@ -218,7 +201,7 @@ fn expected_code(name: &str) -> u64 {
 fn qie_invalid_files_report_their_code_and_nothing_else() {
     let Some(dir) = common::fixture("citygml/qie") else { return };
     let mut n = 0;
-    for f in all_gml(&dir) {
+    for f in common::gml_files(&dir) {
         let name = f.file_name().unwrap().to_str().unwrap().to_string();
         if !name.starts_with('i') {
             continue;
@@ -236,7 +219,7 @@ fn qie_invalid_files_report_their_code_and_nothing_else() {
 fn qie_valid_files_report_nothing() {
     let Some(dir) = common::fixture("citygml/qie") else { return };
     let mut n = 0;
-    for f in all_gml(&dir) {
+    for f in common::gml_files(&dir) {
         let name = f.file_name().unwrap().to_str().unwrap().to_string();
         if !name.starts_with('v') {
             continue;
@@ -694,7 +677,7 @@ fn summary_counts(summary: &Value) -> Value {
 #[test]
 fn directory_run_equals_the_single_file_runs_with_xsd() {
     let (Some(dir), Some(_)) = (common::fixture("citygml"), shared_xsd_dir()) else { return };
-    let files = all_gml(&dir);
+    let files = common::gml_files(&dir);
     assert!(files.len() >= 60, "the whole fixture set, found {}", files.len());
     let (code, lines, summary, stderr) = validate_lines(&[dir.to_str().unwrap()], &[]);
     assert_eq!(lines.len(), files.len(), "one object per file; stderr: {stderr}");
@@ -719,7 +702,7 @@ fn text_run_is_the_concatenation_of_single_file_texts_then_a_summary() {
     let out = String::from_utf8(o.stdout).unwrap();
     let (body, last) = out.trim_end().rsplit_once('\n').unwrap();
     let mut want = String::new();
-    let files = all_gml(&dir);
+    let files = common::gml_files(&dir);
     let (mut valid, mut invalid) = (0, 0);
     for f in &files {
         let s = common::run(&["-q", "validate", f.to_str().unwrap()], None);
@@ -785,7 +768,7 @@ fn result_order_does_not_depend_on_the_threads() {
 fn quoted_glob_patterns_and_stdin_among_files() {
     let Some(dir) = common::fixture("citygml/qie") else { return };
     // the pattern's matches, listed here independently
-    let mut want: Vec<PathBuf> = all_gml(&dir)
+    let mut want: Vec<PathBuf> = common::gml_files(&dir)
         .into_iter()
         .filter(|p| {
             let n = p.file_name().unwrap().to_str().unwrap();

@@ -134,6 +134,25 @@ pub fn rust_sources(dir: &Path) -> Vec<PathBuf> {
     out
 }
 
+/// Every `.gml` file below `dir`, recursively, sorted (the fixture sweeps of citygml, export and
+/// validate go through the same list).
+pub fn gml_files(dir: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    let mut dirs = vec![dir.to_path_buf()];
+    while let Some(d) = dirs.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                dirs.push(p);
+            } else if p.extension().is_some_and(|x| x == "gml") {
+                out.push(p);
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
 /// The subcommands `geofit --help` lists (without `help`), in its order.
 pub fn subcommands() -> Vec<String> {
     let o = run(&["--help"], None);

@@ -332,6 +332,23 @@ pub fn map_model(m: &Popa3d) -> Result<Mapped, ModelError> {
     let par: Vec<UnknownId> = m.parameters.iter().enumerate().map(|(i, q)| p.add_unknown(format!("parameter {i}"), q.value)).collect();
     let fp: Vec<[UnknownId; 3]> = m.fixed_points.iter().enumerate().map(|(i, f)| [0, 1, 2].map(|k| p.add_unknown(format!("fixedpoint {i} t{}", ["x", "y", "z"][k]), f.t[k]))).collect();
     let sq: Vec<[UnknownId; 4]> = m.setups.iter().enumerate().map(|(i, s)| [0, 1, 2, 3].map(|k| p.add_unknown(format!("setup {i} q{k}"), s.q[k]))).collect();
+    check_normal_references(m)?;
+    let net = Net { m, inc: Incidence::new(m), pd, par, fp, sq };
+    let node_points = plane_node_points(m, &net.inc);
+    let reference_points = reference_points_of(m, &node_points);
+    let mut mapping = Mapping { datum_param: datum_parameter_values(m), net, p, origins: Vec::new(), cond_obs: Vec::new(), reference_points };
+    for (i, ob) in m.observations.iter().enumerate() {
+        mapping.map_observation(i, ob)?;
+    }
+    mapping.add_levelled_restrictions()?;
+    let Mapping { net: Net { pd, par, fp, sq, .. }, p, origins, cond_obs, reference_points, .. } = mapping;
+    let object_unknowns: Vec<UnknownId> = pd.iter().chain(par.iter()).copied().collect();
+    Ok(Mapped { problem: p, object_unknowns, origins, cond_obs, reference_points, node_points, plane_d: pd, params: par, fixed: fp, setups: sq })
+}
+
+/// Planes and normals are indexed directly while mapping (normal vectors, reference points), so
+/// their references are checked before anything else.
+fn check_normal_references(m: &Popa3d) -> Result<(), ModelError> {
     for (i, pl) in m.planes.iter().enumerate() {
         if pl.normal.idx() >= m.normals.len() {
             return Err(ModelError::Reference { element: format!("plane {i}"), message: format!("references normal {}, which does not exist", pl.normal.0) });
@@ -344,12 +361,13 @@ pub fn map_model(m: &Popa3d) -> Result<Mapped, ModelError> {
             }
         }
     }
-    let net = Net { m, inc: Incidence::new(m), pd: pd.clone(), par: par.clone(), fp: fp.clone(), sq: sq.clone() };
-    let node_points = plane_node_points(m, &net.inc);
-    let reference_points = reference_points_of(m, &node_points);
-    // The document's soft-datum values of the normal parameters (citygml2popa3d writes them next to
-    // the plane ones): with them a datum observation of d becomes the observed plane's offset at
-    // the reference point, see the PlaneD arm below.
+    Ok(())
+}
+
+/// The document's soft-datum values of the normal parameters (citygml2popa3d writes them next to
+/// the plane ones): with them a datum observation of d becomes the observed plane's offset at
+/// the reference point, see [`Mapping::add_plane_offset`].
+fn datum_parameter_values(m: &Popa3d) -> Vec<Option<f64>> {
     let mut datum_param: Vec<Option<f64>> = vec![None; m.parameters.len()];
     for ob in &m.observations {
         if let (ObsOrigin::Datum, ObsKind::ParameterObs { unknown: pm::Unknown::Param(q), l }) = (ob.origin, &ob.kind) {
@@ -358,167 +376,209 @@ pub fn map_model(m: &Popa3d) -> Result<Mapped, ModelError> {
             }
         }
     }
-    let observed_normal = |q: pm::PlaneId| -> [f64; 3] {
-        let pl = m.plane(q);
-        let c = m.normal(pl.normal).comps;
-        std::array::from_fn(|k| {
-            let (par_id, sg) = c[k];
-            pl.sign.f64() * sg.f64() * datum_param[par_id.idx()].unwrap_or(m.parameter(par_id).value)
-        })
-    };
-    let object_unknowns: Vec<UnknownId> = pd.iter().chain(par.iter()).copied().collect();
-    let mut origins: Vec<ObsOrigin2> = Vec::new();
-    let mut cond_obs: Vec<usize> = Vec::new();
-    let add_obs = |p: &mut Problem, origins: &mut Vec<ObsOrigin2>, el: &str, i: usize, comp: &'static str, v: f64, s: f64| -> Result<crate::ObsId, ModelError> {
-        let o = p.add_observation(format!("{el}{}", if comp.is_empty() { String::new() } else { format!(" {comp}") }), v, s)?;
-        origins.push(ObsOrigin2 { obs: i, component: comp, class: None });
-        Ok(o)
-    };
-    for (i, ob) in m.observations.iter().enumerate() {
+    datum_param
+}
+
+/// The engine problem being built from a model's observations, with what each engine
+/// observation and condition came from.
+struct Mapping<'a> {
+    net: Net<'a>,
+    p: Problem,
+    origins: Vec<ObsOrigin2>,
+    cond_obs: Vec<usize>,
+    reference_points: Vec<[f64; 3]>,
+    datum_param: Vec<Option<f64>>,
+}
+
+impl Mapping<'_> {
+    /// Maps document observation `i`; every condition it adds is recorded as coming from `i`.
+    fn map_observation(&mut self, i: usize, ob: &pm::Observation) -> Result<(), ModelError> {
         let el = format!("observation {i} ({})", ob.kind.class_name());
-        let el = el.as_str();
-        let before = p.condition_count();
+        let before = self.p.condition_count();
+        self.map_kind(i, ob, &el)?;
+        for _ in before..self.p.condition_count() {
+            self.cond_obs.push(i);
+        }
+        Ok(())
+    }
+
+    fn map_kind(&mut self, i: usize, ob: &pm::Observation, el: &str) -> Result<(), ModelError> {
+        let (m, net) = (self.net.m, &self.net);
         match &ob.kind {
             ObsKind::DistanceFaceFace { a, b, l } => {
-                let (pa, pb) = (net.face_plane(*a, el)?, net.face_plane(*b, el)?);
-                let o = add_obs(&mut p, &mut origins, el, i, "", l.value, l.sigma)?;
-                p.add_condition(el, DistanceFaceFace, [net.plane_slots(pa), net.plane_slots(pb)].concat(), vec![o])?;
+                let x = [net.plane_slots(net.face_plane(*a, el)?), net.plane_slots(net.face_plane(*b, el)?)].concat();
+                self.add_measured(el, i, *l, DistanceFaceFace, x)
             }
             ObsKind::DistanceFaceEdge { a, b, l } => {
                 let pa = net.face_plane(*a, el)?;
                 let [j, k] = net.edge_planes(*b, el)?;
-                let o = add_obs(&mut p, &mut origins, el, i, "", l.value, l.sigma)?;
-                p.add_condition(el, DistanceFaceEdge, [net.plane_slots(pa), net.plane_slots(j), net.plane_slots(k)].concat(), vec![o])?;
+                let x = [net.plane_slots(pa), net.plane_slots(j), net.plane_slots(k)].concat();
+                self.add_measured(el, i, *l, DistanceFaceEdge, x)
             }
             ObsKind::DistanceFaceNode { a, b, l } => {
                 let pa = net.face_plane(*a, el)?;
                 let t = net.node_planes(*b, el)?;
-                let o = add_obs(&mut p, &mut origins, el, i, "", l.value, l.sigma)?;
                 let x = [net.plane_slots(pa), net.plane_slots(t[0]), net.plane_slots(t[1]), net.plane_slots(t[2])].concat();
-                p.add_condition(el, DistanceFaceNode, x, vec![o])?;
+                self.add_measured(el, i, *l, DistanceFaceNode, x)
             }
             ObsKind::DistanceEdgeEdge { a, b, l } => {
                 let (e1, e2) = (net.edge_planes(*a, el)?, net.edge_planes(*b, el)?);
-                let o = add_obs(&mut p, &mut origins, el, i, "", l.value, l.sigma)?;
                 let x = [e1, e2].iter().flat_map(|e| e.iter().flat_map(|&q| net.plane_slots(q))).collect();
-                p.add_condition(el, DistanceEdgeEdge, x, vec![o])?;
+                self.add_measured(el, i, *l, DistanceEdgeEdge, x)
             }
             ObsKind::DistanceEdgeNode { a, b, l } => {
                 let e = net.edge_planes(*a, el)?;
                 let t = net.node_planes(*b, el)?;
-                let o = add_obs(&mut p, &mut origins, el, i, "", l.value, l.sigma)?;
                 let x = e.iter().chain(t.iter()).flat_map(|&q| net.plane_slots(q)).collect();
-                p.add_condition(el, DistanceEdgeNode, x, vec![o])?;
+                self.add_measured(el, i, *l, DistanceEdgeNode, x)
             }
             ObsKind::DistanceNodeNode { a, b, l } => {
                 let (t1, t2) = (net.node_planes(*a, el)?, net.node_planes(*b, el)?);
-                let o = add_obs(&mut p, &mut origins, el, i, "", l.value, l.sigma)?;
                 let x = t1.iter().chain(t2.iter()).flat_map(|&q| net.plane_slots(q)).collect();
-                p.add_condition(el, DistanceNodeNode, x, vec![o])?;
+                self.add_measured(el, i, *l, DistanceNodeNode, x)
             }
-            ObsKind::PointOnFace { setup, hz, v, s, .. } | ObsKind::PointOnEdge { setup, hz, v, s, .. } | ObsKind::PointOnNode { setup, hz, v, s, .. } => {
-                let planes: Vec<pm::PlaneId> = match &ob.kind {
-                    ObsKind::PointOnFace { target, .. } => vec![net.face_plane(*target, el)?],
-                    ObsKind::PointOnEdge { target, .. } => net.edge_planes(*target, el)?.to_vec(),
-                    ObsKind::PointOnNode { target, .. } => net.node_planes(*target, el)?.to_vec(),
-                    _ => unreachable!(),
-                };
-                let ss = net.setup_slots(*setup, el)?;
-                let ih = m.setups[setup.idx()].instrument_height;
-                let ohz = add_obs(&mut p, &mut origins, el, i, "Hz", hz.value, hz.sigma)?;
-                let ov = add_obs(&mut p, &mut origins, el, i, "V", v.value, v.sigma)?;
-                let os = add_obs(&mut p, &mut origins, el, i, "s", s.value, s.sigma)?;
-                let class: &'static str = ob.kind.class_name();
-                for q in planes {
-                    p.add_condition(el, PointOnPlanePolar { ih, class }, [ss.clone(), net.plane_slots(q)].concat(), vec![ohz, ov, os])?;
-                }
-            }
+            ObsKind::PointOnFace { .. } | ObsKind::PointOnEdge { .. } | ObsKind::PointOnNode { .. } => self.add_polar(i, &ob.kind, el),
             ObsKind::ConstraintFaceFace { a, b, l } => {
                 let (pa, pb) = (net.face_plane(*a, el)?, net.face_plane(*b, el)?);
-                let o = add_obs(&mut p, &mut origins, el, i, "", l.value, l.sigma)?;
-                p.add_condition(el, ConstraintFaceFace, [net.plane_normal(pa), net.plane_normal(pb)].concat(), vec![o])?;
+                let x = [net.plane_normal(pa), net.plane_normal(pb)].concat();
+                self.add_measured(el, i, *l, ConstraintFaceFace, x)
             }
             ObsKind::ConstraintFaceEdge { a, b, l } => {
                 let pa = net.face_plane(*a, el)?;
                 let [j, k] = net.edge_planes(*b, el)?;
-                let o = add_obs(&mut p, &mut origins, el, i, "", l.value, l.sigma)?;
-                p.add_condition(el, ConstraintFaceEdge, [net.plane_normal(pa), net.plane_normal(j), net.plane_normal(k)].concat(), vec![o])?;
+                let x = [net.plane_normal(pa), net.plane_normal(j), net.plane_normal(k)].concat();
+                self.add_measured(el, i, *l, ConstraintFaceEdge, x)
             }
             ObsKind::ConstraintEdgeEdge { a, b, l } => {
                 let (e1, e2) = (net.edge_planes(*a, el)?, net.edge_planes(*b, el)?);
-                let o = add_obs(&mut p, &mut origins, el, i, "", l.value, l.sigma)?;
                 let x = e1.iter().chain(e2.iter()).flat_map(|&q| net.plane_normal(q)).collect();
-                p.add_condition(el, ConstraintEdgeEdge, x, vec![o])?;
+                self.add_measured(el, i, *l, ConstraintEdgeEdge, x)
             }
             ObsKind::RelativeDistancePlanePlane { lower, upper, l } => {
                 for q in [lower, upper] {
                     net.check::<()>("plane", q.idx(), m.planes.len(), el)?;
                 }
-                let o = add_obs(&mut p, &mut origins, el, i, "", l.value, l.sigma)?;
                 // d' = sign·d along the normal object's own direction (popa3d-model convention).
-                let x = vec![Slot { unknown: pd[lower.idx()], sign: m.plane(*lower).sign.f64() }, Slot { unknown: pd[upper.idx()], sign: m.plane(*upper).sign.f64() }];
-                p.add_condition(el, RelativeDistancePlanePlane, x, vec![o])?;
+                let x = vec![Slot { unknown: net.pd[lower.idx()], sign: m.plane(*lower).sign.f64() }, Slot { unknown: net.pd[upper.idx()], sign: m.plane(*upper).sign.f64() }];
+                self.add_measured(el, i, *l, RelativeDistancePlanePlane, x)
             }
             ObsKind::RelativeAngleNormalNormal { a, b, l } => {
                 for q in [a, b] {
                     net.check::<()>("normal", q.idx(), m.normals.len(), el)?;
                 }
-                let o = add_obs(&mut p, &mut origins, el, i, "", l.value, l.sigma)?;
-                p.add_condition(el, RelativeAngleNormalNormal, [net.normal_slots(*a, 1.0), net.normal_slots(*b, 1.0)].concat(), vec![o])?;
+                let x = [net.normal_slots(*a, 1.0), net.normal_slots(*b, 1.0)].concat();
+                self.add_measured(el, i, *l, RelativeAngleNormalNormal, x)
             }
             ObsKind::NormNV { normal, sigma } => {
                 net.check::<()>("normal", normal.idx(), m.normals.len(), el)?;
                 let x = net.normal_slots(*normal, 1.0);
                 match sigma {
-                    Some(s) => {
-                        let o = add_obs(&mut p, &mut origins, el, i, "", 1.0, *s)?;
-                        p.add_condition(el, NormNvObs, x, vec![o])?;
-                    }
-                    None => {
-                        p.add_restriction(el, NormNvRestriction, x)?;
-                    }
+                    Some(s) => self.add_measured(el, i, pm::Measured { value: 1.0, sigma: *s }, NormNvObs, x),
+                    None => self.add_restriction(el, NormNvRestriction, x),
                 }
             }
             ObsKind::NormQ { setup } => {
                 net.check::<()>("setup", setup.idx(), m.setups.len(), el)?;
-                p.add_restriction(el, NormQ, sq[setup.idx()].iter().map(|&u| u.into()).collect())?;
+                let x = net.sq[setup.idx()].iter().map(|&u| u.into()).collect();
+                self.add_restriction(el, NormQ, x)
             }
             ObsKind::ParameterFix { unknown, value } => {
                 let u = net.unknown(unknown, el)?;
-                p.add_restriction(el, FixTo(*value), vec![u.into()])?;
+                self.add_restriction(el, FixTo(*value), vec![u.into()])
             }
-            // A soft-datum identity observation of a plane distance in the document (origin
-            // "datum", as citygml2popa3d writes them) is taken as what it stands for, the plane
-            // where it was: l = d_obs − ⟨n_obs, c⟩ observes d − ⟨n, c⟩ at the plane's reference
-            // point c. The identity form would pivot the plane about the model origin whenever
-            // its normal rotates (spec §4.7: "these values depend on the datum").
             ObsKind::ParameterObs { unknown: pm::Unknown::PlaneD(q), l } if ob.origin == ObsOrigin::Datum && q.idx() < m.planes.len() => {
-                let c = reference_points[q.idx()];
-                let o = add_obs(&mut p, &mut origins, el, i, "", l.value - dot(observed_normal(*q), c), l.sigma)?;
-                if let Some(last) = origins.last_mut() {
-                    last.class = Some("PlaneOffsetObs");
-                }
-                p.add_condition(el, PlaneOffset { c }, net.plane_slots(*q), vec![o])?;
+                self.add_plane_offset(i, el, *q, *l)
             }
             ObsKind::ParameterObs { unknown, l } => {
                 let u = net.unknown(unknown, el)?;
-                let o = add_obs(&mut p, &mut origins, el, i, "", l.value, l.sigma)?;
-                p.add_condition(el, Identity, vec![u.into()], vec![o])?;
-            }
-        }
-        for _ in before..p.condition_count() {
-            cond_obs.push(i);
-        }
-    }
-    // Levelled instruments: q1 = q2 = 0 (T 3.37, spec P3/P8).
-    for (i, s) in m.setups.iter().enumerate() {
-        if s.levelled {
-            for k in [1usize, 2] {
-                p.add_restriction(format!("setup {i} levelled (q{k} = 0)"), Levelled, vec![sq[i][k].into()])?;
+                self.add_measured(el, i, *l, Identity, vec![u.into()])
             }
         }
     }
-    Ok(Mapped { problem: p, object_unknowns, origins, cond_obs, reference_points, node_points, plane_d: pd, params: par, fixed: fp, setups: sq })
+
+    /// One engine observation of document observation `i` (`comp` names the component of a
+    /// polar observation, empty otherwise).
+    fn add_obs(&mut self, el: &str, i: usize, comp: &'static str, l: pm::Measured) -> Result<crate::ObsId, ModelError> {
+        let o = self.p.add_observation(format!("{el}{}", if comp.is_empty() { String::new() } else { format!(" {comp}") }), l.value, l.sigma)?;
+        self.origins.push(ObsOrigin2 { obs: i, component: comp, class: None });
+        Ok(o)
+    }
+
+    /// A condition `equation(x, l)` on one measured value `l`.
+    fn add_measured<E: Equation>(&mut self, el: &str, i: usize, l: pm::Measured, equation: E, x: Vec<Slot>) -> Result<(), ModelError> {
+        let o = self.add_obs(el, i, "", l)?;
+        self.p.add_condition(el, equation, x, vec![o])?;
+        Ok(())
+    }
+
+    fn add_restriction<E: Equation>(&mut self, el: &str, equation: E, x: Vec<Slot>) -> Result<(), ModelError> {
+        self.p.add_restriction(el, equation, x)?;
+        Ok(())
+    }
+
+    /// A polar pointing (Hz, V, s from a set-up) at a face, edge or node: one condition per plane
+    /// of the target, all on the same three observations.
+    fn add_polar(&mut self, i: usize, kind: &ObsKind, el: &str) -> Result<(), ModelError> {
+        let net = &self.net;
+        let (setup, planes, hz, v, s): (&pm::SetupId, Vec<pm::PlaneId>, _, _, _) = match kind {
+            ObsKind::PointOnFace { setup, target, hz, v, s } => (setup, vec![net.face_plane(*target, el)?], hz, v, s),
+            ObsKind::PointOnEdge { setup, target, hz, v, s } => (setup, net.edge_planes(*target, el)?.to_vec(), hz, v, s),
+            ObsKind::PointOnNode { setup, target, hz, v, s } => (setup, net.node_planes(*target, el)?.to_vec(), hz, v, s),
+            _ => return Ok(()),
+        };
+        let ss = net.setup_slots(*setup, el)?;
+        let ih = net.m.setups[setup.idx()].instrument_height;
+        let plane_slots: Vec<Vec<Slot>> = planes.iter().map(|&q| net.plane_slots(q)).collect();
+        let ohz = self.add_obs(el, i, "Hz", *hz)?;
+        let ov = self.add_obs(el, i, "V", *v)?;
+        let os = self.add_obs(el, i, "s", *s)?;
+        let class: &'static str = kind.class_name();
+        for q in plane_slots {
+            self.p.add_condition(el, PointOnPlanePolar { ih, class }, [ss.clone(), q].concat(), vec![ohz, ov, os])?;
+        }
+        Ok(())
+    }
+
+    /// A soft-datum identity observation of a plane distance in the document (origin
+    /// "datum", as citygml2popa3d writes them) is taken as what it stands for, the plane
+    /// where it was: l = d_obs − ⟨n_obs, c⟩ observes d − ⟨n, c⟩ at the plane's reference
+    /// point c. The identity form would pivot the plane about the model origin whenever
+    /// its normal rotates (spec §4.7: "these values depend on the datum").
+    fn add_plane_offset(&mut self, i: usize, el: &str, q: pm::PlaneId, l: pm::Measured) -> Result<(), ModelError> {
+        let c = self.reference_points[q.idx()];
+        let value = l.value - dot(self.observed_normal(q), c);
+        let o = self.add_obs(el, i, "", pm::Measured { value, sigma: l.sigma })?;
+        if let Some(last) = self.origins.last_mut() {
+            last.class = Some("PlaneOffsetObs");
+        }
+        let x = self.net.plane_slots(q);
+        self.p.add_condition(el, PlaneOffset { c }, x, vec![o])?;
+        Ok(())
+    }
+
+    /// The plane's normal at the document's soft-datum parameter values (the current ones where
+    /// the document has none).
+    fn observed_normal(&self, q: pm::PlaneId) -> [f64; 3] {
+        let m = self.net.m;
+        let pl = m.plane(q);
+        let c = m.normal(pl.normal).comps;
+        std::array::from_fn(|k| {
+            let (par_id, sg) = c[k];
+            pl.sign.f64() * sg.f64() * self.datum_param[par_id.idx()].unwrap_or(m.parameter(par_id).value)
+        })
+    }
+
+    /// Levelled instruments: q1 = q2 = 0 (T 3.37, spec P3/P8).
+    fn add_levelled_restrictions(&mut self) -> Result<(), ModelError> {
+        for (i, s) in self.net.m.setups.iter().enumerate() {
+            if s.levelled {
+                for k in [1usize, 2] {
+                    self.p.add_restriction(format!("setup {i} levelled (q{k} = 0)"), Levelled, vec![self.net.sq[i][k].into()])?;
+                }
+            }
+        }
+        Ok(())
+    }
 }
 
 /// Starting values of every set-up by the spec's grid search (§4.4, P11) over its face pointings

@@ -1,5 +1,7 @@
 //! Acceptance tests of the generic Gauss–Helmert engine against independent truth.
 
+mod common;
+
 use adjust::equations::*;
 use adjust::fits::{fit_line_2d, fit_plane, PointOnPlane};
 use adjust::{adjust, AdjustError, Datum, Equation, ObsId, Options, Problem, Scalar, Slot, UnknownId};
@@ -207,14 +209,7 @@ fn survey(seed: u64, blunder: Option<(bool, f64)>) -> Survey {
     let mut pointings = Vec::new();
     let mut raw = Vec::new();
     for (k, i, pt) in targets {
-        let dw = [pt[0] - tt[0], pt[1] - tt[1], pt[2] - tt[2] - ih];
-        let xl = [0, 1, 2].map(|c| r[0][c] * dw[0] + r[1][c] * dw[1] + r[2][c] * dw[2]);
-        let s = (xl[0] * xl[0] + xl[1] * xl[1] + xl[2] * xl[2]).sqrt();
-        let mut hz = xl[0].atan2(xl[1]) / GON;
-        if hz < 0.0 {
-            hz += 400.0;
-        }
-        let v = (xl[2] / s).acos() / GON;
+        let (hz, v, s) = common::polar_reading(&r, tt, ih, pt);
         let (hz, v, s) = (hz + g(0.0005, &mut rng), v + g(0.0005, &mut rng), s + g(0.002, &mut rng));
         let n = normals_true[k];
         pointings.push(Pointing { hz_gon: hz, v_gon: v, s, planes: vec![(n, sketch[k][i])] });

@@ -1,6 +1,8 @@
 //! Polar pointings through the popa3d mapping: a total-station set-up on the project's OBJ sketch
 //! (fixtures/popa3d/rooms.obj), starting values from the spec's grid search (P11), a levelled
 //! instrument (P3/P8: q1 = q2 = 0), pointings simulated from the sketch geometry.
+mod common;
+
 use adjust::equations::{rotation, GON};
 use adjust::popa3d::{adjust_model, ModelOptions};
 use normalize::conditions::{sketch_priors, Ranges, SketchOptions};
@@ -39,14 +41,7 @@ fn levelled_setup_found_by_grid_search_and_adjusted() {
         let c = loops[0].iter().fold([0.0; 3], |a, nd| [a[0] + pos[nd.idx()][0], a[1] + pos[nd.idx()][1], a[2] + pos[nd.idx()][2]]);
         let k = loops[0].len() as f64;
         let p = [c[0] / k, c[1] / k, c[2] / k];
-        let dw = [p[0] - t[0], p[1] - t[1], p[2] - t[2] - ih];
-        let xl = [0, 1, 2].map(|c| r[0][c] * dw[0] + r[1][c] * dw[1] + r[2][c] * dw[2]);
-        let s = (xl[0] * xl[0] + xl[1] * xl[1] + xl[2] * xl[2]).sqrt();
-        let mut hz = xl[0].atan2(xl[1]) / GON;
-        if hz < 0.0 {
-            hz += 400.0;
-        }
-        let v = (xl[2] / s).acos() / GON;
+        let (hz, v, s) = common::polar_reading(&r, t, ih, p);
         m.add_observation(Observation::new(
             ObsKind::PointOnFace { setup: su, target: FaceId::from(f), hz: Measured::new(hz, 0.0005), v: Measured::new(v, 0.0005), s: Measured::new(s, 0.002) },
             ObsOrigin::Measured,

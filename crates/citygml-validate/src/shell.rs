@@ -130,242 +130,297 @@ pub fn check_shell(polys: &[PolygonInput], opts: &Options) -> (Vec<Issue>, Optio
     }
 }
 
+/// The shell checks in val3dity's order, each returning early so that one defect is reported
+/// under the code val3dity gives it, not also under the codes it causes further down.
 fn shell_topology_and_geometry(mesh: &ShellMesh, opts: &Options) -> Vec<Issue> {
-    let tris = &mesh.triangles;
-    let tp = &mesh.triangle_polygon;
-    // edge uses: undirected key -> (triangle, runs from low to high id)
-    let mut edges: BTreeMap<(u32, u32), Vec<(usize, bool)>> = BTreeMap::new();
-    for (ti, t) in tris.iter().enumerate() {
+    let edges = edge_uses(&mesh.triangles);
+    let issues = non_manifold_edges(mesh, &edges);
+    if !issues.is_empty() {
+        return issues;
+    }
+    let issues = faces_meeting_polygon_insides(mesh, &edges);
+    if !issues.is_empty() {
+        return issues;
+    }
+    if edges.values().any(|u| u.len() == 2 && u[0].1 == u[1].1) {
+        return orientation_issues(mesh, &edges);
+    }
+    let vertices = non_manifold_vertices(&mesh.triangles);
+    if !vertices.is_empty() {
+        // faces crossing at the vertex are the cause; report that (306) instead
+        let si = self_intersections(mesh, opts);
+        if !si.is_empty() {
+            return si;
+        }
+        return vertices.iter().map(|v| non_manifold_vertex_issue(mesh, *v)).collect();
+    }
+    if let Some(issue) = separate_parts(mesh) {
+        return vec![issue];
+    }
+    let issues = hole_issues(mesh, &edges);
+    if !issues.is_empty() {
+        return issues;
+    }
+    self_intersections(mesh, opts)
+}
+
+/// Each undirected edge of the triangles → its uses: (triangle, runs from the lower to the higher
+/// vertex id). Two uses in opposite directions are a manifold, consistently oriented edge.
+type EdgeUses = BTreeMap<(u32, u32), Vec<(usize, bool)>>;
+
+fn edge_uses(triangles: &[[u32; 3]]) -> EdgeUses {
+    let mut edges = EdgeUses::new();
+    for (ti, t) in triangles.iter().enumerate() {
         for k in 0..3 {
             let (a, b) = (t[k], t[(k + 1) % 3]);
             edges.entry((a.min(b), a.max(b))).or_default().push((ti, a < b));
         }
     }
-    let edge_str = |e: &(u32, u32)| format!("{}–{}", fmt_abs(&mesh.abs_point(e.0)), fmt_abs(&mesh.abs_point(e.1)));
-    // A triangulation edge inside a polygon shows up twice for that polygon (once per side).
-    let boundary_polys = |uses: &[(usize, bool)]| -> (Vec<usize>, Vec<usize>) {
-        let mut count: BTreeMap<usize, usize> = BTreeMap::new();
-        for u in uses {
-            *count.entry(tp[u.0]).or_default() += 1;
-        }
-        let inner = count.iter().filter(|(_, &c)| c >= 2).map(|(&p, _)| p).collect();
-        let bound = count.iter().filter(|(_, &c)| c == 1).map(|(&p, _)| p).collect();
-        (bound, inner)
-    };
-    // 303: non-manifold edges (a polygon edge shared by more than two polygons)
+    edges
+}
+
+fn edge_str(mesh: &ShellMesh, e: &(u32, u32)) -> String {
+    format!("{}–{}", fmt_abs(&mesh.abs_point(e.0)), fmt_abs(&mesh.abs_point(e.1)))
+}
+
+/// The polygons using an edge, split into (on their boundary, inside them): a triangulation edge
+/// inside a polygon shows up twice for that polygon (once per side).
+fn boundary_and_inner_polygons(mesh: &ShellMesh, uses: &[(usize, bool)]) -> (Vec<usize>, Vec<usize>) {
+    let mut count: BTreeMap<usize, usize> = BTreeMap::new();
+    for u in uses {
+        *count.entry(mesh.triangle_polygon[u.0]).or_default() += 1;
+    }
+    let inner = count.iter().filter(|(_, &c)| c >= 2).map(|(&p, _)| p).collect();
+    let bound = count.iter().filter(|(_, &c)| c == 1).map(|(&p, _)| p).collect();
+    (bound, inner)
+}
+
+/// 303: non-manifold edges (a polygon edge shared by more than two polygons).
+fn non_manifold_edges(mesh: &ShellMesh, edges: &EdgeUses) -> Vec<Issue> {
     let mut issues = Vec::new();
-    for (e, uses) in &edges {
-        if uses.len() > 2 {
-            let (bound, inner) = boundary_polys(uses);
-            if inner.is_empty() && bound.len() > 2 {
-                issues.push(shell_issue(
-                    ErrorCode::NonManifoldCase,
-                    Some(bound[0]),
-                    format!("edge {} is shared by {} polygons ({})", edge_str(e), bound.len(), list1(&bound)),
-                ));
+    for (e, uses) in edges.iter().filter(|(_, u)| u.len() > 2) {
+        let (bound, inner) = boundary_and_inner_polygons(mesh, uses);
+        if inner.is_empty() && bound.len() > 2 {
+            issues.push(shell_issue(
+                ErrorCode::NonManifoldCase,
+                Some(bound[0]),
+                format!("edge {} is shared by {} polygons ({})", edge_str(mesh, e), bound.len(), list1(&bound)),
+            ));
+        }
+    }
+    issues
+}
+
+/// 303: other polygons meet the inside of a polygon along one of its triangulation edges. The
+/// polygon is split there (a face on each side of the edge), so the edge has more than two
+/// incident faces (val3dity 304 NON_MANIFOLD_EDGE, "each edge of a shell should have exactly
+/// 2 incident polygons", reported as 303) and the faces around each of its end vertices form
+/// two fans (303 NON_MANIFOLD_VERTEX, "its incident polygons do not form one umbrella"). This
+/// is the pinched vertex of QIE i306_4, where an inner ring touches the outer ring: val3dity's
+/// halfedge builder cannot attach the third face to the edge and reports 303 while building
+/// the shell, before it tests for intersections (306).
+fn faces_meeting_polygon_insides(mesh: &ShellMesh, edges: &EdgeUses) -> Vec<Issue> {
+    let mut issues = Vec::new();
+    for (e, uses) in edges.iter().filter(|(_, u)| u.len() > 2) {
+        let (bound, inner) = boundary_and_inner_polygons(mesh, uses);
+        if let (Some(&a), Some(&b)) = (inner.first(), bound.first().or(inner.get(1))) {
+            issues.push(shell_issue(
+                ErrorCode::NonManifoldCase,
+                Some(a.min(b)),
+                format!(
+                    "non-manifold vertices at {} and {}: polygon #{} meets the inside of polygon #{} along the edge between them, \
+                     so the faces around each form two fans",
+                    fmt_abs(&mesh.abs_point(e.0)),
+                    fmt_abs(&mesh.abs_point(e.1)),
+                    b + 1,
+                    a + 1,
+                ),
+            ));
+        }
+    }
+    issues
+}
+
+/// 307: orientation, by propagating relative flips over shared edges. In each connected group of
+/// polygons the smaller side (the flipped ones, on a tie) is reported as the wrong one.
+fn orientation_issues(mesh: &ShellMesh, edges: &EdgeUses) -> Vec<Issue> {
+    let adj = flip_adjacency(mesh, edges);
+    let mut label: Vec<Option<bool>> = vec![None; adj.len()];
+    let mut issues = Vec::new();
+    for start in 0..adj.len() {
+        if label[start].is_some() {
+            continue;
+        }
+        let comp = label_flips_from(start, &adj, &mut label);
+        let flipped: Vec<usize> = comp.iter().copied().filter(|&p| label[p] == Some(true)).collect();
+        let kept = comp.len() - flipped.len();
+        let wrong: Vec<usize> =
+            if flipped.len() <= kept { flipped } else { comp.iter().copied().filter(|&p| label[p] == Some(false)).collect() };
+        for p in wrong {
+            issues.push(shell_issue(ErrorCode::PolygonWrongOrientation, Some(p), "polygon is oriented opposite to its neighbours".into()));
+        }
+    }
+    if issues.is_empty() {
+        issues.push(shell_issue(ErrorCode::PolygonWrongOrientation, None, "faces use an edge in the same direction".into()));
+    }
+    issues
+}
+
+/// Polygon → (neighbour over a manifold edge, whether the two use that edge in the same direction).
+fn flip_adjacency(mesh: &ShellMesh, edges: &EdgeUses) -> Vec<Vec<(usize, bool)>> {
+    let tp = &mesh.triangle_polygon;
+    let np = tp.iter().max().map_or(0, |m| m + 1);
+    let mut adj: Vec<Vec<(usize, bool)>> = vec![Vec::new(); np];
+    for u in edges.values().filter(|u| u.len() == 2) {
+        let (pa, pb) = (tp[u[0].0], tp[u[1].0]);
+        if pa != pb {
+            let flip = u[0].1 == u[1].1;
+            adj[pa].push((pb, flip));
+            adj[pb].push((pa, flip));
+        }
+    }
+    adj
+}
+
+/// Labels the polygons reachable from `start` flipped (true) or not relative to `start`; returns
+/// them in the order they were reached.
+fn label_flips_from(start: usize, adj: &[Vec<(usize, bool)>], label: &mut [Option<bool>]) -> Vec<usize> {
+    let mut comp = vec![start];
+    label[start] = Some(false);
+    let mut stack = vec![start];
+    while let Some(p) = stack.pop() {
+        let lp = label[p] == Some(true);
+        for &(q, flip) in &adj[p] {
+            if label[q].is_none() {
+                label[q] = Some(lp ^ flip);
+                comp.push(q);
+                stack.push(q);
             }
         }
     }
-    if !issues.is_empty() {
-        return issues;
-    }
-    // 303: other polygons meet the inside of a polygon along one of its triangulation edges. The
-    // polygon is split there (a face on each side of the edge), so the edge has more than two
-    // incident faces (val3dity 304 NON_MANIFOLD_EDGE, "each edge of a shell should have exactly
-    // 2 incident polygons", reported as 303) and the faces around each of its end vertices form
-    // two fans (303 NON_MANIFOLD_VERTEX, "its incident polygons do not form one umbrella"). This
-    // is the pinched vertex of QIE i306_4, where an inner ring touches the outer ring: val3dity's
-    // halfedge builder cannot attach the third face to the edge and reports 303 while building
-    // the shell, before it tests for intersections (306).
-    for (e, uses) in &edges {
-        if uses.len() > 2 {
-            let (bound, inner) = boundary_polys(uses);
-            if let (Some(&a), Some(&b)) = (inner.first(), bound.first().or(inner.get(1))) {
-                issues.push(shell_issue(
-                    ErrorCode::NonManifoldCase,
-                    Some(a.min(b)),
-                    format!(
-                        "non-manifold vertices at {} and {}: polygon #{} meets the inside of polygon #{} along the edge between them, \
-                         so the faces around each form two fans",
-                        fmt_abs(&mesh.abs_point(e.0)),
-                        fmt_abs(&mesh.abs_point(e.1)),
-                        b + 1,
-                        a + 1,
-                    ),
-                ));
-            }
-        }
-    }
-    if !issues.is_empty() {
-        return issues;
-    }
-    // 307: orientation, by propagating relative flips over shared edges
-    if edges.values().any(|u| u.len() == 2 && u[0].1 == u[1].1) {
-        let np = tp.iter().max().map_or(0, |m| m + 1);
-        let mut adj: Vec<Vec<(usize, bool)>> = vec![Vec::new(); np];
-        for u in edges.values() {
-            if u.len() == 2 {
-                let (pa, pb) = (tp[u[0].0], tp[u[1].0]);
-                if pa != pb {
-                    let flip = u[0].1 == u[1].1;
-                    adj[pa].push((pb, flip));
-                    adj[pb].push((pa, flip));
-                }
-            }
-        }
-        let mut label: Vec<Option<bool>> = vec![None; np];
-        for start in 0..np {
-            if label[start].is_some() {
-                continue;
-            }
-            let mut comp = vec![start];
-            label[start] = Some(false);
-            let mut stack = vec![start];
-            while let Some(p) = stack.pop() {
-                for &(q, flip) in &adj[p] {
-                    if label[q].is_none() {
-                        label[q] = Some(label[p].unwrap() ^ flip);
-                        comp.push(q);
-                        stack.push(q);
-                    }
-                }
-            }
-            let flipped: Vec<usize> = comp.iter().copied().filter(|&p| label[p] == Some(true)).collect();
-            let kept = comp.len() - flipped.len();
-            let wrong: Vec<usize> = if flipped.len() <= kept {
-                flipped
-            } else {
-                comp.iter().copied().filter(|&p| label[p] == Some(false)).collect()
-            };
-            for p in wrong {
-                issues.push(shell_issue(
-                    ErrorCode::PolygonWrongOrientation,
-                    Some(p),
-                    "polygon is oriented opposite to its neighbours".into(),
-                ));
-            }
-        }
-        if issues.is_empty() {
-            issues.push(shell_issue(ErrorCode::PolygonWrongOrientation, None, "faces use an edge in the same direction".into()));
-        }
-        return issues;
-    }
-    // vertex fans: faces around a vertex connected through the edges at that vertex
+    comp
+}
+
+/// Vertices whose faces form several fans, at least one of them closed, sorted. Faces around a
+/// vertex are one fan when connected through the edges at that vertex.
+fn non_manifold_vertices(triangles: &[[u32; 3]]) -> Vec<u32> {
     let mut corners: HashMap<u32, Vec<(u32, u32)>> = HashMap::new();
-    for t in tris {
+    for t in triangles {
         for k in 0..3 {
             corners.entry(t[k]).or_default().push((t[(k + 1) % 3], t[(k + 2) % 3]));
         }
     }
-    let mut nonmanifold_vertices: Vec<u32> = Vec::new();
-    for (v, cs) in &corners {
-        let mut d = Dsu::new(cs.len());
-        let mut by_nb: HashMap<u32, usize> = HashMap::new();
-        for (ci, (a, b)) in cs.iter().enumerate() {
-            for nb in [a, b] {
-                if let Some(&other) = by_nb.get(nb) {
-                    d.union(ci, other);
-                } else {
-                    by_nb.insert(*nb, ci);
-                }
+    let mut vertices: Vec<u32> = corners.iter().filter(|(_, cs)| has_closed_fan_among_several(cs)).map(|(v, _)| *v).collect();
+    vertices.sort_unstable();
+    vertices
+}
+
+/// A fan is closed when each of its edges at the vertex is used by two of its corners. Several
+/// fans with at least one closed is a non-manifold vertex (val3dity cannot attach a face to a
+/// closed vertex umbrella); several open fans is a hole or a T-junction (302).
+fn has_closed_fan_among_several(corners: &[(u32, u32)]) -> bool {
+    let mut d = Dsu::new(corners.len());
+    let mut by_nb: HashMap<u32, usize> = HashMap::new();
+    for (ci, (a, b)) in corners.iter().enumerate() {
+        for nb in [a, b] {
+            if let Some(&other) = by_nb.get(nb) {
+                d.union(ci, other);
+            } else {
+                by_nb.insert(*nb, ci);
             }
         }
-        // A fan is closed when each of its edges at `v` is used by two of its corners. Several
-        // fans with at least one closed is a non-manifold vertex (val3dity cannot attach a face to
-        // a closed vertex umbrella); several open fans is a hole or a T-junction (302).
-        let mut fans: HashMap<usize, HashMap<u32, usize>> = HashMap::new();
-        for (ci, (a, b)) in cs.iter().enumerate() {
-            let r = d.find(ci);
-            let m = fans.entry(r).or_default();
-            *m.entry(*a).or_default() += 1;
-            *m.entry(*b).or_default() += 1;
-        }
-        if fans.len() > 1 && fans.values().any(|m| m.values().all(|&c| c == 2)) {
-            nonmanifold_vertices.push(*v);
-        }
     }
-    nonmanifold_vertices.sort_unstable();
-    if !nonmanifold_vertices.is_empty() {
-        let si = self_intersections(mesh, opts);
-        if !si.is_empty() {
-            return si;
-        }
-        return nonmanifold_vertices
-            .iter()
-            .map(|v| {
-                shell_issue(
-                    ErrorCode::NonManifoldCase,
-                    None,
-                    format!("non-manifold vertex at {}: its faces form more than one fan", fmt_abs(&mesh.abs_point(*v))),
-                )
-            })
-            .collect();
+    let mut fans: HashMap<usize, HashMap<u32, usize>> = HashMap::new();
+    for (ci, (a, b)) in corners.iter().enumerate() {
+        let m = fans.entry(d.find(ci)).or_default();
+        *m.entry(*a).or_default() += 1;
+        *m.entry(*b).or_default() += 1;
     }
-    // 305 MULTIPLE_CONNECTED_COMPONENTS (val3dity, "Error codes": polygons that are not connected
-    // to the rest of the shell). Connected means sharing a vertex, not only an edge: val3dity
-    // builds the shell as a halfedge structure on the snapped vertices and keeps its largest
-    // connected component, whose traversal goes around vertices, so two groups of faces that
-    // share vertices but no edge (real LoD2 solids whose two halves meet at T-junctions, where
-    // one side's edge is split in two on the other) are one component. Their edges used once
-    // are holes in it: 302 SHELL_NOT_CLOSED ("the shell must not have holes").
+    fans.len() > 1 && fans.values().any(|m| m.values().all(|&c| c == 2))
+}
+
+fn non_manifold_vertex_issue(mesh: &ShellMesh, v: u32) -> Issue {
+    shell_issue(
+        ErrorCode::NonManifoldCase,
+        None,
+        format!("non-manifold vertex at {}: its faces form more than one fan", fmt_abs(&mesh.abs_point(v))),
+    )
+}
+
+/// 305 MULTIPLE_CONNECTED_COMPONENTS (val3dity, "Error codes": polygons that are not connected
+/// to the rest of the shell). Connected means sharing a vertex, not only an edge: val3dity
+/// builds the shell as a halfedge structure on the snapped vertices and keeps its largest
+/// connected component, whose traversal goes around vertices, so two groups of faces that
+/// share vertices but no edge (real LoD2 solids whose two halves meet at T-junctions, where
+/// one side's edge is split in two on the other) are one component. Their edges used once
+/// are holes in it: 302 SHELL_NOT_CLOSED ("the shell must not have holes").
+fn separate_parts(mesh: &ShellMesh) -> Option<Issue> {
+    let tris = &mesh.triangles;
     let mut dv = Dsu::new(mesh.points.len());
     for t in tris {
         dv.union(t[0] as usize, t[1] as usize);
         dv.union(t[0] as usize, t[2] as usize);
     }
     let ncomp = tris.iter().map(|t| dv.find(t[0] as usize)).collect::<HashSet<_>>().len();
-    if ncomp > 1 {
-        return vec![shell_issue(
-            ErrorCode::MultipleConnectedComponents,
-            None,
-            format!("the faces form {ncomp} separate parts"),
-        )];
+    (ncomp > 1).then(|| shell_issue(ErrorCode::MultipleConnectedComponents, None, format!("the faces form {ncomp} separate parts")))
+}
+
+/// The number of parts the faces form through shared edges: more than one means the parts meet
+/// only at vertices.
+fn parts_through_edges(mesh: &ShellMesh, edges: &EdgeUses) -> usize {
+    let mut de = Dsu::new(mesh.triangles.len());
+    for u in edges.values().filter(|u| u.len() == 2) {
+        de.union(u[0].0, u[1].0);
     }
-    // parts through shared edges: more than one means the parts meet only at vertices
-    let mut de = Dsu::new(tris.len());
-    for u in edges.values() {
-        if u.len() == 2 {
-            de.union(u[0].0, u[1].0);
-        }
-    }
-    let edge_parts = (0..tris.len()).map(|i| de.find(i)).collect::<HashSet<_>>().len();
-    // 302: border edges (used by one face only), grouped into holes by shared vertices
+    (0..mesh.triangles.len()).map(|i| de.find(i)).collect::<HashSet<_>>().len()
+}
+
+/// 302: border edges (used by one face only), grouped into holes by shared vertices, one issue
+/// per hole in the order its first edge comes.
+fn hole_issues(mesh: &ShellMesh, edges: &EdgeUses) -> Vec<Issue> {
     let border: Vec<BorderEdge> = edges.iter().filter(|(_, u)| u.len() == 1).map(|(e, u)| (e, u[0].0)).collect();
-    if !border.is_empty() {
-        let mut dh = Dsu::new(mesh.points.len());
-        for (e, _) in &border {
-            dh.union(e.0 as usize, e.1 as usize);
-        }
-        let mut holes: BTreeMap<usize, Vec<BorderEdge>> = BTreeMap::new();
-        let mut order = Vec::new();
-        for b in &border {
-            let r = dh.find(b.0 .0 as usize);
-            holes
-                .entry(r)
-                .or_insert_with(|| {
-                    order.push(r);
-                    Vec::new()
-                })
-                .push(*b);
-        }
-        for r in order {
-            let hole = &holes[&r];
+    if border.is_empty() {
+        return Vec::new();
+    }
+    let edge_parts = parts_through_edges(mesh, edges);
+    holes(mesh, &border)
+        .iter()
+        .map(|hole| {
             let (e, ti) = hole[0];
-            let mut detail = format!("hole in the shell at edge {}", edge_str(e));
+            let mut detail = format!("hole in the shell at edge {}", edge_str(mesh, e));
             if edge_parts > 1 {
                 // the faces fall into parts that share vertices but no edge: name every edge
                 // used once, so each place where the parts fail to share an edge can be found
-                let all: Vec<String> = hole.iter().map(|(e, _)| edge_str(e)).collect();
+                let all: Vec<String> = hole.iter().map(|(e, _)| edge_str(mesh, e)).collect();
                 detail = format!(
                     "{detail}: the faces form {edge_parts} parts that share vertices but no edge; edges used once: {}",
                     all.join(", ")
                 );
             }
-            issues.push(shell_issue(ErrorCode::ShellNotClosed, Some(tp[ti]), detail));
-        }
-        return issues;
+            shell_issue(ErrorCode::ShellNotClosed, Some(mesh.triangle_polygon[ti]), detail)
+        })
+        .collect()
+}
+
+/// The border edges grouped by shared vertices, groups in the order of their first edge.
+fn holes<'a>(mesh: &ShellMesh, border: &[BorderEdge<'a>]) -> Vec<Vec<BorderEdge<'a>>> {
+    let mut dh = Dsu::new(mesh.points.len());
+    for (e, _) in border {
+        dh.union(e.0 as usize, e.1 as usize);
     }
-    self_intersections(mesh, opts)
+    let mut holes: BTreeMap<usize, Vec<BorderEdge>> = BTreeMap::new();
+    let mut order = Vec::new();
+    for b in border {
+        let r = dh.find(b.0 .0 as usize);
+        holes
+            .entry(r)
+            .or_insert_with(|| {
+                order.push(r);
+                Vec::new()
+            })
+            .push(*b);
+    }
+    order.into_iter().filter_map(|r| holes.remove(&r)).collect()
 }
 
 /// An edge used by one face only, with that face's triangle.

@@ -74,9 +74,14 @@ pub fn has_own_geometry(b: &CityObject) -> bool {
     own_objects(b).iter().any(|o| !o.geometries.is_empty())
 }
 
+/// How rejections and the per-building report name a building: its gml:id, else `Building@line:column`.
+pub fn building_id(b: &CityObject) -> String {
+    b.id.clone().unwrap_or_else(|| format!("Building@{}:{}", b.span.line, b.span.column))
+}
+
 /// Builds the soup of one building. `max_lod`: the highest LoD to use.
 pub fn building_soup(b: &CityObject, max_lod: u8) -> Result<Soup, Rejection> {
-    let bid = b.id.clone().unwrap_or_else(|| format!("Building@{}:{}", b.span.line, b.span.column));
+    let bid = building_id(b);
     let objs = own_objects(b);
     // Parent boundary surface of each opening.
     let mut parent_of: std::collections::HashMap<String, String> = std::collections::HashMap::new();

@@ -70,6 +70,22 @@ pub struct ConditionCounts {
     pub norm: usize,
 }
 
+impl ConditionCounts {
+    /// The counts of several objects added up (the summary line over all buildings).
+    pub fn sum<'a>(counts: impl IntoIterator<Item = &'a ConditionCounts>) -> ConditionCounts {
+        let mut cc = ConditionCounts::default();
+        for r in counts {
+            cc.parallelism += r.parallelism;
+            cc.coplanarity += r.coplanarity;
+            cc.orthogonality += r.orthogonality;
+            cc.wall_window += r.wall_window;
+            cc.identity += r.identity;
+            cc.norm += r.norm;
+        }
+        cc
+    }
+}
+
 /// Element ranges of one normalized object inside a model.
 #[derive(Debug, Clone, Default)]
 pub struct Ranges {
@@ -400,6 +416,18 @@ pub fn sketch_priors(m: &mut Popa3d, r: &Ranges, o: &SketchOptions) -> (usize, u
         m.add_observation(ob);
     }
     (nd, na, c.norm)
+}
+
+/// Adds measured distances one by one with [`add_distance`]; returns how many distances and how
+/// many induced constraints went in.
+pub fn add_distances(m: &mut Popa3d, distances: Vec<Observation>, sigma_induced: f64) -> (usize, usize) {
+    let (mut added, mut induced) = (0, 0);
+    for o in distances {
+        let ids = add_distance(m, o, sigma_induced);
+        added += 1;
+        induced += ids.len().saturating_sub(1);
+    }
+    (added, induced)
 }
 
 /// Adds a measured distance and, for face–face, face–edge and edge–edge distances, the induced

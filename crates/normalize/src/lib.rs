@@ -8,7 +8,8 @@
 //! 3. [`conditions`]: conditions from geometry and semantics (spec §8.2 step 5) and sketch priors
 //!    (spec §4.6).
 //!
-//! [`citygml`] and [`obj`] turn the input formats into [`soup::Soup`]s; [`counts`] reports the
+//! [`citygml`] and [`obj`] turn the input formats into [`soup::Soup`]s; [`convert`] runs the whole
+//! conversion of a CityGML document's buildings; [`counts`] reports the
 //! before/after counts the way the spec's Tables 7.1 and 7.4 do.
 //!
 //! # Examples
@@ -32,6 +33,7 @@
 
 pub mod citygml;
 pub mod conditions;
+pub mod convert;
 pub mod counts;
 pub mod geometry;
 pub mod obj;

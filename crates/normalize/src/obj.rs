@@ -71,3 +71,24 @@ pub fn read_sketch(bytes: &[u8], name: &str) -> Result<Soup, ObjError> {
     }
     Ok(soup)
 }
+
+/// The origin of a sketch's model. Sketches are drawn in local coordinates, so each axis keeps 0
+/// unless the sketch's centre lies more than 1 km from it; then it is the centre floored to metres,
+/// which keeps coordinates small for the adjustment without moving a local sketch.
+pub fn sketch_origin(soup: &Soup) -> [f64; 3] {
+    let mut origin = [0.0f64; 3];
+    let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+    for p in soup.polygons.iter().flat_map(|p| p.rings.iter().flatten()) {
+        for k in 0..3 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
+    }
+    for k in 0..3 {
+        let c = (lo[k] + hi[k]) / 2.0;
+        if c.abs() > 1000.0 {
+            origin[k] = c.floor();
+        }
+    }
+    origin
+}

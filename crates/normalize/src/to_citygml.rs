@@ -512,248 +512,345 @@ pub fn to_citygml_with(model: &Popa3d, tpl: &Template, opts: &BackOptions) -> Re
 /// only the polygons the model maps to (and XLinks to polygons it removes), so the edits of
 /// models of different buildings can be applied together or left out one building at a time.
 pub fn back_edits(model: &Popa3d, tpl: &Template, opts: &BackOptions) -> Result<(Vec<Edit>, BackReport), BackError> {
-    let (template, polys, refs, doc_order) = (tpl.bytes, &tpl.polys, &tpl.refs, &tpl.doc_order);
-    let decimals = opts.precision.or(tpl.decimals);
     let mut m = model.clone();
     let plane_cluster = snap_coplanar_planes(&mut m, opts.coplanar_tolerance);
     let inc = Incidence::new(&m);
-    let pos = node_positions(&m, &inc, polys)?;
-    let vmap = vertex_map(&m, polys)?;
-    // Polygons merged into another polygon's face by normalization: they belong to the model
-    // even when none of their vertices kept a node.
-    let absorbed: Vec<(String, Vec<String>)> = m
-        .faces
-        .iter()
-        .filter_map(|f| f.source.as_ref())
-        .filter(|s| !s.merged.is_empty() && polys.contains_key(&s.polygon))
-        .map(|s| (s.polygon.clone(), s.merged.iter().filter(|g| polys.contains_key(*g)).cloned().collect()))
-        .collect();
-    let mut mapped_set: HashSet<&String> = vmap.keys().map(|k| &k.0).collect();
-    // hosts too: a face can keep none of its polygon's own vertices (the middle one of three
-    // collinear wall segments)
-    mapped_set.extend(absorbed.iter().flat_map(|(h, g)| std::iter::once(h).chain(g.iter())));
-    let mapped: Vec<String> = doc_order.iter().filter(|id| mapped_set.contains(id)).cloned().collect();
+    let pos = node_positions(&m, &inc, &tpl.polys)?;
+    let vmap = vertex_map(&m, &tpl.polys)?;
+    let absorbed = absorbed_polygons(&m, &tpl.polys);
+    let mapped = mapped_polygons(tpl, &vmap, &absorbed);
     let mut report = BackReport { polygons_mapped: mapped.len(), ..Default::default() };
-    let new_rings = rewritten_rings(&mapped, polys, &vmap, &pos, opts, &mut report)?;
-
-    // 3./4. Degenerate polygons and merge groups.
-    let mut removed: HashSet<String> = HashSet::new();
-    for id in &mapped {
-        if new_rings[id][0].is_none() {
-            removed.insert(id.clone());
-            report.removed_degenerate.push(id.clone());
-        }
-    }
-    // face per polygon id
-    let mut face_of: HashMap<String, FaceId> = HashMap::new();
-    for (i, f) in m.faces.iter().enumerate() {
-        if let Some(s) = &f.source {
-            face_of.insert(s.polygon.clone(), FaceId::from(i));
-        }
-    }
-    let mut replaced: HashMap<String, String> = HashMap::new(); // kept id → new polygon text
-    let mut merged_away: HashMap<String, String> = HashMap::new(); // removed id → kept id
-    // Polygons that normalization merged into the face of another polygon (GA01 repair, spec
-    // §7.4: coplanar neighbours whose common edge left a node without three planes) have
-    // vertices in the model but no face of their own. Writing them vertex by vertex would drop
-    // them as degenerate and lose their surface; instead the host face is written whole into its
-    // own polygon and they are merged away into it.
-    // Polygons referenced (XLink) from outside their own building: removing or merging them
-    // would change another building, so they keep their own polygon.
-    let external: HashSet<&String> = mapped
-        .iter()
-        .filter(|id| {
-            let own = polys[*id].building.map(|b| b.span.bytes.start);
-            refs.get(*id).is_some_and(|rs| rs.iter().any(|r| r.building != own))
-        })
-        .collect();
-    // A polygon whose face has other nodes than its own vertices (it absorbed a neighbour, or
-    // lost collinear vertices to a neighbour's merge) is written as its face.
-    let mut nodes_of: HashMap<&String, BTreeSet<NodeId>> = HashMap::new();
-    for ((p, _, _), n) in &vmap {
-        nodes_of.entry(p).or_default().insert(*n);
-    }
-    let hosts: HashSet<&String> = absorbed.iter().map(|(h, _)| h).collect();
-    for id in &mapped {
-        let Some(&f) = face_of.get(id) else { continue };
-        let Some(loops) = m.face_loops(&inc, f, &pos) else { continue };
-        let on_face: BTreeSet<NodeId> = loops.iter().flatten().copied().collect();
-        if nodes_of.get(id) == Some(&on_face) && !hosts.contains(id) {
-            continue;
-        }
-        let mut rings: Vec<Vec<P3>> = loops.iter().map(|l| collapse(l.iter().map(|n| pos[n.idx()]).collect(), opts.collapse_tolerance)).collect();
-        if rings.is_empty() || rings[0].len() < 3 || newell_area(&rings[0]) < opts.area_tolerance {
-            continue;
-        }
-        let outer = rings.remove(0);
-        rings.retain(|r| r.len() >= 3 && newell_area(r) >= opts.area_tolerance);
-        replaced.insert(id.clone(), polygon_text(template, polys[id].poly, &outer, &rings, decimals));
-        removed.remove(id);
-        report.removed_degenerate.retain(|r| r != id);
-    }
-    // The polygons merged into a face go with their host (their surface may empty, openings move).
-    for (host, guests) in absorbed {
-        if guests.iter().any(|g| external.contains(g)) || !replaced.contains_key(&host) {
-            continue;
-        }
-        for g in &guests {
-            removed.remove(g);
-            merged_away.insert(g.clone(), host.clone());
-        }
-        report.removed_degenerate.retain(|r| !guests.contains(r));
-        report.merged.push((host, guests));
-    }
+    let new_rings = rewritten_rings(&mapped, &tpl.polys, &vmap, &pos, opts, &mut report)?;
+    let external = externally_referenced(tpl, &mapped);
+    let face_of = face_of_polygon(&m);
+    let back = Back { tpl, opts, decimals: opts.precision.or(tpl.decimals), m: &m, plane_cluster, inc, pos, face_of, mapped: &mapped, external };
+    let mut fate = Fate::default();
+    back.remove_degenerate(&new_rings, &mut fate, &mut report);
+    back.write_changed_faces_whole(&vmap, &absorbed, &mut fate, &mut report);
+    back.merge_absorbed(absorbed, &mut fate, &mut report);
     if opts.merge {
-        // canonical nodes by position
-        let canon = coincident_classes(&pos, opts.collapse_tolerance);
-        let mut groups: BTreeMap<(usize, String, String, i8, Option<usize>), Vec<String>> = BTreeMap::new();
-        for id in &mapped {
-            if removed.contains(id) || external.contains(id) || merged_away.contains_key(id) {
-                continue;
-            }
-            let (Some(&f), Some(sem)) = (face_of.get(id), polys[id].poly.semantic) else { continue };
-            let face = m.face(f);
-            let solid = ((face.back.0.min(face.front.0) as usize) << 32) | face.back.0.max(face.front.0) as usize;
-            let key = (plane_cluster[face.plane.idx()], sem.local_name().to_string(), String::new(), face.orientation.i8() * m.plane(face.plane).sign.i8(), Some(solid));
-            groups.entry(key).or_default().push(id.clone());
-        }
-        for (_, ids) in groups {
-            if ids.len() < 2 {
-                continue;
-            }
-            // Connected components by shared (canonical) edges.
-            let edges_of = |id: &String| -> Vec<(usize, usize)> {
-                let f = face_of[id];
-                let loops = m.face_loops(&inc, f, &pos).unwrap_or_default();
-                let mut e = Vec::new();
-                for l in loops {
-                    for k in 0..l.len() {
-                        let (a, b) = (canon[l[k].idx()], canon[l[(k + 1) % l.len()].idx()]);
-                        if a != b {
-                            e.push((a, b));
-                        }
-                    }
-                }
-                e
-            };
-            let es: Vec<Vec<(usize, usize)>> = ids.iter().map(edges_of).collect();
-            for (_, members) in edge_components(&es) {
-                if members.len() < 2 {
-                    continue;
-                }
-                let Some(mut loops) = union_boundary(&es, &members, &pos, opts) else { continue };
-                let imax = (0..loops.len()).max_by(|&a, &b| newell_area(&loops[a]).total_cmp(&newell_area(&loops[b]))).unwrap();
-                let outer = loops.remove(imax);
-                let kept = ids[members[0]].clone();
-                let t = polygon_text(template, polys[&kept].poly, &outer, &loops, decimals);
-                replaced.insert(kept.clone(), t);
-                let others: Vec<String> = members[1..].iter().map(|&k| ids[k].clone()).collect();
-                for o in &others {
-                    merged_away.insert(o.clone(), kept.clone());
-                    replaced.remove(o);
-                }
-                for target in merged_away.values_mut() {
-                    if others.contains(target) {
-                        *target = kept.clone();
-                    }
-                }
-                report.merged.push((kept, others));
-            }
-        }
+        back.merge_coplanar(&mut fate, &mut report);
     }
-
-    // Surfaces that lose every polygon (only a surface holding a polygon that went can).
-    let surface_polys = &tpl.surface_polys;
-    let gone = |id: &String| removed.contains(id) || merged_away.contains_key(id);
-    if let Some(id) = mapped.iter().find(|id| gone(id) && external.contains(id)) {
-        return Err(BackError::Geometry { element: format!("polygon `{id}` of {}", building_name(polys[id].building)), message: "would lose its area but is referenced (XLink) from another building".into() });
-    }
+    back.check_external_kept(&fate)?;
     let mut edits: Vec<Edit> = Vec::new();
-    let mut emptied: HashSet<usize> = HashSet::new();
-    let mut inserts: BTreeMap<usize, Vec<u8>> = BTreeMap::new();
-    let surf_keys: BTreeSet<usize> = mapped.iter().filter(|id| gone(id)).filter_map(|id| polys[id].surface.map(|s| s.span.bytes.start)).collect();
-    for k in &surf_keys {
-        let (s, ids) = &surface_polys[k];
-        if ids.iter().all(gone) && !citygml_io::SurfaceType::from_local_name(&s.kind).is_some_and(|t| t.is_opening()) {
-            let Some(r) = enclosing(template, s.span.bytes.start, s.span.bytes.end) else { continue };
-            emptied.insert(*k);
-            report.removed_surfaces.push(s.id.clone().unwrap_or_else(|| format!("{}@{}", s.kind, s.span.line)));
-            // Move openings to the surface keeping the merged polygon.
-            let target = ids.iter().find_map(|i| merged_away.get(i)).and_then(|kept| polys[kept].surface);
-            if let Some(t) = target {
-                let close = template[..t.span.bytes.end].iter().rposition(|&c| c == b'<').unwrap_or(t.span.bytes.end);
-                for c in &s.children {
-                    if let Some(or) = enclosing(template, c.span.bytes.start, c.span.bytes.end) {
-                        inserts.entry(close).or_default().extend_from_slice(&template[or.clone()]);
-                        report.moved_openings.push(c.id.clone().unwrap_or_default());
-                    }
-                }
-            }
-            edits.push(Edit { bytes: r, replacement: vec![] });
-        }
-    }
-    let in_emptied = |id: &String| polys[id].surface.is_some_and(|s| emptied.contains(&s.span.bytes.start));
-    for id in &mapped {
-        let p = polys[id].poly;
-        let id_refs = refs.get(id).cloned().unwrap_or_default();
-        if gone(id) {
-            if !in_emptied(id) {
-                let span = p.member_span.as_ref().map(|s| s.bytes.clone()).unwrap_or(p.span.bytes.clone());
-                edits.push(Edit { bytes: span, replacement: vec![] });
-            }
-            for r in id_refs {
-                edits.push(Edit { bytes: xlink_deletion(template, r.bytes), replacement: vec![] });
-            }
-            continue;
-        }
-        if in_emptied(id) {
-            continue;
-        }
-        if let Some(t) = replaced.get(id) {
-            edits.push(Edit { bytes: p.span.bytes.clone(), replacement: t.clone().into_bytes() });
-            continue;
-        }
-        let rings = &new_rings[id];
-        for (ri, r) in std::iter::once(&p.exterior).chain(p.interiors.iter()).enumerate() {
-            match &rings[ri] {
-                Some(pts) => {
-                    let text = RingText::of(template, r, decimals);
-                    let (xyz, src): (Vec<P3>, Vec<Option<usize>>) = pts.iter().map(|&(q, k)| (q, Some(k))).unzip();
-                    let dim = r.srs_dimension.max(3);
-                    if r.encoding == citygml_io::CoordEncoding::Pos && pts.len() + 1 != r.pos_spans.len() {
-                        let px = prefix_at(template, r.span.bytes.start);
-                        let t = citygml_io::writer::linear_ring_element(&px, r.id.as_deref(), &fmt_points(&xyz, &src, dim, &text), dim);
-                        edits.push(Edit { bytes: r.span.bytes.clone(), replacement: t.into_bytes() });
-                    } else {
-                        let mut closed = xyz.clone();
-                        closed.push(xyz[0]);
-                        let mut at = src.clone();
-                        at.push(src[0]);
-                        let e = citygml_io::writer::ring_edits_with(r, &closed, |i, c, v| text.value(at[i], c, v))
-                            .map_err(|e| BackError::Write(format!("polygon `{id}` ring {ri}: {e}")))?;
-                        edits.extend(e);
-                    }
-                }
-                None => {
-                    // A degenerate hole: drop it with its <gml:interior> wrapper.
-                    if let Some(w) = enclosing(template, r.span.bytes.start, r.span.bytes.end) {
-                        edits.push(Edit { bytes: w, replacement: vec![] });
-                    }
-                }
-            }
-        }
+    let (emptied, inserts) = back.surface_edits(&fate, &mut edits, &mut report);
+    for id in back.mapped {
+        back.polygon_edits(id, &fate, &emptied, &new_rings[id], &mut edits)?;
     }
     for (at, bytes) in inserts {
         edits.push(Edit { bytes: at..at, replacement: bytes });
     }
     for e in &mut edits {
         if e.replacement.is_empty() {
-            e.bytes = whole_lines(template, e.bytes.clone());
+            e.bytes = whole_lines(tpl.bytes, e.bytes.clone());
         }
     }
     report.removed_degenerate.sort();
     report.removed_surfaces.sort();
     Ok((edits, report))
+}
+
+/// Polygons merged into another polygon's face by normalization, as (host, merged ones present
+/// in the template): they belong to the model even when none of their vertices kept a node.
+fn absorbed_polygons(m: &Popa3d, polys: &HashMap<String, PolyInfo<'_>>) -> Vec<(String, Vec<String>)> {
+    m.faces
+        .iter()
+        .filter_map(|f| f.source.as_ref())
+        .filter(|s| !s.merged.is_empty() && polys.contains_key(&s.polygon))
+        .map(|s| (s.polygon.clone(), s.merged.iter().filter(|g| polys.contains_key(*g)).cloned().collect()))
+        .collect()
+}
+
+/// The template's polygons the model maps to, in document order: those with a vertex on a node,
+/// and hosts and merged polygons too (a face can keep none of its polygon's own vertices: the
+/// middle one of three collinear wall segments).
+fn mapped_polygons(tpl: &Template, vmap: &HashMap<(String, u32, u32), NodeId>, absorbed: &[(String, Vec<String>)]) -> Vec<String> {
+    let mut mapped_set: HashSet<&String> = vmap.keys().map(|k| &k.0).collect();
+    mapped_set.extend(absorbed.iter().flat_map(|(h, g)| std::iter::once(h).chain(g.iter())));
+    tpl.doc_order.iter().filter(|id| mapped_set.contains(id)).cloned().collect()
+}
+
+/// Polygons referenced (XLink) from outside their own building: removing or merging them would
+/// change another building, so they keep their own polygon.
+fn externally_referenced(tpl: &Template, mapped: &[String]) -> HashSet<String> {
+    mapped
+        .iter()
+        .filter(|id| {
+            let own = tpl.polys[*id].building.map(|b| b.span.bytes.start);
+            tpl.refs.get(*id).is_some_and(|rs| rs.iter().any(|r| r.building != own))
+        })
+        .cloned()
+        .collect()
+}
+
+/// The face of each source polygon id.
+fn face_of_polygon(m: &Popa3d) -> HashMap<String, FaceId> {
+    let mut face_of: HashMap<String, FaceId> = HashMap::new();
+    for (i, f) in m.faces.iter().enumerate() {
+        if let Some(s) = &f.source {
+            face_of.insert(s.polygon.clone(), FaceId::from(i));
+        }
+    }
+    face_of
+}
+
+/// What writing back decided for the mapped polygons other than rewriting their vertices.
+#[derive(Default)]
+struct Fate {
+    /// Degenerate: removed.
+    removed: HashSet<String>,
+    /// Kept id → its new polygon text (written whole).
+    replaced: HashMap<String, String>,
+    /// Removed id → the kept id it was merged into.
+    merged_away: HashMap<String, String>,
+}
+
+impl Fate {
+    fn gone(&self, id: &String) -> bool {
+        self.removed.contains(id) || self.merged_away.contains_key(id)
+    }
+}
+
+/// The adjusted model (coplanar planes snapped) with the template it is written into.
+struct Back<'t, 'a> {
+    tpl: &'t Template<'a>,
+    opts: &'t BackOptions,
+    decimals: Option<usize>,
+    m: &'t Popa3d,
+    plane_cluster: Vec<usize>,
+    inc: Incidence,
+    pos: Vec<P3>,
+    face_of: HashMap<String, FaceId>,
+    mapped: &'t [String],
+    external: HashSet<String>,
+}
+
+impl Back<'_, '_> {
+    /// 3. Polygons whose outer ring collapsed are removed.
+    fn remove_degenerate(&self, new_rings: &HashMap<String, Vec<Option<IndexedRing>>>, fate: &mut Fate, report: &mut BackReport) {
+        for id in self.mapped {
+            if new_rings[id][0].is_none() {
+                fate.removed.insert(id.clone());
+                report.removed_degenerate.push(id.clone());
+            }
+        }
+    }
+
+    /// A polygon whose face has other nodes than its own vertices (it absorbed a neighbour, or
+    /// lost collinear vertices to a neighbour's merge) is written as its face. Polygons that
+    /// normalization merged into the face of another polygon (GA01 repair, spec §7.4: coplanar
+    /// neighbours whose common edge left a node without three planes) have vertices in the model
+    /// but no face of their own. Writing them vertex by vertex would drop them as degenerate and
+    /// lose their surface; instead the host face is written whole into its own polygon and they
+    /// are merged away into it ([`Back::merge_absorbed`]).
+    fn write_changed_faces_whole(&self, vmap: &HashMap<(String, u32, u32), NodeId>, absorbed: &[(String, Vec<String>)], fate: &mut Fate, report: &mut BackReport) {
+        let mut nodes_of: HashMap<&String, BTreeSet<NodeId>> = HashMap::new();
+        for ((p, _, _), n) in vmap {
+            nodes_of.entry(p).or_default().insert(*n);
+        }
+        let hosts: HashSet<&String> = absorbed.iter().map(|(h, _)| h).collect();
+        for id in self.mapped {
+            let Some(&f) = self.face_of.get(id) else { continue };
+            let Some(loops) = self.m.face_loops(&self.inc, f, &self.pos) else { continue };
+            let on_face: BTreeSet<NodeId> = loops.iter().flatten().copied().collect();
+            if nodes_of.get(id) == Some(&on_face) && !hosts.contains(id) {
+                continue;
+            }
+            let mut rings: Vec<Vec<P3>> = loops.iter().map(|l| collapse(l.iter().map(|n| self.pos[n.idx()]).collect(), self.opts.collapse_tolerance)).collect();
+            if rings.is_empty() || rings[0].len() < 3 || newell_area(&rings[0]) < self.opts.area_tolerance {
+                continue;
+            }
+            let outer = rings.remove(0);
+            rings.retain(|r| r.len() >= 3 && newell_area(r) >= self.opts.area_tolerance);
+            fate.replaced.insert(id.clone(), polygon_text(self.tpl.bytes, self.tpl.polys[id].poly, &outer, &rings, self.decimals));
+            fate.removed.remove(id);
+            report.removed_degenerate.retain(|r| r != id);
+        }
+    }
+
+    /// The polygons merged into a face go with their host (their surface may empty, openings
+    /// move), unless one is referenced from another building or the host was not written whole.
+    fn merge_absorbed(&self, absorbed: Vec<(String, Vec<String>)>, fate: &mut Fate, report: &mut BackReport) {
+        for (host, guests) in absorbed {
+            if guests.iter().any(|g| self.external.contains(g)) || !fate.replaced.contains_key(&host) {
+                continue;
+            }
+            for g in &guests {
+                fate.removed.remove(g);
+                fate.merged_away.insert(g.clone(), host.clone());
+            }
+            report.removed_degenerate.retain(|r| !guests.contains(r));
+            report.merged.push((host, guests));
+        }
+    }
+
+    /// 4. Polygons on one plane cluster with the same semantic type, orientation and solids that
+    /// share edges become one polygon, written into the first of them.
+    fn merge_coplanar(&self, fate: &mut Fate, report: &mut BackReport) {
+        let canon = coincident_classes(&self.pos, self.opts.collapse_tolerance);
+        for (_, ids) in self.merge_groups(fate) {
+            if ids.len() < 2 {
+                continue;
+            }
+            let es: Vec<Vec<(usize, usize)>> = ids.iter().map(|id| self.canonical_edges(id, &canon)).collect();
+            for (_, members) in edge_components(&es) {
+                if members.len() < 2 {
+                    continue;
+                }
+                let Some(loops) = union_boundary(&es, &members, &self.pos, self.opts) else { continue };
+                self.merge_members(&ids, &members, loops, fate, report);
+            }
+        }
+    }
+
+    /// The polygons that may merge, keyed by (plane cluster, semantic type, orientation, solids).
+    fn merge_groups(&self, fate: &Fate) -> BTreeMap<(usize, String, String, i8, Option<usize>), Vec<String>> {
+        let (m, polys) = (self.m, &self.tpl.polys);
+        let mut groups: BTreeMap<(usize, String, String, i8, Option<usize>), Vec<String>> = BTreeMap::new();
+        for id in self.mapped {
+            if fate.removed.contains(id) || self.external.contains(id) || fate.merged_away.contains_key(id) {
+                continue;
+            }
+            let (Some(&f), Some(sem)) = (self.face_of.get(id), polys[id].poly.semantic) else { continue };
+            let face = m.face(f);
+            let solid = ((face.back.0.min(face.front.0) as usize) << 32) | face.back.0.max(face.front.0) as usize;
+            let key = (self.plane_cluster[face.plane.idx()], sem.local_name().to_string(), String::new(), face.orientation.i8() * m.plane(face.plane).sign.i8(), Some(solid));
+            groups.entry(key).or_default().push(id.clone());
+        }
+        groups
+    }
+
+    /// The directed edges of a polygon's face between canonical (coincident-merged) nodes.
+    fn canonical_edges(&self, id: &String, canon: &[usize]) -> Vec<(usize, usize)> {
+        let f = self.face_of[id];
+        let loops = self.m.face_loops(&self.inc, f, &self.pos).unwrap_or_default();
+        let mut e = Vec::new();
+        for l in loops {
+            for k in 0..l.len() {
+                let (a, b) = (canon[l[k].idx()], canon[l[(k + 1) % l.len()].idx()]);
+                if a != b {
+                    e.push((a, b));
+                }
+            }
+        }
+        e
+    }
+
+    /// Writes the union `loops` (largest first as outer ring) into the first member and merges
+    /// the others away into it, also where earlier merges pointed at them.
+    fn merge_members(&self, ids: &[String], members: &[usize], mut loops: Vec<Vec<P3>>, fate: &mut Fate, report: &mut BackReport) {
+        let imax = (0..loops.len()).max_by(|&a, &b| newell_area(&loops[a]).total_cmp(&newell_area(&loops[b]))).unwrap_or(0);
+        let outer = loops.remove(imax);
+        let kept = ids[members[0]].clone();
+        let t = polygon_text(self.tpl.bytes, self.tpl.polys[&kept].poly, &outer, &loops, self.decimals);
+        fate.replaced.insert(kept.clone(), t);
+        let others: Vec<String> = members[1..].iter().map(|&k| ids[k].clone()).collect();
+        for o in &others {
+            fate.merged_away.insert(o.clone(), kept.clone());
+            fate.replaced.remove(o);
+        }
+        for target in fate.merged_away.values_mut() {
+            if others.contains(target) {
+                *target = kept.clone();
+            }
+        }
+        report.merged.push((kept, others));
+    }
+
+    /// A polygon referenced from another building must keep its area.
+    fn check_external_kept(&self, fate: &Fate) -> Result<(), BackError> {
+        match self.mapped.iter().find(|id| fate.gone(id) && self.external.contains(*id)) {
+            Some(id) => Err(BackError::Geometry { element: format!("polygon `{id}` of {}", building_name(self.tpl.polys[id].building)), message: "would lose its area but is referenced (XLink) from another building".into() }),
+            None => Ok(()),
+        }
+    }
+
+    /// Surfaces that lose every polygon (only a surface holding a polygon that went can) are
+    /// removed, their openings moved to the surface keeping the merged polygon. Returns the
+    /// emptied surfaces (by start byte) and the bytes to insert (by position).
+    fn surface_edits(&self, fate: &Fate, edits: &mut Vec<Edit>, report: &mut BackReport) -> (HashSet<usize>, BTreeMap<usize, Vec<u8>>) {
+        let (template, polys) = (self.tpl.bytes, &self.tpl.polys);
+        let gone = |id: &String| fate.gone(id);
+        let mut emptied: HashSet<usize> = HashSet::new();
+        let mut inserts: BTreeMap<usize, Vec<u8>> = BTreeMap::new();
+        let surf_keys: BTreeSet<usize> = self.mapped.iter().filter(|id| gone(id)).filter_map(|id| polys[id].surface.map(|s| s.span.bytes.start)).collect();
+        for k in &surf_keys {
+            let (s, ids) = &self.tpl.surface_polys[k];
+            if ids.iter().all(gone) && !citygml_io::SurfaceType::from_local_name(&s.kind).is_some_and(|t| t.is_opening()) {
+                let Some(r) = enclosing(template, s.span.bytes.start, s.span.bytes.end) else { continue };
+                emptied.insert(*k);
+                report.removed_surfaces.push(s.id.clone().unwrap_or_else(|| format!("{}@{}", s.kind, s.span.line)));
+                // Move openings to the surface keeping the merged polygon.
+                let target = ids.iter().find_map(|i| fate.merged_away.get(i)).and_then(|kept| polys[kept].surface);
+                if let Some(t) = target {
+                    let close = template[..t.span.bytes.end].iter().rposition(|&c| c == b'<').unwrap_or(t.span.bytes.end);
+                    for c in &s.children {
+                        if let Some(or) = enclosing(template, c.span.bytes.start, c.span.bytes.end) {
+                            inserts.entry(close).or_default().extend_from_slice(&template[or.clone()]);
+                            report.moved_openings.push(c.id.clone().unwrap_or_default());
+                        }
+                    }
+                }
+                edits.push(Edit { bytes: r, replacement: vec![] });
+            }
+        }
+        (emptied, inserts)
+    }
+
+    /// The edits of one mapped polygon: removed (with the XLinks to it) when gone, nothing when
+    /// its surface went, its new text when written whole, else its rings rewritten.
+    fn polygon_edits(&self, id: &String, fate: &Fate, emptied: &HashSet<usize>, rings: &[Option<IndexedRing>], edits: &mut Vec<Edit>) -> Result<(), BackError> {
+        let p = self.tpl.polys[id].poly;
+        let in_emptied = self.tpl.polys[id].surface.is_some_and(|s| emptied.contains(&s.span.bytes.start));
+        if fate.gone(id) {
+            if !in_emptied {
+                let span = p.member_span.as_ref().map(|s| s.bytes.clone()).unwrap_or(p.span.bytes.clone());
+                edits.push(Edit { bytes: span, replacement: vec![] });
+            }
+            for r in self.tpl.refs.get(id).cloned().unwrap_or_default() {
+                edits.push(Edit { bytes: xlink_deletion(self.tpl.bytes, r.bytes), replacement: vec![] });
+            }
+            return Ok(());
+        }
+        if in_emptied {
+            return Ok(());
+        }
+        if let Some(t) = fate.replaced.get(id) {
+            edits.push(Edit { bytes: p.span.bytes.clone(), replacement: t.clone().into_bytes() });
+            return Ok(());
+        }
+        for (ri, r) in std::iter::once(&p.exterior).chain(p.interiors.iter()).enumerate() {
+            match &rings[ri] {
+                Some(pts) => edits.extend(self.ring_edits(id, ri, r, pts)?),
+                None => {
+                    // A degenerate hole: drop it with its <gml:interior> wrapper.
+                    if let Some(w) = enclosing(self.tpl.bytes, r.span.bytes.start, r.span.bytes.end) {
+                        edits.push(Edit { bytes: w, replacement: vec![] });
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// One ring's new coordinates: edited in place value by value, or the whole ring element
+    /// rewritten when a `gml:pos` ring changes its number of points.
+    fn ring_edits(&self, id: &str, ri: usize, r: &Ring, pts: &IndexedRing) -> Result<Vec<Edit>, BackError> {
+        let template = self.tpl.bytes;
+        let text = RingText::of(template, r, self.decimals);
+        let (xyz, src): (Vec<P3>, Vec<Option<usize>>) = pts.iter().map(|&(q, k)| (q, Some(k))).unzip();
+        let dim = r.srs_dimension.max(3);
+        if r.encoding == citygml_io::CoordEncoding::Pos && pts.len() + 1 != r.pos_spans.len() {
+            let px = prefix_at(template, r.span.bytes.start);
+            let t = citygml_io::writer::linear_ring_element(&px, r.id.as_deref(), &fmt_points(&xyz, &src, dim, &text), dim);
+            return Ok(vec![Edit { bytes: r.span.bytes.clone(), replacement: t.into_bytes() }]);
+        }
+        let mut closed = xyz.clone();
+        closed.push(xyz[0]);
+        let mut at = src.clone();
+        at.push(src[0]);
+        citygml_io::writer::ring_edits_with(r, &closed, |i, c, v| text.value(at[i], c, v)).map_err(|e| BackError::Write(format!("polygon `{id}` ring {ri}: {e}")))
+    }
 }
 
 /// Polygons (by their directed edges) that share an edge in opposite directions, grouped into

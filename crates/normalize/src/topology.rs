@@ -429,27 +429,27 @@ pub fn rebuild_edges(t: &mut Topo) {
 /// (nearly coplanar); merged pairs of source polygons are appended to `merged`. Returns whether anything changed. Removed nodes keep no popa3d node: their
 /// source vertices lie on the line of their neighbours.
 pub fn repair(t: &mut Topo, deficient: &[usize], mergeable: &dyn Fn(usize, usize) -> bool, merged: &mut Vec<(usize, usize)>) -> bool {
-    let mut changed = false;
+    let mut changed = merge_faces_at_deficient_nodes(t, deficient, mergeable, merged);
+    changed |= remove_two_neighbour_nodes(t, deficient);
+    if changed {
+        renumber_used_nodes(t);
+        rebuild_edges(t);
+    }
+    changed
+}
+
+/// Step 1 of [`repair`]: merges mergeable faces with the same solids across the edges at deficient
+/// nodes (each merged pair appended to `merged`). Returns whether any faces were merged.
+fn merge_faces_at_deficient_nodes(
+    t: &mut Topo,
+    deficient: &[usize],
+    mergeable: &dyn Fn(usize, usize) -> bool,
+    merged: &mut Vec<(usize, usize)>,
+) -> bool {
     let def: std::collections::HashSet<usize> = deficient.iter().cloned().collect();
-    // 1. Merge coplanar faces across edges at deficient nodes.
-    let mut uses: HashMap<(usize, usize), Vec<usize>> = HashMap::new();
-    for (fi, f) in t.faces.iter().enumerate() {
-        for r in &f.rings {
-            for i in 0..r.len() {
-                let (a, b) = (r[i], r[(i + 1) % r.len()]);
-                uses.entry((a.min(b), a.max(b))).or_default().push(fi);
-            }
-        }
-    }
+    let uses = edge_face_uses(t);
     let mut parent: Vec<usize> = (0..t.faces.len()).collect();
-    fn find(p: &mut Vec<usize>, x: usize) -> usize {
-        let mut r = x;
-        while p[r] != r {
-            r = p[r];
-        }
-        p[x] = r;
-        r
-    }
+    let mut changed = false;
     let mut keys: Vec<&(usize, usize)> = uses.keys().collect();
     keys.sort();
     for k in keys {
@@ -464,7 +464,7 @@ pub fn repair(t: &mut Topo, deficient: &[usize], mergeable: &dyn Fn(usize, usize
         if t.faces[f].back != t.faces[g].back || t.faces[f].front != t.faces[g].front {
             continue;
         }
-        let (rf, rg) = (find(&mut parent, f), find(&mut parent, g));
+        let (rf, rg) = (find_root(&mut parent, f), find_root(&mut parent, g));
         if rf != rg {
             parent[rf.max(rg)] = rf.min(rg);
             merged.push((t.faces[f].polygon, t.faces[g].polygon));
@@ -472,71 +472,134 @@ pub fn repair(t: &mut Topo, deficient: &[usize], mergeable: &dyn Fn(usize, usize
         }
     }
     if changed {
-        let mut groups: HashMap<usize, Vec<usize>> = HashMap::new();
-        for f in 0..t.faces.len() {
-            let r = find(&mut parent, f);
-            groups.entry(r).or_default().push(f);
-        }
-        let mut new_faces = Vec::new();
-        for f in 0..t.faces.len() {
-            let g = match groups.get(&f) {
-                Some(g) => g,
-                None => continue, // not a group root
-            };
-            if g.len() == 1 {
-                new_faces.push(t.faces[f].clone());
-                continue;
-            }
-            // Directed boundary edges minus the internal ones (used in both directions).
-            let mut de: Vec<(usize, usize)> = Vec::new();
-            for &h in g {
-                for r in &t.faces[h].rings {
-                    for i in 0..r.len() {
-                        de.push((r[i], r[(i + 1) % r.len()]));
-                    }
-                }
-            }
-            let set: std::collections::HashSet<(usize, usize)> = de.iter().cloned().collect();
-            let mut rest: Vec<(usize, usize)> = de.into_iter().filter(|(a, b)| !set.contains(&(*b, *a))).collect();
-            rest.sort();
-            let mut rings = Vec::new();
-            while let Some(&(a0, b0)) = rest.first() {
-                rest.remove(0);
-                let mut ring = vec![a0];
-                let mut cur = b0;
-                while cur != a0 {
-                    ring.push(cur);
-                    match rest.iter().position(|(a, _)| *a == cur) {
-                        Some(i) => cur = rest.remove(i).1,
-                        None => break,
-                    }
-                }
-                if ring.len() >= 3 {
-                    rings.push(ring);
-                }
-            }
-            if rings.is_empty() {
-                continue;
-            }
-            // Outer ring first: the largest |Newell| area.
-            let area = |r: &Vec<usize>| {
-                let p: Vec<[f64; 3]> = r.iter().map(|&i| t.points[i]).collect();
-                let n = popa3d_model::topology::newell(&p);
-                (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt()
-            };
-            let imax = (0..rings.len()).max_by(|&a, &b| area(&rings[a]).total_cmp(&area(&rings[b]))).unwrap_or(0);
-            rings.swap(0, imax);
-            let mut nf = t.faces[f].clone();
-            nf.rings = rings;
-            for &h in g.iter().filter(|&&h| h != f) {
-                nf.absorbed.push(t.faces[h].polygon);
-                nf.absorbed.extend(t.faces[h].absorbed.iter().copied());
-            }
-            new_faces.push(nf);
-        }
-        t.faces = new_faces;
+        t.faces = merged_faces(t, &mut parent);
     }
-    // 2. Remove deficient nodes with exactly two neighbours.
+    changed
+}
+
+/// Undirected edge → the faces using it (a face once per use), in face order.
+fn edge_face_uses(t: &Topo) -> HashMap<(usize, usize), Vec<usize>> {
+    let mut uses: HashMap<(usize, usize), Vec<usize>> = HashMap::new();
+    for (fi, f) in t.faces.iter().enumerate() {
+        for r in &f.rings {
+            for i in 0..r.len() {
+                let (a, b) = (r[i], r[(i + 1) % r.len()]);
+                uses.entry((a.min(b), a.max(b))).or_default().push(fi);
+            }
+        }
+    }
+    uses
+}
+
+/// The root of `x` in the union-find forest `p`, compressing `x`'s path.
+fn find_root(p: &mut [usize], x: usize) -> usize {
+    let mut r = x;
+    while p[r] != r {
+        r = p[r];
+    }
+    p[x] = r;
+    r
+}
+
+/// One face per union-find group, at the position of its root (the group's first face); a group
+/// whose boundary closes no ring is dropped.
+fn merged_faces(t: &Topo, parent: &mut [usize]) -> Vec<TopoFace> {
+    let mut groups: HashMap<usize, Vec<usize>> = HashMap::new();
+    for f in 0..t.faces.len() {
+        let r = find_root(parent, f);
+        groups.entry(r).or_default().push(f);
+    }
+    (0..t.faces.len()).filter_map(|f| groups.get(&f).and_then(|g| merged_face(t, f, g))).collect()
+}
+
+/// Face `root` grown by the other faces of its group `g`: their common boundary as rings, the
+/// outer one first, and their polygons recorded as absorbed.
+fn merged_face(t: &Topo, root: usize, g: &[usize]) -> Option<TopoFace> {
+    if g.len() == 1 {
+        return Some(t.faces[root].clone());
+    }
+    let mut rings = group_boundary_rings(t, g);
+    if rings.is_empty() {
+        return None;
+    }
+    // Outer ring first: the largest |Newell| area.
+    let area = |r: &Vec<usize>| {
+        let p: Vec<[f64; 3]> = r.iter().map(|&i| t.points[i]).collect();
+        let n = popa3d_model::topology::newell(&p);
+        (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt()
+    };
+    let imax = (0..rings.len()).max_by(|&a, &b| area(&rings[a]).total_cmp(&area(&rings[b]))).unwrap_or(0);
+    rings.swap(0, imax);
+    let mut nf = t.faces[root].clone();
+    nf.rings = rings;
+    for &h in g.iter().filter(|&&h| h != root) {
+        nf.absorbed.push(t.faces[h].polygon);
+        nf.absorbed.extend(t.faces[h].absorbed.iter().copied());
+    }
+    Some(nf)
+}
+
+/// The directed boundary edges of a group of faces minus the internal ones (used in both
+/// directions), chained into rings of at least 3 nodes, starting from the smallest edge.
+fn group_boundary_rings(t: &Topo, g: &[usize]) -> Vec<Vec<usize>> {
+    let mut de: Vec<(usize, usize)> = Vec::new();
+    for &h in g {
+        for r in &t.faces[h].rings {
+            for i in 0..r.len() {
+                de.push((r[i], r[(i + 1) % r.len()]));
+            }
+        }
+    }
+    let set: std::collections::HashSet<(usize, usize)> = de.iter().cloned().collect();
+    let mut rest: Vec<(usize, usize)> = de.into_iter().filter(|(a, b)| !set.contains(&(*b, *a))).collect();
+    rest.sort();
+    let mut rings = Vec::new();
+    while let Some(&(a0, b0)) = rest.first() {
+        rest.remove(0);
+        let mut ring = vec![a0];
+        let mut cur = b0;
+        while cur != a0 {
+            ring.push(cur);
+            match rest.iter().position(|(a, _)| *a == cur) {
+                Some(i) => cur = rest.remove(i).1,
+                None => break,
+            }
+        }
+        if ring.len() >= 3 {
+            rings.push(ring);
+        }
+    }
+    rings
+}
+
+/// Step 2 of [`repair`]: removes the deficient nodes with exactly two neighbours from the rings,
+/// their source vertices carried to the edge that replaces them; rings left with < 3 nodes and
+/// faces left without rings are dropped. Returns whether a ring lost a node.
+fn remove_two_neighbour_nodes(t: &mut Topo, deficient: &[usize]) -> bool {
+    let nb = node_neighbours(t);
+    let removable: std::collections::HashSet<usize> =
+        deficient.iter().cloned().filter(|n| nb.get(n).is_some_and(|s| s.len() == 2)).collect();
+    if removable.is_empty() {
+        return false;
+    }
+    carry_sources_past(t, &removable);
+    let mut changed = false;
+    for f in t.faces.iter_mut() {
+        for r in f.rings.iter_mut() {
+            let before = r.len();
+            r.retain(|n| !removable.contains(n));
+            if r.len() != before {
+                changed = true;
+            }
+        }
+        f.rings.retain(|r| r.len() >= 3);
+    }
+    t.faces.retain(|f| !f.rings.is_empty());
+    changed
+}
+
+/// Node → its neighbours along the faces' rings.
+fn node_neighbours(t: &Topo) -> HashMap<usize, std::collections::BTreeSet<usize>> {
     let mut nb: HashMap<usize, std::collections::BTreeSet<usize>> = HashMap::new();
     for f in &t.faces {
         for r in &f.rings {
@@ -547,86 +610,89 @@ pub fn repair(t: &mut Topo, deficient: &[usize], mergeable: &dyn Fn(usize, usize
             }
         }
     }
-    let removable: std::collections::HashSet<usize> =
-        deficient.iter().cloned().filter(|n| nb.get(n).is_some_and(|s| s.len() == 2)).collect();
-    if !removable.is_empty() {
-        // Carry the removed nodes' source vertices (and those already on the edges they split) to
-        // the edge between the kept neighbours.
-        let mut done: std::collections::HashSet<(usize, usize)> = std::collections::HashSet::new();
-        let mut moved: Vec<((usize, usize), Vec<VertexSource>)> = Vec::new();
-        for f in &t.faces {
-            for r in &f.rings {
-                let k = r.len();
-                for i in 0..k {
-                    if removable.contains(&r[i]) || !removable.contains(&r[(i + 1) % k]) {
-                        continue;
-                    }
-                    let p = r[i];
-                    let mut chain = vec![p];
-                    let mut j = (i + 1) % k;
-                    while removable.contains(&r[j]) && chain.len() <= k {
-                        chain.push(r[j]);
-                        j = (j + 1) % k;
-                    }
-                    chain.push(r[j]);
-                    let q = r[j];
-                    let key = (p.min(q), p.max(q));
-                    if !done.insert(key) {
-                        continue;
-                    }
-                    let mut src = Vec::new();
-                    for w in chain.windows(2) {
-                        if let Some(v) = t.edge_sources.remove(&(w[0].min(w[1]), w[0].max(w[1]))) {
-                            src.extend(v);
-                        }
-                    }
-                    for n in &chain[1..chain.len() - 1] {
-                        src.extend(t.node_sources[*n].iter().cloned());
-                    }
-                    moved.push((key, src));
+    nb
+}
+
+/// Carries the removed nodes' source vertices (and those already on the edges they split) to
+/// the edge between the kept neighbours, so no source vertex is lost with its node.
+fn carry_sources_past(t: &mut Topo, removable: &std::collections::HashSet<usize>) {
+    let mut done: std::collections::HashSet<(usize, usize)> = std::collections::HashSet::new();
+    let mut moved: Vec<((usize, usize), Vec<VertexSource>)> = Vec::new();
+    for f in &t.faces {
+        for r in &f.rings {
+            let k = r.len();
+            for i in 0..k {
+                if removable.contains(&r[i]) || !removable.contains(&r[(i + 1) % k]) {
+                    continue;
+                }
+                let chain = removed_chain(r, i, removable);
+                let (p, q) = (chain[0], chain[chain.len() - 1]);
+                let key = (p.min(q), p.max(q));
+                if done.insert(key) {
+                    moved.push((key, chain_sources(&mut t.edge_sources, &t.node_sources, &chain)));
                 }
             }
         }
-        for (k, v) in moved {
-            t.edge_sources.entry(k).or_default().extend(v);
-        }
-        for f in t.faces.iter_mut() {
-            for r in f.rings.iter_mut() {
-                let before = r.len();
-                r.retain(|n| !removable.contains(n));
-                if r.len() != before {
-                    changed = true;
-                }
-            }
-            f.rings.retain(|r| r.len() >= 3);
-        }
-        t.faces.retain(|f| !f.rings.is_empty());
     }
-    if changed {
-        // Drop nodes no ring uses any more and renumber.
-        let mut map = vec![usize::MAX; t.points.len()];
-        let mut points = Vec::new();
-        let mut sources = Vec::new();
-        for f in t.faces.iter_mut() {
-            for r in f.rings.iter_mut() {
-                for n in r.iter_mut() {
-                    if map[*n] == usize::MAX {
-                        map[*n] = points.len();
-                        points.push(t.points[*n]);
-                        sources.push(t.node_sources[*n].clone());
-                    }
-                    *n = map[*n];
+    for (k, v) in moved {
+        t.edge_sources.entry(k).or_default().extend(v);
+    }
+}
+
+/// From the kept node `r[i]` along the ring over the removable nodes to the next kept one
+/// (both ends included).
+fn removed_chain(r: &[usize], i: usize, removable: &std::collections::HashSet<usize>) -> Vec<usize> {
+    let k = r.len();
+    let mut chain = vec![r[i]];
+    let mut j = (i + 1) % k;
+    while removable.contains(&r[j]) && chain.len() <= k {
+        chain.push(r[j]);
+        j = (j + 1) % k;
+    }
+    chain.push(r[j]);
+    chain
+}
+
+/// The sources on the chain's edges (taken from `edge_sources`) followed by its inner nodes'.
+fn chain_sources(
+    edge_sources: &mut HashMap<(usize, usize), Vec<VertexSource>>,
+    node_sources: &[Vec<VertexSource>],
+    chain: &[usize],
+) -> Vec<VertexSource> {
+    let mut src = Vec::new();
+    for w in chain.windows(2) {
+        if let Some(v) = edge_sources.remove(&(w[0].min(w[1]), w[0].max(w[1]))) {
+            src.extend(v);
+        }
+    }
+    for n in &chain[1..chain.len() - 1] {
+        src.extend(node_sources[*n].iter().cloned());
+    }
+    src
+}
+
+/// Drops nodes no ring uses any more and renumbers the rest in order of first use.
+fn renumber_used_nodes(t: &mut Topo) {
+    let mut map = vec![usize::MAX; t.points.len()];
+    let mut points = Vec::new();
+    let mut sources = Vec::new();
+    for f in t.faces.iter_mut() {
+        for r in f.rings.iter_mut() {
+            for n in r.iter_mut() {
+                if map[*n] == usize::MAX {
+                    map[*n] = points.len();
+                    points.push(t.points[*n]);
+                    sources.push(t.node_sources[*n].clone());
                 }
+                *n = map[*n];
             }
         }
-        t.points = points;
-        t.node_sources = sources;
-        t.edge_sources = std::mem::take(&mut t.edge_sources)
-            .into_iter()
-            .filter(|((a, b), _)| map[*a] != usize::MAX && map[*b] != usize::MAX)
-            .map(|((a, b), v)| ((map[a].min(map[b]), map[a].max(map[b])), v))
-            .collect();
-        rebuild_edges(t);
     }
-    changed
+    t.points = points;
+    t.node_sources = sources;
+    t.edge_sources = std::mem::take(&mut t.edge_sources)
+        .into_iter()
+        .filter(|((a, b), _)| map[*a] != usize::MAX && map[*b] != usize::MAX)
+        .map(|((a, b), v)| ((map[a].min(map[b]), map[a].max(map[b])), v))
+        .collect();
 }

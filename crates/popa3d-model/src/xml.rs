@@ -529,185 +529,27 @@ pub fn read(bytes: &[u8]) -> Result<Popa3d, XmlError> {
     let lines = Lines::new(bytes);
     let mut reader = quick_xml::Reader::from_reader(bytes);
     reader.config_mut().trim_text(true);
-    let mut m = Popa3d::default();
-    let mut solids = Table::new("solid");
-    let mut nodes = Table::new("node");
-    let mut edges = Table::new("edge");
-    let mut hes = Table::new("halfedge");
-    let mut faces = Table::new("face");
-    let mut planes = Table::new("plane");
-    let mut normals = Table::new("normal");
-    let mut params = Table::new("parameter");
-    let mut fps = Table::new("fixedpoint");
-    let mut setups = Table::new("setup");
-    let mut obs: Table<Observation> = Table::new("observation");
+    let mut reading = Reading::new();
     let mut stack: Vec<String> = Vec::new();
-    let mut cur_node: Option<(El, Vec<VertexSource>)> = None;
-    let mut cur_on: Option<(El, EdgeId, Vec<VertexSource>)> = None;
-    let mut edge_vertices: Vec<(El, EdgeId, Vec<VertexSource>)> = Vec::new();
-    let mut saw_root = false;
-    let mut saw_origin = false;
-
     loop {
         let start_pos = reader.buffer_position() as usize;
         let ev = reader.read_event().map_err(|e| {
             let (line, column) = lines.at(reader.error_position() as usize);
             XmlError::Syntax { line, column, message: format!("malformed XML: {}", input_limits::quote(&e.to_string())) }
         })?;
-        let (is_empty, start) = match &ev {
-            Event::Start(s) => (false, Some(s)),
-            Event::Empty(s) => (true, Some(s)),
-            _ => (false, None),
-        };
-        if let Some(s) = start {
-            // Position of the '<' of this tag (skip whitespace trimmed before it).
-            let mut p = start_pos;
-            while p < bytes.len() && bytes[p] != b'<' {
-                p += 1;
+        match &ev {
+            Event::Start(s) | Event::Empty(s) => {
+                let is_empty = matches!(ev, Event::Empty(_));
+                let (line, column) = lines.at(tag_start(bytes, start_pos));
+                let el = element(s, line, column)?;
+                reading.start(stack.last().map(String::as_str), el, is_empty)?;
+                if !is_empty {
+                    stack.push(el_name(s));
+                }
             }
-            let (line, column) = lines.at(p);
-            let el = element(s, line, column)?;
-            let parent = stack.last().map(|s| s.as_str());
-            match (parent, el.name.as_str()) {
-                (None, "popa3d") => {
-                    saw_root = true;
-                    if let Some(v) = el.opt("version") {
-                        if v != VERSION {
-                            return Err(el.err(format!("unsupported popa3d version \"{v}\" (this reader knows {VERSION})")));
-                        }
-                    }
-                }
-                (None, other) => return Err(el.err(format!("the root element must be <popa3d>, found <{other}>"))),
-                (Some("popa3d"), "origin") => {
-                    saw_origin = true;
-                    m.origin = [el.f64("x")?, el.f64("y")?, el.f64("z")?];
-                    m.srs_name = el.opt("srsName").map(str::to_string);
-                }
-                (Some("popa3d"), "source") => {
-                    m.source = Some(SourceDocument { format: el.req("format")?.to_string(), file: el.req("file")?.to_string() });
-                }
-                (Some("popa3d"), sec) if SECTIONS.iter().any(|(s, _)| *s == sec) => {}
-                (Some("solids"), "solid") => {
-                    let kind = SolidKind::parse(el.req("kind")?)
-                        .ok_or_else(|| el.err("kind must be exterior, building, room or component"))?;
-                    let s = Solid { kind, name: el.opt("name").map(str::to_string) };
-                    solids.push(&el, s)?;
-                }
-                (Some("nodes"), "node") => {
-                    if is_empty {
-                        nodes.push(&el, Node::default())?;
-                    } else {
-                        cur_node = Some((el, Vec::new()));
-                    }
-                }
-                (Some("popa3d"), "edgevertices") => {}
-                (Some("edgevertices"), "on") => {
-                    let e = EdgeId(el.u32("edge")?);
-                    if is_empty {
-                        edge_vertices.push((el, e, Vec::new()));
-                    } else {
-                        cur_on = Some((el, e, Vec::new()));
-                    }
-                }
-                (Some("on"), "src") => {
-                    let src = parse_src(&el)?;
-                    if let Some((_, _, v)) = cur_on.as_mut() {
-                        v.push(src);
-                    }
-                }
-                (Some("node"), "src") => {
-                    let src = parse_src(&el)?;
-                    if let Some((_, v)) = cur_node.as_mut() {
-                        v.push(src);
-                    }
-                }
-                (Some("edges"), "edge") => {
-                    let e = Edge { start: NodeId(el.u32("start")?), end: NodeId(el.u32("end")?) };
-                    edges.push(&el, e)?;
-                }
-                (Some("halfedges"), "halfedge") => {
-                    let h = HalfEdge { edge: EdgeId(el.u32("edge")?), sign: el.sign("sign")?, face: FaceId(el.u32("face")?) };
-                    hes.push(&el, h)?;
-                }
-                (Some("faces"), "face") => {
-                    let source = match el.opt("polygon") {
-                        Some(p) => Some(FaceSource {
-                            polygon: p.to_string(),
-                            semantic: el.opt("semantic").map(str::to_string),
-                            owner: el.opt("owner").map(str::to_string),
-                            merged: el.opt("merged").map(|m| m.split_whitespace().map(str::to_string).collect()).unwrap_or_default(),
-                        }),
-                        None => None,
-                    };
-                    let f = Face {
-                        plane: PlaneId(el.u32("plane")?),
-                        orientation: el.sign("orientation")?,
-                        front: SolidId(el.u32("front")?),
-                        back: SolidId(el.u32("back")?),
-                        source,
-                    };
-                    faces.push(&el, f)?;
-                }
-                (Some("planes"), "plane") => {
-                    let p = Plane { normal: NormalId(el.u32("normal")?), sign: el.sign("sign")?, d: el.f64("d")? };
-                    planes.push(&el, p)?;
-                }
-                (Some("normals"), "normal") => {
-                    let c = |p: &str, s: &str| -> Result<(ParamId, Sign), XmlError> { Ok((ParamId(el.u32(p)?), el.sign(s)?)) };
-                    let n = NormalVector { comps: [c("x", "sx")?, c("y", "sy")?, c("z", "sz")?] };
-                    normals.push(&el, n)?;
-                }
-                (Some("parameters"), "parameter") => {
-                    // `wert` is the thesis' attribute name (spec §2.6); accepted on input.
-                    let v = if el.opt("value").is_some() { el.f64("value")? } else { el.f64("wert")? };
-                    params.push(&el, Parameter { value: v })?;
-                }
-                (Some("fixedpoints"), "fixedpoint") => {
-                    let p = FixedPoint { t: [el.f64("tx")?, el.f64("ty")?, el.f64("tz")?] };
-                    fps.push(&el, p)?;
-                }
-                (Some("setups"), "setup") => {
-                    let s = Setup {
-                        fixed_point: FixedPointId(el.u32("fixedpoint")?),
-                        instrument_height: el.f64("ih")?,
-                        q: [el.f64("q0")?, el.f64("q1")?, el.f64("q2")?, el.f64("q3")?],
-                        levelled: if el.opt("levelled").is_some() { el.bool("levelled")? } else { false },
-                    };
-                    setups.push(&el, s)?;
-                }
-                (Some("observations"), _) => {
-                    let kind = parse_observation(&el)?;
-                    let origin = match el.opt("origin") {
-                        Some(o) => ObsOrigin::parse(o).ok_or_else(|| el.err(format!("unknown origin \"{o}\"")))?,
-                        None => ObsOrigin::Measured,
-                    };
-                    let induced_by = match el.opt("inducedBy") {
-                        Some(_) => Some(ObsId(el.u32("inducedBy")?)),
-                        None => None,
-                    };
-                    let o = Observation { kind, origin, induced_by, label: el.opt("label").map(str::to_string) };
-                    obs.push(&el, o)?;
-                }
-                (Some(p), c) => return Err(el.err(format!("unexpected element <{c}> inside <{p}>"))),
-            }
-            if !is_empty {
-                stack.push(el_name(s));
-            }
-            continue;
-        }
-        match ev {
             Event::End(_) => {
                 if let Some(name) = stack.pop() {
-                    if name == "on" {
-                        if let Some(x) = cur_on.take() {
-                            edge_vertices.push(x);
-                        }
-                    }
-                    if name == "node" {
-                        if let Some((el, v)) = cur_node.take() {
-                            nodes.push(&el, Node { sources: v })?;
-                        }
-                    }
+                    reading.end(&name)?;
                 }
             }
             Event::Text(t) => {
@@ -720,42 +562,250 @@ pub fn read(bytes: &[u8]) -> Result<Popa3d, XmlError> {
             _ => {}
         }
     }
-    if !saw_root {
-        return Err(XmlError::Syntax { line: 1, column: 1, message: "not a popa3d document: no <popa3d> root element".into() });
+    reading.finish()
+}
+
+/// Position of the '<' of a tag read from `start_pos` (skipping whitespace trimmed before it), so
+/// that messages point at the tag and not at the end of the previous one.
+fn tag_start(bytes: &[u8], start_pos: usize) -> usize {
+    let mut p = start_pos;
+    while p < bytes.len() && bytes[p] != b'<' {
+        p += 1;
     }
-    if !saw_origin {
-        return Err(XmlError::Syntax { line: 1, column: 1, message: "<popa3d>: missing <origin>".into() });
-    }
-    let (v, _) = solids.finish()?;
-    m.solids = v;
-    let (v, _) = nodes.finish()?;
-    m.nodes = v;
-    let (v, epos) = edges.finish()?;
-    m.edges = v;
-    for (el, e, sources) in edge_vertices {
-        if e.idx() >= m.edges.len() {
-            return Err(el.err(format!("references {e}, which does not exist")));
+    p
+}
+
+/// A document being read: one table per element type, filled element by element (ids are only
+/// checked to be dense once all are in), and the `<node>`/`<on>` elements whose `<src>` children
+/// are still being collected.
+struct Reading {
+    model: Popa3d,
+    solids: Table<Solid>,
+    nodes: Table<Node>,
+    edges: Table<Edge>,
+    half_edges: Table<HalfEdge>,
+    faces: Table<Face>,
+    planes: Table<Plane>,
+    normals: Table<NormalVector>,
+    parameters: Table<Parameter>,
+    fixed_points: Table<FixedPoint>,
+    setups: Table<Setup>,
+    observations: Table<Observation>,
+    open_node: Option<(El, Vec<VertexSource>)>,
+    open_on: Option<(El, EdgeId, Vec<VertexSource>)>,
+    edge_vertices: Vec<(El, EdgeId, Vec<VertexSource>)>,
+    saw_root: bool,
+    saw_origin: bool,
+}
+
+impl Reading {
+    fn new() -> Self {
+        Reading {
+            model: Popa3d::default(),
+            solids: Table::new("solid"),
+            nodes: Table::new("node"),
+            edges: Table::new("edge"),
+            half_edges: Table::new("halfedge"),
+            faces: Table::new("face"),
+            planes: Table::new("plane"),
+            normals: Table::new("normal"),
+            parameters: Table::new("parameter"),
+            fixed_points: Table::new("fixedpoint"),
+            setups: Table::new("setup"),
+            observations: Table::new("observation"),
+            open_node: None,
+            open_on: None,
+            edge_vertices: Vec::new(),
+            saw_root: false,
+            saw_origin: false,
         }
-        m.edge_vertices.push(EdgeVertices { edge: e, sources });
     }
-    let (v, hpos) = hes.finish()?;
-    m.half_edges = v;
-    let (v, fpos) = faces.finish()?;
-    m.faces = v;
-    let (v, ppos) = planes.finish()?;
-    m.planes = v;
-    let (v, npos) = normals.finish()?;
-    m.normals = v;
-    let (v, _) = params.finish()?;
-    m.parameters = v;
-    let (v, _) = fps.finish()?;
-    m.fixed_points = v;
-    let (v, spos) = setups.finish()?;
-    m.setups = v;
-    let (v, opos) = obs.finish()?;
-    m.observations = v;
-    check_references(&m, &epos, &hpos, &fpos, &ppos, &npos, &spos, &opos)?;
-    Ok(m)
+
+    /// One start (or empty) tag inside `parent`: the schema's structure, element by element.
+    fn start(&mut self, parent: Option<&str>, el: El, is_empty: bool) -> Result<(), XmlError> {
+        match (parent, el.name.as_str()) {
+            (None, "popa3d") => {
+                self.saw_root = true;
+                check_version(&el)
+            }
+            (None, other) => Err(el.err(format!("the root element must be <popa3d>, found <{other}>"))),
+            (Some("popa3d"), "origin") => {
+                self.saw_origin = true;
+                self.model.origin = [el.f64("x")?, el.f64("y")?, el.f64("z")?];
+                self.model.srs_name = el.opt("srsName").map(str::to_string);
+                Ok(())
+            }
+            (Some("popa3d"), "source") => {
+                self.model.source = Some(SourceDocument { format: el.req("format")?.to_string(), file: el.req("file")?.to_string() });
+                Ok(())
+            }
+            (Some("popa3d"), sec) if sec == "edgevertices" || SECTIONS.iter().any(|(s, _)| *s == sec) => Ok(()),
+            (Some("solids"), "solid") => self.solids.push(&el, parse_solid(&el)?),
+            (Some("nodes"), "node") if is_empty => self.nodes.push(&el, Node::default()),
+            (Some("nodes"), "node") => {
+                self.open_node = Some((el, Vec::new()));
+                Ok(())
+            }
+            (Some("edgevertices"), "on") => self.start_on(el, is_empty),
+            (Some("on"), "src") => {
+                let src = parse_src(&el)?;
+                if let Some((_, _, v)) = self.open_on.as_mut() {
+                    v.push(src);
+                }
+                Ok(())
+            }
+            (Some("node"), "src") => {
+                let src = parse_src(&el)?;
+                if let Some((_, v)) = self.open_node.as_mut() {
+                    v.push(src);
+                }
+                Ok(())
+            }
+            (Some("edges"), "edge") => self.edges.push(&el, Edge { start: NodeId(el.u32("start")?), end: NodeId(el.u32("end")?) }),
+            (Some("halfedges"), "halfedge") => self.half_edges.push(&el, parse_half_edge(&el)?),
+            (Some("faces"), "face") => self.faces.push(&el, parse_face(&el)?),
+            (Some("planes"), "plane") => self.planes.push(&el, parse_plane(&el)?),
+            (Some("normals"), "normal") => self.normals.push(&el, parse_normal(&el)?),
+            (Some("parameters"), "parameter") => self.parameters.push(&el, parse_parameter(&el)?),
+            (Some("fixedpoints"), "fixedpoint") => {
+                self.fixed_points.push(&el, FixedPoint { t: [el.f64("tx")?, el.f64("ty")?, el.f64("tz")?] })
+            }
+            (Some("setups"), "setup") => self.setups.push(&el, parse_setup(&el)?),
+            (Some("observations"), _) => self.observations.push(&el, parse_observation_element(&el)?),
+            (Some(p), c) => Err(el.err(format!("unexpected element <{c}> inside <{p}>"))),
+        }
+    }
+
+    /// `<on edge=..>`: the vertices lying on an edge; its `<src>` children follow unless empty.
+    fn start_on(&mut self, el: El, is_empty: bool) -> Result<(), XmlError> {
+        let e = EdgeId(el.u32("edge")?);
+        if is_empty {
+            self.edge_vertices.push((el, e, Vec::new()));
+        } else {
+            self.open_on = Some((el, e, Vec::new()));
+        }
+        Ok(())
+    }
+
+    /// The end tag of `name`: a `<node>` or `<on>` is complete with its sources.
+    fn end(&mut self, name: &str) -> Result<(), XmlError> {
+        if name == "on" {
+            if let Some(x) = self.open_on.take() {
+                self.edge_vertices.push(x);
+            }
+        }
+        if name == "node" {
+            if let Some((el, v)) = self.open_node.take() {
+                self.nodes.push(&el, Node { sources: v })?;
+            }
+        }
+        Ok(())
+    }
+
+    /// The model, once the root and origin were seen, every table's ids are dense and every
+    /// reference points at an existing element (checked in this order, so the first error in a
+    /// document is always the same one).
+    fn finish(self) -> Result<Popa3d, XmlError> {
+        if !self.saw_root {
+            return Err(XmlError::Syntax { line: 1, column: 1, message: "not a popa3d document: no <popa3d> root element".into() });
+        }
+        if !self.saw_origin {
+            return Err(XmlError::Syntax { line: 1, column: 1, message: "<popa3d>: missing <origin>".into() });
+        }
+        let mut m = self.model;
+        (m.solids, _) = self.solids.finish()?;
+        (m.nodes, _) = self.nodes.finish()?;
+        let (edges, epos) = self.edges.finish()?;
+        m.edges = edges;
+        for (el, e, sources) in self.edge_vertices {
+            if e.idx() >= m.edges.len() {
+                return Err(el.err(format!("references {e}, which does not exist")));
+            }
+            m.edge_vertices.push(EdgeVertices { edge: e, sources });
+        }
+        let (half_edges, hpos) = self.half_edges.finish()?;
+        let (faces, fpos) = self.faces.finish()?;
+        let (planes, ppos) = self.planes.finish()?;
+        let (normals, npos) = self.normals.finish()?;
+        (m.half_edges, m.faces, m.planes, m.normals) = (half_edges, faces, planes, normals);
+        (m.parameters, _) = self.parameters.finish()?;
+        (m.fixed_points, _) = self.fixed_points.finish()?;
+        let (setups, spos) = self.setups.finish()?;
+        let (observations, opos) = self.observations.finish()?;
+        (m.setups, m.observations) = (setups, observations);
+        check_references(&m, &epos, &hpos, &fpos, &ppos, &npos, &spos, &opos)?;
+        Ok(m)
+    }
+}
+
+fn check_version(el: &El) -> Result<(), XmlError> {
+    match el.opt("version") {
+        Some(v) if v != VERSION => Err(el.err(format!("unsupported popa3d version \"{v}\" (this reader knows {VERSION})"))),
+        _ => Ok(()),
+    }
+}
+
+fn parse_solid(el: &El) -> Result<Solid, XmlError> {
+    let kind = SolidKind::parse(el.req("kind")?).ok_or_else(|| el.err("kind must be exterior, building, room or component"))?;
+    Ok(Solid { kind, name: el.opt("name").map(str::to_string) })
+}
+
+fn parse_half_edge(el: &El) -> Result<HalfEdge, XmlError> {
+    Ok(HalfEdge { edge: EdgeId(el.u32("edge")?), sign: el.sign("sign")?, face: FaceId(el.u32("face")?) })
+}
+
+fn parse_face(el: &El) -> Result<Face, XmlError> {
+    let source = el.opt("polygon").map(|p| FaceSource {
+        polygon: p.to_string(),
+        semantic: el.opt("semantic").map(str::to_string),
+        owner: el.opt("owner").map(str::to_string),
+        merged: el.opt("merged").map(|m| m.split_whitespace().map(str::to_string).collect()).unwrap_or_default(),
+    });
+    Ok(Face {
+        plane: PlaneId(el.u32("plane")?),
+        orientation: el.sign("orientation")?,
+        front: SolidId(el.u32("front")?),
+        back: SolidId(el.u32("back")?),
+        source,
+    })
+}
+
+fn parse_plane(el: &El) -> Result<Plane, XmlError> {
+    Ok(Plane { normal: NormalId(el.u32("normal")?), sign: el.sign("sign")?, d: el.f64("d")? })
+}
+
+fn parse_normal(el: &El) -> Result<NormalVector, XmlError> {
+    let c = |p: &str, s: &str| -> Result<(ParamId, Sign), XmlError> { Ok((ParamId(el.u32(p)?), el.sign(s)?)) };
+    Ok(NormalVector { comps: [c("x", "sx")?, c("y", "sy")?, c("z", "sz")?] })
+}
+
+fn parse_parameter(el: &El) -> Result<Parameter, XmlError> {
+    // `wert` is the thesis' attribute name (spec §2.6); accepted on input.
+    let value = if el.opt("value").is_some() { el.f64("value")? } else { el.f64("wert")? };
+    Ok(Parameter { value })
+}
+
+fn parse_setup(el: &El) -> Result<Setup, XmlError> {
+    Ok(Setup {
+        fixed_point: FixedPointId(el.u32("fixedpoint")?),
+        instrument_height: el.f64("ih")?,
+        q: [el.f64("q0")?, el.f64("q1")?, el.f64("q2")?, el.f64("q3")?],
+        levelled: if el.opt("levelled").is_some() { el.bool("levelled")? } else { false },
+    })
+}
+
+/// An observation element: its kind from the element name, then the attributes every kind shares.
+fn parse_observation_element(el: &El) -> Result<Observation, XmlError> {
+    let kind = parse_observation(el)?;
+    let origin = match el.opt("origin") {
+        Some(o) => ObsOrigin::parse(o).ok_or_else(|| el.err(format!("unknown origin \"{o}\"")))?,
+        None => ObsOrigin::Measured,
+    };
+    let induced_by = match el.opt("inducedBy") {
+        Some(_) => Some(ObsId(el.u32("inducedBy")?)),
+        None => None,
+    };
+    Ok(Observation { kind, origin, induced_by, label: el.opt("label").map(str::to_string) })
 }
 
 fn parse_src(el: &El) -> Result<VertexSource, XmlError> {

@@ -3,7 +3,7 @@
 
 use clap::{Args as ClapArgs, ValueEnum};
 
-use crate::cmd::args::require_positive;
+use crate::cmd::args::{InputOutput, require_positive};
 use crate::config::{Config, Input, Output};
 use crate::report::{write_json_report, ReportKind};
 use crate::error::{CliError, CmdResult, Exit};
@@ -51,11 +51,8 @@ pub enum DatumArg {
 #[derive(ClapArgs, Debug)]
 #[command(after_help = AFTER_HELP)]
 pub struct Args {
-    /// popa3d document, `-` for stdin.
-    pub input: String,
-    /// Adjusted popa3d document (stdout when missing or `-`).
-    #[arg(short, long)]
-    pub output: Option<String>,
+    #[command(flatten)]
+    pub io: InputOutput,
     /// Datum definition.
     #[arg(long, value_enum, default_value = "free")]
     pub datum: DatumArg,
@@ -224,9 +221,9 @@ pub(crate) fn print_report(r: &Report, rows: usize, verbose: bool) {
 }
 
 pub fn run(args: Args, config: &Config) -> CmdResult {
-    crate::config::check_report_target(args.report.as_deref(), args.output.as_deref())?;
+    crate::config::check_report_target(args.report.as_deref(), args.io.output.as_deref())?;
     let opts = model_options(&args)?;
-    let input = Input::from_arg(&args.input);
+    let input = Input::from_arg(&args.io.input);
     let name = input.display_name();
     let bytes = input.read_all()?;
     let mut model = popa3d_model::read(&bytes).map_err(|e| CliError::unreadable(format!("{name}: {e}")))?;
@@ -248,7 +245,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
             report.max_plane_shift, args.max_shift
         )));
     }
-    let out = Output::from_arg(args.output.as_deref());
+    let out = Output::from_arg(args.io.output.as_deref());
     out.write_with(|w| popa3d_model::write(&model, w).map_err(|e| CliError::internal(e.to_string())))?;
     if let Some(p) = &args.report {
         write_json_report(p, &REPORT, &report)?;

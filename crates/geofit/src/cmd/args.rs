@@ -7,6 +7,18 @@ use clap::Args as ClapArgs;
 use crate::error::CliError;
 use normalize::Tolerances;
 
+/// The input document and `-o/--output` of the commands that turn one document into another
+/// (`adjust`, `citygml2popa3d`, `heal`, `obj2popa3d`), so `-` means stdin / stdout the same way
+/// everywhere; each command's help says which formats they are.
+#[derive(ClapArgs, Debug, Clone)]
+pub struct InputOutput {
+    /// Input document, `-` for stdin.
+    pub input: String,
+    /// Output document (stdout when missing or `-`).
+    #[arg(short, long)]
+    pub output: Option<String>,
+}
+
 /// The normalization tolerances (spec §3.1/§3.2; defaults decided in [`normalize::Tolerances`]),
 /// flattened into the commands that turn polygons into a popa3d model.
 #[derive(ClapArgs, Debug, Clone)]

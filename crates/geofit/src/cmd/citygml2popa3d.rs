@@ -4,13 +4,13 @@
 use clap::Args as ClapArgs;
 use serde::Serialize;
 
-use crate::cmd::args::{require_positive, NormalizeArgs};
+use crate::cmd::args::{InputOutput, NormalizeArgs, require_positive};
 use crate::config::{Config, Input, Output};
 use crate::report::{write_json_report, ReportKind};
 use crate::error::{CliError, CmdResult, Exit};
-use normalize::conditions::{self, ConditionCounts, ConditionOptions, Ranges};
-use normalize::{Counts, Notice, Rejection, Tolerances};
-use popa3d_model::{Popa3d, SourceDocument};
+use normalize::conditions::{ConditionCounts, ConditionOptions};
+use normalize::convert::{convert_buildings, model_for, select_buildings, BuildingOptions, BuildingReport, Conversion};
+use normalize::{Counts, Rejection, Tolerances};
 
 const AFTER_HELP: &str = "\
 Example:
@@ -36,11 +36,8 @@ listed on stderr with rule and gml:id; the others are still converted and the ex
 #[derive(ClapArgs, Debug)]
 #[command(after_help = AFTER_HELP)]
 pub struct Args {
-    /// CityGML file (1.0, 2.0 or 3.0), `-` for stdin.
-    pub input: String,
-    /// Output popa3d document (stdout when missing or `-`).
-    #[arg(short, long)]
-    pub output: Option<String>,
+    #[command(flatten)]
+    pub io: InputOutput,
     /// Convert only the building(s) with this gml:id (repeatable).
     #[arg(long = "id")]
     pub ids: Vec<String>,
@@ -81,14 +78,6 @@ pub struct Args {
     pub report: Option<String>,
 }
 
-#[derive(Serialize)]
-struct BuildingReport {
-    id: String,
-    counts: Counts,
-    conditions: ConditionCounts,
-    notices: Vec<Notice>,
-}
-
 /// `--report`: what was converted, per building.
 const REPORT: ReportKind = ReportKind {
     schema: "geofit-citygml2popa3d-report/1",
@@ -114,8 +103,7 @@ struct Report {
     buildings: Vec<BuildingReport>,
 }
 
-pub fn run(args: Args, config: &Config) -> CmdResult {
-    let tol = args.normalize.tolerances()?;
+fn condition_options(args: &Args) -> Result<ConditionOptions, CliError> {
     require_positive(&[
         ("parallel-angle", args.parallel_angle),
         ("orthogonal-angle", args.orthogonal_angle),
@@ -128,11 +116,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     if let Some(s) = args.sigma_norm {
         require_positive(&[("sigma-norm", s)])?;
     }
-    let input = Input::from_arg(&args.input);
-    let name = input.display_name();
-    let bytes = input.read_all()?;
-    let city = citygml_io::parse(&bytes).map_err(|e| CliError::unreadable(format!("{name}: {e}")))?;
-    let copt = ConditionOptions {
+    Ok(ConditionOptions {
         parallel_deg: args.parallel_angle,
         orthogonal_deg: args.orthogonal_angle,
         epsilon: args.epsilon,
@@ -141,96 +125,40 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         sigma_identity_d: args.sigma_identity_d,
         sigma_identity_param: args.sigma_identity_param,
         sigma_norm: args.sigma_norm,
-    };
-    let origin = normalize::citygml::local_origin(&city);
-    let mut model = Popa3d::new(origin);
-    model.srs_name = city.srs_name.clone();
-    model.source = Some(SourceDocument { format: "citygml".into(), file: name.clone() });
+    })
+}
 
-    let mut units: Vec<&citygml_io::CityObject> =
-        normalize::citygml::buildings(&city).into_iter().filter(|b| normalize::citygml::has_own_geometry(b)).collect();
-    if !args.ids.is_empty() {
-        for id in &args.ids {
-            if !units.iter().any(|b| b.id.as_deref() == Some(id.as_str())) {
-                return Err(CliError::usage(format!("{name}: no building or building part with gml:id `{id}` and geometry")));
-            }
-        }
-        units.retain(|b| b.id.as_ref().is_some_and(|i| args.ids.contains(i)));
-    }
+pub fn run(args: Args, config: &Config) -> CmdResult {
+    let tol = args.normalize.tolerances()?;
+    let copt = condition_options(&args)?;
+    let input = Input::from_arg(&args.io.input);
+    let name = input.display_name();
+    let bytes = input.read_all()?;
+    let city = citygml_io::parse(&bytes).map_err(|e| CliError::unreadable(format!("{name}: {e}")))?;
+    let units = select_buildings(&city, &args.ids).map_err(|e| CliError::usage(format!("{name}: {e}")))?;
     if units.is_empty() {
         return Err(CliError::findings(format!("{name}: no Building or BuildingPart with geometry")));
     }
+    let mut model = model_for(&city, &name);
+    let origin = model.origin;
     let progress = config.progress("citygml2popa3d", units.len() as u64);
-    let mut rejected = Vec::new();
-    let mut reports = Vec::new();
-    let mut all_ranges = Vec::new();
-    for (i, b) in units.iter().enumerate() {
-        let bid = b.id.clone().unwrap_or_else(|| format!("Building@{}:{}", b.span.line, b.span.column));
-        progress.set(i as u64 + 1, &bid);
-        let soup = match normalize::citygml::building_soup(b, args.lod) {
-            Ok(s) => s,
-            Err(r) => {
-                rejected.push(with_building(r, &bid));
-                continue;
-            }
-        };
-        let before = Ranges::whole(&model);
-        match normalize::normalize_into(&mut model, &soup, &tol) {
-            Ok(n) => {
-                let ranges = Ranges::since(&model, &before);
-                all_ranges.push(ranges);
-                reports.push(BuildingReport { id: bid, counts: n.counts, conditions: ConditionCounts::default(), notices: n.notices });
-            }
-            Err(r) => rejected.push(with_building(r, &bid)),
-        }
-    }
-    // conditions once all buildings are in: the incidence and node positions are built once
-    if !args.no_conditions {
-        for (r, cc) in reports.iter_mut().zip(conditions::semantic_many(&mut model, &all_ranges, &copt)) {
-            r.conditions = cc;
-        }
-    }
-    progress.finish(&format!("{} converted, {} rejected", reports.len(), rejected.len()));
-    let total = Counts::sum(&name, reports.iter().map(|r| &r.counts));
+    let options = BuildingOptions { lod: args.lod, tolerances: tol, conditions: (!args.no_conditions).then_some(copt) };
+    let done = convert_buildings(&mut model, &units, &options, &|i, id| progress.set(i as u64 + 1, id));
+    progress.finish(&format!("{} converted, {} rejected", done.buildings.len(), done.rejected.len()));
+    let total = Counts::sum(&name, done.buildings.iter().map(|r| &r.counts));
     if !config.quiet {
-        crate::config::stderr_str(&total.table());
-        let mut cc = ConditionCounts::default();
-        for r in &reports {
-            cc.parallelism += r.conditions.parallelism;
-            cc.coplanarity += r.conditions.coplanarity;
-            cc.orthogonality += r.conditions.orthogonality;
-            cc.wall_window += r.conditions.wall_window;
-            cc.identity += r.conditions.identity;
-            cc.norm += r.conditions.norm;
-        }
-        crate::say!(
-            "conditions: parallelism {}, coplanarity {}, orthogonality {}, wall-window {}, identity {}, normal-norm {}",
-            cc.parallelism, cc.coplanarity, cc.orthogonality, cc.wall_window, cc.identity, cc.norm
-        );
-        for r in &reports {
-            for n in &r.notices {
-                crate::say!("geofit: notice: {}: {}: {}: {}", r.id, n.rule, n.element, n.message);
-            }
-        }
+        print_summary(&total, &done);
     }
-    for r in &rejected {
+    for r in &done.rejected {
         crate::say!("geofit: rejected: {r}");
     }
-    if !reports.is_empty() {
-        let out = Output::from_arg(args.output.as_deref());
+    if !done.buildings.is_empty() {
+        let out = Output::from_arg(args.io.output.as_deref());
         out.write_with(|w| popa3d_model::write(&model, w).map_err(|e| CliError::internal(e.to_string())))?;
     }
+    let (converted, rejected) = (done.buildings.len(), done.rejected);
     if let Some(p) = &args.report {
-        let report = Report {
-            input: name.clone(),
-            origin,
-            tolerances: tol,
-            conditions: copt,
-            converted: reports.len(),
-            rejected: rejected.clone(),
-            total,
-            buildings: reports,
-        };
+        let report = Report { input: name.clone(), origin, tolerances: tol, conditions: copt, converted, rejected: rejected.clone(), total, buildings: done.buildings };
         write_json_report(p, &REPORT, &report)?;
     }
     if rejected.is_empty() {
@@ -243,10 +171,17 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     }
 }
 
-/// Puts the building's gml:id in front of the element when the rejection names a polygon.
-fn with_building(mut r: Rejection, bid: &str) -> Rejection {
-    if r.element != bid {
-        r.element = format!("{bid}: {}", r.element);
+/// The counts table, the generated conditions and every notice on stderr.
+fn print_summary(total: &Counts, done: &Conversion) {
+    crate::config::stderr_str(&total.table());
+    let cc = ConditionCounts::sum(done.buildings.iter().map(|r| &r.conditions));
+    crate::say!(
+        "conditions: parallelism {}, coplanarity {}, orthogonality {}, wall-window {}, identity {}, normal-norm {}",
+        cc.parallelism, cc.coplanarity, cc.orthogonality, cc.wall_window, cc.identity, cc.norm
+    );
+    for r in &done.buildings {
+        for n in &r.notices {
+            crate::say!("geofit: notice: {}: {}: {}: {}", r.id, n.rule, n.element, n.message);
+        }
     }
-    r
 }

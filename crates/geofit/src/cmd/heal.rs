@@ -4,7 +4,7 @@
 use clap::Args as ClapArgs;
 use serde::Serialize;
 
-use crate::cmd::args::{require_non_negative, require_positive};
+use crate::cmd::args::{InputOutput, require_non_negative, require_positive};
 use crate::config::{Config, Input, Output};
 use crate::report::{write_json_report, ReportKind};
 use crate::error::{CliError, CmdResult, Exit};
@@ -38,11 +38,8 @@ no building with geometry; 2 bad options or a geographic CRS; 3 unreadable input
 #[derive(ClapArgs, Debug)]
 #[command(after_help = AFTER_HELP)]
 pub struct Args {
-    /// CityGML file, `-` for stdin.
-    pub input: String,
-    /// Output CityGML (stdout when missing or `-`).
-    #[arg(short, long)]
-    pub output: Option<String>,
+    #[command(flatten)]
+    pub io: InputOutput,
     /// Highest LoD to read.
     #[arg(long, default_value_t = 4)]
     pub lod: u8,
@@ -143,10 +140,10 @@ fn print_summary(r: &HealReport) {
 
 pub fn run(args: Args, config: &Config) -> CmdResult {
     let opts = options(&args)?;
-    let output = Output::from_arg(args.output.as_deref());
+    let output = Output::from_arg(args.io.output.as_deref());
     output.check_target()?;
-    crate::config::check_report_target(args.report.as_deref(), args.output.as_deref())?;
-    let input = Input::from_arg(&args.input);
+    crate::config::check_report_target(args.report.as_deref(), args.io.output.as_deref())?;
+    let input = Input::from_arg(&args.io.input);
     let name = input.display_name();
     let bytes = input.read_all()?;
     let progress = config.progress("heal", 0);

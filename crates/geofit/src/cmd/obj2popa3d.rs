@@ -4,7 +4,7 @@
 use clap::Args as ClapArgs;
 use serde::Serialize;
 
-use crate::cmd::args::{require_positive, NormalizeArgs};
+use crate::cmd::args::{InputOutput, NormalizeArgs, require_positive};
 use crate::config::{Config, Input, Output};
 use crate::report::{write_json_report, ReportKind};
 use crate::error::{CliError, CmdResult, Exit};
@@ -35,11 +35,8 @@ face-edge and edge-edge distances add their induced parallelism constraint.
 #[derive(ClapArgs, Debug)]
 #[command(after_help = AFTER_HELP)]
 pub struct Args {
-    /// OBJ sketch, `-` for stdin.
-    pub input: String,
-    /// Output popa3d document (stdout when missing or `-`).
-    #[arg(short, long)]
-    pub output: Option<String>,
+    #[command(flatten)]
+    pub io: InputOutput,
     /// CSV of measured distances to attach.
     #[arg(long, visible_alias = "add")]
     pub distances: Option<String>,
@@ -85,42 +82,21 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         ("sigma-norm", args.sigma_norm),
         ("sigma-induced", args.sigma_induced),
     ])?;
-    let input = Input::from_arg(&args.input);
+    let input = Input::from_arg(&args.io.input);
     let name = input.display_name();
     let bytes = input.read_all()?;
     let soup = normalize::obj::read_sketch(&bytes, &name).map_err(|e| CliError::unreadable(e.to_string()))?;
-    // Sketches are drawn in local coordinates; keep the origin at 0 unless they are far from it.
-    let mut origin = [0.0f64; 3];
-    let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
-    for p in soup.polygons.iter().flat_map(|p| p.rings.iter().flatten()) {
-        for k in 0..3 {
-            lo[k] = lo[k].min(p[k]);
-            hi[k] = hi[k].max(p[k]);
-        }
-    }
-    for k in 0..3 {
-        let c = (lo[k] + hi[k]) / 2.0;
-        if c.abs() > 1000.0 {
-            origin[k] = c.floor();
-        }
-    }
-    let mut model = Popa3d::new(origin);
+    let mut model = Popa3d::new(normalize::obj::sketch_origin(&soup));
     model.source = Some(SourceDocument { format: "obj".into(), file: name.clone() });
     let n = normalize::normalize_into(&mut model, &soup, &tol).map_err(|r| CliError::findings(format!("{name}: rejected: {r}")))?;
     let r = Ranges::whole(&model);
     let so = SketchOptions { sigma_plane_difference: args.sigma_plane_difference, sigma_relative_angle: args.sigma_relative_angle, sigma_norm: args.sigma_norm };
     let (nd, na, nn) = conditions::sketch_priors(&mut model, &r, &so);
-    let (mut ndist, mut nind) = (0, 0);
-    if let Some(csv) = &args.distances {
-        let ci = Input::from_arg(csv);
-        let text = String::from_utf8(ci.read_all()?).map_err(|_| CliError::unreadable(format!("{csv}: not UTF-8 text")))?;
-        let obs = popa3d_model::csv::parse_distances(&text, &model).map_err(|e| CliError::findings(format!("{csv}: {e}")))?;
-        for o in obs {
-            let ids = conditions::add_distance(&mut model, o, args.sigma_induced);
-            ndist += 1;
-            nind += ids.len() - 1;
-        }
-    }
+    let distances = match &args.distances {
+        Some(csv) => read_distances(csv, &model)?,
+        None => Vec::new(),
+    };
+    let (ndist, nind) = conditions::add_distances(&mut model, distances, args.sigma_induced);
     if !config.quiet {
         crate::config::stderr_str(&n.counts.table());
         crate::say!("sketch priors: {nd} plane differences, {na} relative angles, {nn} unit norms; {ndist} distances, {nind} induced constraints");
@@ -128,7 +104,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
             crate::say!("geofit: notice: {}: {}: {}", x.rule, x.element, x.message);
         }
     }
-    let out = Output::from_arg(args.output.as_deref());
+    let out = Output::from_arg(args.io.output.as_deref());
     out.write_with(|w| popa3d_model::write(&model, w).map_err(|e| CliError::internal(e.to_string())))?;
     if let Some(p) = &args.report {
         let rep = Report {
@@ -144,4 +120,10 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         write_json_report(p, &REPORT, &rep)?;
     }
     Ok(Exit::Ok)
+}
+
+/// The measured distances of the `--distances` CSV, resolved against the model's elements.
+fn read_distances(csv: &str, model: &Popa3d) -> Result<Vec<popa3d_model::Observation>, CliError> {
+    let text = String::from_utf8(Input::from_arg(csv).read_all()?).map_err(|_| CliError::unreadable(format!("{csv}: not UTF-8 text")))?;
+    popa3d_model::csv::parse_distances(&text, model).map_err(|e| CliError::findings(format!("{csv}: {e}")))
 }
