@@ -170,8 +170,11 @@ rrange)
 rglb)
     t=$1 step=${GEOFIT_SURFACE_STEP:-4}
     read -r zmin zmax <"$out/zrange.txt"
+    # a flat source (min = max at gdalinfo's 3 decimals) has no ramp to share
+    range=(--height-range "$zmin" "$zmax")
+    [ "$zmin" != "$zmax" ] || range=()
     mkdir -p "$out/glb"
-    "$GEOFIT" -q surface "$out/stitched/$t.tmb" --step "$step" --no-cell-edges --height-range "$zmin" "$zmax" -o "$out/glb/$t.glb"
+    "$GEOFIT" -q surface "$out/stitched/$t.tmb" --step "$step" --no-cell-edges "${range[@]}" -o "$out/glb/$t.glb"
     ;;
 rtileset)
     args=()
