@@ -17,7 +17,8 @@
 //!   penalised, and a face between tetrahedra on two sides of a fault is not in the graph).
 //!
 //! The minimiser of seed eq. 12 solves `A·φ = b` with `A = Σ A_c A_cᵗ = A_B + A_F` (seed eq. 1–3),
-//! solved by conjugate gradients with an incomplete-Cholesky IC(0) preconditioner.
+//! solved by conjugate gradients with an incomplete-Cholesky IC(0) preconditioner (`sparse_spd`,
+//! the workspace's one sparse module).
 //!
 //! The default roughness weight is not a constant but follows the data's noise measured in cells
 //! ([`auto_roughness`]), so one default serves a unit sphere and geology in metres alike.
@@ -27,6 +28,7 @@ use rayon::prelude::*;
 use crate::geom::{add, barycentric, cross, dot, hat_gradients, norm, scale, sub, V3};
 use crate::mesh::{Locator, TetMesh};
 use crate::Error;
+use sparse_spd::{CgStats, Checkpoint, NotConverged, PcgOptions, Preconditioner, SymCsr};
 
 /// Relative weights ϖ of the three constraint classes (seed eq. 9).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -298,43 +300,10 @@ pub fn roughness_rows(mesh: &TetMesh, weight: f64) -> Rows {
     rows
 }
 
-/// A symmetric sparse matrix in CSR form (full storage).
-#[derive(Debug, Clone, Default)]
-pub struct Csr {
-    pub n: usize,
-    pub ptr: Vec<usize>,
-    pub idx: Vec<u32>,
-    pub val: Vec<f64>,
-}
-
-impl Csr {
-    /// y = A·x (rayon over rows).
-    pub fn mul(&self, x: &[f64], y: &mut [f64]) {
-        y.par_iter_mut().enumerate().for_each(|(r, yr)| {
-            let (a, b) = (self.ptr[r], self.ptr[r + 1]);
-            let mut s = 0.0;
-            for k in a..b {
-                s += self.val[k] * x[self.idx[k] as usize];
-            }
-            *yr = s;
-        });
-    }
-    pub fn diag(&self) -> Vec<f64> {
-        (0..self.n)
-            .map(|r| {
-                (self.ptr[r]..self.ptr[r + 1]).find(|&k| self.idx[k] as usize == r).map(|k| self.val[k]).unwrap_or(0.0)
-            })
-            .collect()
-    }
-    pub fn nnz(&self) -> usize {
-        self.val.len()
-    }
-}
-
 /// `A = Σ A_c A_cᵗ` and `b = Σ b_c A_c` (seed eq. 11) over the rows that `select` keeps.
 /// Row-by-row sparse product AᵀA (Gustavson) over the transposed rows: no sort of triplets,
 /// rows in parallel, each summed in a fixed order (bit-identical results).
-pub fn normal_system(n: usize, rows: &[&Rows], select: &dyn Fn(usize, usize) -> bool) -> (Csr, Vec<f64>) {
+pub fn normal_system(n: usize, rows: &[&Rows], select: &dyn Fn(usize, usize) -> bool) -> (SymCsr, Vec<f64>) {
     // Selected rows as (set, row) in a fixed order.
     let sel: Vec<(usize, usize)> =
         rows.iter().enumerate().flat_map(|(s, rs)| (0..rs.len()).filter(move |&r| select(s, r)).map(move |r| (s, r))).collect();
@@ -389,224 +358,22 @@ pub fn normal_system(n: usize, rows: &[&Rows], select: &dyn Fn(usize, usize) -> 
             },
         )
         .collect();
-    let mut m = Csr { n, ptr: vec![0; n + 1], idx: Vec::new(), val: Vec::new() };
+    let mut m = SymCsr { start: vec![0; n + 1], cols: Vec::new(), vals: Vec::new() };
     let mut b = vec![0.0; n];
     for (i, (row, bi)) in per.into_iter().enumerate() {
         for (j, v) in row {
-            m.idx.push(j);
-            m.val.push(v);
+            m.cols.push(j);
+            m.vals.push(v);
         }
-        m.ptr[i + 1] = m.idx.len();
+        m.start[i + 1] = m.cols.len();
         b[i] = bi;
     }
     (m, b)
 }
 
-/// What one CG solve did.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct CgStats {
-    pub iterations: usize,
-    pub residual: f64,
-    pub converged: bool,
-}
-
-/// Dot product with a fixed summation order (fixed-size chunks summed in parallel, then in
-/// order), so identical input gives bit-identical CG iterates and outputs on any thread count.
-fn det_dot(a: &[f64], b: &[f64]) -> f64 {
-    let parts: Vec<f64> = a
-        .par_chunks(4096)
-        .zip(b.par_chunks(4096))
-        .map(|(x, y)| x.iter().zip(y).map(|(p, q)| p * q).sum::<f64>())
-        .collect();
-    parts.iter().sum()
-}
-
-/// Sum of symmetric CSR matrices plus `shift`·I (A = A_B + A_F merged, seed §3).
-pub fn csr_sum(mats: &[&Csr], shift: f64) -> Csr {
-    let n = mats[0].n;
-    let mut out = Csr { n, ptr: vec![0; n + 1], idx: Vec::new(), val: Vec::new() };
-    let mut acc: Vec<(u32, f64)> = Vec::new();
-    for r in 0..n {
-        acc.clear();
-        for m in mats {
-            for k in m.ptr[r]..m.ptr[r + 1] {
-                acc.push((m.idx[k], m.val[k]));
-            }
-        }
-        acc.push((r as u32, shift));
-        acc.sort_by_key(|e| e.0); // stable: deterministic sums
-        let mut i = 0;
-        while i < acc.len() {
-            let c = acc[i].0;
-            let mut s = 0.0;
-            while i < acc.len() && acc[i].0 == c {
-                s += acc[i].1;
-                i += 1;
-            }
-            out.idx.push(c);
-            out.val.push(s);
-        }
-        out.ptr[r + 1] = out.idx.len();
-    }
-    out
-}
-
-/// Incomplete Cholesky IC(0) factor: L with the pattern of A's lower triangle, A ≈ L·Lᵀ.
-/// A non-positive pivot (A is not an M-matrix) restarts with a diagonal shift (Manteuffel).
-pub struct Ic0 {
-    ptr: Vec<usize>,
-    idx: Vec<u32>,
-    val: Vec<f64>,
-}
-
-impl Ic0 {
-    pub fn new(a: &Csr) -> Ic0 {
-        let n = a.n;
-        let mut ptr = vec![0usize; n + 1];
-        let mut idx = Vec::new();
-        let mut base = Vec::new();
-        for r in 0..n {
-            for k in a.ptr[r]..a.ptr[r + 1] {
-                if a.idx[k] as usize <= r {
-                    idx.push(a.idx[k]);
-                    base.push(a.val[k]);
-                }
-            }
-            ptr[r + 1] = idx.len();
-        }
-        let mut alpha = 0.0;
-        loop {
-            let mut val = base.clone();
-            let mut ok = true;
-            'rows: for i in 0..n {
-                let (s, e) = (ptr[i], ptr[i + 1]);
-                if alpha > 0.0 {
-                    val[e - 1] *= 1.0 + alpha;
-                }
-                for kk in s..e {
-                    let k = idx[kk] as usize;
-                    // dot of rows i and k over columns j < k
-                    let (mut p, mut q) = (s, ptr[k]);
-                    let mut sum = 0.0;
-                    while p < kk && q < ptr[k + 1] - 1 {
-                        let (cp, cq) = (idx[p], idx[q]);
-                        if cp == cq {
-                            sum += val[p] * val[q];
-                            p += 1;
-                            q += 1;
-                        } else if cp < cq {
-                            p += 1;
-                        } else {
-                            q += 1;
-                        }
-                    }
-                    if k == i {
-                        let d = val[kk] - sum;
-                        if !(d > 0.0) {
-                            ok = false;
-                            break 'rows;
-                        }
-                        val[kk] = d.sqrt();
-                    } else {
-                        val[kk] = (val[kk] - sum) / val[ptr[k + 1] - 1];
-                    }
-                }
-            }
-            if ok {
-                return Ic0 { ptr, idx, val };
-            }
-            alpha = if alpha == 0.0 { 1e-3 } else { alpha * 10.0 };
-        }
-    }
-
-    /// z = (L·Lᵀ)⁻¹ r.
-    pub fn apply(&self, r: &[f64], z: &mut [f64]) {
-        let n = r.len();
-        for i in 0..n {
-            let (s, e) = (self.ptr[i], self.ptr[i + 1]);
-            let mut v = r[i];
-            for k in s..e - 1 {
-                v -= self.val[k] * z[self.idx[k] as usize];
-            }
-            z[i] = v / self.val[e - 1];
-        }
-        for i in (0..n).rev() {
-            let (s, e) = (self.ptr[i], self.ptr[i + 1]);
-            z[i] /= self.val[e - 1];
-            let zi = z[i];
-            for k in s..e - 1 {
-                z[self.idx[k] as usize] -= self.val[k] * zi;
-            }
-        }
-    }
-}
-
-/// Preconditioned conjugate gradients on `A·x = b` from the start value in `x`
-/// (Hestenes & Stiefel 1952, seed ref. [HS52]) with an IC(0) preconditioner.
-/// Stops when ‖r‖ ≤ tol·‖b‖.
-pub fn pcg(a: &Csr, b: &[f64], x: &mut [f64], tol: f64, max_iter: usize) -> CgStats {
-    pcg_checked(a, b, x, tol, max_iter, None)
-}
-
-/// [`pcg`] with a checkpoint: when ‖r‖ ≤ `loose`·‖b‖ first holds, `go_on(x)` decides whether to
-/// keep iterating to `tol` within the same Krylov sequence (true) or to stop there (false).
-/// Continuing instead of restarting keeps CG's superlinear phase.
-pub fn pcg_checked(
-    a: &Csr,
-    b: &[f64],
-    x: &mut [f64],
-    tol: f64,
-    max_iter: usize,
-    mut check: Option<(f64, &mut dyn FnMut(&[f64]) -> bool)>,
-) -> CgStats {
-    let n = b.len();
-    let pdot = det_dot;
-    let bn = pdot(b, b).sqrt();
-    if bn == 0.0 {
-        x.iter_mut().for_each(|v| *v = 0.0);
-        return CgStats { iterations: 0, residual: 0.0, converged: true };
-    }
-    let ic = Ic0::new(a);
-    let mut r = vec![0.0; n];
-    a.mul(x, &mut r);
-    r.par_iter_mut().zip(b.par_iter()).for_each(|(r, b)| *r = b - *r);
-    let mut z = vec![0.0; n];
-    ic.apply(&r, &mut z);
-    let mut p = z.clone();
-    let mut rz = pdot(&r, &z);
-    let mut q = vec![0.0; n];
-    let mut res = pdot(&r, &r).sqrt() / bn;
-    let mut it = 0;
-    loop {
-        if let Some((loose, go_on)) = check.as_mut() {
-            if res <= *loose {
-                let cont = go_on(x);
-                check = None;
-                if !cont {
-                    return CgStats { iterations: it, residual: res, converged: true };
-                }
-            }
-        }
-        if res <= tol || it >= max_iter {
-            break;
-        }
-        a.mul(&p, &mut q);
-        let pq = pdot(&p, &q);
-        if !(pq > 0.0) {
-            break;
-        }
-        let alpha = rz / pq;
-        x.par_iter_mut().zip(p.par_iter()).for_each(|(x, p)| *x += alpha * p);
-        r.par_iter_mut().zip(q.par_iter()).for_each(|(r, q)| *r -= alpha * q);
-        ic.apply(&r, &mut z);
-        let rz2 = pdot(&r, &z);
-        let beta = rz2 / rz;
-        rz = rz2;
-        p.par_iter_mut().zip(z.par_iter()).for_each(|(p, z)| *p = z + beta * *p);
-        res = pdot(&r, &r).sqrt() / bn;
-        it += 1;
-    }
-    CgStats { iterations: it, residual: res, converged: res <= tol }
+/// The CG of the DSI system: IC(0)-preconditioned, stopping and judged at `tol`.
+pub fn pcg(a: &SymCsr, b: &[f64], x: &mut [f64], tol: f64, max_iter: usize, check: Option<Checkpoint<'_>>) -> Result<CgStats, NotConverged> {
+    sparse_spd::pcg(a, b, x, &Preconditioner::ic0(a), &PcgOptions::new(tol, max_iter), check)
 }
 
 /// Hysteresis of the active set, as a fraction of the margin δ·g the inequality rows ask for.
@@ -710,14 +477,14 @@ pub fn solve_rows(
         let (a_float, b_float) = normal_system(n, &[data], &|_, r| act[r] && data.float[r]);
         let b: Vec<f64> = b_base.iter().zip(&b_float).map(|(a, b)| a + b).collect();
         // seed §3: the base and float systems are merged into one system for CG.
-        let a = csr_sum(&[&a_rough, &a_base, &a_float], shift);
+        let a = SymCsr::sum(&[&a_rough, &a_base, &a_float], shift);
         let last = settled || round + 1 >= p.rounds.max(1);
         // Not the last round: stop at the loose tolerance unless the active set is already
         // unchanged there, in which case the same CG run goes on to `p.tol` and we are done.
         let mut next: Option<Vec<bool>> = None;
         let mut done = last;
         let st = if last {
-            pcg(&a, &b, &mut x, p.tol, p.max_iter)
+            pcg(&a, &b, &mut x, p.tol, p.max_iter, None)
         } else {
             let mut go_on = |xx: &[f64]| {
                 let new = next_active(data, xx, &act, p);
@@ -730,19 +497,19 @@ pub fn solve_rows(
                 next = Some(new);
                 same
             };
-            let st = pcg_checked(&a, &b, &mut x, p.tol, p.max_iter, Some((loose, &mut go_on)));
+            let st = pcg(&a, &b, &mut x, p.tol, p.max_iter, Some(Checkpoint { loose, go_on: &mut go_on }));
             if next.as_ref() == Some(&act) {
                 done = true;
             }
             st
         };
+        let st = st.map_err(|e| {
+            progress(round, e.iterations, e.residual);
+            Error::NotConverged { iterations: e.iterations, residual: e.residual, tol: e.tol }
+        })?;
         iters.push(st.iterations);
         last_res = st.residual;
         progress(round, st.iterations, st.residual);
-        if !st.converged {
-            let tol = if done { p.tol } else { loose };
-            return Err(Error::NotConverged { iterations: st.iterations, residual: st.residual, tol });
-        }
         if done {
             break;
         }

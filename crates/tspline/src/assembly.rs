@@ -311,14 +311,19 @@ pub(crate) fn by_elements(sys: System<'_>, samples: &Samples, region: Option<&Re
             acc.rows.sums
         })
         .collect();
-    parts.push(uncovered_cells(sys, samples, region, &covered.into_words()));
+    // a part with no cell would only add zeros (and cost a pass over every entry)
+    match uncovered_cells(sys, samples, region, &covered.into_words()) {
+        Some(rest) => parts.push(rest),
+        None if parts.is_empty() => parts.push(sys.zero_sums()),
+        None => {}
+    }
     Sums::merged(parts)
 }
 
 /// The valid cells (of `region`) that no leaf holds half-open, cell by cell: upper borders of
 /// the domain (A1) and cells outside it (which add nothing).
-fn uncovered_cells(sys: System<'_>, samples: &Samples, region: Option<&Region>, covered: &[u64]) -> Sums {
-    let mut rows = CellRows::new(sys);
+fn uncovered_cells(sys: System<'_>, samples: &Samples, region: Option<&Region>, covered: &[u64]) -> Option<Sums> {
+    let mut rows: Option<CellRows<'_>> = None;
     let w = samples.width;
     for (wi, &word) in covered.iter().enumerate() {
         if word == u64::MAX {
@@ -329,12 +334,12 @@ fn uncovered_cells(sys: System<'_>, samples: &Samples, region: Option<&Region>, 
             if q >= samples.z.len() {
                 break;
             }
-            if word & (1u64 << b) == 0 && region.is_none_or(|r| r.contains(q)) {
-                rows.add_point((q % w) as f64, (q / w) as f64, samples.z[q]);
+            if word & (1u64 << b) == 0 && region.is_none_or(|r| r.contains(q)) && !samples.z[q].is_nan() {
+                rows.get_or_insert_with(|| CellRows::new(sys)).add_point((q % w) as f64, (q / w) as f64, samples.z[q]);
             }
         }
     }
-    rows.sums
+    rows.map(|r| r.sums)
 }
 
 /// Scratch and partial sums of the per-element path.

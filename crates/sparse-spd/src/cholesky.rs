@@ -1,0 +1,102 @@
+//! faer's supernodal sparse Cholesky with the symbolic factorisation (AMD ordering and
+//! elimination tree) re-used while the pattern stays the same.
+
+use std::cell::RefCell;
+
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::sparse::linalg::cholesky::{factorize_symbolic_cholesky, LltRef, SymbolicCholesky, SymmetricOrdering};
+use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
+use faer::{Conj, MatMut, Par, Side};
+
+use crate::csr::SymCsr;
+
+/// Why the direct solve was not done.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum CholeskyError {
+    #[error("the symbolic Cholesky factorisation failed: {0}")]
+    Symbolic(String),
+    #[error("the Cholesky factor would take {bytes} bytes, more than the {limit} allowed")]
+    FactorTooLarge { bytes: usize, limit: usize },
+    #[error("the matrix is not numerically positive definite (a non-positive pivot)")]
+    NotPositiveDefinite,
+}
+
+struct Cached {
+    col_ptr: Vec<usize>,
+    row_idx: Vec<usize>,
+    symbolic: SymbolicCholesky<usize>,
+}
+
+thread_local! {
+    /// The last symbolic factorisation of this thread (a fit's loop runs on one thread and
+    /// solves a sequence of systems whose pattern often repeats).
+    static SYMBOLIC: RefCell<Option<Cached>> = const { RefCell::new(None) };
+}
+
+/// The lower triangle of `a` in CSC: by symmetry column j of it is row j of the CSR from the
+/// diagonal on (columns sorted, so the rows of each CSC column are sorted too).
+fn lower_csc(a: &SymCsr) -> (Vec<usize>, Vec<usize>, Vec<f64>) {
+    let n = a.n();
+    let mut col_ptr = Vec::with_capacity(n + 1);
+    let mut row_idx = Vec::with_capacity(a.cols.len() / 2 + n);
+    let mut vals = Vec::with_capacity(a.cols.len() / 2 + n);
+    col_ptr.push(0usize);
+    for j in 0..n {
+        for k in a.start[j]..a.start[j + 1] {
+            let i = a.cols[k] as usize;
+            if i >= j {
+                row_idx.push(i);
+                vals.push(a.vals[k]);
+            }
+        }
+        col_ptr.push(row_idx.len());
+    }
+    (col_ptr, row_idx, vals)
+}
+
+/// Solves A x = b by Cholesky plus one step of iterative refinement; the bool says whether
+/// the symbolic factorisation of this thread's previous call was re-used (same pattern,
+/// compared exactly). A factor of more than `max_factor_bytes` is not built.
+pub fn cholesky_solve(a: &SymCsr, b: &[f64], max_factor_bytes: usize) -> Result<(Vec<f64>, bool), CholeskyError> {
+    let (col_ptr, row_idx, vals) = lower_csc(a);
+    SYMBOLIC.with(|cache| factor_and_solve(a, b, (&col_ptr, &row_idx, &vals), max_factor_bytes, &mut cache.borrow_mut()))
+}
+
+fn factor_and_solve(a: &SymCsr, b: &[f64], csc: (&[usize], &[usize], &[f64]), max_bytes: usize, cache: &mut Option<Cached>) -> Result<(Vec<f64>, bool), CholeskyError> {
+    let n = a.n();
+    let (col_ptr, row_idx, vals) = csc;
+    let sym = SymbolicSparseColMatRef::new_checked(n, n, col_ptr, None, row_idx);
+    let mat = SparseColMatRef::new(sym, vals);
+    let reused = cache.as_ref().is_some_and(|c| c.col_ptr == col_ptr && c.row_idx == row_idx);
+    if !reused {
+        let symbolic = factorize_symbolic_cholesky(sym, Side::Lower, SymmetricOrdering::Amd, Default::default()).map_err(|e| CholeskyError::Symbolic(format!("{e:?}")))?;
+        *cache = Some(Cached { col_ptr: col_ptr.to_vec(), row_idx: row_idx.to_vec(), symbolic });
+    }
+    let Some(cached) = cache.as_ref() else { return Err(CholeskyError::Symbolic("no cached factorisation".into())) };
+    let symbolic = &cached.symbolic;
+    let bytes = symbolic.len_val().saturating_mul(8);
+    if bytes > max_bytes {
+        return Err(CholeskyError::FactorTooLarge { bytes, limit: max_bytes });
+    }
+    let par = if rayon::current_num_threads() > 1 { Par::rayon(0) } else { Par::Seq };
+    let mut l = vec![0.0; symbolic.len_val()];
+    let mut buf = MemBuffer::new(symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default()));
+    symbolic
+        .factorize_numeric_llt::<f64>(&mut l, mat, Side::Lower, Default::default(), par, MemStack::new(&mut buf), Default::default())
+        .map_err(|_| CholeskyError::NotPositiveDefinite)?;
+    let llt = LltRef::<'_, usize, f64>::new(symbolic, &l);
+    let mut sbuf = MemBuffer::new(symbolic.solve_in_place_scratch::<f64>(1, par));
+    let mut solve = |v: &mut [f64]| {
+        let m = MatMut::from_column_major_slice_mut(v, n, 1);
+        llt.solve_in_place_with_conj(Conj::No, m, par, MemStack::new(&mut sbuf));
+    };
+    let mut x = b.to_vec();
+    solve(&mut x);
+    // one refinement step: x += A⁻¹ (b − A x)
+    let mut r = vec![0.0; n];
+    a.mul(&x, &mut r);
+    r.iter_mut().zip(b).for_each(|(ri, bi)| *ri = bi - *ri);
+    solve(&mut r);
+    x.iter_mut().zip(&r).for_each(|(xi, di)| *xi += di);
+    Ok((x, reused))
+}

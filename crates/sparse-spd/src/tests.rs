@@ -1,0 +1,158 @@
+//! Solves checked against systems with a known answer.
+
+use super::*;
+
+/// The 2-D Laplacian plus a shift (SPD for shift > 0) on an m×m grid, full pattern.
+fn laplace_2d(m: usize, shift: f64) -> SymCsr {
+    let n = m * m;
+    let mut a = SymCsr::default();
+    for q in 0..n {
+        let (i, j) = (q % m, q / m);
+        let mut row = vec![(q as u32, 4.0 + shift)];
+        if i > 0 {
+            row.push(((q - 1) as u32, -1.0));
+        }
+        if i + 1 < m {
+            row.push(((q + 1) as u32, -1.0));
+        }
+        if j > 0 {
+            row.push(((q - m) as u32, -1.0));
+        }
+        if j + 1 < m {
+            row.push(((q + m) as u32, -1.0));
+        }
+        row.sort_by_key(|e| e.0);
+        for (c, v) in row {
+            a.cols.push(c);
+            a.vals.push(v);
+        }
+        a.start.push(a.cols.len());
+    }
+    a
+}
+
+fn tspline_like(n: usize) -> SolveOptions {
+    let cg = PcgOptions { tol: 1e-13, max_iter: 20 * n + 2000, accept: 1e-10, dot_chunk: 8192 };
+    SolveOptions { direct: true, max_factor_bytes: 256 << 20, direct_accept: 1e-10, cg }
+}
+
+fn known(a: &SymCsr) -> (Vec<f64>, Vec<f64>) {
+    let truth: Vec<f64> = (0..a.n()).map(|q| ((q * 7919) % 101) as f64 / 10.0 - 5.0).collect();
+    let mut b = vec![0.0; a.n()];
+    a.mul(&truth, &mut b);
+    (truth, b)
+}
+
+/// The 1-D Laplacian's solution for b = e₁ is known in closed form: x_i = (n − i)/(n + 1)
+/// (i = 0-based), the discrete Green's function. Both CG preconditioners and the Cholesky
+/// reach it.
+#[test]
+fn laplacian_green_function_is_found_by_every_solver() {
+    let n = 64;
+    let a = laplacian_1d(n, 0.0);
+    let mut b = vec![0.0; n];
+    b[0] = 1.0;
+    let exact: Vec<f64> = (0..n).map(|i| (n - i) as f64 / (n + 1) as f64).collect();
+    let close = |x: &[f64], eps: f64| x.iter().zip(&exact).all(|(p, q)| (p - q).abs() < eps);
+    let (x, _) = cholesky_solve(&a, &b, 1 << 20).unwrap();
+    assert!(close(&x, 1e-12));
+    for pre in [Preconditioner::jacobi(&a), Preconditioner::ic0(&a)] {
+        let mut y = vec![0.0; n];
+        let st = pcg(&a, &b, &mut y, &pre, &PcgOptions::new(1e-12, 500), None).unwrap();
+        assert!(close(&y, 1e-9), "{st:?}");
+        // a tridiagonal matrix is its own IC(0): one iteration
+        if matches!(pre, Preconditioner::Ic0(_)) {
+            assert!(st.iterations <= 1, "{st:?}");
+        }
+    }
+}
+
+/// Cholesky and CG solve a known 2-D system to 1e-10, the second Cholesky of the same pattern
+/// re-uses the symbolic factorisation, and a CG with too few iterations says so instead of
+/// returning its approximation.
+#[test]
+fn direct_and_iterative_agree_with_the_truth() {
+    let a = laplace_2d(40, 0.01);
+    let n = a.n();
+    let (truth, b) = known(&a);
+    let opts = tspline_like(n);
+    let (x, info) = solve_spd(&a, &b, &vec![0.0; n], &opts).unwrap();
+    assert_eq!(info.method, "cholesky");
+    assert!(x.iter().zip(&truth).all(|(p, q)| (p - q).abs() < 1e-10), "{info:?}");
+    let mut a2 = a.clone();
+    a2.vals.iter_mut().for_each(|v| *v *= 2.0);
+    let (x2, info2) = solve_spd(&a2, &b, &vec![0.0; n], &opts).unwrap();
+    assert!(info2.symbolic_reused);
+    assert!(x2.iter().zip(&truth).all(|(p, q)| (2.0 * p - q).abs() < 1e-10));
+    let (xc, ic) = jacobi_cg(&a, &b, &vec![0.0; n], &opts.cg).unwrap();
+    assert!(ic.iterations > 10);
+    assert!(xc.iter().zip(&truth).all(|(p, q)| (p - q).abs() < 1e-8));
+    let short = PcgOptions { max_iter: 3, ..opts.cg };
+    let e = jacobi_cg(&a, &b, &vec![0.0; n], &short).unwrap_err();
+    assert_eq!(e.iterations, 3);
+    assert!(e.residual > 1e-6 && e.to_string().contains("did not converge"), "{e}");
+}
+
+/// A matrix with a negative diagonal entry is not positive definite: the Cholesky refuses it,
+/// and the policy's CG fallback either reports the failure or returns a verified answer.
+#[test]
+fn indefinite_systems_are_reported() {
+    let mut a = laplace_2d(10, 0.0);
+    let k = a.find(5, 5).unwrap();
+    a.vals[k] = -50.0;
+    let b = vec![1.0; a.n()];
+    assert_eq!(cholesky_solve(&a, &b, 1 << 20).unwrap_err(), CholeskyError::NotPositiveDefinite);
+    match solve_spd(&a, &b, &vec![0.0; a.n()], &tspline_like(a.n())) {
+        Err(e) => assert!(e.to_string().contains("did not converge")),
+        Ok((x, info)) => {
+            let mut r = vec![0.0; a.n()];
+            a.mul(&x, &mut r);
+            let err = r.iter().zip(&b).map(|(p, q)| (p - q).powi(2)).sum::<f64>().sqrt() / 10.0;
+            assert!(err <= 1e-10, "{info:?}: residual {err}");
+        }
+    }
+}
+
+/// A factor over the byte limit is refused with its size, and the policy solves by CG.
+#[test]
+fn oversized_factors_fall_back_to_cg() {
+    let a = laplace_2d(20, 0.1);
+    let (truth, b) = known(&a);
+    let e = cholesky_solve(&a, &b, 64).unwrap_err();
+    assert!(matches!(e, CholeskyError::FactorTooLarge { bytes, limit: 64 } if bytes > 64), "{e}");
+    let opts = SolveOptions { max_factor_bytes: 64, ..tspline_like(a.n()) };
+    let (x, info) = solve_spd(&a, &b, &vec![0.0; a.n()], &opts).unwrap();
+    assert_eq!(info.method, "cg");
+    assert!(x.iter().zip(&truth).all(|(p, q)| (p - q).abs() < 1e-8));
+}
+
+/// The checkpoint sees the iterate once at the loose tolerance; stopping there returns an
+/// answer that meets the loose tolerance only, flagged as such.
+#[test]
+fn checkpoint_stops_at_the_loose_tolerance() {
+    let a = laplace_2d(30, 0.01);
+    let (_, b) = known(&a);
+    let mut calls = 0;
+    let mut stop = |_: &[f64]| {
+        calls += 1;
+        false
+    };
+    let mut x = vec![0.0; a.n()];
+    let opts = PcgOptions::new(1e-12, 10_000);
+    let st = pcg(&a, &b, &mut x, &Preconditioner::ic0(&a), &opts, Some(Checkpoint { loose: 1e-4, go_on: &mut stop })).unwrap();
+    assert_eq!(calls, 1);
+    assert!(st.stopped_at_checkpoint && st.true_residual <= 1e-4 && st.true_residual > 1e-12, "{st:?}");
+}
+
+/// Sums merge patterns, add the shift on the diagonal, and b = 0 solves to x = 0 at once.
+#[test]
+fn sum_and_trivial_right_hand_side() {
+    let a = laplacian_1d(3, 0.0);
+    let s = SymCsr::sum(&[&a, &a], 0.5);
+    assert_eq!(s.cols, a.cols);
+    assert_eq!(s.diag(), vec![4.5, 4.5, 4.5]);
+    assert_eq!(s.vals[1], -2.0);
+    let mut x = vec![3.0; 3];
+    let st = pcg(&s, &[0.0; 3], &mut x, &Preconditioner::jacobi(&s), &PcgOptions::new(1e-12, 10), None).unwrap();
+    assert_eq!((x, st.iterations), (vec![0.0; 3], 0));
+}
