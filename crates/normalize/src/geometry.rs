@@ -87,11 +87,10 @@ fn build_depth(soup: &Soup, topo: &Topo, tol: &Tolerances, origin: [f64; 3], dep
 }
 
 /// Steps 1–4 of geometric normalization on one part's faces: per face its least-squares
-/// normal, normal cluster, plane and sign relative to the cluster normal; the cluster normals
+/// normal, plane and sign relative to the cluster normal; the cluster normals
 /// (orthogonal partners sharing parameters) and the planes as (cluster, d, first face).
 struct PlaneNet {
     fnormal: Vec<Vector3<f64>>,
-    fcluster: Vec<usize>,
     fsign: Vec<f64>,
     fplane: Vec<usize>,
     cnormal: Vec<Vector3<f64>>,
@@ -114,7 +113,7 @@ impl PlaneNet {
         let fsign: Vec<f64> = (0..nf).map(|f| if cnormal[fcluster[f]].dot(&fnormal[f]) >= 0.0 { 1.0 } else { -1.0 }).collect();
         let fd: Vec<f64> = (0..nf).map(|f| cnormal[fcluster[f]].dot(&fcent[f])).collect();
         let (planes, fplane) = coplanar_planes(cnormal.len(), &fcluster, &fd, &farea, tol.plane_distance);
-        Ok(PlaneNet { fnormal, fcluster, fsign, fplane, cnormal, partner, planes })
+        Ok(PlaneNet { fnormal, fsign, fplane, cnormal, partner, planes })
     }
 
     /// Nodes whose planes' normals are not 3 independent directions (smallest singular value
