@@ -1669,9 +1669,10 @@ pub(crate) fn resolve_object(
     global: &mut dyn GlobalIds,
 ) -> Result<Vec<XLinkRef>, ReadError> {
     let mut unresolved = Vec::new();
-    resolve_whole_surface_refs(obj, local_ids, reparse, global)?;
-    resolve_solid_refs(obj, local_ids, reparse, global, &mut unresolved)?;
-    resolve_polygon_refs(obj, local_ids, reparse, global, &mut unresolved)?;
+    let mut lk = Lookups { local_ids, reparse, global };
+    resolve_whole_surface_refs(obj, &mut lk)?;
+    resolve_solid_refs(obj, &mut lk, &mut unresolved)?;
+    resolve_polygon_refs(obj, &mut lk, &mut unresolved)?;
     // Each reference says where it sits (the innermost object holding it) and, when its id
     // names an element that is not a geometry (a city object, an appearance...), what that is.
     for u in &mut unresolved {
@@ -1680,10 +1681,18 @@ pub(crate) fn resolve_object(
             u.feature_type = o.kind.clone();
         }
         if let Some(id) = href_id(&u.href) {
-            u.target = find_id(local_ids, global, id)?.map(|e| String::from_utf8_lossy(qname_at(reparse.src, e.bytes.start)).into_owned());
+            u.target = find_id(lk.local_ids, lk.global, id)?.map(|e| String::from_utf8_lossy(qname_at(lk.reparse.src, e.bytes.start)).into_owned());
         }
     }
     Ok(unresolved)
+}
+
+/// The lookups an object's XLinks are resolved through: the object's own ids, the document
+/// bytes targets are re-parsed from, and the ids of the rest of the document.
+struct Lookups<'l, 's, 'a> {
+    local_ids: &'l FxMap<String, IdEntry>,
+    reparse: &'l Reparse<'s, 'a>,
+    global: &'l mut dyn GlobalIds,
 }
 
 /// Phase -1: a whole surface-type geometry property by reference (`<bldg:lod2MultiSurface
@@ -1694,11 +1703,9 @@ pub(crate) fn resolve_object(
 /// exist stays a placeholder: the polygon phase reports it as an unresolved XLink.
 fn resolve_whole_surface_refs(
     obj: &mut CityObject,
-    local_ids: &FxMap<String, IdEntry>,
-    reparse: &Reparse<'_, '_>,
-    global: &mut dyn GlobalIds,
+    lk: &mut Lookups<'_, '_, '_>,
 ) -> Result<(), ReadError> {
-    let whole = whole_surface_targets(obj, local_ids, reparse, global)?;
+    let whole = whole_surface_targets(obj, lk)?;
     if whole.is_empty() {
         return Ok(());
     }
@@ -1732,10 +1739,9 @@ fn resolve_whole_surface_refs(
 /// for messages) of its target, `None` when there is none.
 fn whole_surface_targets(
     obj: &CityObject,
-    local_ids: &FxMap<String, IdEntry>,
-    reparse: &Reparse<'_, '_>,
-    global: &mut dyn GlobalIds,
+    lk: &mut Lookups<'_, '_, '_>,
 ) -> Result<Vec<Option<(String, String)>>, ReadError> {
+    let (local_ids, reparse, global) = (lk.local_ids, lk.reparse, &mut *lk.global);
     let mut by_id: rustc_hash::FxHashSet<&str> = Default::default();
     visit_polys(obj, &mut |p| {
         if let (false, Some(id)) = (is_placeholder(p), &p.id) {
@@ -1767,9 +1773,7 @@ fn whole_surface_targets(
 /// polygon XLinks resolved), or skipped members that say why not.
 fn resolve_solid_refs(
     obj: &mut CityObject,
-    local_ids: &FxMap<String, IdEntry>,
-    reparse: &Reparse<'_, '_>,
-    global: &mut dyn GlobalIds,
+    lk: &mut Lookups<'_, '_, '_>,
     unresolved: &mut Vec<XLinkRef>,
 ) -> Result<(), ReadError> {
     let mut has_solid_refs = false;
@@ -1777,7 +1781,7 @@ fn resolve_solid_refs(
     if !has_solid_refs {
         return Ok(());
     }
-    let resolved = solid_ref_targets(obj, local_ids, reparse, global, unresolved)?;
+    let resolved = solid_ref_targets(obj, lk, unresolved)?;
     let mut it = resolved.into_iter();
     visit_geoms_mut(obj, &mut |g| {
         if !solid_placeholders_in(g) {
@@ -1817,11 +1821,10 @@ fn resolve_solid_refs(
 /// name of its target (a whole `lodNSolid xlink:href` geometry takes the target's type).
 fn solid_ref_targets(
     obj: &CityObject,
-    local_ids: &FxMap<String, IdEntry>,
-    reparse: &Reparse<'_, '_>,
-    global: &mut dyn GlobalIds,
+    lk: &mut Lookups<'_, '_, '_>,
     unresolved: &mut Vec<XLinkRef>,
 ) -> Result<Vec<(ResolvedSolids, Option<String>)>, ReadError> {
+    let (local_ids, reparse, global) = (lk.local_ids, lk.reparse, &mut *lk.global);
     let mut by_id: FxMap<&str, &Polygon> = FxMap::default();
     visit_polys(obj, &mut |p| {
         if let (false, Some(id)) = (is_placeholder(p), &p.id) {
@@ -1855,11 +1858,10 @@ fn solid_ref_targets(
 /// order), then spliced in in the same order.
 fn resolve_polygon_refs(
     obj: &mut CityObject,
-    local_ids: &FxMap<String, IdEntry>,
-    reparse: &Reparse<'_, '_>,
-    global: &mut dyn GlobalIds,
+    lk: &mut Lookups<'_, '_, '_>,
     unresolved: &mut Vec<XLinkRef>,
 ) -> Result<(), ReadError> {
+    let (local_ids, reparse, global) = (lk.local_ids, lk.reparse, &mut *lk.global);
     let mut replacements: Vec<Option<Vec<Polygon>>> = Vec::new();
     {
         let mut by_id: FxMap<&str, &Polygon> = FxMap::default();
