@@ -1669,132 +1669,199 @@ pub(crate) fn resolve_object(
     global: &mut dyn GlobalIds,
 ) -> Result<Vec<XLinkRef>, ReadError> {
     let mut unresolved = Vec::new();
-    // Phase -1: a whole surface-type geometry property by reference (`<bldg:lod2MultiSurface
-    // xlink:href="#ms"/>`, read as one polygon placeholder) becomes what its target is: a solid
-    // placeholder for a Solid/CompositeSolid/MultiSolid (resolved below with the solidMember
-    // references), the surfaces of a surface geometry (named after it), and for anything else
-    // a skipped member instead of the polygons it happens to contain. A target that does not
-    // exist stays a placeholder: the polygon phase reports it as an unresolved XLink.
-    let mut whole: Vec<Option<(String, String)>> = Vec::new();
-    {
-        let mut by_id: rustc_hash::FxHashSet<&str> = Default::default();
-        visit_polys(obj, &mut |p| {
-            if let (false, Some(id)) = (is_placeholder(p), &p.id) {
-                by_id.insert(id.as_str());
-            }
-        });
-        let mut hrefs: Vec<&str> = Vec::new();
-        visit_geoms(obj, &mut |g| {
-            if let Some(ph) = whole_surface_ref(g) {
-                hrefs.push(ph.id.as_deref().unwrap_or(""));
-            }
-        });
-        for href in hrefs {
-            // (local name, qualified name for messages) of the target
-            let name = match href_id(href) {
-                Some(id) if by_id.contains(id) => Some(("Polygon".to_string(), "gml:Polygon".to_string())),
-                Some(id) => find_id(local_ids, global, id)?.map(|e| {
-                    let at = e.bytes.start;
-                    (String::from_utf8_lossy(name_at(reparse.src, at)).into_owned(), String::from_utf8_lossy(qname_at(reparse.src, at)).into_owned())
-                }),
-                None => None,
-            };
-            whole.push(name);
+    let mut lk = Lookups { local_ids, reparse, global };
+    resolve_whole_surface_refs(obj, &mut lk)?;
+    resolve_solid_refs(obj, &mut lk, &mut unresolved)?;
+    resolve_polygon_refs(obj, &mut lk, &mut unresolved)?;
+    // Each reference says where it sits (the innermost object holding it) and, when its id
+    // names an element that is not a geometry (a city object, an appearance...), what that is.
+    for u in &mut unresolved {
+        if let Some(o) = innermost_at(obj, u.span.bytes.start) {
+            u.feature = o.id.clone();
+            u.feature_type = o.kind.clone();
+        }
+        if let Some(id) = href_id(&u.href) {
+            u.target = find_id(lk.local_ids, lk.global, id)?.map(|e| String::from_utf8_lossy(qname_at(lk.reparse.src, e.bytes.start)).into_owned());
         }
     }
-    if !whole.is_empty() {
-        let mut it = whole.into_iter();
-        visit_geoms_mut(obj, &mut |g| {
-            if whole_surface_ref(g).is_none() {
-                return;
-            }
-            let Some(Some((name, qname))) = it.next() else { return };
-            let GeometryKind::Surfaces(v) = &mut g.kind else { return };
-            if matches!(name.as_str(), "Solid" | "CompositeSolid" | "MultiSolid") {
-                let mut ph = v.pop().unwrap();
-                ph.exterior.srs_dimension = 0;
-                g.kind = GeometryKind::Solids(vec![(Shell { id: None, polygons: vec![ph], via_xlink: None }, Vec::new())]);
-            } else if is_surface_like(name.as_bytes()) {
-                g.gml_type = name;
-            } else {
-                let ph = v.pop().unwrap();
-                let href = ph.id.unwrap_or_default();
-                g.skipped_members.push(SkippedMember {
-                    reason: format!("xlink:href=\"{}\" points to <{}>, not a geometry", quote(&href), quote(&qname)),
-                    href: Some(href),
-                    span: ph.via_xlink.unwrap_or_default(),
-                });
-            }
-        });
+    Ok(unresolved)
+}
+
+/// The lookups an object's XLinks are resolved through: the object's own ids, the document
+/// bytes targets are re-parsed from, and the ids of the rest of the document.
+struct Lookups<'l, 's, 'a> {
+    local_ids: &'l FxMap<String, IdEntry>,
+    reparse: &'l Reparse<'s, 'a>,
+    global: &'l mut dyn GlobalIds,
+}
+
+/// Phase -1: a whole surface-type geometry property by reference (`<bldg:lod2MultiSurface
+/// xlink:href="#ms"/>`, read as one polygon placeholder) becomes what its target is: a solid
+/// placeholder for a Solid/CompositeSolid/MultiSolid (resolved by [`resolve_solid_refs`] with the
+/// solidMember references), the surfaces of a surface geometry (named after it), and for anything
+/// else a skipped member instead of the polygons it happens to contain. A target that does not
+/// exist stays a placeholder: the polygon phase reports it as an unresolved XLink.
+fn resolve_whole_surface_refs(
+    obj: &mut CityObject,
+    lk: &mut Lookups<'_, '_, '_>,
+) -> Result<(), ReadError> {
+    let whole = whole_surface_targets(obj, lk)?;
+    if whole.is_empty() {
+        return Ok(());
     }
-    // Phase 0: `solidMember xlink:href`s become copies of the solids they point to (their own
-    // polygon XLinks resolved), or skipped members that say why not.
+    let mut it = whole.into_iter();
+    visit_geoms_mut(obj, &mut |g| {
+        if whole_surface_ref(g).is_none() {
+            return;
+        }
+        let Some(Some((name, qname))) = it.next() else { return };
+        let GeometryKind::Surfaces(v) = &mut g.kind else { return };
+        if matches!(name.as_str(), "Solid" | "CompositeSolid" | "MultiSolid") {
+            let Some(mut ph) = v.pop() else { return };
+            ph.exterior.srs_dimension = 0;
+            g.kind = GeometryKind::Solids(vec![(Shell { id: None, polygons: vec![ph], via_xlink: None }, Vec::new())]);
+        } else if is_surface_like(name.as_bytes()) {
+            g.gml_type = name;
+        } else {
+            let Some(ph) = v.pop() else { return };
+            let href = ph.id.unwrap_or_default();
+            g.skipped_members.push(SkippedMember {
+                reason: format!("xlink:href=\"{}\" points to <{}>, not a geometry", quote(&href), quote(&qname)),
+                href: Some(href),
+                span: ph.via_xlink.unwrap_or_default(),
+            });
+        }
+    });
+    Ok(())
+}
+
+/// Per whole surface-type property by reference, in visiting order: (local name, qualified name
+/// for messages) of its target, `None` when there is none.
+fn whole_surface_targets(
+    obj: &CityObject,
+    lk: &mut Lookups<'_, '_, '_>,
+) -> Result<Vec<Option<(String, String)>>, ReadError> {
+    let (local_ids, reparse, global) = (lk.local_ids, lk.reparse, &mut *lk.global);
+    let mut by_id: rustc_hash::FxHashSet<&str> = Default::default();
+    visit_polys(obj, &mut |p| {
+        if let (false, Some(id)) = (is_placeholder(p), &p.id) {
+            by_id.insert(id.as_str());
+        }
+    });
+    let mut hrefs: Vec<&str> = Vec::new();
+    visit_geoms(obj, &mut |g| {
+        if let Some(ph) = whole_surface_ref(g) {
+            hrefs.push(ph.id.as_deref().unwrap_or(""));
+        }
+    });
+    let mut whole = Vec::new();
+    for href in hrefs {
+        let name = match href_id(href) {
+            Some(id) if by_id.contains(id) => Some(("Polygon".to_string(), "gml:Polygon".to_string())),
+            Some(id) => find_id(local_ids, global, id)?.map(|e| {
+                let at = e.bytes.start;
+                (String::from_utf8_lossy(name_at(reparse.src, at)).into_owned(), String::from_utf8_lossy(qname_at(reparse.src, at)).into_owned())
+            }),
+            None => None,
+        };
+        whole.push(name);
+    }
+    Ok(whole)
+}
+
+/// Phase 0: `solidMember xlink:href`s become copies of the solids they point to (their own
+/// polygon XLinks resolved), or skipped members that say why not.
+fn resolve_solid_refs(
+    obj: &mut CityObject,
+    lk: &mut Lookups<'_, '_, '_>,
+    unresolved: &mut Vec<XLinkRef>,
+) -> Result<(), ReadError> {
     let mut has_solid_refs = false;
     visit_geoms(obj, &mut |g| has_solid_refs |= solid_placeholders_in(g));
-    if has_solid_refs {
-        // per placeholder: its solids and skipped members, and the element name of its target
-        // (a whole `lodNSolid xlink:href` geometry takes the target's type)
-        let mut resolved: Vec<(ResolvedSolids, Option<String>)> = Vec::new();
-        {
-            let mut by_id: FxMap<&str, &Polygon> = FxMap::default();
-            visit_polys(obj, &mut |p| {
-                if let (false, Some(id)) = (is_placeholder(p), &p.id) {
-                    by_id.insert(id.as_str(), p);
+    if !has_solid_refs {
+        return Ok(());
+    }
+    let resolved = solid_ref_targets(obj, lk, unresolved)?;
+    let mut it = resolved.into_iter();
+    visit_geoms_mut(obj, &mut |g| {
+        if !solid_placeholders_in(g) {
+            return;
+        }
+        let GeometryKind::Solids(v) = &mut g.kind else { return };
+        let old = std::mem::take(v);
+        let mut target = None;
+        for s in old {
+            if is_solid_placeholder(&s) {
+                if let Some(((solids, skipped), name)) = it.next() {
+                    v.extend(solids);
+                    g.skipped_members.extend(skipped);
+                    target = target.or(name);
                 }
-            });
-            let mut phs: Vec<&Polygon> = Vec::new();
-            visit_geoms(obj, &mut |g| {
-                if let GeometryKind::Solids(v) = &g.kind {
-                    phs.extend(v.iter().filter(|s| is_solid_placeholder(s)).map(|s| &s.0.polygons[0]));
-                }
-            });
-            let ctx = SolidCtx { by_id: &by_id, local_ids, reparse };
-            for ph in phs {
-                let via = ph.via_xlink.clone().unwrap_or_default();
-                let mut out = (Vec::new(), Vec::new());
-                let href = ph.id.as_deref().unwrap_or("");
-                ctx.resolve_solid(href, &via, global, 0, &mut out, &mut unresolved)?;
-                let target = match href_id(href) {
-                    Some(id) => find_id(local_ids, global, id)?,
-                    None => None,
-                };
-                let name = target.map(|e| String::from_utf8_lossy(name_at(reparse.src, e.bytes.start)).into_owned());
-                resolved.push((out, name));
+            } else {
+                v.push(s);
             }
         }
-        let mut it = resolved.into_iter();
-        visit_geoms_mut(obj, &mut |g| {
-            if !solid_placeholders_in(g) {
-                return;
+        g.skipped_members.sort_by_key(|m| m.span.bytes.start);
+        if g.gml_type == "xlink" {
+            // `<bldg:lod2Solid xlink:href="#s"/>`: the geometry is what it points to
+            if let Some(name) = target.filter(|_| !v.is_empty()) {
+                g.gml_type = name;
             }
-            let GeometryKind::Solids(v) = &mut g.kind else { return };
-            let old = std::mem::take(v);
-            let mut target = None;
-            for s in old {
-                if is_solid_placeholder(&s) {
-                    if let Some(((solids, skipped), name)) = it.next() {
-                        v.extend(solids);
-                        g.skipped_members.extend(skipped);
-                        target = target.or(name);
-                    }
-                } else {
-                    v.push(s);
-                }
-            }
-            g.skipped_members.sort_by_key(|m| m.span.bytes.start);
-            if g.gml_type == "xlink" {
-                // `<bldg:lod2Solid xlink:href="#s"/>`: the geometry is what it points to
-                if let Some(name) = target.filter(|_| !v.is_empty()) {
-                    g.gml_type = name;
-                }
-                if g.gml_type == "Solid" && v.len() == 1 && g.skipped_members.is_empty() {
-                    let (exterior, interior) = v.pop().unwrap();
+            if g.gml_type == "Solid" && v.len() == 1 && g.skipped_members.is_empty() {
+                if let Some((exterior, interior)) = v.pop() {
                     g.kind = GeometryKind::Solid { exterior, interior };
                 }
             }
-        });
+        }
+    });
+    Ok(())
+}
+
+/// Per solid placeholder, in visiting order: its solids and skipped members, and the element
+/// name of its target (a whole `lodNSolid xlink:href` geometry takes the target's type).
+fn solid_ref_targets(
+    obj: &CityObject,
+    lk: &mut Lookups<'_, '_, '_>,
+    unresolved: &mut Vec<XLinkRef>,
+) -> Result<Vec<(ResolvedSolids, Option<String>)>, ReadError> {
+    let (local_ids, reparse, global) = (lk.local_ids, lk.reparse, &mut *lk.global);
+    let mut by_id: FxMap<&str, &Polygon> = FxMap::default();
+    visit_polys(obj, &mut |p| {
+        if let (false, Some(id)) = (is_placeholder(p), &p.id) {
+            by_id.insert(id.as_str(), p);
+        }
+    });
+    let mut phs: Vec<&Polygon> = Vec::new();
+    visit_geoms(obj, &mut |g| {
+        if let GeometryKind::Solids(v) = &g.kind {
+            phs.extend(v.iter().filter(|s| is_solid_placeholder(s)).map(|s| &s.0.polygons[0]));
+        }
+    });
+    let ctx = SolidCtx { by_id: &by_id, local_ids, reparse };
+    let mut resolved = Vec::new();
+    for ph in phs {
+        let via = ph.via_xlink.clone().unwrap_or_default();
+        let mut out = (Vec::new(), Vec::new());
+        let href = ph.id.as_deref().unwrap_or("");
+        ctx.resolve_solid(href, &via, global, 0, &mut out, unresolved)?;
+        let target = match href_id(href) {
+            Some(id) => find_id(local_ids, global, id)?,
+            None => None,
+        };
+        let name = target.map(|e| String::from_utf8_lossy(name_at(reparse.src, e.bytes.start)).into_owned());
+        resolved.push((out, name));
     }
-    // Phase 1 (shared borrow): what each placeholder becomes, in visiting order.
+    Ok(resolved)
+}
+
+/// Phases 1 and 2: what each polygon placeholder becomes (under a shared borrow, in visiting
+/// order), then spliced in in the same order.
+fn resolve_polygon_refs(
+    obj: &mut CityObject,
+    lk: &mut Lookups<'_, '_, '_>,
+    unresolved: &mut Vec<XLinkRef>,
+) -> Result<(), ReadError> {
+    let (local_ids, reparse, global) = (lk.local_ids, lk.reparse, &mut *lk.global);
     let mut replacements: Vec<Option<Vec<Polygon>>> = Vec::new();
     {
         let mut by_id: FxMap<&str, &Polygon> = FxMap::default();
@@ -1814,7 +1881,6 @@ pub(crate) fn resolve_object(
             replacements.push(r);
         }
     }
-    // Phase 2: splice them in, same order.
     let mut it = replacements.into_iter();
     visit_vecs_mut(obj, &mut |v| {
         if !v.iter().any(is_placeholder) {
@@ -1832,18 +1898,7 @@ pub(crate) fn resolve_object(
             }
         }
     });
-    // Each reference says where it sits (the innermost object holding it) and, when its id
-    // names an element that is not a geometry (a city object, an appearance...), what that is.
-    for u in &mut unresolved {
-        if let Some(o) = innermost_at(obj, u.span.bytes.start) {
-            u.feature = o.id.clone();
-            u.feature_type = o.kind.clone();
-        }
-        if let Some(id) = href_id(&u.href) {
-            u.target = find_id(local_ids, global, id)?.map(|e| String::from_utf8_lossy(qname_at(reparse.src, e.bytes.start)).into_owned());
-        }
-    }
-    Ok(unresolved)
+    Ok(())
 }
 
 /// The deepest object of `obj` (itself included) whose element holds byte `at`.

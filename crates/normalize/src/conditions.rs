@@ -197,33 +197,50 @@ fn semantic_with(m: &mut Popa3d, r: &Ranges, o: &ConditionOptions, inc: &Inciden
     let area = face_areas(m, inc, pos, &r.faces);
     let mut c = ConditionCounts::default();
     let mut out: Vec<Observation> = Vec::new();
-    // Largest face per normal, per plane.
+    let normal_face = largest_face_per_normal(m, r, &area);
+    let normals: Vec<usize> = r.normals.clone().filter(|n| normal_face.contains_key(n)).collect();
+    let groups = angle_conditions(m, &normals, &normal_face, o, &mut out, &mut c);
+    // Coplanarity and wall–window distances within each parallel group.
+    for (g, ns) in groups {
+        let refn = unit(m.face_plane_value(FaceId::from(normal_face[&g])).n);
+        let faces = group_face_offsets(m, r, inc, pos, &ns, refn);
+        coplanarity_conditions(m, &faces, &area, o, &mut out, &mut c);
+        wall_window_conditions(m, &faces, o, &mut out, &mut c);
+    }
+    norms_and_identities(m, r, o, &mut out, &mut c, true);
+    for ob in out {
+        m.add_observation(ob);
+    }
+    c
+}
+
+/// The largest face of each normal: its plane value stands for the normal in angle tests.
+fn largest_face_per_normal(m: &Popa3d, r: &Ranges, area: &HashMap<usize, f64>) -> HashMap<usize, usize> {
     let mut normal_face: HashMap<usize, usize> = HashMap::new();
-    let mut plane_faces: HashMap<usize, Vec<usize>> = HashMap::new();
     for f in r.faces.clone() {
-        let pl = m.faces[f].plane.idx();
-        plane_faces.entry(pl).or_default().push(f);
-        let nv = m.planes[pl].normal.idx();
+        let nv = m.planes[m.faces[f].plane.idx()].normal.idx();
         let best = normal_face.entry(nv).or_insert(f);
         if area[&f] > area[best] {
             *best = f;
         }
     }
+    normal_face
+}
+
+/// Parallelism and orthogonality conditions between every pair of normals within the angle
+/// tolerances (not swap pairs, orthogonal by construction, spec §3.2 step 4). Returns the
+/// parallel groups (union–find over the parallel pairs) as (root, members), by root.
+fn angle_conditions(
+    m: &Popa3d,
+    normals: &[usize],
+    normal_face: &HashMap<usize, usize>,
+    o: &ConditionOptions,
+    out: &mut Vec<Observation>,
+    c: &mut ConditionCounts,
+) -> Vec<(usize, Vec<usize>)> {
     let cos_par = o.parallel_deg.to_radians().cos();
     let sin_ort = o.orthogonal_deg.to_radians().sin();
-    // Parallel groups of normals (union-find over parallel pairs), and the pair conditions.
-    let normals: Vec<usize> = r.normals.clone().filter(|n| normal_face.contains_key(n)).collect();
     let mut group: HashMap<usize, usize> = normals.iter().map(|&n| (n, n)).collect();
-    fn find(g: &mut HashMap<usize, usize>, x: usize) -> usize {
-        let p = g[&x];
-        if p == x {
-            x
-        } else {
-            let r = find(g, p);
-            g.insert(x, r);
-            r
-        }
-    }
     let pset = |n: usize| {
         let mut k: Vec<ParamId> = m.normals[n].comps.iter().map(|x| x.0).collect();
         k.sort();
@@ -238,7 +255,7 @@ fn semantic_with(m: &mut Popa3d, r: &Ranges, o: &ConditionOptions, inc: &Inciden
             let cs = dot(unit(m.face_plane_value(FaceId::from(fa)).n), unit(m.face_plane_value(FaceId::from(fb)).n));
             let kind = if cs.abs() >= cos_par {
                 c.parallelism += 1;
-                let (ra, rb) = (find(&mut group, a), find(&mut group, b));
+                let (ra, rb) = (group_root(&mut group, a), group_root(&mut group, b));
                 group.insert(ra.max(rb), ra.min(rb));
                 Some(cs.signum())
             } else if cs.abs() <= sin_ort {
@@ -256,102 +273,115 @@ fn semantic_with(m: &mut Popa3d, r: &Ranges, o: &ConditionOptions, inc: &Inciden
             }
         }
     }
-    // Coplanarity and wall–window distances within each parallel group.
     let mut groups: HashMap<usize, Vec<usize>> = HashMap::new();
-    for &n in &normals {
-        let g = find(&mut group, n);
+    for &n in normals {
+        let g = group_root(&mut group, n);
         groups.entry(g).or_default().push(n);
     }
-    let mut gkeys: Vec<usize> = groups.keys().cloned().collect();
-    gkeys.sort();
-    for g in gkeys {
-        let ns = &groups[&g];
-        let refn = unit(m.face_plane_value(FaceId::from(normal_face[&g])).n);
-        // (signed offset along refn, face) for each face of the group: offset of the face's plane.
-        let mut faces: Vec<(f64, usize)> = Vec::new();
-        for f in r.faces.clone() {
+    let mut groups: Vec<(usize, Vec<usize>)> = groups.into_iter().collect();
+    groups.sort_by_key(|g| g.0);
+    groups
+}
+
+/// The root of `x` in the union–find map `g`, compressing the path.
+fn group_root(g: &mut HashMap<usize, usize>, x: usize) -> usize {
+    let p = g[&x];
+    if p == x {
+        x
+    } else {
+        let r = group_root(g, p);
+        g.insert(x, r);
+        r
+    }
+}
+
+/// (signed offset along `refn`, face) for each face of the range whose normal is one of `ns`:
+/// the offset of the face's plane, measured at its first node.
+fn group_face_offsets(m: &Popa3d, r: &Ranges, inc: &Incidence, pos: &[[f64; 3]], ns: &[usize], refn: [f64; 3]) -> Vec<(f64, usize)> {
+    let mut faces: Vec<(f64, usize)> = Vec::new();
+    for f in r.faces.clone() {
+        let pl = m.faces[f].plane.idx();
+        if !ns.contains(&m.planes[pl].normal.idx()) {
+            continue;
+        }
+        let h = inc.face_half_edges[f][0];
+        let p = pos[m.half_edge_start(h).idx()];
+        faces.push((dot(refn, p), f));
+    }
+    faces
+}
+
+/// Coplanarity: per semantic type (openings aside), one representative (largest face) per
+/// plane, planes sorted by offset, consecutive pairs within ε get a distance-0 condition.
+fn coplanarity_conditions(m: &Popa3d, faces: &[(f64, usize)], area: &HashMap<usize, f64>, o: &ConditionOptions, out: &mut Vec<Observation>, c: &mut ConditionCounts) {
+    let sem = |f: usize| m.faces[f].source.as_ref().and_then(|s| s.semantic.clone());
+    let mut by_sem: HashMap<Option<String>, Vec<(f64, usize)>> = HashMap::new();
+    for &(t, f) in faces {
+        if !is_opening(sem(f).as_deref()) {
+            by_sem.entry(sem(f)).or_default().push((t, f));
+        }
+    }
+    let mut sems: Vec<Option<String>> = by_sem.keys().cloned().collect();
+    sems.sort();
+    for s in sems {
+        let mut per_plane: HashMap<usize, (f64, usize)> = HashMap::new();
+        for &(t, f) in &by_sem[&s] {
             let pl = m.faces[f].plane.idx();
-            if !ns.contains(&m.planes[pl].normal.idx()) {
-                continue;
-            }
-            // A point of the face: its first node.
-            let h = inc.face_half_edges[f][0];
-            let p = pos[m.half_edge_start(h).idx()];
-            faces.push((dot(refn, p), f));
-        }
-        let sem = |f: usize| m.faces[f].source.as_ref().and_then(|s| s.semantic.clone());
-        // Coplanarity: per semantic type, planes sorted by offset, consecutive pairs within ε.
-        let mut by_sem: HashMap<Option<String>, Vec<(f64, usize)>> = HashMap::new();
-        for &(t, f) in &faces {
-            if !is_opening(sem(f).as_deref()) {
-                by_sem.entry(sem(f)).or_default().push((t, f));
+            let e = per_plane.entry(pl).or_insert((t, f));
+            if area[&f] > area[&e.1] {
+                *e = (t, f);
             }
         }
-        let mut sems: Vec<Option<String>> = by_sem.keys().cloned().collect();
-        sems.sort();
-        for s in sems {
-            let mut v = by_sem[&s].clone();
-            // One representative (largest face) per plane.
-            let mut per_plane: HashMap<usize, (f64, usize)> = HashMap::new();
-            for (t, f) in v.drain(..) {
-                let pl = m.faces[f].plane.idx();
-                let e = per_plane.entry(pl).or_insert((t, f));
-                if area[&f] > area[&e.1] {
-                    *e = (t, f);
-                }
-            }
-            let mut v: Vec<(f64, usize)> = per_plane.into_values().collect();
-            v.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-            for w in v.windows(2) {
-                let dd = w[1].0 - w[0].0;
-                if dd.abs() < o.epsilon {
-                    let ob = Observation::new(
-                        ObsKind::DistanceFaceFace { a: FaceId::from(w[0].1), b: FaceId::from(w[1].1), l: Measured::new(0.0, o.sigma_distance) },
-                        ObsOrigin::Semantic,
-                    );
-                    out.push(ob.with_label(format!("coplanar {} (source offset {dd:.4} m)", s.clone().unwrap_or_default())));
-                    c.coplanarity += 1;
-                }
-            }
-        }
-        // Wall–window: each opening face to the nearest parallel face of its parent (or any wall).
-        for &(t, f) in &faces {
-            let src = match &m.faces[f].source {
-                Some(s) if is_opening(s.semantic.as_deref()) => s.clone(),
-                _ => continue,
-            };
-            let mut best: Option<(f64, usize)> = None;
-            for &(t2, f2) in &faces {
-                if f2 == f || m.faces[f2].plane == m.faces[f].plane {
-                    continue;
-                }
-                let s2 = match &m.faces[f2].source {
-                    Some(s) => s,
-                    None => continue,
-                };
-                if s2.semantic.as_deref() != Some("WallSurface") {
-                    continue;
-                }
-                let dd = (t2 - t).abs();
-                if best.map_or(true, |(b, _)| dd < b) {
-                    best = Some((dd, f2));
-                }
-            }
-            if let Some((dd, f2)) = best {
+        let mut v: Vec<(f64, usize)> = per_plane.into_values().collect();
+        v.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        for w in v.windows(2) {
+            let dd = w[1].0 - w[0].0;
+            if dd.abs() < o.epsilon {
                 let ob = Observation::new(
-                    ObsKind::DistanceFaceFace { a: FaceId::from(f2), b: FaceId::from(f), l: Measured::new(dd, o.sigma_distance) },
+                    ObsKind::DistanceFaceFace { a: FaceId::from(w[0].1), b: FaceId::from(w[1].1), l: Measured::new(0.0, o.sigma_distance) },
                     ObsOrigin::Semantic,
                 );
-                out.push(ob.with_label(format!("wall-window {}", src.owner.clone().unwrap_or(src.polygon.clone()))));
-                c.wall_window += 1;
+                out.push(ob.with_label(format!("coplanar {} (source offset {dd:.4} m)", s.clone().unwrap_or_default())));
+                c.coplanarity += 1;
             }
         }
     }
-    norms_and_identities(m, r, o, &mut out, &mut c, true);
-    for ob in out {
-        m.add_observation(ob);
+}
+
+/// Wall–window: each opening face to the nearest parallel wall face on another plane, at its
+/// source distance (kept even below ε: the reveal depth is real).
+fn wall_window_conditions(m: &Popa3d, faces: &[(f64, usize)], o: &ConditionOptions, out: &mut Vec<Observation>, c: &mut ConditionCounts) {
+    for &(t, f) in faces {
+        let src = match &m.faces[f].source {
+            Some(s) if is_opening(s.semantic.as_deref()) => s.clone(),
+            _ => continue,
+        };
+        let mut best: Option<(f64, usize)> = None;
+        for &(t2, f2) in faces {
+            if f2 == f || m.faces[f2].plane == m.faces[f].plane {
+                continue;
+            }
+            let s2 = match &m.faces[f2].source {
+                Some(s) => s,
+                None => continue,
+            };
+            if s2.semantic.as_deref() != Some("WallSurface") {
+                continue;
+            }
+            let dd = (t2 - t).abs();
+            if best.map_or(true, |(b, _)| dd < b) {
+                best = Some((dd, f2));
+            }
+        }
+        if let Some((dd, f2)) = best {
+            let ob = Observation::new(
+                ObsKind::DistanceFaceFace { a: FaceId::from(f2), b: FaceId::from(f), l: Measured::new(dd, o.sigma_distance) },
+                ObsOrigin::Semantic,
+            );
+            out.push(ob.with_label(format!("wall-window {}", src.owner.clone().unwrap_or(src.polygon.clone()))));
+            c.wall_window += 1;
+        }
     }
-    c
 }
 
 /// σ of the sketch priors (spec Table 7.2: plane differences ±10 cm, relative angles ±0.001,

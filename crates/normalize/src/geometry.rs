@@ -68,29 +68,172 @@ pub fn build(soup: &Soup, topo: &Topo, tol: &Tolerances, origin: [f64; 3]) -> Re
 fn build_depth(soup: &Soup, topo: &Topo, tol: &Tolerances, origin: [f64; 3], depth: usize) -> Result<Part, Rejection> {
     let pts: Vec<[f64; 3]> =
         topo.points.iter().map(|p| [p[0] - origin[0], p[1] - origin[1], p[2] - origin[2]]).collect();
-    let nf = topo.faces.len();
-    let (fnormal, fcent, farea) = face_planes(soup, topo, &pts, tol)?;
+    let net = PlaneNet::of(soup, topo, &pts, tol)?;
+    // GA01 repair (spec §7.4): nodes whose faces span fewer than 3 independent plane directions.
+    if depth < 4 {
+        let deficient = net.deficient_nodes(topo, pts.len());
+        if !deficient.is_empty() {
+            if let Some(part) = repaired(soup, topo, tol, origin, depth, &net, &deficient)? {
+                return Ok(part);
+            }
+        }
+    }
+    let (m, zero_params) = net.model(soup, topo, origin);
+    let inc = Incidence::new(&m);
+    check_simple_cycles(&m, &inc, soup)?;
+    let max_shift = max_node_shift(&m, &inc, topo, &pts, tol, soup)?;
+    let counts = part_counts(soup, topo, &m, &net, max_shift);
+    Ok(Part { model: m, counts, zero_params, max_node_shift: max_shift, notices: Vec::new() })
+}
 
-    let cos_tol = tol.normal_angle_deg.to_radians().cos();
-    let (mut cnormal, fcluster) = cluster_normals(&fnormal, &farea, cos_tol);
+/// Steps 1–4 of geometric normalization on one part's faces: per face its least-squares
+/// normal, plane and sign relative to the cluster normal; the cluster normals
+/// (orthogonal partners sharing parameters) and the planes as (cluster, d, first face).
+struct PlaneNet {
+    fnormal: Vec<Vector3<f64>>,
+    fsign: Vec<f64>,
+    fplane: Vec<usize>,
+    cnormal: Vec<Vector3<f64>>,
+    partner: Vec<Option<(usize, usize)>>,
+    planes: Vec<(usize, f64, usize)>,
+}
 
-    // 4 (before 3, since it changes the normals): orthogonal sharing.
-    let partner = if tol.share_orthogonal { share_orthogonal(&mut cnormal, cos_tol, tol.normal_angle_deg.to_radians().sin()) } else { vec![None; cnormal.len()] };
+impl PlaneNet {
+    fn of(soup: &Soup, topo: &Topo, pts: &[[f64; 3]], tol: &Tolerances) -> Result<PlaneNet, Rejection> {
+        let nf = topo.faces.len();
+        let (fnormal, fcent, farea) = face_planes(soup, topo, pts, tol)?;
 
-    // 3. Planes per normal (coplanar faces).
-    let fsign: Vec<f64> = (0..nf).map(|f| if cnormal[fcluster[f]].dot(&fnormal[f]) >= 0.0 { 1.0 } else { -1.0 }).collect();
-    let fd: Vec<f64> = (0..nf).map(|f| cnormal[fcluster[f]].dot(&fcent[f])).collect();
+        let cos_tol = tol.normal_angle_deg.to_radians().cos();
+        let (mut cnormal, fcluster) = cluster_normals(&fnormal, &farea, cos_tol);
+
+        // 4 (before 3, since it changes the normals): orthogonal sharing.
+        let partner = if tol.share_orthogonal { share_orthogonal(&mut cnormal, cos_tol, tol.normal_angle_deg.to_radians().sin()) } else { vec![None; cnormal.len()] };
+
+        // 3. Planes per normal (coplanar faces).
+        let fsign: Vec<f64> = (0..nf).map(|f| if cnormal[fcluster[f]].dot(&fnormal[f]) >= 0.0 { 1.0 } else { -1.0 }).collect();
+        let fd: Vec<f64> = (0..nf).map(|f| cnormal[fcluster[f]].dot(&fcent[f])).collect();
+        let (planes, fplane) = coplanar_planes(cnormal.len(), &fcluster, &fd, &farea, tol.plane_distance);
+        Ok(PlaneNet { fnormal, fsign, fplane, cnormal, partner, planes })
+    }
+
+    /// Nodes whose planes' normals are not 3 independent directions (smallest singular value
+    /// below sin(ILL_CONDITIONED_DEG)).
+    fn deficient_nodes(&self, topo: &Topo, n_points: usize) -> Vec<usize> {
+        let mut node_planes: Vec<Vec<usize>> = vec![Vec::new(); n_points];
+        for (fi, f) in topo.faces.iter().enumerate() {
+            for r in &f.rings {
+                for &n in r {
+                    if !node_planes[n].contains(&self.fplane[fi]) {
+                        node_planes[n].push(self.fplane[fi]);
+                    }
+                }
+            }
+        }
+        (0..n_points)
+            .filter(|&n| {
+                let vals: Vec<popa3d_model::geometry::PlaneValue> = node_planes[n]
+                    .iter()
+                    .map(|&p| {
+                        let c = self.cnormal[self.planes[p].0];
+                        popa3d_model::geometry::PlaneValue { n: [c.x, c.y, c.z], d: self.planes[p].1 }
+                    })
+                    .collect();
+                !node_planes[n].is_empty() && min_singular(&vals) < ILL_CONDITIONED_DEG.to_radians().sin()
+            })
+            .collect()
+    }
+
+    /// The part's model: solids, nodes, edges, parameters, normals, planes (ordered by their
+    /// first face so ids follow the source order), faces and half-edges; with the parameters that
+    /// must stay 0.
+    fn model(&self, soup: &Soup, topo: &Topo, origin: [f64; 3]) -> (Popa3d, Vec<ParamId>) {
+        let mut porder: Vec<usize> = (0..self.planes.len()).collect();
+        porder.sort_by_key(|&p| self.planes[p].2);
+        let mut prank = vec![0usize; self.planes.len()];
+        for (r, &p) in porder.iter().enumerate() {
+            prank[p] = r;
+        }
+        let mut m = Popa3d::new(origin);
+        add_topology(&mut m, soup, topo);
+        let zero_params = self.add_normals(&mut m);
+        // Planes: sign of its first face, d accordingly.
+        for &p in &porder {
+            let (c, d, first) = self.planes[p];
+            let s = self.fsign[first];
+            m.add_plane(Plane { normal: NormalId::from(c), sign: if s > 0.0 { Sign::Plus } else { Sign::Minus }, d: s * d });
+        }
+        for (fi, f) in topo.faces.iter().enumerate() {
+            let p = prank[self.fplane[fi]];
+            let psign = m.planes[p].sign.f64();
+            let orient = self.fsign[fi] * psign;
+            let poly = &soup.polygons[f.polygon];
+            m.add_face(Face {
+                plane: PlaneId::from(p),
+                orientation: if orient > 0.0 { Sign::Plus } else { Sign::Minus },
+                front: SolidId::from(f.front.map_or(0, |s| s + 1)),
+                back: SolidId::from(f.back + 1),
+                source: Some(FaceSource {
+                    merged: f.absorbed.iter().map(|&i| soup.polygons[i].source.polygon.clone()).collect(),
+                    ..poly.source.clone()
+                }),
+            });
+        }
+        for &(e, s, f) in &topo.half_edges {
+            m.add_half_edge(HalfEdge { edge: EdgeId::from(e), sign: if s > 0 { Sign::Plus } else { Sign::Minus }, face: FaceId::from(f) });
+        }
+        (m, zero_params)
+    }
+
+    /// Parameters: bases and unpaired normals first (3 each), partners reference their base;
+    /// then the normals. Returns the parameters that must stay 0 (a partner's shared component).
+    fn add_normals(&self, m: &mut Popa3d) -> Vec<ParamId> {
+        let cnormal = &self.cnormal;
+        let mut nparams: Vec<Option<[(ParamId, Sign); 3]>> = vec![None; cnormal.len()];
+        let mut zero_params = Vec::new();
+        for c in 0..cnormal.len() {
+            if self.partner[c].is_some() {
+                continue;
+            }
+            let n = cnormal[c];
+            let ids = [0, 1, 2].map(|k| (m.add_parameter(Parameter { value: n[k] }), Sign::Plus));
+            nparams[c] = Some(ids);
+        }
+        for c in 0..cnormal.len() {
+            if let Some((b, k)) = self.partner[c] {
+                let Some(bp) = nparams[b] else { continue };
+                let (i, j) = ((k + 1) % 3, (k + 2) % 3);
+                let mut comps = [bp[0]; 3];
+                comps[i] = (bp[j].0, Sign::Minus);
+                comps[j] = (bp[i].0, Sign::Plus);
+                comps[k] = (bp[k].0, Sign::Plus);
+                nparams[c] = Some(comps);
+                if !zero_params.contains(&bp[k].0) {
+                    zero_params.push(bp[k].0);
+                }
+            }
+        }
+        for c in 0..cnormal.len() {
+            m.add_normal(NormalVector { comps: nparams[c].expect("every normal has parameters") });
+        }
+        zero_params
+    }
+}
+
+/// Step 3: faces of one normal cluster whose d lie within `plane_distance` of the group's first
+/// (in order of d) share a plane at their area-weighted d. Returns the planes as (cluster, d,
+/// first face) and each face's plane.
+fn coplanar_planes(n_clusters: usize, fcluster: &[usize], fd: &[f64], farea: &[f64], plane_distance: f64) -> (Vec<(usize, f64, usize)>, Vec<usize>) {
+    let nf = fcluster.len();
     let mut fplane = vec![0usize; nf];
-    // (cluster, d, first face)
     let mut planes: Vec<(usize, f64, usize)> = Vec::new();
-    for c in 0..cnormal.len() {
+    for c in 0..n_clusters {
         let mut fs: Vec<usize> = (0..nf).filter(|&f| fcluster[f] == c).collect();
         fs.sort_by(|&a, &b| fd[a].total_cmp(&fd[b]).then(a.cmp(&b)));
         let mut start = 0;
         while start < fs.len() {
             let d0 = fd[fs[start]];
             let mut end = start + 1;
-            while end < fs.len() && fd[fs[end]] - d0 <= tol.plane_distance {
+            while end < fs.len() && fd[fs[end]] - d0 <= plane_distance {
                 end += 1;
             }
             let group = &fs[start..end];
@@ -104,76 +247,51 @@ fn build_depth(soup: &Soup, topo: &Topo, tol: &Tolerances, origin: [f64; 3], dep
             start = end;
         }
     }
-    // GA01 repair (spec §7.4): nodes whose faces span fewer than 3 independent plane directions.
-    if depth < 4 {
-        let mut node_planes: Vec<Vec<usize>> = vec![Vec::new(); pts.len()];
-        for (fi, f) in topo.faces.iter().enumerate() {
-            for r in &f.rings {
-                for &n in r {
-                    if !node_planes[n].contains(&fplane[fi]) {
-                        node_planes[n].push(fplane[fi]);
-                    }
-                }
-            }
-        }
-        let deficient: Vec<usize> = (0..pts.len())
-            .filter(|&n| {
-                let vals: Vec<popa3d_model::geometry::PlaneValue> = node_planes[n]
-                    .iter()
-                    .map(|&p| {
-                        let c = cnormal[planes[p].0];
-                        popa3d_model::geometry::PlaneValue { n: [c.x, c.y, c.z], d: planes[p].1 }
-                    })
-                    .collect();
-                !node_planes[n].is_empty() && min_singular(&vals) < ILL_CONDITIONED_DEG.to_radians().sin()
-            })
-            .collect();
-        if !deficient.is_empty() {
-            let cos_merge = ILL_CONDITIONED_DEG.to_radians().cos();
-            let mergeable = |f: usize, g: usize| {
-                topo.faces[f].back == topo.faces[g].back
-                    && topo.faces[f].front == topo.faces[g].front
-                    && fnormal[f].dot(&fnormal[g]).abs() >= cos_merge
-            };
-            let mut merged = Vec::new();
-            let mut t2 = topo.clone();
-            if crate::topology::repair(&mut t2, &deficient, &mergeable, &mut merged) {
-                let mut part = build_depth(soup, &t2, tol, origin, depth + 1)?;
-                for (a, b) in merged {
-                    let (pa, pb) = (&soup.polygons[a], &soup.polygons[b]);
-                    let sem = |p: &crate::soup::SoupPolygon| p.source.semantic.clone().unwrap_or_else(|| "no semantics".into());
-                    part.notices.push(crate::Notice {
-                        rule: "GA01-MERGE".into(),
-                        element: pb.locator.clone(),
-                        message: format!(
-                            "merged into face {} ({} / {}): the two are coplanar within {ILL_CONDITIONED_DEG}° and their common edge left a node without 3 independent planes",
-                            pa.locator,
-                            sem(pa),
-                            sem(pb)
-                        ),
-                    });
-                }
-                // Report the soup as it was read.
-                part.counts.stages[0] = StageCounts::new("points", topo.soup_nodes, topo.soup_edges, topo.soup_faces, 0, 0, 0);
-                return Ok(part);
-            }
-        }
-    }
-    // Order planes by their first face so ids follow the source order.
-    let mut porder: Vec<usize> = (0..planes.len()).collect();
-    porder.sort_by_key(|&p| planes[p].2);
-    let mut prank = vec![0usize; planes.len()];
-    for (r, &p) in porder.iter().enumerate() {
-        prank[p] = r;
-    }
+    (planes, fplane)
+}
 
-    // Build the part's model.
-    let mut m = Popa3d::new(origin);
+/// The GA01 repair: nearly coplanar faces across the deficient nodes merged, two-neighbour
+/// nodes removed ([`crate::topology::repair`]) and the part built again from the repaired
+/// topology, with a notice per merged pair. `None` when the repair changed nothing.
+fn repaired(soup: &Soup, topo: &Topo, tol: &Tolerances, origin: [f64; 3], depth: usize, net: &PlaneNet, deficient: &[usize]) -> Result<Option<Part>, Rejection> {
+    let cos_merge = ILL_CONDITIONED_DEG.to_radians().cos();
+    let fnormal = &net.fnormal;
+    let mergeable = |f: usize, g: usize| {
+        topo.faces[f].back == topo.faces[g].back && topo.faces[f].front == topo.faces[g].front && fnormal[f].dot(&fnormal[g]).abs() >= cos_merge
+    };
+    let mut merged = Vec::new();
+    let mut t2 = topo.clone();
+    if !crate::topology::repair(&mut t2, deficient, &mergeable, &mut merged) {
+        return Ok(None);
+    }
+    let mut part = build_depth(soup, &t2, tol, origin, depth + 1)?;
+    for (a, b) in merged {
+        let (pa, pb) = (&soup.polygons[a], &soup.polygons[b]);
+        let sem = |p: &crate::soup::SoupPolygon| p.source.semantic.clone().unwrap_or_else(|| "no semantics".into());
+        part.notices.push(crate::Notice {
+            rule: "GA01-MERGE".into(),
+            element: pb.locator.clone(),
+            message: format!(
+                "merged into face {} ({} / {}): the two are coplanar within {ILL_CONDITIONED_DEG}° and their common edge left a node without 3 independent planes",
+                pa.locator,
+                sem(pa),
+                sem(pb)
+            ),
+        });
+    }
+    // Report the soup as it was read.
+    part.counts.stages[0] = StageCounts::new("points", topo.soup_nodes, topo.soup_edges, topo.soup_faces, 0, 0, 0);
+    Ok(Some(part))
+}
+
+/// The part's solids (the exterior first), nodes and edges with their sorted, deduplicated
+/// source vertices.
+fn add_topology(m: &mut Popa3d, soup: &Soup, topo: &Topo) {
     m.add_solid(Solid { kind: SolidKind::Exterior, name: None });
     for s in &soup.solids {
         m.add_solid(Solid { kind: s.kind, name: s.name.clone() });
     }
-    for (i, _) in pts.iter().enumerate() {
+    for i in 0..topo.points.len() {
         let mut src = topo.node_sources[i].clone();
         src.sort();
         src.dedup();
@@ -188,84 +306,25 @@ fn build_depth(soup: &Soup, topo: &Topo, tol: &Tolerances, origin: [f64; 3], dep
             m.edge_vertices.push(EdgeVertices { edge: EdgeId::from(i), sources: v });
         }
     }
-    // Parameters: bases and unpaired normals first (3 each), partners reference their base.
-    let mut nparams: Vec<Option<[(ParamId, Sign); 3]>> = vec![None; cnormal.len()];
-    let mut zero_params = Vec::new();
-    for c in 0..cnormal.len() {
-        if partner[c].is_some() {
-            continue;
-        }
-        let n = cnormal[c];
-        let ids = [0, 1, 2].map(|k| (m.add_parameter(Parameter { value: n[k] }), Sign::Plus));
-        nparams[c] = Some(ids);
-    }
-    for c in 0..cnormal.len() {
-        if let Some((b, k)) = partner[c] {
-            let bp = nparams[b].expect("base normal has parameters");
-            let (i, j) = ((k + 1) % 3, (k + 2) % 3);
-            let mut comps = [bp[0]; 3];
-            comps[i] = (bp[j].0, Sign::Minus);
-            comps[j] = (bp[i].0, Sign::Plus);
-            comps[k] = (bp[k].0, Sign::Plus);
-            nparams[c] = Some(comps);
-            if !zero_params.contains(&bp[k].0) {
-                zero_params.push(bp[k].0);
-            }
-        }
-    }
-    for c in 0..cnormal.len() {
-        m.add_normal(NormalVector { comps: nparams[c].expect("every normal has parameters") });
-    }
-    // Planes: sign of its first face, d accordingly.
-    for &p in &porder {
-        let (c, d, first) = planes[p];
-        let s = fsign[first];
-        m.add_plane(Plane { normal: NormalId::from(c), sign: if s > 0.0 { Sign::Plus } else { Sign::Minus }, d: s * d });
-    }
-    for (fi, f) in topo.faces.iter().enumerate() {
-        let p = prank[fplane[fi]];
-        let psign = m.planes[p].sign.f64();
-        let orient = fsign[fi] * psign;
-        let poly = &soup.polygons[f.polygon];
-        m.add_face(Face {
-            plane: PlaneId::from(p),
-            orientation: if orient > 0.0 { Sign::Plus } else { Sign::Minus },
-            front: SolidId::from(f.front.map_or(0, |s| s + 1)),
-            back: SolidId::from(f.back + 1),
-            source: Some(FaceSource {
-                merged: f.absorbed.iter().map(|&i| soup.polygons[i].source.polygon.clone()).collect(),
-                ..poly.source.clone()
-            }),
-        });
-    }
-    for &(e, s, f) in &topo.half_edges {
-        m.add_half_edge(HalfEdge { edge: EdgeId::from(e), sign: if s > 0 { Sign::Plus } else { Sign::Minus }, face: FaceId::from(f) });
-    }
+}
 
-    let inc = Incidence::new(&m);
-    check_simple_cycles(&m, &inc, soup)?;
-    let max_shift = max_node_shift(&m, &inc, topo, &pts, tol, soup)?;
-
-    let n_nodes = m.nodes.len();
-    let n_edges = m.edges.len();
-    let counts = Counts {
+/// The before/after counts of the spec's Tables 7.1 and 7.4, one stage per normalization step.
+fn part_counts(soup: &Soup, topo: &Topo, m: &Popa3d, net: &PlaneNet, max_shift: f64) -> Counts {
+    let nf = topo.faces.len();
+    let (n_nodes, n_edges, n_normals, n_planes) = (m.nodes.len(), m.edges.len(), net.cnormal.len(), net.planes.len());
+    Counts {
         name: soup.name.clone(),
-        source: crate::counts::SourceCounts {
-            polygons: soup.polygons.len(),
-            rings: soup.source_rings,
-            points: topo.soup_points,
-        },
+        source: crate::counts::SourceCounts { polygons: soup.polygons.len(), rings: soup.source_rings, points: topo.soup_points },
         stages: vec![
             StageCounts::new("points", topo.soup_nodes, topo.soup_edges, topo.soup_faces, 0, 0, 0),
             StageCounts::new("planar", n_nodes, n_edges, nf, nf, nf, 3 * nf),
-            StageCounts::new("parallel", n_nodes, n_edges, nf, nf, cnormal.len(), 3 * cnormal.len()),
-            StageCounts::new("coplanar", n_nodes, n_edges, nf, planes.len(), cnormal.len(), 3 * cnormal.len()),
-            StageCounts::new("orthogonal", n_nodes, n_edges, nf, planes.len(), cnormal.len(), m.parameters.len()),
+            StageCounts::new("parallel", n_nodes, n_edges, nf, nf, n_normals, 3 * n_normals),
+            StageCounts::new("coplanar", n_nodes, n_edges, nf, n_planes, n_normals, 3 * n_normals),
+            StageCounts::new("orthogonal", n_nodes, n_edges, nf, n_planes, n_normals, m.parameters.len()),
         ],
         half_edges: m.half_edges.len(),
         max_node_shift: max_shift,
-    };
-    Ok(Part { model: m, counts, zero_params, max_node_shift: max_shift, notices: Vec::new() })
+    }
 }
 
 /// Step 1: the least-squares plane of every face (normal oriented like the outer ring's Newell

@@ -75,6 +75,17 @@ pub fn write_to_vec(m: &Popa3d) -> Result<Vec<u8>, XmlError> {
 /// Writes the document. The output is a pure function of the model (byte-identical for equal models).
 pub fn write<W: Write + ?Sized>(m: &Popa3d, w: &mut W) -> Result<(), XmlError> {
     let mut o = String::with_capacity(256 + m.half_edges.len() * 56 + m.nodes.len() * 80);
+    write_header(&mut o, m)?;
+    write_topology(&mut o, m)?;
+    write_geometry(&mut o, m)?;
+    write_survey(&mut o, m)?;
+    o.push_str("</popa3d>\n");
+    w.write_all(o.as_bytes())?;
+    Ok(())
+}
+
+/// The XML declaration, the root's start tag, `<origin>` and `<source>`.
+fn write_header(o: &mut String, m: &Popa3d) -> Result<(), XmlError> {
     use std::fmt::Write as _;
     o.push_str("<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n");
     let _ = writeln!(o, "<popa3d xmlns=\"{NAMESPACE}\" version=\"{VERSION}\">");
@@ -87,8 +98,13 @@ pub fn write<W: Write + ?Sized>(m: &Popa3d, w: &mut W) -> Result<(), XmlError> {
     if let Some(s) = &m.source {
         let _ = writeln!(o, "  <source format=\"{}\" file=\"{}\"/>", esc(&s.format), esc(&s.file));
     }
+    Ok(())
+}
 
-    section(&mut o, "solids", m.solids.len(), |o| {
+/// Solids, nodes, edges (with the vertices on them), half-edges and faces.
+fn write_topology(o: &mut String, m: &Popa3d) -> Result<(), XmlError> {
+    use std::fmt::Write as _;
+    section(o, "solids", m.solids.len(), |o| {
         for (i, s) in m.solids.iter().enumerate() {
             let _ = write!(o, "    <solid id=\"{i}\" kind=\"{}\"", s.kind.as_str());
             if let Some(n) = &s.name {
@@ -98,7 +114,7 @@ pub fn write<W: Write + ?Sized>(m: &Popa3d, w: &mut W) -> Result<(), XmlError> {
         }
         Ok(())
     })?;
-    section(&mut o, "nodes", m.nodes.len(), |o| {
+    section(o, "nodes", m.nodes.len(), |o| {
         for (i, n) in m.nodes.iter().enumerate() {
             if n.sources.is_empty() {
                 let _ = writeln!(o, "    <node id=\"{i}\"/>");
@@ -112,24 +128,14 @@ pub fn write<W: Write + ?Sized>(m: &Popa3d, w: &mut W) -> Result<(), XmlError> {
         }
         Ok(())
     })?;
-    section(&mut o, "edges", m.edges.len(), |o| {
+    section(o, "edges", m.edges.len(), |o| {
         for (i, e) in m.edges.iter().enumerate() {
             let _ = writeln!(o, "    <edge id=\"{i}\" start=\"{}\" end=\"{}\"/>", e.start.0, e.end.0);
         }
         Ok(())
     })?;
-    if !m.edge_vertices.is_empty() {
-        o.push_str("  <edgevertices>\n");
-        for ev in &m.edge_vertices {
-            let _ = write!(o, "    <on edge=\"{}\">", ev.edge.0);
-            for s in &ev.sources {
-                write_src(&mut o, s);
-            }
-            o.push_str("</on>\n");
-        }
-        o.push_str("  </edgevertices>\n");
-    }
-    section(&mut o, "halfedges", m.half_edges.len(), |o| {
+    write_edge_vertices(o, m);
+    section(o, "halfedges", m.half_edges.len(), |o| {
         for (i, h) in m.half_edges.iter().enumerate() {
             let _ = writeln!(
                 o,
@@ -141,40 +147,67 @@ pub fn write<W: Write + ?Sized>(m: &Popa3d, w: &mut W) -> Result<(), XmlError> {
         }
         Ok(())
     })?;
-    section(&mut o, "faces", m.faces.len(), |o| {
+    section(o, "faces", m.faces.len(), |o| {
         for (i, f) in m.faces.iter().enumerate() {
-            let _ = write!(
-                o,
-                "    <face id=\"{i}\" plane=\"{}\" orientation=\"{}\" front=\"{}\" back=\"{}\"",
-                f.plane.0,
-                sgn(f.orientation),
-                f.front.0,
-                f.back.0
-            );
-            if let Some(s) = &f.source {
-                let _ = write!(o, " polygon=\"{}\"", esc(&s.polygon));
-                if let Some(t) = &s.semantic {
-                    let _ = write!(o, " semantic=\"{}\"", esc(t));
-                }
-                if let Some(t) = &s.owner {
-                    let _ = write!(o, " owner=\"{}\"", esc(t));
-                }
-                if !s.merged.is_empty() {
-                    let _ = write!(o, " merged=\"{}\"", esc(&s.merged.join(" ")));
-                }
-            }
-            o.push_str("/>\n");
+            write_face(o, i, f);
         }
         Ok(())
-    })?;
-    section(&mut o, "planes", m.planes.len(), |o| {
+    })
+}
+
+/// `<edgevertices>`: the source vertices lying on edges (only when there are any).
+fn write_edge_vertices(o: &mut String, m: &Popa3d) {
+    use std::fmt::Write as _;
+    if m.edge_vertices.is_empty() {
+        return;
+    }
+    o.push_str("  <edgevertices>\n");
+    for ev in &m.edge_vertices {
+        let _ = write!(o, "    <on edge=\"{}\">", ev.edge.0);
+        for s in &ev.sources {
+            write_src(o, s);
+        }
+        o.push_str("</on>\n");
+    }
+    o.push_str("  </edgevertices>\n");
+}
+
+fn write_face(o: &mut String, i: usize, f: &Face) {
+    use std::fmt::Write as _;
+    let _ = write!(
+        o,
+        "    <face id=\"{i}\" plane=\"{}\" orientation=\"{}\" front=\"{}\" back=\"{}\"",
+        f.plane.0,
+        sgn(f.orientation),
+        f.front.0,
+        f.back.0
+    );
+    if let Some(s) = &f.source {
+        let _ = write!(o, " polygon=\"{}\"", esc(&s.polygon));
+        if let Some(t) = &s.semantic {
+            let _ = write!(o, " semantic=\"{}\"", esc(t));
+        }
+        if let Some(t) = &s.owner {
+            let _ = write!(o, " owner=\"{}\"", esc(t));
+        }
+        if !s.merged.is_empty() {
+            let _ = write!(o, " merged=\"{}\"", esc(&s.merged.join(" ")));
+        }
+    }
+    o.push_str("/>\n");
+}
+
+/// Planes, normals and parameters.
+fn write_geometry(o: &mut String, m: &Popa3d) -> Result<(), XmlError> {
+    use std::fmt::Write as _;
+    section(o, "planes", m.planes.len(), |o| {
         for (i, p) in m.planes.iter().enumerate() {
             let d = num(p.d, &|| format!("plane {i}"))?;
             let _ = writeln!(o, "    <plane id=\"{i}\" normal=\"{}\" sign=\"{}\" d=\"{d}\"/>", p.normal.0, sgn(p.sign));
         }
         Ok(())
     })?;
-    section(&mut o, "normals", m.normals.len(), |o| {
+    section(o, "normals", m.normals.len(), |o| {
         for (i, n) in m.normals.iter().enumerate() {
             let c = n.comps;
             let _ = writeln!(
@@ -190,21 +223,26 @@ pub fn write<W: Write + ?Sized>(m: &Popa3d, w: &mut W) -> Result<(), XmlError> {
         }
         Ok(())
     })?;
-    section(&mut o, "parameters", m.parameters.len(), |o| {
+    section(o, "parameters", m.parameters.len(), |o| {
         for (i, p) in m.parameters.iter().enumerate() {
             let v = num(p.value, &|| format!("parameter {i}"))?;
             let _ = writeln!(o, "    <parameter id=\"{i}\" value=\"{v}\"/>");
         }
         Ok(())
-    })?;
-    section(&mut o, "fixedpoints", m.fixed_points.len(), |o| {
+    })
+}
+
+/// Fixed points, set-ups and observations.
+fn write_survey(o: &mut String, m: &Popa3d) -> Result<(), XmlError> {
+    use std::fmt::Write as _;
+    section(o, "fixedpoints", m.fixed_points.len(), |o| {
         for (i, p) in m.fixed_points.iter().enumerate() {
             let f = |k: usize| num(p.t[k], &|| format!("fixedpoint {i}"));
             let _ = writeln!(o, "    <fixedpoint id=\"{i}\" tx=\"{}\" ty=\"{}\" tz=\"{}\"/>", f(0)?, f(1)?, f(2)?);
         }
         Ok(())
     })?;
-    section(&mut o, "setups", m.setups.len(), |o| {
+    section(o, "setups", m.setups.len(), |o| {
         for (i, s) in m.setups.iter().enumerate() {
             let f = |x: f64| num(x, &|| format!("setup {i}"));
             let _ = writeln!(
@@ -221,15 +259,12 @@ pub fn write<W: Write + ?Sized>(m: &Popa3d, w: &mut W) -> Result<(), XmlError> {
         }
         Ok(())
     })?;
-    section(&mut o, "observations", m.observations.len(), |o| {
+    section(o, "observations", m.observations.len(), |o| {
         for (i, ob) in m.observations.iter().enumerate() {
             write_observation(o, i, ob)?;
         }
         Ok(())
-    })?;
-    o.push_str("</popa3d>\n");
-    w.write_all(o.as_bytes())?;
-    Ok(())
+    })
 }
 
 fn write_src(o: &mut String, s: &VertexSource) {
