@@ -49,7 +49,7 @@ pub enum DatumArg {
 }
 
 #[derive(ClapArgs, Debug)]
-#[command(after_help = AFTER_HELP)]
+#[command(after_help = AFTER_HELP, mut_arg("input", |a| a.help("popa3d document, `-` for stdin")), mut_arg("output", |a| a.help("Adjusted popa3d document (stdout when missing or `-`)")))]
 pub struct Args {
     #[command(flatten)]
     pub io: InputOutput,

@@ -34,7 +34,7 @@ rings with < 3 distinct points, faces far from planar, nodes without 3 independe
 listed on stderr with rule and gml:id; the others are still converted and the exit code is 1.";
 
 #[derive(ClapArgs, Debug)]
-#[command(after_help = AFTER_HELP)]
+#[command(after_help = AFTER_HELP, mut_arg("input", |a| a.help("CityGML file (1.0, 2.0 or 3.0), `-` for stdin")), mut_arg("output", |a| a.help("Output popa3d document (stdout when missing or `-`)")))]
 pub struct Args {
     #[command(flatten)]
     pub io: InputOutput,

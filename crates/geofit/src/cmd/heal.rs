@@ -36,7 +36,7 @@ Exit codes: 0 written (see the report for kept buildings); 1 --strict and a buil
 no building with geometry; 2 bad options or a geographic CRS; 3 unreadable input; 4 internal.";
 
 #[derive(ClapArgs, Debug)]
-#[command(after_help = AFTER_HELP)]
+#[command(after_help = AFTER_HELP, mut_arg("input", |a| a.help("CityGML file, `-` for stdin")), mut_arg("output", |a| a.help("Output CityGML (stdout when missing or `-`)")))]
 pub struct Args {
     #[command(flatten)]
     pub io: InputOutput,

@@ -33,7 +33,7 @@ face-edge and edge-edge distances add their induced parallelism constraint.
   distance,room1/f1,room1/f2,2.745,0.001";
 
 #[derive(ClapArgs, Debug)]
-#[command(after_help = AFTER_HELP)]
+#[command(after_help = AFTER_HELP, mut_arg("input", |a| a.help("OBJ sketch, `-` for stdin")), mut_arg("output", |a| a.help("Output popa3d document (stdout when missing or `-`)")))]
 pub struct Args {
     #[command(flatten)]
     pub io: InputOutput,
