@@ -106,3 +106,59 @@ fn with_building(mut r: Rejection, bid: &str) -> Rejection {
     }
     r
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::cell::RefCell;
+
+    /// A CityGML 2.0 document of boxes (x0, y0, width, depth, height), building `b{i}` each, as
+    /// closed lod1Solids with outward faces.
+    fn boxes(list: &[[f64; 5]]) -> String {
+        let mut members = String::new();
+        for (i, [x, y, w, d, h]) in list.iter().enumerate() {
+            // corner k: bit 0 → +width, bit 1 → +depth, bit 2 → +height
+            let c = |k: usize| [x + w * (k & 1) as f64, y + d * (k >> 1 & 1) as f64, h * (k >> 2 & 1) as f64];
+            let faces = [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [1, 3, 7, 5], [3, 2, 6, 7], [2, 0, 4, 6]];
+            let mut shell = String::new();
+            for f in faces {
+                let ring: Vec<String> = f.iter().chain(&f[..1]).map(|&k| c(k).map(|v| v.to_string()).join(" ")).collect();
+                shell += &format!("<gml:surfaceMember><gml:Polygon><gml:exterior><gml:LinearRing><gml:posList>{}</gml:posList></gml:LinearRing></gml:exterior></gml:Polygon></gml:surfaceMember>", ring.join(" "));
+            }
+            members += &format!(
+                "<core:cityObjectMember><bldg:Building gml:id=\"b{i}\"><bldg:lod1Solid><gml:Solid><gml:exterior><gml:CompositeSurface>{shell}</gml:CompositeSurface></gml:exterior></gml:Solid></bldg:lod1Solid></bldg:Building></core:cityObjectMember>\n"
+            );
+        }
+        format!(
+            "<?xml version=\"1.0\"?>\n<core:CityModel xmlns:core=\"http://www.opengis.net/citygml/2.0\" xmlns:bldg=\"http://www.opengis.net/citygml/building/2.0\" xmlns:gml=\"http://www.opengis.net/gml\">\n{members}</core:CityModel>\n"
+        )
+    }
+
+    #[test]
+    fn a_mistyped_id_is_an_error_and_ids_select_in_document_order() {
+        let city = citygml_io::parse(boxes(&[[0.0, 0.0, 4.0, 3.0, 2.5], [10.0, 0.0, 5.0, 5.0, 3.0], [20.0, 0.0, 2.0, 2.0, 6.0]]).as_bytes()).unwrap();
+        assert_eq!(select_buildings(&city, &["b7".into()]).err(), Some(UnknownBuilding("b7".into())));
+        let picked = select_buildings(&city, &["b2".into(), "b0".into()]).unwrap();
+        assert_eq!(picked.iter().map(|b| b.id.clone().unwrap()).collect::<Vec<_>>(), ["b0", "b2"]);
+        assert_eq!(select_buildings(&city, &[]).unwrap().len(), 3);
+    }
+
+    #[test]
+    fn every_box_becomes_eight_nodes_on_six_planes_of_its_own() {
+        let city = citygml_io::parse(boxes(&[[0.0, 0.0, 4.0, 3.0, 2.5], [10.0, 0.0, 5.0, 5.0, 3.0]]).as_bytes()).unwrap();
+        let units = select_buildings(&city, &[]).unwrap();
+        let mut model = model_for(&city, "boxes.gml");
+        let seen = RefCell::new(Vec::new());
+        let o = BuildingOptions { lod: 2, tolerances: Tolerances::default(), conditions: None };
+        let done = convert_buildings(&mut model, &units, &o, &|i, id| seen.borrow_mut().push((i, id.to_string())));
+        assert_eq!(*seen.borrow(), [(0, "b0".to_string()), (1, "b1".to_string())]);
+        assert!(done.rejected.is_empty(), "{:?}", done.rejected);
+        for r in &done.buildings {
+            let last = r.counts.last();
+            assert_eq!((last.nodes, last.faces, last.planes), (8, 6, 6), "{}", r.id);
+            assert_eq!(r.conditions, ConditionCounts::default(), "no conditions asked for");
+        }
+        assert_eq!((model.nodes.len(), model.faces.len()), (16, 12), "the two boxes share nothing");
+        assert_eq!(model.source.as_ref().map(|s| s.file.as_str()), Some("boxes.gml"));
+    }
+}
