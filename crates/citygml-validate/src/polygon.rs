@@ -336,19 +336,33 @@ fn ring_not_simple(r: &[V2], ids: &[u32]) -> Option<String> {
     None
 }
 
+/// Where a vertex of one ring touches the inside of a segment of another ring:
+/// (ring, segment, vertex id, parameter along the segment).
+type Split = (usize, usize, u32, f64);
+
+/// The distinct points where two rings touch, by ring pair (a < b).
+type Touches = Vec<((usize, usize), Vec<V2>)>;
+
 /// Topology between the rings of one polygon (after each ring is simple): 202, 201, 206, 207, 205.
 /// Returns the points where a vertex of one ring touches the inside of a segment of another
 /// (ring, segment, vertex id, parameter), so the triangulation can split that segment.
-fn check_ring_topology(
-    pi: usize,
-    rings: &[Vec<V2>],
-    ids: &[Vec<u32>],
-    extent: f64,
-) -> Result<Vec<(usize, usize, u32, f64)>, Issue> {
+fn check_ring_topology(pi: usize, rings: &[Vec<V2>], ids: &[Vec<u32>], extent: f64) -> Result<Vec<Split>, Issue> {
     let nr = rings.len();
     if nr == 1 {
         return Ok(Vec::new());
     }
+    check_duplicated_rings(pi, ids)?;
+    let eps = 1e-9 * extent.max(1e-9);
+    let mut splits = Vec::new();
+    let touches = ring_touches(pi, rings, ids, eps, &mut splits)?;
+    check_inner_ring_positions(pi, rings)?;
+    check_interior_connected(pi, nr, &touches)?;
+    Ok(splits)
+}
+
+/// 202: two rings with the same set of vertices are the same ring written twice.
+fn check_duplicated_rings(pi: usize, ids: &[Vec<u32>]) -> Result<(), Issue> {
+    let nr = ids.len();
     for a in 0..nr {
         for b in a + 1..nr {
             let mut sa = ids[a].clone();
@@ -360,72 +374,105 @@ fn check_ring_topology(
             }
         }
     }
-    let eps = 1e-9 * extent.max(1e-9);
-    let mut splits = Vec::new();
-    // touch points per ring pair
-    let mut touches: Vec<((usize, usize), Vec<V2>)> = Vec::new();
+    Ok(())
+}
+
+/// 201 for every ring pair, in pair order: rings may touch in points but not cross or share a
+/// segment. Collects the touch points per pair (for 205) and the segment splits (into `splits`).
+fn ring_touches(pi: usize, rings: &[Vec<V2>], ids: &[Vec<u32>], eps: f64, splits: &mut Vec<Split>) -> Result<Touches, Issue> {
+    let nr = rings.len();
+    let mut touches: Touches = Vec::new();
     for a in 0..nr {
         for b in a + 1..nr {
-            let (ra, rb) = (&rings[a], &rings[b]);
-            let mut pts: Vec<V2> = Vec::new();
-            for (i, j) in overlapping_segments(ra, rb, false) {
-                let (p, q) = (ra[i], ra[(i + 1) % ra.len()]);
-                {
-                    let (s, t) = (rb[j], rb[(j + 1) % rb.len()]);
-                    match line_intersection(gline(&p, &q), gline(&s, &t)) {
-                        None => {}
-                        Some(LineIntersection::SinglePoint { is_proper: true, .. }) => {
-                            return Err(issue(
-                                ErrorCode::IntersectionRings,
-                                pi,
-                                Some(b),
-                                format!("ring {} crosses ring {}", b + 1, a + 1),
-                            ));
-                        }
-                        Some(LineIntersection::Collinear { intersection }) => {
-                            let (x0, x1) = (intersection.start, intersection.end);
-                            if (x0.x - x1.x).hypot(x0.y - x1.y) > eps {
-                                return Err(issue(
-                                    ErrorCode::IntersectionRings,
-                                    pi,
-                                    Some(b),
-                                    format!("rings {} and {} share a segment", a + 1, b + 1),
-                                ));
-                            }
-                            pts.push(V2::new(x0.x, x0.y));
-                        }
-                        Some(LineIntersection::SinglePoint { intersection: x, .. }) => {
-                            let x = V2::new(x.x, x.y);
-                            pts.push(x);
-                            // A vertex of one ring inside a segment of the other: split that segment.
-                            let near = |u: &V2, w: &V2| (u - w).norm() <= eps;
-                            if !near(&x, &p) && !near(&x, &q) {
-                                if near(&x, &s) {
-                                    splits.push((a, i, ids[b][j], (x - p).norm() / (q - p).norm()));
-                                } else if near(&x, &t) {
-                                    splits.push((a, i, ids[b][(j + 1) % rb.len()], (x - p).norm() / (q - p).norm()));
-                                }
-                            } else if !near(&x, &s) && !near(&x, &t) {
-                                let vid = if near(&x, &p) { ids[a][i] } else { ids[a][(i + 1) % ra.len()] };
-                                splits.push((b, j, vid, (x - s).norm() / (t - s).norm()));
-                            }
-                        }
-                    }
-                }
-            }
-            // distinct touch points
-            let mut distinct: Vec<V2> = Vec::new();
-            for p in pts {
-                if !distinct.iter().any(|q| (q - p).norm() <= eps) {
-                    distinct.push(p);
-                }
-            }
+            let pts = ring_pair_contacts(pi, (a, b), rings, ids, eps, splits)?;
+            let distinct = distinct_points(pts, eps);
             if !distinct.is_empty() {
                 touches.push(((a, b), distinct));
             }
         }
     }
-    // 206: every inner ring inside the outer ring; 207: no inner ring inside another.
+    Ok(touches)
+}
+
+/// The points where rings `a` and `b` meet (with repeats), or 201 when they cross or share a
+/// segment; a meeting inside a segment is recorded in `splits`.
+fn ring_pair_contacts(
+    pi: usize,
+    (a, b): (usize, usize),
+    rings: &[Vec<V2>],
+    ids: &[Vec<u32>],
+    eps: f64,
+    splits: &mut Vec<Split>,
+) -> Result<Vec<V2>, Issue> {
+    let (ra, rb) = (&rings[a], &rings[b]);
+    let mut pts: Vec<V2> = Vec::new();
+    for (i, j) in overlapping_segments(ra, rb, false) {
+        let (p, q) = (ra[i], ra[(i + 1) % ra.len()]);
+        let (s, t) = (rb[j], rb[(j + 1) % rb.len()]);
+        match line_intersection(gline(&p, &q), gline(&s, &t)) {
+            None => {}
+            Some(LineIntersection::SinglePoint { is_proper: true, .. }) => {
+                return Err(issue(ErrorCode::IntersectionRings, pi, Some(b), format!("ring {} crosses ring {}", b + 1, a + 1)));
+            }
+            Some(LineIntersection::Collinear { intersection }) => {
+                let (x0, x1) = (intersection.start, intersection.end);
+                if (x0.x - x1.x).hypot(x0.y - x1.y) > eps {
+                    return Err(issue(
+                        ErrorCode::IntersectionRings,
+                        pi,
+                        Some(b),
+                        format!("rings {} and {} share a segment", a + 1, b + 1),
+                    ));
+                }
+                pts.push(V2::new(x0.x, x0.y));
+            }
+            Some(LineIntersection::SinglePoint { intersection: x, .. }) => {
+                let x = V2::new(x.x, x.y);
+                pts.push(x);
+                splits.extend(vertex_on_segment(x, (a, i, p, q), (b, j, s, t), ids, eps));
+            }
+        }
+    }
+    Ok(pts)
+}
+
+/// A vertex of one ring inside a segment of the other: that segment must be split at it.
+/// `sa` and `sb` are (ring, segment index, start, end) of the two segments meeting at `x`.
+fn vertex_on_segment(
+    x: V2,
+    (a, i, p, q): (usize, usize, V2, V2),
+    (b, j, s, t): (usize, usize, V2, V2),
+    ids: &[Vec<u32>],
+    eps: f64,
+) -> Option<Split> {
+    let near = |u: &V2, w: &V2| (u - w).norm() <= eps;
+    if !near(&x, &p) && !near(&x, &q) {
+        if near(&x, &s) {
+            return Some((a, i, ids[b][j], (x - p).norm() / (q - p).norm()));
+        } else if near(&x, &t) {
+            return Some((a, i, ids[b][(j + 1) % ids[b].len()], (x - p).norm() / (q - p).norm()));
+        }
+    } else if !near(&x, &s) && !near(&x, &t) {
+        let vid = if near(&x, &p) { ids[a][i] } else { ids[a][(i + 1) % ids[a].len()] };
+        return Some((b, j, vid, (x - s).norm() / (t - s).norm()));
+    }
+    None
+}
+
+/// `pts` without repeats closer than `eps`, in first-seen order.
+fn distinct_points(pts: Vec<V2>, eps: f64) -> Vec<V2> {
+    let mut distinct: Vec<V2> = Vec::new();
+    for p in pts {
+        if !distinct.iter().any(|q| (q - p).norm() <= eps) {
+            distinct.push(p);
+        }
+    }
+    distinct
+}
+
+/// 206: every inner ring inside the outer ring; 207: no inner ring inside another.
+fn check_inner_ring_positions(pi: usize, rings: &[Vec<V2>]) -> Result<(), Issue> {
+    let nr = rings.len();
     let polys: Vec<geo::Polygon<f64>> = rings
         .iter()
         .map(|r| {
@@ -434,18 +481,7 @@ fn check_ring_topology(
             geo::Polygon::new(LineString::new(cs), vec![])
         })
         .collect();
-    let position = |inner: usize, outer: usize| -> CoordPos {
-        // first vertex (or segment midpoint) of `inner` that is not on the boundary of `outer`
-        let r = &rings[inner];
-        let cands = r.iter().copied().chain((0..r.len()).map(|k| (r[k] + r[(k + 1) % r.len()]) * 0.5));
-        for c in cands {
-            let pos = polys[outer].coordinate_position(&coord! {x: c.x, y: c.y});
-            if pos != CoordPos::OnBoundary {
-                return pos;
-            }
-        }
-        CoordPos::OnBoundary
-    };
+    let position = |inner: usize, outer: usize| ring_position(&rings[inner], &polys[outer]);
     for b in 1..nr {
         if position(b, 0) == CoordPos::Outside {
             return Err(issue(ErrorCode::InnerRingOutside, pi, Some(b), format!("inner ring {} lies outside the outer ring", b + 1)));
@@ -463,17 +499,27 @@ fn check_ring_topology(
             }
         }
     }
-    // 205: two rings touching twice, or rings touching in a cycle, cut the interior apart.
-    let mut parent: Vec<usize> = (0..nr).collect();
-    fn find(p: &mut [usize], x: usize) -> usize {
-        let mut x = x;
-        while p[x] != x {
-            p[x] = p[p[x]];
-            x = p[x];
+    Ok(())
+}
+
+/// Position of ring `r` relative to `outer`: that of its first vertex (or segment midpoint) not
+/// on the boundary of `outer`, since rings may touch.
+fn ring_position(r: &[V2], outer: &geo::Polygon<f64>) -> CoordPos {
+    let cands = r.iter().copied().chain((0..r.len()).map(|k| (r[k] + r[(k + 1) % r.len()]) * 0.5));
+    for c in cands {
+        let pos = outer.coordinate_position(&coord! {x: c.x, y: c.y});
+        if pos != CoordPos::OnBoundary {
+            return pos;
         }
-        x
     }
-    for ((a, b), pts) in &touches {
+    CoordPos::OnBoundary
+}
+
+/// 205: two rings touching twice, or rings touching in a cycle, cut the interior apart.
+/// Rings are joined in a union-find as their touches are read; a touch within one set closes a cycle.
+fn check_interior_connected(pi: usize, nr: usize, touches: &Touches) -> Result<(), Issue> {
+    let mut parent: Vec<usize> = (0..nr).collect();
+    for ((a, b), pts) in touches {
         if pts.len() >= 2 {
             return Err(issue(
                 ErrorCode::InteriorDisconnected,
@@ -482,7 +528,7 @@ fn check_ring_topology(
                 format!("rings {} and {} touch at {} points", a + 1, b + 1, pts.len()),
             ));
         }
-        let (ra, rb) = (find(&mut parent, *a), find(&mut parent, *b));
+        let (ra, rb) = (union_find_root(&mut parent, *a), union_find_root(&mut parent, *b));
         if ra == rb {
             return Err(issue(
                 ErrorCode::InteriorDisconnected,
@@ -493,7 +539,17 @@ fn check_ring_topology(
         }
         parent[ra] = rb;
     }
-    Ok(splits)
+    Ok(())
+}
+
+/// Root of `x`'s set in the union-find `p`, halving the path on the way.
+fn union_find_root(p: &mut [usize], x: usize) -> usize {
+    let mut x = x;
+    while p[x] != x {
+        p[x] = p[p[x]];
+        x = p[x];
+    }
+    x
 }
 
 /// Inserts vertex `vid` into segment `seg` of a ring (after the segment's start), keeping several
