@@ -120,6 +120,7 @@ fn check_ring(pi: usize, ri: usize, mut ids: Vec<u32>, snap: &Snapper) -> Result
     Ok(ids)
 }
 
+/// Ring checks, then polygon checks in val3dity's order; the first error stops the polygon.
 fn check_polygon(
     pi: usize,
     poly: &PolygonInput,
@@ -135,65 +136,107 @@ fn check_polygon(
     let ext3 = pts(&rs[0]);
     let all3: Vec<V3> = rs.iter().flat_map(|r| pts(r)).collect();
     let newell = newell_normal(&ext3);
-    let extent = {
-        let mut e: f64 = 0.0;
-        for p in &all3 {
-            e = e.max((p - all3[0]).norm());
-        }
-        e
-    };
+    let extent = extent_from_first(&all3);
     if !(newell.norm() > 1e-12 * extent * extent) {
         return Err(issue(ErrorCode::RingSelfIntersection, pi, Some(0), "outer ring is collapsed to a line or a point".into()));
     }
-    let plane = if rs.len() == 1 && rs[0].len() == 3 {
-        Plane { point: ext3[0], normal: newell.normalize() }
-    } else {
-        let Some(mut pl) = fit_plane(&all3) else {
-            return Err(issue(ErrorCode::RingSelfIntersection, pi, Some(0), "polygon is collapsed to a line".into()));
-        };
-        // spec: val3dity checks every point against the least-squares plane (203).
-        let (mut dmax, mut at) = (0.0f64, 0usize);
-        for (k, p) in all3.iter().enumerate() {
-            let d = pl.distance(p).abs();
-            if d > dmax {
-                dmax = d;
-                at = k;
-            }
-        }
-        if dmax > opts.planarity_tol {
-            return Err(with_value(dmax, issue(
-                ErrorCode::NonPlanarPolygonDistancePlane,
-                pi,
-                None,
-                format!(
-                    "distance to fitted plane {:.6} m at {} (tolerance {} m)",
-                    dmax,
-                    fmt_pt(&all3[at], &snap.origin()),
-                    opts.planarity_tol
-                ),
-            )));
-        }
-        if pl.normal.dot(&newell) < 0.0 {
-            pl.normal = -pl.normal;
-        }
-        pl
-    };
+    let plane = polygon_plane(pi, &rs, &ext3, &all3, newell, snap, opts)?;
     let (u, v) = plane.basis();
-    let proj = |r: &Vec<u32>| -> Vec<V2> {
-        r.iter()
-            .map(|&i| {
-                let d = snap.points[i as usize] - plane.point;
-                V2::new(d.dot(&u), d.dot(&v))
-            })
-            .collect()
+    let rings2: Vec<Vec<V2>> = rs.iter().map(|r| project_ring(r, snap, &plane, u, v)).collect();
+    check_projected_rings(pi, &rings2, &rs)?;
+    let splits = check_ring_topology(pi, &rings2, &rs, extent)?;
+    let rings_split = split_rings(&rs, splits);
+    let triangles = triangulate(&rings_split, snap, &plane, u, v).ok_or_else(|| {
+        issue(ErrorCode::RingSelfIntersection, pi, None, "polygon cannot be triangulated in its plane (rings touch or cross)".into())
+    })?;
+    check_triangle_normals(pi, &triangles, snap, extent, opts)?;
+    let (normal, triangles) = if poly.reversed {
+        (-plane.normal, triangles.into_iter().map(|t| [t[0], t[2], t[1]]).collect())
+    } else {
+        (plane.normal, triangles)
     };
-    let rings2: Vec<Vec<V2>> = rs.iter().map(proj).collect();
-    for (ri, (r2, ids)) in rings2.iter().zip(&rs).enumerate() {
+    Ok(PreparedPolygon { rings: rs, normal, triangles })
+}
+
+/// The largest distance of a point from the first one: the polygon's size, which scales the
+/// collapse and touch tolerances.
+fn extent_from_first(all3: &[V3]) -> f64 {
+    let mut e: f64 = 0.0;
+    for p in all3 {
+        e = e.max((p - all3[0]).norm());
+    }
+    e
+}
+
+/// The polygon's plane, its normal turned to agree with the exterior's Newell normal: a lone
+/// triangle lies in its own plane; otherwise the least-squares plane, which must pass 203.
+fn polygon_plane(
+    pi: usize,
+    rs: &[Vec<u32>],
+    ext3: &[V3],
+    all3: &[V3],
+    newell: V3,
+    snap: &Snapper,
+    opts: &Options,
+) -> Result<Plane, Issue> {
+    if rs.len() == 1 && rs[0].len() == 3 {
+        return Ok(Plane { point: ext3[0], normal: newell.normalize() });
+    }
+    let Some(mut pl) = fit_plane(all3) else {
+        return Err(issue(ErrorCode::RingSelfIntersection, pi, Some(0), "polygon is collapsed to a line".into()));
+    };
+    check_planarity(pi, &pl, all3, snap, opts)?;
+    if pl.normal.dot(&newell) < 0.0 {
+        pl.normal = -pl.normal;
+    }
+    Ok(pl)
+}
+
+/// 203: the farthest point from the fitted plane must lie within the planarity tolerance.
+fn check_planarity(pi: usize, pl: &Plane, all3: &[V3], snap: &Snapper, opts: &Options) -> Result<(), Issue> {
+    // spec: val3dity checks every point against the least-squares plane (203).
+    let (mut dmax, mut at) = (0.0f64, 0usize);
+    for (k, p) in all3.iter().enumerate() {
+        let d = pl.distance(p).abs();
+        if d > dmax {
+            dmax = d;
+            at = k;
+        }
+    }
+    if dmax > opts.planarity_tol {
+        return Err(with_value(dmax, issue(
+            ErrorCode::NonPlanarPolygonDistancePlane,
+            pi,
+            None,
+            format!(
+                "distance to fitted plane {:.6} m at {} (tolerance {} m)",
+                dmax,
+                fmt_pt(&all3[at], &snap.origin()),
+                opts.planarity_tol
+            ),
+        )));
+    }
+    Ok(())
+}
+
+/// A ring's points in the plane's 2D basis (`u`, `v`) around the plane's point.
+fn project_ring(r: &[u32], snap: &Snapper, plane: &Plane, u: V3, v: V3) -> Vec<V2> {
+    r.iter()
+        .map(|&i| {
+            let d = snap.points[i as usize] - plane.point;
+            V2::new(d.dot(&u), d.dot(&v))
+        })
+        .collect()
+}
+
+/// 104 on each projected ring (simple), then 208: the exterior runs counter-clockwise around the
+/// oriented normal; inner rings must not.
+fn check_projected_rings(pi: usize, rings2: &[Vec<V2>], rs: &[Vec<u32>]) -> Result<(), Issue> {
+    for (ri, (r2, ids)) in rings2.iter().zip(rs).enumerate() {
         if let Some(why) = ring_not_simple(r2, ids) {
             return Err(issue(ErrorCode::RingSelfIntersection, pi, Some(ri), why));
         }
     }
-    // The exterior runs counter-clockwise around the oriented normal; inner rings must not.
     for ri in 1..rings2.len() {
         if signed_area(&rings2[ri]) > 0.0 {
             return Err(issue(
@@ -204,18 +247,23 @@ fn check_polygon(
             ));
         }
     }
-    let splits = check_ring_topology(pi, &rings2, &rs, extent)?;
-    let mut rings_split = rs.clone();
-    let mut splits = splits;
+    Ok(())
+}
+
+/// The rings with every touch point inserted into the segment it touches, so the triangulation
+/// sees the rings meet at shared vertices.
+fn split_rings(rs: &[Vec<u32>], mut splits: Vec<Split>) -> Vec<Vec<u32>> {
+    let mut rings_split = rs.to_vec();
     // later segments first, and within a segment the farthest split first, so indices stay valid
     splits.sort_by(|a, b| a.0.cmp(&b.0).then(b.1.cmp(&a.1)).then(b.3.total_cmp(&a.3)));
     for (ri, seg, vid, _t) in splits {
         insert_split(&mut rings_split[ri], seg, vid);
     }
-    let triangles = triangulate(&rings_split, snap, &plane, u, v).ok_or_else(|| {
-        issue(ErrorCode::RingSelfIntersection, pi, None, "polygon cannot be triangulated in its plane (rings touch or cross)".into())
-    })?;
-    // 204: the normals of the triangles must not deviate from each other by more than the tolerance.
+    rings_split
+}
+
+/// 204: the normals of the triangles must not deviate from each other by more than the tolerance.
+fn check_triangle_normals(pi: usize, triangles: &[[u32; 3]], snap: &Snapper, extent: f64, opts: &Options) -> Result<(), Issue> {
     let normals: Vec<(f64, V3)> = triangles
         .iter()
         .filter_map(|t| {
@@ -226,19 +274,7 @@ fn check_polygon(
         })
         .collect();
     if normals.len() > 1 {
-        let mut worst = 0.0f64;
-        if normals.len() <= 256 {
-            for i in 0..normals.len() {
-                for j in i + 1..normals.len() {
-                    worst = worst.max(angle_deg(&normals[i].1, &normals[j].1));
-                }
-            }
-        } else {
-            let r = normals.iter().max_by(|a, b| a.0.total_cmp(&b.0)).unwrap().1;
-            for n in &normals {
-                worst = worst.max(angle_deg(&r, &n.1));
-            }
-        }
+        let worst = worst_normal_deviation(&normals);
         if worst > opts.normals_tol_deg {
             return Err(with_value(worst, issue(
                 ErrorCode::NonPlanarPolygonNormalsDeviation,
@@ -248,12 +284,26 @@ fn check_polygon(
             )));
         }
     }
-    let (normal, triangles) = if poly.reversed {
-        (-plane.normal, triangles.into_iter().map(|t| [t[0], t[2], t[1]]).collect())
+    Ok(())
+}
+
+/// Largest angle in degrees between (area, unit normal) pairs: every pair up to 256 normals, above
+/// that each against the largest triangle's normal, so big polygons do not cost n².
+fn worst_normal_deviation(normals: &[(f64, V3)]) -> f64 {
+    let mut worst = 0.0f64;
+    if normals.len() <= 256 {
+        for i in 0..normals.len() {
+            for j in i + 1..normals.len() {
+                worst = worst.max(angle_deg(&normals[i].1, &normals[j].1));
+            }
+        }
     } else {
-        (plane.normal, triangles)
-    };
-    Ok(PreparedPolygon { rings: rs, normal, triangles })
+        let r = normals.iter().max_by(|a, b| a.0.total_cmp(&b.0)).unwrap().1;
+        for n in normals {
+            worst = worst.max(angle_deg(&r, &n.1));
+        }
+    }
+    worst
 }
 
 fn gline(a: &V2, b: &V2) -> Line<f64> {
