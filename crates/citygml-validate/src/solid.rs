@@ -35,8 +35,44 @@ pub fn check_solid(shells: &[Vec<PolygonInput>], opts: &Options) -> Vec<Issue> {
 }
 
 /// The checks of [`check_solid`]; also returns the shells' meshes (common frame: the exterior
-/// shell's origin) when the solid is valid.
+/// shell's origin) when the solid is valid. Each stage runs only when the ones before found
+/// nothing: shells, 405, 402, 401, 403 / 401, 404.
 fn solid_meshes(shells: &[Vec<PolygonInput>], opts: &Options) -> (Vec<Issue>, Vec<ShellMesh>) {
+    let (issues, mut meshes) = shell_meshes(shells, opts);
+    if !issues.is_empty() {
+        return (issues, Vec::new());
+    }
+    let issues = check_shell_orientations(&meshes);
+    if !issues.is_empty() {
+        return (issues, Vec::new());
+    }
+    let o = to_common_frame(&mut meshes);
+    if meshes.len() < 2 {
+        return (issues, meshes);
+    }
+    let issues = check_duplicated_shells(&meshes, opts);
+    if !issues.is_empty() {
+        return (issues, Vec::new());
+    }
+    let extent = meshes[0].points.iter().map(|p| p.norm()).fold(0.0, f64::max);
+    let (eps, touch) = contact_eps(opts, extent);
+    let (issues, lines) = check_shell_intersections(&meshes, eps, touch, o);
+    if !issues.is_empty() {
+        return (issues, Vec::new());
+    }
+    let issues = check_cavity_positions(&meshes, touch);
+    if !issues.is_empty() {
+        return (issues, Vec::new());
+    }
+    let issues = check_contact_loops(&lines, touch, o);
+    if !issues.is_empty() {
+        return (issues, Vec::new());
+    }
+    (issues, meshes)
+}
+
+/// Every shell's own checks (issues tagged with the shell's index), and the meshes of the valid ones.
+fn shell_meshes(shells: &[Vec<PolygonInput>], opts: &Options) -> (Vec<Issue>, Vec<ShellMesh>) {
     let mut issues = Vec::new();
     let mut meshes: Vec<ShellMesh> = Vec::new();
     for (si, polys) in shells.iter().enumerate() {
@@ -49,9 +85,12 @@ fn solid_meshes(shells: &[Vec<PolygonInput>], opts: &Options) -> (Vec<Issue>, Ve
             meshes.push(m);
         }
     }
-    if !issues.is_empty() {
-        return (issues, Vec::new());
-    }
+    (issues, meshes)
+}
+
+/// 405: the exterior shell's normals point outwards (positive volume), the cavities' inwards.
+fn check_shell_orientations(meshes: &[ShellMesh]) -> Vec<Issue> {
+    let mut issues = Vec::new();
     for (si, m) in meshes.iter().enumerate() {
         let vol = m.signed_volume();
         if si == 0 && vol < 0.0 {
@@ -68,10 +107,12 @@ fn solid_meshes(shells: &[Vec<PolygonInput>], opts: &Options) -> (Vec<Issue>, Ve
             ));
         }
     }
-    if !issues.is_empty() {
-        return (issues, Vec::new());
-    }
-    // common frame: the exterior shell's origin
+    issues
+}
+
+/// Moves every mesh into the exterior shell's frame, so shells can be compared point by point;
+/// returns that common origin.
+fn to_common_frame(meshes: &mut [ShellMesh]) -> V3 {
     let o = meshes[0].origin;
     for m in meshes.iter_mut() {
         let d = m.origin - o;
@@ -80,12 +121,13 @@ fn solid_meshes(shells: &[Vec<PolygonInput>], opts: &Options) -> (Vec<Issue>, Ve
         }
         m.origin = o;
     }
-    if meshes.len() < 2 {
-        return (issues, meshes);
-    }
-    let pts: Vec<&[V3]> = meshes.iter().map(|m| m.points.as_slice()).collect();
-    // 402: two shells with the same vertices
-    let keys: Vec<_> = pts.iter().map(|p| vertex_key(p, opts)).collect();
+    o
+}
+
+/// 402: two shells with the same vertices.
+fn check_duplicated_shells(meshes: &[ShellMesh], opts: &Options) -> Vec<Issue> {
+    let mut issues = Vec::new();
+    let keys: Vec<_> = meshes.iter().map(|m| vertex_key(&m.points, opts)).collect();
     for a in 0..meshes.len() {
         for b in a + 1..meshes.len() {
             if keys[a] == keys[b] {
@@ -93,12 +135,13 @@ fn solid_meshes(shells: &[Vec<PolygonInput>], opts: &Options) -> (Vec<Issue>, Ve
             }
         }
     }
-    if !issues.is_empty() {
-        return (issues, Vec::new());
-    }
-    // 401: shells may touch at points and along lines, but not cross or share a face piece
-    let extent = pts[0].iter().map(|p| p.norm()).fold(0.0, f64::max);
-    let (eps, touch) = contact_eps(opts, extent);
+    issues
+}
+
+/// 401: shells may touch at points and along lines, but not cross or share a face piece.
+/// Also returns the lines along which shells touch (for 404).
+fn check_shell_intersections(meshes: &[ShellMesh], eps: f64, touch: f64, o: V3) -> (Vec<Issue>, Vec<(V3, V3)>) {
+    let mut issues = Vec::new();
     let trees: Vec<_> = meshes.iter().map(|m| tri_tree(m, touch)).collect();
     let mut lines: Vec<(V3, V3)> = Vec::new();
     for a in 0..meshes.len() {
@@ -115,15 +158,18 @@ fn solid_meshes(shells: &[Vec<PolygonInput>], opts: &Options) -> (Vec<Issue>, Ve
             lines.extend(m.lines);
         }
     }
-    if !issues.is_empty() {
-        return (issues, Vec::new());
-    }
-    // 403 / 401: where a cavity lies (generalised winding number of its face centroids): all
-    // outside the exterior is 403; partly outside, or inside another cavity, is 401 (a shell
-    // crossing another along one of its own edges is not seen by the triangle pairs alone).
+    (issues, lines)
+}
+
+/// 403 / 401: where a cavity lies (generalised winding number of its face centroids): all
+/// outside the exterior is 403; partly outside, or inside another cavity, is 401 (a shell
+/// crossing another along one of its own edges is not seen by the triangle pairs alone).
+fn check_cavity_positions(meshes: &[ShellMesh], touch: f64) -> Vec<Issue> {
+    let mut issues = Vec::new();
+    let inside = |t: usize, p: &V3| winding_number(&meshes[t].points, &meshes[t].triangles, p);
     for s in 1..meshes.len() {
         let cs = samples(&meshes[s], touch);
-        let outside = cs.iter().filter(|p| winding_number(pts[0], &meshes[0].triangles, p).abs() < 0.5).count();
+        let outside = cs.iter().filter(|p| inside(0, p).abs() < 0.5).count();
         if outside == cs.len() {
             issues.push(solid_issue(ErrorCode::InnerShellOutside, s, format!("interior shell {} is not inside the exterior shell", s)));
         } else if outside > 0 {
@@ -132,10 +178,7 @@ fn solid_meshes(shells: &[Vec<PolygonInput>], opts: &Options) -> (Vec<Issue>, Ve
                 s,
                 format!("interior shell {} is partly outside the exterior shell (they cross)", s),
             ));
-        } else if let Some(t) = (1..meshes.len())
-            .filter(|&t| t != s)
-            .find(|&t| cs.iter().any(|p| winding_number(pts[t], &meshes[t].triangles, p).abs() > 0.5))
-        {
+        } else if let Some(t) = (1..meshes.len()).filter(|&t| t != s).find(|&t| cs.iter().any(|p| inside(t, p).abs() > 0.5)) {
             issues.push(solid_issue(
                 ErrorCode::IntersectionShells,
                 s,
@@ -143,11 +186,13 @@ fn solid_meshes(shells: &[Vec<PolygonInput>], opts: &Options) -> (Vec<Issue>, Ve
             ));
         }
     }
-    if !issues.is_empty() {
-        return (issues, Vec::new());
-    }
-    // 404: line contacts that close a loop cut a pocket out of the interior
-    let cycles = contact_cycles(&lines, touch);
+    issues
+}
+
+/// 404: line contacts that close a loop cut a pocket out of the interior.
+fn check_contact_loops(lines: &[(V3, V3)], touch: f64, o: V3) -> Vec<Issue> {
+    let mut issues = Vec::new();
+    let cycles = contact_cycles(lines, touch);
     if cycles > 0 {
         let at = lines.first().map(|l| fmt(&(l.0 + o))).unwrap_or_default();
         issues.push(solid_issue(
@@ -158,9 +203,8 @@ fn solid_meshes(shells: &[Vec<PolygonInput>], opts: &Options) -> (Vec<Issue>, Ve
                 if cycles == 1 { "" } else { "s" }
             ),
         ));
-        return (issues, Vec::new());
     }
-    (issues, meshes)
+    issues
 }
 
 /// Checks a CompositeSolid given as its solids (each: exterior shell, then cavities). Returns
