@@ -395,6 +395,16 @@ const XMLNS_LOOKAHEAD: usize = 1 << 20;
 static XMLNS: std::sync::LazyLock<memchr::memmem::Finder<'static>> =
     std::sync::LazyLock::new(|| memchr::memmem::Finder::new(b"xmlns"));
 
+/// What [`Parser::parse_linear_ring`] has read of a ring's coordinates so far.
+struct RingCoords {
+    points: Vec<Point3>,
+    /// The encoding seen first; `None` until a coordinate element is read.
+    encoding: Option<CoordEncoding>,
+    dim: u8,
+    text_span: SourceSpan,
+    pos_spans: Vec<SourceSpan>,
+}
+
 impl<'a> Parser<'a> {
     pub fn new(src: &'a [u8], lines: Arc<LineIndex<'a>>, range: Range<usize>, bindings: Vec<Binding>) -> Parser<'a> {
         let mut r = Reader::from_reader(&src[range.clone()]);
@@ -1188,13 +1198,11 @@ impl<'a> Parser<'a> {
         }
     }
 
+    /// A `gml:LinearRing` in any of GML's three coordinate encodings (never mixed); the text
+    /// spans are kept so the coordinates can be rewritten in place.
     fn parse_linear_ring(&mut self, t: Tag<'a>) -> Result<Ring, ReadError> {
         let id = t.attr_string(b"id");
-        let mut points: Vec<Point3> = Vec::new();
-        let mut encoding: Option<CoordEncoding> = None;
-        let mut dim: u8 = 3;
-        let mut text_span = SourceSpan::default();
-        let mut pos_spans = Vec::new();
+        let mut acc = RingCoords { points: Vec::new(), encoding: None, dim: 3, text_span: SourceSpan::default(), pos_spans: Vec::new() };
         let end;
         loop {
             match self.next()? {
@@ -1205,71 +1213,9 @@ impl<'a> Parser<'a> {
                         continue;
                     }
                     match l {
-                        b"posList" => {
-                            if encoding.is_some() {
-                                return Err(self.err(c.start, "gml:LinearRing mixes coordinate encodings"));
-                            }
-                            let d = c.attr(b"srsDimension").and_then(|v| parse_dim(&v)).or(self.dim_hint).unwrap_or(3);
-                            let r = self.content(&c)?;
-                            let (pts, nvals) = self.pos_list(r.clone(), d)?;
-                            if nvals == 0 {
-                                return Err(self.err(c.start, "empty gml:posList (missing coordinates)"));
-                            }
-                            if nvals % d as usize != 0 {
-                                return Err(self.err(
-                                    c.start,
-                                    format!("gml:posList has {nvals} values, not a multiple of srsDimension {d}"),
-                                ));
-                            }
-                            points = pts;
-                            dim = d;
-                            let tr = self.trimmed(r);
-                            text_span = self.span(tr.start, tr.end);
-                            encoding = Some(CoordEncoding::PosList);
-                        }
-                        b"pos" => {
-                            if encoding.is_some_and(|e| e != CoordEncoding::Pos) {
-                                return Err(self.err(c.start, "gml:LinearRing mixes coordinate encodings"));
-                            }
-                            let d_attr = c.attr(b"srsDimension").and_then(|v| parse_dim(&v));
-                            let r = self.content(&c)?;
-                            let vals = self.numbers(r.clone(), "gml:pos")?;
-                            let d = d_attr.unwrap_or(vals.len() as u8);
-                            if !(vals.len() == 2 || vals.len() == 3) || vals.len() != d as usize {
-                                return Err(self.err(
-                                    c.start,
-                                    format!("gml:pos has {} values, expected 2 or 3 (one position)", vals.len()),
-                                ));
-                            }
-                            let tr = self.trimmed(r);
-                            if encoding.is_none() {
-                                dim = d;
-                                text_span = self.span(tr.start, tr.end);
-                            } else if d != dim {
-                                return Err(self.err(c.start, format!("gml:pos has {d} values, the ring's first has {dim}")));
-                            }
-                            text_span.bytes.end = tr.end;
-                            points.push(to_point(&vals));
-                            pos_spans.push(self.span(tr.start, tr.end));
-                            encoding = Some(CoordEncoding::Pos);
-                        }
-                        b"coordinates" => {
-                            if encoding.is_some() {
-                                return Err(self.err(c.start, "gml:LinearRing mixes coordinate encodings"));
-                            }
-                            let cs = c.attr(b"cs").map(|v| v.into_owned()).unwrap_or_else(|| b",".to_vec());
-                            let dec = c.attr(b"decimal").map(|v| v.into_owned()).unwrap_or_else(|| b".".to_vec());
-                            let r = self.content(&c)?;
-                            let (pts, d) = self.coordinates(r.clone(), &cs, &dec)?;
-                            if pts.is_empty() {
-                                return Err(self.err(c.start, "empty gml:coordinates (missing coordinates)"));
-                            }
-                            points = pts;
-                            dim = d;
-                            let tr = self.trimmed(r);
-                            text_span = self.span(tr.start, tr.end);
-                            encoding = Some(CoordEncoding::Coordinates);
-                        }
+                        b"posList" => self.ring_pos_list(&c, &mut acc)?,
+                        b"pos" => self.ring_pos(&c, &mut acc)?,
+                        b"coordinates" => self.ring_coordinates(&c, &mut acc)?,
                         _ => {
                             self.skip(&c)?;
                         }
@@ -1291,6 +1237,7 @@ impl<'a> Parser<'a> {
                 Ev::Text { .. } => {}
             }
         }
+        let RingCoords { points, encoding, dim, text_span, pos_spans } = acc;
         let Some(encoding) = encoding else {
             return Err(self.err(
                 t.start,
@@ -1298,6 +1245,81 @@ impl<'a> Parser<'a> {
             ));
         };
         Ok(Ring { id, points, srs_dimension: dim, encoding, text_span, pos_spans, span: self.span(t.start, end) })
+    }
+
+    /// A ring's `gml:posList`: all its points at once, in the declared (or inherited) dimension.
+    fn ring_pos_list(&mut self, c: &Tag<'a>, acc: &mut RingCoords) -> Result<(), ReadError> {
+        if acc.encoding.is_some() {
+            return Err(self.err(c.start, "gml:LinearRing mixes coordinate encodings"));
+        }
+        let d = c.attr(b"srsDimension").and_then(|v| parse_dim(&v)).or(self.dim_hint).unwrap_or(3);
+        let r = self.content(c)?;
+        let (pts, nvals) = self.pos_list(r.clone(), d)?;
+        if nvals == 0 {
+            return Err(self.err(c.start, "empty gml:posList (missing coordinates)"));
+        }
+        if nvals % d as usize != 0 {
+            return Err(self.err(
+                c.start,
+                format!("gml:posList has {nvals} values, not a multiple of srsDimension {d}"),
+            ));
+        }
+        acc.points = pts;
+        acc.dim = d;
+        let tr = self.trimmed(r);
+        acc.text_span = self.span(tr.start, tr.end);
+        acc.encoding = Some(CoordEncoding::PosList);
+        Ok(())
+    }
+
+    /// One `gml:pos` of a ring: one point, in the dimension of the ring's first; the text span
+    /// grows to cover first..last `gml:pos`.
+    fn ring_pos(&mut self, c: &Tag<'a>, acc: &mut RingCoords) -> Result<(), ReadError> {
+        if acc.encoding.is_some_and(|e| e != CoordEncoding::Pos) {
+            return Err(self.err(c.start, "gml:LinearRing mixes coordinate encodings"));
+        }
+        let d_attr = c.attr(b"srsDimension").and_then(|v| parse_dim(&v));
+        let r = self.content(c)?;
+        let vals = self.numbers(r.clone(), "gml:pos")?;
+        let d = d_attr.unwrap_or(vals.len() as u8);
+        if !(vals.len() == 2 || vals.len() == 3) || vals.len() != d as usize {
+            return Err(self.err(
+                c.start,
+                format!("gml:pos has {} values, expected 2 or 3 (one position)", vals.len()),
+            ));
+        }
+        let tr = self.trimmed(r);
+        if acc.encoding.is_none() {
+            acc.dim = d;
+            acc.text_span = self.span(tr.start, tr.end);
+        } else if d != acc.dim {
+            return Err(self.err(c.start, format!("gml:pos has {d} values, the ring's first has {}", acc.dim)));
+        }
+        acc.text_span.bytes.end = tr.end;
+        acc.points.push(to_point(&vals));
+        acc.pos_spans.push(self.span(tr.start, tr.end));
+        acc.encoding = Some(CoordEncoding::Pos);
+        Ok(())
+    }
+
+    /// A ring's `gml:coordinates` (GML 2 style, with its own separators): all its points at once.
+    fn ring_coordinates(&mut self, c: &Tag<'a>, acc: &mut RingCoords) -> Result<(), ReadError> {
+        if acc.encoding.is_some() {
+            return Err(self.err(c.start, "gml:LinearRing mixes coordinate encodings"));
+        }
+        let cs = c.attr(b"cs").map(|v| v.into_owned()).unwrap_or_else(|| b",".to_vec());
+        let dec = c.attr(b"decimal").map(|v| v.into_owned()).unwrap_or_else(|| b".".to_vec());
+        let r = self.content(c)?;
+        let (pts, d) = self.coordinates(r.clone(), &cs, &dec)?;
+        if pts.is_empty() {
+            return Err(self.err(c.start, "empty gml:coordinates (missing coordinates)"));
+        }
+        acc.points = pts;
+        acc.dim = d;
+        let tr = self.trimmed(r);
+        acc.text_span = self.span(tr.start, tr.end);
+        acc.encoding = Some(CoordEncoding::Coordinates);
+        Ok(())
     }
 
     /// A posList straight into points (no intermediate Vec<f64>, no token slices: each number
