@@ -160,6 +160,8 @@ mosaic)
     ;;
 rrange)
     src=$1
+    # runs beside the plan job (it needs only the source), so OUT may not exist yet
+    mkdir -p "$out"
     tmp=$(mktemp "$out/.zrange.XXXXXX")
     trap 'rm -f "$tmp"' EXIT
     # GDAL computes the exact min/max block by block (bounded memory, no .aux.xml written)
