@@ -236,6 +236,18 @@ impl<'a> Net<'a> {
         let pl = self.m.plane(p);
         self.normal_slots(pl.normal, pl.sign.f64())
     }
+    /// The plane slots of every plane of two entities (a face's plane, an edge's two, a node's
+    /// three), first entity first: the unknowns of a distance between them.
+    fn slots_of(&self, entities: [Vec<pm::PlaneId>; 2]) -> Vec<Slot> {
+        entities.iter().flatten().flat_map(|&q| self.plane_slots(q)).collect()
+    }
+    /// The normal slots of every plane of two entities: the unknowns of an angle constraint.
+    fn normals_of(&self, entities: [Vec<pm::PlaneId>; 2]) -> Vec<Slot> {
+        entities.iter().flatten().flat_map(|&q| self.plane_normal(q)).collect()
+    }
+    fn face_planes(&self, f: pm::FaceId, el: &str) -> Result<Vec<pm::PlaneId>, ModelError> {
+        Ok(vec![self.face_plane(f, el)?])
+    }
     fn plane_slots(&self, p: pm::PlaneId) -> Vec<Slot> {
         plane_slots_of(self.m, &self.par, &self.pd, p)
     }
@@ -406,52 +418,40 @@ impl Mapping<'_> {
         let (m, net) = (self.net.m, &self.net);
         match &ob.kind {
             ObsKind::DistanceFaceFace { a, b, l } => {
-                let x = [net.plane_slots(net.face_plane(*a, el)?), net.plane_slots(net.face_plane(*b, el)?)].concat();
+                let x = net.slots_of([net.face_planes(*a, el)?, net.face_planes(*b, el)?]);
                 self.add_measured(el, i, *l, DistanceFaceFace, x)
             }
             ObsKind::DistanceFaceEdge { a, b, l } => {
-                let pa = net.face_plane(*a, el)?;
-                let [j, k] = net.edge_planes(*b, el)?;
-                let x = [net.plane_slots(pa), net.plane_slots(j), net.plane_slots(k)].concat();
+                let x = net.slots_of([net.face_planes(*a, el)?, net.edge_planes(*b, el)?.into()]);
                 self.add_measured(el, i, *l, DistanceFaceEdge, x)
             }
             ObsKind::DistanceFaceNode { a, b, l } => {
-                let pa = net.face_plane(*a, el)?;
-                let t = net.node_planes(*b, el)?;
-                let x = [net.plane_slots(pa), net.plane_slots(t[0]), net.plane_slots(t[1]), net.plane_slots(t[2])].concat();
+                let x = net.slots_of([net.face_planes(*a, el)?, net.node_planes(*b, el)?.into()]);
                 self.add_measured(el, i, *l, DistanceFaceNode, x)
             }
             ObsKind::DistanceEdgeEdge { a, b, l } => {
-                let (e1, e2) = (net.edge_planes(*a, el)?, net.edge_planes(*b, el)?);
-                let x = [e1, e2].iter().flat_map(|e| e.iter().flat_map(|&q| net.plane_slots(q))).collect();
+                let x = net.slots_of([net.edge_planes(*a, el)?.into(), net.edge_planes(*b, el)?.into()]);
                 self.add_measured(el, i, *l, DistanceEdgeEdge, x)
             }
             ObsKind::DistanceEdgeNode { a, b, l } => {
-                let e = net.edge_planes(*a, el)?;
-                let t = net.node_planes(*b, el)?;
-                let x = e.iter().chain(t.iter()).flat_map(|&q| net.plane_slots(q)).collect();
+                let x = net.slots_of([net.edge_planes(*a, el)?.into(), net.node_planes(*b, el)?.into()]);
                 self.add_measured(el, i, *l, DistanceEdgeNode, x)
             }
             ObsKind::DistanceNodeNode { a, b, l } => {
-                let (t1, t2) = (net.node_planes(*a, el)?, net.node_planes(*b, el)?);
-                let x = t1.iter().chain(t2.iter()).flat_map(|&q| net.plane_slots(q)).collect();
+                let x = net.slots_of([net.node_planes(*a, el)?.into(), net.node_planes(*b, el)?.into()]);
                 self.add_measured(el, i, *l, DistanceNodeNode, x)
             }
             ObsKind::PointOnFace { .. } | ObsKind::PointOnEdge { .. } | ObsKind::PointOnNode { .. } => self.add_polar(i, &ob.kind, el),
             ObsKind::ConstraintFaceFace { a, b, l } => {
-                let (pa, pb) = (net.face_plane(*a, el)?, net.face_plane(*b, el)?);
-                let x = [net.plane_normal(pa), net.plane_normal(pb)].concat();
+                let x = net.normals_of([net.face_planes(*a, el)?, net.face_planes(*b, el)?]);
                 self.add_measured(el, i, *l, ConstraintFaceFace, x)
             }
             ObsKind::ConstraintFaceEdge { a, b, l } => {
-                let pa = net.face_plane(*a, el)?;
-                let [j, k] = net.edge_planes(*b, el)?;
-                let x = [net.plane_normal(pa), net.plane_normal(j), net.plane_normal(k)].concat();
+                let x = net.normals_of([net.face_planes(*a, el)?, net.edge_planes(*b, el)?.into()]);
                 self.add_measured(el, i, *l, ConstraintFaceEdge, x)
             }
             ObsKind::ConstraintEdgeEdge { a, b, l } => {
-                let (e1, e2) = (net.edge_planes(*a, el)?, net.edge_planes(*b, el)?);
-                let x = e1.iter().chain(e2.iter()).flat_map(|&q| net.plane_normal(q)).collect();
+                let x = net.normals_of([net.edge_planes(*a, el)?.into(), net.edge_planes(*b, el)?.into()]);
                 self.add_measured(el, i, *l, ConstraintEdgeEdge, x)
             }
             ObsKind::RelativeDistancePlanePlane { lower, upper, l } => {

@@ -319,74 +319,128 @@ impl<'a> Ctx<'a> {
 /// Adjust a problem. Consumes nothing; returns the solution or a precise error.
 pub fn adjust(problem: &Problem, opts: &Options) -> Result<Solution, AdjustError> {
     let p = problem;
-    for u in &p.unknowns {
-        if !u.value.is_finite() {
-            return Err(AdjustError::NonFinite { what: format!("approximate value of unknown {}", u.name) });
-        }
-    }
+    check_approximations(p)?;
     let nets: Vec<Net> = p.conditions.iter().map(|c| build_net(&c.x, &c.l)).collect();
     let rnets: Vec<Net> = p.restrictions.iter().map(|c| build_net(&c.x, &c.l)).collect();
 
     let blocks = condition_blocks(p, &nets, opts);
     let comps = components(p, &nets, &rnets, &blocks)?;
-    let nu = p.unknowns.len();
 
     let ctx = Ctx { x0: p.unknowns.iter().map(|u| u.value).collect(), l0: p.obs.iter().map(|o| o.value).collect(), p, nets, rnets, blocks, opts };
-    let datum_subset: Option<Vec<bool>> = match &opts.datum {
-        Datum::Determined => None,
-        Datum::Free { subset } => {
-            let mut m = vec![false; nu];
-            for u in subset {
-                if u.0 >= nu {
-                    return Err(AdjustError::UnknownUnknown { equation: "free datum subset".into(), id: u.0 });
-                }
-                m[u.0] = true;
-            }
-            Some(m)
-        }
-    };
+    let datum_subset = free_datum_mask(&opts.datum, p.unknowns.len())?;
 
     let results: Vec<Result<CompResult, AdjustError>> =
         comps.par_iter().map(|c| solve_component(&ctx, c, datum_subset.as_deref())).collect();
-
-    // Assemble.
-    let mut x: Vec<f64> = p.unknowns.iter().map(|u| u.value).collect();
-    let mut obs = vec![ObsResult::default(); p.obs.len()];
-    let mut sigma_x = if opts.unknown_sigmas && opts.statistics { Some(vec![0.0; nu]) } else { None };
-    let (mut iterations, mut vtpv, mut rsum, mut red, mut datum_n) = (0usize, 0.0, 0.0, 0i64, 0usize);
-    let mut null_space = Vec::new();
+    let mut merged = Merged::new(p, opts);
     for (c, res) in comps.iter().zip(results) {
-        let res = res?;
-        for row in &res.null {
-            null_space.push(row.iter().map(|&(k, g)| (UnknownId(c.unknowns[k]), g)).collect());
+        merged.add(c, res?);
+    }
+    Ok(merged.into_solution(opts, comps.len()))
+}
+
+/// Every approximate value must be finite before anything is linearised.
+fn check_approximations(p: &Problem) -> Result<(), AdjustError> {
+    match p.unknowns.iter().find(|u| !u.value.is_finite()) {
+        Some(u) => Err(AdjustError::NonFinite { what: format!("approximate value of unknown {}", u.name) }),
+        None => Ok(()),
+    }
+}
+
+/// The unknowns a free datum is defined on, as a mask over all unknowns (`None` when the datum
+/// is determined by the observations).
+fn free_datum_mask(datum: &Datum, nu: usize) -> Result<Option<Vec<bool>>, AdjustError> {
+    let Datum::Free { subset } = datum else { return Ok(None) };
+    let mut m = vec![false; nu];
+    for u in subset {
+        if u.0 >= nu {
+            return Err(AdjustError::UnknownUnknown { equation: "free datum subset".into(), id: u.0 });
         }
-        iterations = iterations.max(res.iterations);
-        vtpv += res.vtpv;
-        red += res.redundancy;
-        datum_n += res.datum_rows;
+        m[u.0] = true;
+    }
+    Ok(Some(m))
+}
+
+/// The components' results gathered into whole-problem vectors and sums, in component order.
+struct Merged {
+    x: Vec<f64>,
+    obs: Vec<ObsResult>,
+    sigma_x: Option<Vec<f64>>,
+    null_space: Vec<Vec<(UnknownId, f64)>>,
+    iterations: usize,
+    vtpv: f64,
+    redundancy_sum: f64,
+    redundancy: i64,
+    datum_rows: usize,
+}
+
+impl Merged {
+    fn new(p: &Problem, opts: &Options) -> Merged {
+        let want_sigma = opts.unknown_sigmas && opts.statistics;
+        Merged {
+            x: p.unknowns.iter().map(|u| u.value).collect(),
+            obs: vec![ObsResult::default(); p.obs.len()],
+            sigma_x: want_sigma.then(|| vec![0.0; p.unknowns.len()]),
+            null_space: Vec::new(),
+            iterations: 0,
+            vtpv: 0.0,
+            redundancy_sum: 0.0,
+            redundancy: 0,
+            datum_rows: 0,
+        }
+    }
+
+    fn add(&mut self, c: &Component, res: CompResult) {
+        for row in &res.null {
+            self.null_space.push(row.iter().map(|&(k, g)| (UnknownId(c.unknowns[k]), g)).collect());
+        }
+        self.iterations = self.iterations.max(res.iterations);
+        self.vtpv += res.vtpv;
+        self.redundancy += res.redundancy;
+        self.datum_rows += res.datum_rows;
         for (k, &u) in c.unknowns.iter().enumerate() {
-            x[u] = res.x[k];
-            if let (Some(sx), Some(s)) = (sigma_x.as_mut(), res.qxx_diag.as_ref()) {
+            self.x[u] = res.x[k];
+            if let (Some(sx), Some(s)) = (self.sigma_x.as_mut(), res.qxx_diag.as_ref()) {
                 sx[u] = s[k];
             }
         }
         for (o, r) in res.obs {
-            rsum += r.redundancy;
-            obs[o] = r;
+            self.redundancy_sum += r.redundancy;
+            self.obs[o] = r;
         }
     }
-    let redundancy = red.max(0) as usize;
-    let sigma0_post = if redundancy > 0 { Some((vtpv / redundancy as f64).sqrt() * opts.sigma0) } else { None };
-    if let (Some(sx), Some(s0)) = (sigma_x.as_mut(), sigma0_post) {
-        for v in sx.iter_mut() {
-            *v = s0 * v.max(0.0).sqrt();
+
+    fn into_solution(mut self, opts: &Options, components: usize) -> Solution {
+        let redundancy = self.redundancy.max(0) as usize;
+        let sigma0_post = if redundancy > 0 { Some((self.vtpv / redundancy as f64).sqrt() * opts.sigma0) } else { None };
+        if let Some(sx) = self.sigma_x.as_mut() {
+            let s0 = sigma0_post.unwrap_or(opts.sigma0);
+            sx.iter_mut().for_each(|v| *v = s0 * v.max(0.0).sqrt());
         }
-    } else if let Some(sx) = sigma_x.as_mut() {
-        for v in sx.iter_mut() {
-            *v = opts.sigma0 * v.max(0.0).sqrt();
+        let critical_w = normal_quantile(1.0 - opts.alpha / 2.0);
+        let largest = flag_observations(&mut self.obs, critical_w, opts);
+        let global_test = (redundancy > 0 && opts.statistics).then(|| global_test(self.vtpv, redundancy, opts.alpha_global));
+        Solution {
+            x: self.x,
+            obs: self.obs,
+            sigma_x: self.sigma_x,
+            iterations: self.iterations,
+            redundancy,
+            redundancy_sum: self.redundancy_sum,
+            vtpv: self.vtpv,
+            sigma0_post,
+            global_test,
+            critical_w,
+            largest_suspect: largest,
+            datum_restrictions: self.datum_rows,
+            components,
+            null_space: self.null_space,
         }
     }
-    let critical_w = normal_quantile(1.0 - opts.alpha / 2.0);
+}
+
+/// Marks each observation controllable (enough redundancy) and rejected (normalised residual
+/// over the critical value); returns the controllable one with the largest normalised residual.
+fn flag_observations(obs: &mut [ObsResult], critical_w: f64, opts: &Options) -> Option<ObsId> {
     let mut largest: Option<(usize, f64)> = None;
     for (i, o) in obs.iter_mut().enumerate() {
         o.controllable = o.redundancy >= opts.min_redundancy;
@@ -395,30 +449,14 @@ pub fn adjust(problem: &Problem, opts: &Options) -> Result<Solution, AdjustError
             largest = Some((i, o.normalised));
         }
     }
-    let global_test = if redundancy > 0 && opts.statistics {
-        let t = vtpv; // already divided by σ0² through Q_ll = C_ll/σ0²
-        let lower = chi2_quantile(opts.alpha_global / 2.0, redundancy as f64);
-        let upper = chi2_quantile(1.0 - opts.alpha_global / 2.0, redundancy as f64);
-        Some(GlobalTest { statistic: t, dof: redundancy, lower, upper, passed: t >= lower && t <= upper, verdict: GlobalVerdict::of(t, lower, upper) })
-    } else {
-        None
-    };
-    Ok(Solution {
-        x,
-        obs,
-        sigma_x,
-        iterations,
-        redundancy,
-        redundancy_sum: rsum,
-        vtpv,
-        sigma0_post,
-        global_test,
-        critical_w,
-        largest_suspect: largest.map(|(i, _)| ObsId(i)),
-        datum_restrictions: datum_n,
-        components: comps.len(),
-        null_space,
-    })
+    largest.map(|(i, _)| ObsId(i))
+}
+
+/// The two-sided χ² test of vᵀPv (already divided by σ0² through Q_ll = C_ll/σ0²).
+fn global_test(vtpv: f64, dof: usize, alpha_global: f64) -> GlobalTest {
+    let lower = chi2_quantile(alpha_global / 2.0, dof as f64);
+    let upper = chi2_quantile(1.0 - alpha_global / 2.0, dof as f64);
+    GlobalTest { statistic: vtpv, dof, lower, upper, passed: vtpv >= lower && vtpv <= upper, verdict: GlobalVerdict::of(vtpv, lower, upper) }
 }
 
 /// M blocks: conditions coupled through shared observations or covariance groups, each with its
