@@ -74,6 +74,34 @@ pub struct BackReport {
     pub max_move_by_building: BTreeMap<String, f64>,
 }
 
+impl BackReport {
+    /// The buildings whose largest vertex move exceeds `limit` (m), worst first: a write-back
+    /// that moved a building that far is not a correction, so the caller refuses it.
+    pub fn moved_further_than(&self, limit: f64) -> Option<MovedTooFar> {
+        let mut far: Vec<(String, f64)> = self.max_move_by_building.iter().filter(|(_, &m)| m > limit).map(|(b, &m)| (b.clone(), m)).collect();
+        far.sort_by(|a, b| b.1.total_cmp(&a.1));
+        (!far.is_empty()).then_some(MovedTooFar { limit, buildings: far })
+    }
+}
+
+/// Buildings moved further than the accepted limit, worst first; displays the count and the
+/// worst five.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MovedTooFar {
+    /// The limit (m).
+    pub limit: f64,
+    /// (gml:id, largest vertex move in m), worst first.
+    pub buildings: Vec<(String, f64)>,
+}
+
+impl std::fmt::Display for MovedTooFar {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let named: Vec<String> = self.buildings.iter().take(5).map(|(b, m)| format!("{b} ({m:.3} m)")).collect();
+        let more = if self.buildings.len() > 5 { ", ..." } else { "" };
+        write!(f, "{} building(s) would move further than --max-move {} m: {}{more}", self.buildings.len(), self.limit, named.join(", "))
+    }
+}
+
 /// Why the model cannot be written back into the template.
 #[derive(Debug, Clone, thiserror::Error, PartialEq)]
 pub enum BackError {
@@ -1119,6 +1147,19 @@ mod tests {
         let a = vec![(0, 1), (1, 4), (4, 3), (3, 0)];
         let b = vec![(1, 2), (2, 5), (5, 4), (4, 1)];
         (vec![a, b], pos)
+    }
+
+    #[test]
+    fn buildings_over_the_move_limit_are_named_worst_first_and_at_most_five() {
+        let mut r = BackReport::default();
+        for (k, m) in [0.01, 0.2, 0.05, 0.9, 0.3, 0.4, 0.6, 0.06].into_iter().enumerate() {
+            r.max_move_by_building.insert(format!("b{k}"), m);
+        }
+        assert_eq!(r.moved_further_than(1.0), None);
+        assert_eq!(r.moved_further_than(0.05).unwrap().to_string(), "6 building(s) would move further than --max-move 0.05 m: b3 (0.900 m), b6 (0.600 m), b5 (0.400 m), b4 (0.300 m), b1 (0.200 m), ...");
+        let one = r.moved_further_than(0.7).unwrap();
+        assert_eq!(one.buildings, vec![("b3".to_string(), 0.9)]);
+        assert_eq!(one.to_string(), "1 building(s) would move further than --max-move 0.7 m: b3 (0.900 m)");
     }
 
     #[test]

@@ -86,17 +86,6 @@ fn back_options(a: &Args) -> Result<BackOptions, CliError> {
     Ok(BackOptions { coplanar_tolerance: a.coplanar_tolerance, collapse_tolerance: a.collapse_tolerance, area_tolerance: a.area_tolerance, merge: !a.no_merge, precision: a.precision })
 }
 
-/// The buildings moved further than `limit`, worst first (at most five named).
-fn too_far(r: &BackReport, limit: f64) -> Option<String> {
-    let mut far: Vec<(&String, f64)> = r.max_move_by_building.iter().filter(|(_, &m)| m > limit).map(|(b, &m)| (b, m)).collect();
-    if far.is_empty() {
-        return None;
-    }
-    far.sort_by(|a, b| b.1.total_cmp(&a.1));
-    let named: Vec<String> = far.iter().take(5).map(|(b, m)| format!("{b} ({m:.3} m)")).collect();
-    Some(format!("{} building(s) would move further than --max-move {limit} m: {}{}", far.len(), named.join(", "), if far.len() > 5 { ", ..." } else { "" }))
-}
-
 fn back_error(template: &str, e: BackError) -> CliError {
     match e {
         BackError::Write(_) => CliError::internal(format!("{template}: {e}")),
@@ -134,7 +123,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     if !config.quiet {
         print_back(&report);
     }
-    if let Some(why) = too_far(&report, args.max_move) {
+    if let Some(why) = report.moved_further_than(args.max_move) {
         return Err(CliError::findings(format!("{tname}: {why}; nothing written")));
     }
     output.write_bytes(&out)?;
