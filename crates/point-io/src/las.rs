@@ -139,3 +139,55 @@ fn check_file_claims(path: &Path) -> Result<(), LasError> {
     }
     input_limits::las::check(&mut f, meta.len()).map_err(LasError::Claim)
 }
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+    use las::point::Classification;
+
+    /// A LAS 1.2 file of the given (x, y, z, class) points, written by the `las` crate.
+    pub(crate) fn las_bytes(points: &[([f64; 3], u8)]) -> Vec<u8> {
+        let mut writer = las::Writer::new(Cursor::new(Vec::new()), las::Header::default()).unwrap();
+        for &([x, y, z], class) in points {
+            let classification = Classification::new(class).unwrap();
+            writer.write_point(las::Point { x, y, z, classification, ..Default::default() }).unwrap();
+        }
+        writer.into_inner().unwrap().into_inner()
+    }
+
+    fn all(las: &mut LasPoints) -> Result<Vec<[f64; 3]>, LasError> {
+        let mut out = Vec::new();
+        loop {
+            let batch = las.next_batch()?;
+            if batch.is_empty() {
+                return Ok(out);
+            }
+            out.extend(batch);
+        }
+    }
+
+    #[test]
+    fn the_class_filter_keeps_one_class() {
+        let bytes = las_bytes(&[([1.0, 2.0, 3.0], 2), ([4.0, 5.0, 6.0], 1), ([7.0, 8.0, 9.0], 2)]);
+        let mut las = LasPoints::from_bytes(bytes.clone(), Some(2)).unwrap();
+        assert_eq!(all(&mut las).unwrap(), [[1.0, 2.0, 3.0], [7.0, 8.0, 9.0]]);
+        assert!(las.check_end().is_ok());
+        let mut las = LasPoints::from_bytes(bytes, None).unwrap();
+        assert_eq!(all(&mut las).unwrap().len(), 3);
+        assert_eq!((las.wkt_crs(), las.geotiff_epsg()), (None, None));
+    }
+
+    #[test]
+    fn no_point_of_the_class_lists_the_classes_present() {
+        let mut las = LasPoints::from_bytes(las_bytes(&[([1.0, 2.0, 3.0], 2), ([4.0, 5.0, 6.0], 1)]), Some(17)).unwrap();
+        assert_eq!(all(&mut las).unwrap(), Vec::<[f64; 3]>::new());
+        assert_eq!(las.check_end().unwrap_err().to_string(), "no point of class 17; classes present: 1 (1), 2 (1)");
+    }
+
+    #[test]
+    fn a_truncated_file_is_refused_before_decoding() {
+        let bytes = las_bytes(&[([1.0, 2.0, 3.0], 2), ([4.0, 5.0, 6.0], 2)]);
+        let cut = bytes[..bytes.len() - 10].to_vec();
+        assert!(matches!(LasPoints::from_bytes(cut, None), Err(LasError::Claim(_))));
+    }
+}

@@ -290,4 +290,20 @@ mod tests {
         let sizes: Vec<usize> = XyzBatches::new(text.as_bytes(), "t").map(|b| b.unwrap().len()).collect();
         assert_eq!(sizes, [BATCH_POINTS, 1]);
     }
+
+    #[test]
+    fn las_errors_in_terrain_words() {
+        let path = std::env::temp_dir().join(format!("point-io-terrain-{}.las", std::process::id()));
+        let bytes = crate::las::tests::las_bytes(&[([1.0, 2.0, 3.0], 2)]);
+        std::fs::write(&path, &bytes).unwrap();
+        let name = path.display().to_string();
+        let batches: Vec<_> = LasBatches::open(&path, Some(6)).unwrap().collect();
+        let e = batches.into_iter().next().unwrap().unwrap_err();
+        assert!(matches!(&e, PointsError::Empty { .. }), "{e:?}");
+        assert_eq!(e.to_string(), format!("{name}: no point of class 6; classes present: 2 (1)"));
+        std::fs::write(&path, &bytes[..bytes.len() - 5]).unwrap();
+        let e = LasBatches::open(&path, None).err().unwrap();
+        assert!(matches!(&e, PointsError::TooLarge { .. }), "{e:?}");
+        std::fs::remove_file(&path).unwrap();
+    }
 }
