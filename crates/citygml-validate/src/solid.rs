@@ -209,7 +209,28 @@ fn check_contact_loops(lines: &[(V3, V3)], touch: f64, o: V3) -> Vec<Issue> {
 
 /// Checks a CompositeSolid given as its solids (each: exterior shell, then cavities). Returns
 /// the issues with the index of the solid they belong to (for 50x: the second solid involved).
+/// Each stage runs only when the ones before found nothing: the solids one by one, then 502,
+/// 501, 503.
 pub fn check_composite_solid(solids: &[Vec<Vec<PolygonInput>>], opts: &Options) -> Vec<(usize, Issue)> {
+    let (out, mut exts) = exterior_shells(solids, opts);
+    if !out.is_empty() || exts.len() < 2 {
+        return out;
+    }
+    let o = to_common_frame(&mut exts);
+    let out = check_duplicated_solids(&exts, opts);
+    if !out.is_empty() {
+        return out;
+    }
+    let (out, adjacent) = SolidPairs::new(&exts, opts).check_intersections(o);
+    if !out.is_empty() {
+        return out;
+    }
+    check_disconnected_solids(adjacent, exts.len())
+}
+
+/// Each solid's own issues (with its index), and the exterior shells of the solids that have
+/// meshes.
+fn exterior_shells(solids: &[Vec<Vec<PolygonInput>>], opts: &Options) -> (Vec<(usize, Issue)>, Vec<ShellMesh>) {
     let mut out = Vec::new();
     let mut exts: Vec<ShellMesh> = Vec::new();
     for (k, shells) in solids.iter().enumerate() {
@@ -219,91 +240,106 @@ pub fn check_composite_solid(solids: &[Vec<Vec<PolygonInput>>], opts: &Options) 
             exts.push(meshes.swap_remove(0));
         }
     }
-    if !out.is_empty() || exts.len() < 2 {
-        return out;
-    }
-    let o = exts[0].origin;
-    for m in exts.iter_mut() {
-        let d = m.origin - o;
-        for p in m.points.iter_mut() {
-            *p += d;
-        }
-        m.origin = o;
-    }
-    let issue = |code, detail: String| Issue { code, polygon: None, ring: None, shell: None, detail, value: None };
-    // 502: two identical solids
+    (out, exts)
+}
+
+fn composite_issue(code: ErrorCode, detail: String) -> Issue {
+    Issue { code, polygon: None, ring: None, shell: None, detail, value: None }
+}
+
+/// 502: two solids with the same vertices.
+fn check_duplicated_solids(exts: &[ShellMesh], opts: &Options) -> Vec<(usize, Issue)> {
+    let mut out = Vec::new();
     let keys: Vec<_> = exts.iter().map(|m| vertex_key(&m.points, opts)).collect();
     for a in 0..exts.len() {
         for b in a + 1..exts.len() {
             if keys[a] == keys[b] {
-                out.push((b, issue(ErrorCode::DuplicatedSolids, format!("solids {} and {} are identical", a + 1, b + 1))));
+                out.push((b, composite_issue(ErrorCode::DuplicatedSolids, format!("solids {} and {} are identical", a + 1, b + 1))));
             }
-        }
-    }
-    if !out.is_empty() {
-        return out;
-    }
-    // The tolerances scale with the largest coordinate of any solid (in the common frame), not
-    // of the first one only: a small first solid must not make them too tight for the others.
-    let extent = exts.iter().flat_map(|m| m.points.iter()).map(|p| p.norm()).fold(0.0, f64::max);
-    let (eps, touch) = contact_eps(opts, extent);
-    // Bounding boxes grown by the contact tolerance: two solids whose boxes are apart can
-    // neither cross, nor share a face, nor hold one another, so the pair tests (triangle pairs,
-    // winding numbers) run only for pairs whose boxes meet.
-    let boxes: Vec<([f64; 3], [f64; 3])> = exts.iter().map(|m| bbox(&m.points, touch)).collect();
-    let overlap = |a: usize, b: usize| (0..3).all(|i| boxes[a].0[i] <= boxes[b].1[i] && boxes[b].0[i] <= boxes[a].1[i]);
-    let in_box = |p: &V3, k: usize| (0..3).all(|i| p[i] >= boxes[k].0[i] && p[i] <= boxes[k].1[i]);
-    let mut trees: Vec<Option<TriTree>> = (0..exts.len()).map(|_| None).collect();
-    let mut cents: Vec<Option<Vec<V3>>> = (0..exts.len()).map(|_| None).collect();
-    let mut adjacent = crate::shell::Dsu::new(exts.len());
-    for a in 0..exts.len() {
-        for b in a + 1..exts.len() {
-            if !overlap(a, b) {
-                continue;
-            }
-            for k in [a, b] {
-                if trees[k].is_none() {
-                    trees[k] = Some(tri_tree(&exts[k], touch));
-                    cents[k] = Some(samples(&exts[k], touch));
-                }
-            }
-            let (ta, tb) = (trees[a].as_ref().unwrap(), trees[b].as_ref().unwrap());
-            let m = meet(&exts[a], ta, &exts[b], tb, eps, touch);
-            // 501: crossing surfaces, or a point just inside one solid that is inside the other
-            // (only points inside the other's box can be inside it)
-            let inside = |x: usize, y: usize| {
-                cents[x]
-                    .as_ref()
-                    .unwrap()
-                    .iter()
-                    .filter(|p| in_box(p, y))
-                    .find(|p| winding_number(&exts[y].points, &exts[y].triangles, p).abs() > 0.5)
-                    .copied()
-            };
-            if let Some(p) = m.crossing.or_else(|| inside(b, a)).or_else(|| inside(a, b)) {
-                out.push((
-                    b,
-                    issue(ErrorCode::IntersectionSolids, format!("the interiors of solids {} and {} intersect near {}", a + 1, b + 1, fmt(&(p + o)))),
-                ));
-            } else if m.shared_at.is_some() {
-                adjacent.union(a, b);
-            }
-        }
-    }
-    if !out.is_empty() {
-        return out;
-    }
-    // 503: every solid reachable from the first through shared faces
-    let root = adjacent.find(0);
-    for k in 1..exts.len() {
-        if adjacent.find(k) != root {
-            out.push((
-                k,
-                issue(ErrorCode::DisconnectedSolids, format!("solid {} shares no face with the other solids of the CompositeSolid", k + 1)),
-            ));
         }
     }
     out
+}
+
+/// 503: every solid reachable from the first through shared faces.
+fn check_disconnected_solids(mut adjacent: crate::shell::Dsu, count: usize) -> Vec<(usize, Issue)> {
+    let root = adjacent.find(0);
+    let detail = |k: usize| format!("solid {} shares no face with the other solids of the CompositeSolid", k + 1);
+    (1..count).filter(|&k| adjacent.find(k) != root).map(|k| (k, composite_issue(ErrorCode::DisconnectedSolids, detail(k)))).collect()
+}
+
+/// The exterior shells of a CompositeSolid (in a common frame) for the pair tests, each shell's
+/// triangle tree and inside samples built the first time a pair needs them.
+struct SolidPairs<'a> {
+    exts: &'a [ShellMesh],
+    eps: f64,
+    touch: f64,
+    /// Bounding boxes grown by the contact tolerance: two solids whose boxes are apart can
+    /// neither cross, nor share a face, nor hold one another, so the pair tests (triangle
+    /// pairs, winding numbers) run only for pairs whose boxes meet.
+    boxes: Vec<([f64; 3], [f64; 3])>,
+    indexed: Vec<Option<(TriTree, Vec<V3>)>>,
+}
+
+impl<'a> SolidPairs<'a> {
+    fn new(exts: &'a [ShellMesh], opts: &Options) -> SolidPairs<'a> {
+        // The tolerances scale with the largest coordinate of any solid (in the common frame),
+        // not of the first one only: a small first solid must not make them too tight for the
+        // others.
+        let extent = exts.iter().flat_map(|m| m.points.iter()).map(|p| p.norm()).fold(0.0, f64::max);
+        let (eps, touch) = contact_eps(opts, extent);
+        let boxes = exts.iter().map(|m| bbox(&m.points, touch)).collect();
+        SolidPairs { exts, eps, touch, boxes, indexed: (0..exts.len()).map(|_| None).collect() }
+    }
+
+    /// 501 for each pair whose interiors intersect; the pairs that share a face joined.
+    fn check_intersections(mut self, o: V3) -> (Vec<(usize, Issue)>, crate::shell::Dsu) {
+        let mut out = Vec::new();
+        let mut adjacent = crate::shell::Dsu::new(self.exts.len());
+        for a in 0..self.exts.len() {
+            for b in a + 1..self.exts.len() {
+                if !self.boxes_overlap(a, b) {
+                    continue;
+                }
+                let (crossing, shared) = self.meet(a, b);
+                if let Some(p) = crossing {
+                    let detail = format!("the interiors of solids {} and {} intersect near {}", a + 1, b + 1, fmt(&(p + o)));
+                    out.push((b, composite_issue(ErrorCode::IntersectionSolids, detail)));
+                } else if shared {
+                    adjacent.union(a, b);
+                }
+            }
+        }
+        (out, adjacent)
+    }
+
+    fn boxes_overlap(&self, a: usize, b: usize) -> bool {
+        let boxes = &self.boxes;
+        (0..3).all(|i| boxes[a].0[i] <= boxes[b].1[i] && boxes[b].0[i] <= boxes[a].1[i])
+    }
+
+    /// Where solids `a` and `b` intersect (crossing surfaces, or a point just inside one that
+    /// is inside the other), else whether they share a face.
+    fn meet(&mut self, a: usize, b: usize) -> (Option<V3>, bool) {
+        for k in [a, b] {
+            if self.indexed[k].is_none() {
+                self.indexed[k] = Some((tri_tree(&self.exts[k], self.touch), samples(&self.exts[k], self.touch)));
+            }
+        }
+        let (Some((ta, _)), Some((tb, _))) = (&self.indexed[a], &self.indexed[b]) else { return (None, false) };
+        let m = meet(&self.exts[a], ta, &self.exts[b], tb, self.eps, self.touch);
+        let crossing = m.crossing.or_else(|| self.inside(b, a)).or_else(|| self.inside(a, b));
+        (crossing, m.shared_at.is_some())
+    }
+
+    /// A sample just inside solid `x` that lies inside solid `y` (only samples inside `y`'s
+    /// box can be).
+    fn inside(&self, x: usize, y: usize) -> Option<V3> {
+        let (_, samples) = self.indexed[x].as_ref()?;
+        let (lo, hi) = self.boxes[y];
+        let in_box = |p: &V3| (0..3).all(|i| p[i] >= lo[i] && p[i] <= hi[i]);
+        samples.iter().filter(|p| in_box(p)).find(|p| winding_number(&self.exts[y].points, &self.exts[y].triangles, p).abs() > 0.5).copied()
+    }
 }
 
 /// Axis-aligned box of `ps`, grown by `grow` on every side.

@@ -31,111 +31,154 @@ enum Prim {
 
 /// Parses distance observations and resolves their primitives against the model.
 pub fn parse_distances(text: &str, m: &Popa3d) -> Result<Vec<Observation>, CsvError> {
-    let mut by_polygon: HashMap<&str, FaceId> = HashMap::new();
-    for (i, f) in m.faces.iter().enumerate() {
-        if let Some(s) = &f.source {
-            by_polygon.entry(s.polygon.as_str()).or_insert(FaceId::from(i));
-        }
-    }
-    let mut by_vertex: HashMap<u32, NodeId> = HashMap::new();
-    for (i, n) in m.nodes.iter().enumerate() {
-        for s in &n.sources {
-            if let VertexSource::Obj { vertex } = s {
-                by_vertex.entry(*vertex).or_insert(NodeId::from(i));
-            }
-        }
-    }
+    let resolver = Resolver::new(m);
     let mut out = Vec::new();
     let mut first = true;
     for (ln, raw) in text.lines().enumerate() {
-        let line = ln + 1;
         let t = raw.trim();
         if t.is_empty() || t.starts_with('#') {
             continue;
         }
         let header = first && t.to_ascii_lowercase().starts_with("type,");
         first = false;
-        if header {
-            continue;
+        if !header {
+            out.push(CsvLine::split(ln + 1, raw).observation(&resolver)?);
         }
-        // Field start columns for messages.
+    }
+    Ok(out)
+}
+
+/// The model's primitives by the names a CSV line may give them.
+struct Resolver<'m> {
+    model: &'m Popa3d,
+    /// The first face made from each source polygon id.
+    by_polygon: HashMap<&'m str, FaceId>,
+    /// The first node made from each OBJ vertex (0-based).
+    by_vertex: HashMap<u32, NodeId>,
+}
+
+impl<'m> Resolver<'m> {
+    fn new(m: &'m Popa3d) -> Resolver<'m> {
+        let mut by_polygon: HashMap<&str, FaceId> = HashMap::new();
+        for (i, f) in m.faces.iter().enumerate() {
+            if let Some(s) = &f.source {
+                by_polygon.entry(s.polygon.as_str()).or_insert(FaceId::from(i));
+            }
+        }
+        let mut by_vertex: HashMap<u32, NodeId> = HashMap::new();
+        for (i, n) in m.nodes.iter().enumerate() {
+            for s in &n.sources {
+                if let VertexSource::Obj { vertex } = s {
+                    by_vertex.entry(*vertex).or_insert(NodeId::from(i));
+                }
+            }
+        }
+        Resolver { model: m, by_polygon, by_vertex }
+    }
+}
+
+/// One measurement line: its 1-based number and its fields with their start columns.
+struct CsvLine<'t> {
+    line: usize,
+    fields: Vec<(usize, &'t str)>,
+}
+
+impl<'t> CsvLine<'t> {
+    fn split(line: usize, raw: &'t str) -> CsvLine<'t> {
         let mut fields: Vec<(usize, &str)> = Vec::new();
         let mut col = 1;
         for f in raw.split(',') {
             fields.push((col + (f.len() - f.trim_start().len()), f.trim()));
             col += f.len() + 1;
         }
-        let err = |k: usize, message: String| CsvError { line, column: fields.get(k).map_or(1, |f| f.0), message };
-        if fields.len() != 5 {
-            return Err(err(0, format!("expected 5 fields `type,a,b,value,sigma`, found {}", fields.len())));
+        CsvLine { line, fields }
+    }
+
+    /// An error at field `k` (column 1 when the line has no such field).
+    fn err(&self, k: usize, message: String) -> CsvError {
+        CsvError { line: self.line, column: self.fields.get(k).map_or(1, |f| f.0), message }
+    }
+
+    /// The observation on this line; checks in field order, the type last.
+    fn observation(&self, r: &Resolver) -> Result<Observation, CsvError> {
+        if self.fields.len() != 5 {
+            return Err(self.err(0, format!("expected 5 fields `type,a,b,value,sigma`, found {}", self.fields.len())));
         }
-        let prim = |k: usize| -> Result<Prim, CsvError> {
-            let s = fields[k].1;
-            let q = input_limits::quote(s);
-            let q = &q;
-            let num = |p: &str, n: usize| -> Result<u32, CsvError> {
-                p.parse::<u32>().map_err(|_| err(k, format!("`{q}`: `{}` is not an id", input_limits::quote(p))))
-                    .and_then(|v| if (v as usize) < n { Ok(v) } else { Err(err(k, format!("`{q}`: no such element (the model has {n})"))) })
-            };
-            if let Some(p) = s.strip_prefix("face:") {
-                return Ok(Prim::Face(FaceId(num(p, m.faces.len())?)));
-            }
-            if let Some(p) = s.strip_prefix("edge:") {
-                return Ok(Prim::Edge(EdgeId(num(p, m.edges.len())?)));
-            }
-            if let Some(p) = s.strip_prefix("node:") {
-                return Ok(Prim::Node(NodeId(num(p, m.nodes.len())?)));
-            }
-            if let Some(p) = s.strip_prefix("v:") {
-                let v: u32 = p.parse().map_err(|_| err(k, format!("`{q}`: `{}` is not a vertex number", input_limits::quote(p))))?;
-                return v
-                    .checked_sub(1)
-                    .and_then(|v| by_vertex.get(&v).copied())
-                    .map(Prim::Node)
-                    .ok_or_else(|| err(k, format!("`{q}`: no node comes from OBJ vertex {v}")));
-            }
-            if s.is_empty() {
-                return Err(err(k, "empty primitive reference".into()));
-            }
-            by_polygon.get(s).copied().map(Prim::Face).ok_or_else(|| err(k, format!("`{q}`: no face comes from a source polygon with this id")))
-        };
-        let (a, b) = (prim(1)?, prim(2)?);
-        let val = |k: usize| -> Result<f64, CsvError> {
-            let s = fields[k].1;
-            match s.parse::<f64>() {
-                Ok(x) if x.is_finite() => Ok(x),
-                _ => Err(err(k, format!("`{}` is not a finite number", input_limits::quote(s)))),
-            }
-        };
-        let (value, sigma) = (val(3)?, val(4)?);
+        let (a, b) = (self.primitive(1, r)?, self.primitive(2, r)?);
+        let l = self.measured()?;
+        let kind = distance_kind(a, b, l);
+        let ty = self.fields[0].1;
+        if ty != "distance" && ty != kind.class_name() {
+            let q = input_limits::quote(ty);
+            return Err(self.err(0, format!("type `{q}` does not match the primitives ({}); use `distance` or {}", kind.class_name(), kind.class_name())));
+        }
+        Ok(Observation::new(kind, ObsOrigin::Measured).with_label(format!("csv line {}", self.line)))
+    }
+
+    /// The primitive field `k` names (see the module docs).
+    fn primitive(&self, k: usize, r: &Resolver) -> Result<Prim, CsvError> {
+        let s = self.fields[k].1;
+        let q = input_limits::quote(s);
+        if let Some(p) = s.strip_prefix("face:") {
+            return Ok(Prim::Face(FaceId(self.element_id(k, &q, p, r.model.faces.len())?)));
+        }
+        if let Some(p) = s.strip_prefix("edge:") {
+            return Ok(Prim::Edge(EdgeId(self.element_id(k, &q, p, r.model.edges.len())?)));
+        }
+        if let Some(p) = s.strip_prefix("node:") {
+            return Ok(Prim::Node(NodeId(self.element_id(k, &q, p, r.model.nodes.len())?)));
+        }
+        if let Some(p) = s.strip_prefix("v:") {
+            let v: u32 = p.parse().map_err(|_| self.err(k, format!("`{q}`: `{}` is not a vertex number", input_limits::quote(p))))?;
+            return v
+                .checked_sub(1)
+                .and_then(|v| r.by_vertex.get(&v).copied())
+                .map(Prim::Node)
+                .ok_or_else(|| self.err(k, format!("`{q}`: no node comes from OBJ vertex {v}")));
+        }
+        if s.is_empty() {
+            return Err(self.err(k, "empty primitive reference".into()));
+        }
+        r.by_polygon.get(s).copied().map(Prim::Face).ok_or_else(|| self.err(k, format!("`{q}`: no face comes from a source polygon with this id")))
+    }
+
+    /// The popa3d id `p` of field `k` (quoted whole as `q`), below the element count `n`.
+    fn element_id(&self, k: usize, q: &str, p: &str, n: usize) -> Result<u32, CsvError> {
+        p.parse::<u32>()
+            .map_err(|_| self.err(k, format!("`{q}`: `{}` is not an id", input_limits::quote(p))))
+            .and_then(|v| if (v as usize) < n { Ok(v) } else { Err(self.err(k, format!("`{q}`: no such element (the model has {n})"))) })
+    }
+
+    /// The distance and its standard deviation (fields 3 and 4), MA11/MA12 checked.
+    fn measured(&self) -> Result<Measured, CsvError> {
+        let (value, sigma) = (self.finite(3)?, self.finite(4)?);
         if value < 0.0 {
-            return Err(err(3, format!("MA11: a distance must be ≥ 0, found {value}")));
+            return Err(self.err(3, format!("MA11: a distance must be ≥ 0, found {value}")));
         }
         if sigma <= 0.0 {
-            return Err(err(4, format!("MA12: a standard deviation must be > 0, found {sigma}")));
+            return Err(self.err(4, format!("MA12: a standard deviation must be > 0, found {sigma}")));
         }
-        let l = Measured::new(value, sigma);
-        // Canonical order face < edge < node.
-        let rank = |p: &Prim| match p {
-            Prim::Face(_) => 0,
-            Prim::Edge(_) => 1,
-            Prim::Node(_) => 2,
-        };
-        let (a, b) = if rank(&a) <= rank(&b) { (a, b) } else { (b, a) };
-        let kind = match (a, b) {
-            (Prim::Face(a), Prim::Face(b)) => ObsKind::DistanceFaceFace { a, b, l },
-            (Prim::Face(a), Prim::Edge(b)) => ObsKind::DistanceFaceEdge { a, b, l },
-            (Prim::Face(a), Prim::Node(b)) => ObsKind::DistanceFaceNode { a, b, l },
-            (Prim::Edge(a), Prim::Edge(b)) => ObsKind::DistanceEdgeEdge { a, b, l },
-            (Prim::Edge(a), Prim::Node(b)) => ObsKind::DistanceEdgeNode { a, b, l },
-            (Prim::Node(a), Prim::Node(b)) => ObsKind::DistanceNodeNode { a, b, l },
-            _ => unreachable!("ordered by rank"),
-        };
-        let ty = fields[0].1;
-        if ty != "distance" && ty != kind.class_name() {
-            return Err(err(0, format!("type `{}` does not match the primitives ({}); use `distance` or {}", input_limits::quote(ty), kind.class_name(), kind.class_name())));
-        }
-        out.push(Observation::new(kind, ObsOrigin::Measured).with_label(format!("csv line {line}")));
+        Ok(Measured::new(value, sigma))
     }
-    Ok(out)
+
+    fn finite(&self, k: usize) -> Result<f64, CsvError> {
+        let s = self.fields[k].1;
+        match s.parse::<f64>() {
+            Ok(x) if x.is_finite() => Ok(x),
+            _ => Err(self.err(k, format!("`{}` is not a finite number", input_limits::quote(s)))),
+        }
+    }
+}
+
+/// The Table B.1 distance class of two primitives given in either order; the class holds them
+/// in its canonical order face < edge < node.
+fn distance_kind(a: Prim, b: Prim, l: Measured) -> ObsKind {
+    match (a, b) {
+        (Prim::Face(a), Prim::Face(b)) => ObsKind::DistanceFaceFace { a, b, l },
+        (Prim::Face(a), Prim::Edge(b)) | (Prim::Edge(b), Prim::Face(a)) => ObsKind::DistanceFaceEdge { a, b, l },
+        (Prim::Face(a), Prim::Node(b)) | (Prim::Node(b), Prim::Face(a)) => ObsKind::DistanceFaceNode { a, b, l },
+        (Prim::Edge(a), Prim::Edge(b)) => ObsKind::DistanceEdgeEdge { a, b, l },
+        (Prim::Edge(a), Prim::Node(b)) | (Prim::Node(b), Prim::Edge(a)) => ObsKind::DistanceEdgeNode { a, b, l },
+        (Prim::Node(a), Prim::Node(b)) => ObsKind::DistanceNodeNode { a, b, l },
+    }
 }

@@ -25,22 +25,5 @@ pub enum RasterError {
     Invalid(String),
 }
 
-#[derive(Debug, thiserror::Error)]
-pub enum PointsError {
-    /// A line of an XYZ/CSV file that is not three finite numbers.
-    #[error("{name}:{line}: {message}")]
-    Line { name: String, line: usize, message: String },
-    /// An I/O failure while reading.
-    #[error("{name}: {message}")]
-    Io { name: String, message: String },
-    /// LAS/LAZ header or point decoding failure.
-    #[error("{name}: {message}")]
-    Las { name: String, message: String },
-    /// The file held no usable point.
-    #[error("{name}: {message}")]
-    Empty { name: String, message: String },
-    /// More points than the point budget ([`crate::limits::PointBudget`]), or a LAS/LAZ header
-    /// claiming more than the file holds (checked before the `las` crate allocates by it).
-    #[error("{name}: {message}")]
-    TooLarge { name: String, message: String },
-}
+/// Point reading errors are point-io's (one point reader for the workspace, issue 16).
+pub use point_io::PointsError;

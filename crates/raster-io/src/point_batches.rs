@@ -3,7 +3,7 @@
 //! lidar returns (docs/decisions.md#streaming-points).
 //!
 //! [`PointBatches::open`] reads LAS/LAZ by the `las` crate's chunks and XYZ/CSV text by lines,
-//! with the rules of the [`crate::points`] module docs; every batch is `Ok(points)` in file
+//! with point-io's terrain dialect (`point_io::terrain`); every batch is `Ok(points)` in file
 //! order, an unreadable point ends the stream with one `Err` naming it, and a file without a
 //! point (or without one of the wanted class) ends it with `PointsError::Empty`.
 //!
@@ -23,19 +23,21 @@
 //! std::fs::remove_file(&path).unwrap();
 //! ```
 
-use std::io::BufRead;
 use std::path::Path;
 
+use point_io::terrain::LasBatches;
+
 use crate::error::PointsError;
-use crate::points::{LasPoints, XyzLines};
+use crate::points::las_crs;
 use crate::PointFormat;
 
-/// Points a batch holds at most (the `las` crate's read size; 1.5 MiB of coordinates).
-pub const BATCH_POINTS: usize = 1 << 16;
+pub use point_io::terrain::XyzBatches;
+pub use point_io::BATCH_POINTS;
 
 /// The points of one file, batch by batch (see the module docs).
 pub enum PointBatches {
-    Las(Box<LasPoints>),
+    /// LAS/LAZ with its CRS as WKT (WKT VLR or GeoTIFF keys).
+    Las { points: Box<LasBatches>, crs: Option<String> },
     Xyz(XyzBatches<std::io::BufReader<std::fs::File>>),
 }
 
@@ -45,7 +47,11 @@ impl PointBatches {
     pub fn open(path: &Path, class: Option<u8>) -> Result<PointBatches, PointsError> {
         let name = path.display().to_string();
         match PointFormat::from_path(path) {
-            PointFormat::Las => LasPoints::open(path, class).map(|l| PointBatches::Las(Box::new(l))),
+            PointFormat::Las => {
+                let points = LasBatches::open(path, class)?;
+                let crs = las_crs(points.las());
+                Ok(PointBatches::Las { points: Box::new(points), crs })
+            }
             PointFormat::Xyz => {
                 if class.is_some() {
                     return Err(PointsError::Io { name, message: "a class filter needs a LAS/LAZ file; XYZ text has no classes".into() });
@@ -59,7 +65,7 @@ impl PointBatches {
     /// The CRS the file declares (LAS WKT or GeoTIFF keys), as WKT.
     pub fn crs(&self) -> Option<&str> {
         match self {
-            PointBatches::Las(l) => l.crs.as_deref(),
+            PointBatches::Las { crs, .. } => crs.as_deref(),
             PointBatches::Xyz(_) => None,
         }
     }
@@ -70,59 +76,9 @@ impl Iterator for PointBatches {
 
     fn next(&mut self) -> Option<Self::Item> {
         match self {
-            PointBatches::Las(l) => l.next(),
+            PointBatches::Las { points, .. } => points.next(),
             PointBatches::Xyz(x) => x.next(),
         }
-    }
-}
-
-/// XYZ/CSV text in batches of [`BATCH_POINTS`].
-pub struct XyzBatches<R> {
-    reader: R,
-    lines: XyzLines,
-    name: String,
-    yielded: usize,
-    done: bool,
-}
-
-impl<R: BufRead> XyzBatches<R> {
-    pub fn new(reader: R, name: &str) -> XyzBatches<R> {
-        XyzBatches { reader, lines: XyzLines::default(), name: name.to_string(), yielded: 0, done: false }
-    }
-
-    fn fill(&mut self) -> Result<Vec<[f64; 3]>, PointsError> {
-        let mut batch = Vec::with_capacity(BATCH_POINTS.min(1024));
-        while batch.len() < BATCH_POINTS {
-            match self.lines.next_point(&mut self.reader, &self.name)? {
-                Some(p) => batch.push(p),
-                None => break,
-            }
-        }
-        Ok(batch)
-    }
-}
-
-impl<R: BufRead> Iterator for XyzBatches<R> {
-    type Item = Result<Vec<[f64; 3]>, PointsError>;
-
-    fn next(&mut self) -> Option<Self::Item> {
-        if self.done {
-            return None;
-        }
-        let batch = self.fill();
-        match &batch {
-            Ok(b) if b.is_empty() => {
-                self.done = true;
-                if self.yielded > 0 {
-                    return None;
-                }
-                let message = "no points (empty file or only comments)".into();
-                return Some(Err(PointsError::Empty { name: self.name.clone(), message }));
-            }
-            Ok(b) => self.yielded += b.len(),
-            Err(_) => self.done = true,
-        }
-        Some(batch)
     }
 }
 

@@ -1,0 +1,99 @@
+//! Header column names: one table of every name either dialect recognises, with the role it
+//! has in each. The dialects disagree on purpose: in terrain soundings a `value` column is the
+//! elevation (z) and geographic names (`lon`, `lat`) are accepted; in LoopStructural samples
+//! `value` is the scalar field φ and rows may carry a normal (`nx ny nz`).
+
+/// What a column holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Role {
+    X,
+    Y,
+    Z,
+    /// The scalar field value φ (LoopStructural dialect only).
+    Value,
+    Nx,
+    Ny,
+    Nz,
+}
+
+/// Which reading of a point file.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Dialect {
+    /// Terrain soundings and lidar returns: x y z.
+    Terrain,
+    /// LoopStructural samples: x y z, an optional value φ, an optional normal.
+    LoopStructural,
+}
+
+use Role::*;
+
+/// Every recognised name (lower case): its role in the terrain dialect, then in the
+/// LoopStructural one (`None`: not a column name there).
+const COLUMN_NAMES: &[(&str, Option<Role>, Option<Role>)] = &[
+    ("x", Some(X), Some(X)),
+    ("easting", Some(X), Some(X)),
+    ("east", Some(X), Some(X)),
+    ("lon", Some(X), None),
+    ("long", Some(X), None),
+    ("longitude", Some(X), None),
+    ("e", Some(X), None),
+    ("y", Some(Y), Some(Y)),
+    ("northing", Some(Y), Some(Y)),
+    ("north", Some(Y), Some(Y)),
+    ("lat", Some(Y), None),
+    ("latitude", Some(Y), None),
+    ("n", Some(Y), None),
+    ("z", Some(Z), Some(Z)),
+    ("elevation", Some(Z), Some(Z)),
+    ("depth", Some(Z), Some(Z)),
+    ("height", Some(Z), Some(Z)),
+    ("elev", Some(Z), None),
+    ("h", Some(Z), None),
+    ("alt", Some(Z), None),
+    ("altitude", Some(Z), None),
+    ("value", Some(Z), Some(Value)),
+    ("val", Some(Z), Some(Value)),
+    ("v", None, Some(Value)),
+    ("phi", None, Some(Value)),
+    ("scalar", None, Some(Value)),
+    ("nx", None, Some(Nx)),
+    ("ny", None, Some(Ny)),
+    ("nz", None, Some(Nz)),
+];
+
+/// The role of a header field in `dialect` (surrounding blanks and double quotes ignored, any
+/// case).
+pub fn role_of(field: &str, dialect: Dialect) -> Option<Role> {
+    let name = field.trim().trim_matches('"').to_ascii_lowercase();
+    let (_, terrain, loop_structural) = COLUMN_NAMES.iter().find(|(n, ..)| *n == name)?;
+    match dialect {
+        Dialect::Terrain => *terrain,
+        Dialect::LoopStructural => *loop_structural,
+    }
+}
+
+/// The index of the first header field with `role` in `dialect`.
+pub fn find_column(fields: &[&str], role: Role, dialect: Dialect) -> Option<usize> {
+    fields.iter().position(|f| role_of(f, dialect) == Some(role))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn value_is_z_in_terrain_and_phi_in_loop_structural() {
+        assert_eq!(role_of(" \"Value\" ", Dialect::Terrain), Some(Z));
+        assert_eq!(role_of("value", Dialect::LoopStructural), Some(Value));
+        assert_eq!(role_of("lon", Dialect::LoopStructural), None);
+        assert_eq!(role_of("nx", Dialect::Terrain), None);
+    }
+
+    #[test]
+    fn first_matching_column_wins() {
+        let header = ["id", "Easting", "x", "NORTH", "depth"];
+        assert_eq!(find_column(&header, X, Dialect::Terrain), Some(1));
+        assert_eq!(find_column(&header, Y, Dialect::LoopStructural), Some(3));
+        assert_eq!(find_column(&header, Value, Dialect::LoopStructural), None);
+    }
+}

@@ -1,0 +1,193 @@
+//! The one LAS/LAZ reader: points in the `las` crate's batches, optionally of one ASPRS class,
+//! after the header's claims were checked against the input's size (`input_limits::las`: a LAZ
+//! chunk table of 4·10⁹ entries aborted inside `laz`, and `read_all` pre-allocated 10¹² points
+//! for a 300-byte file). Memory grows with the points decoded, never with a count a header
+//! claims. Errors are typed; each dialect words them ([`LasError`]'s text is the terrain one).
+
+use std::io::Cursor;
+use std::path::Path;
+
+use input_limits::las::LasClaim;
+
+use crate::BATCH_POINTS;
+
+/// Why a LAS/LAZ input cannot be read, or ends short.
+#[derive(Debug, thiserror::Error)]
+pub enum LasError {
+    /// The header claims more than the input holds, or the input could not be read to check.
+    #[error("{0}")]
+    Claim(LasClaim),
+    /// The `las` crate refused the header.
+    #[error("{0}")]
+    Open(las::Error),
+    /// The `las` crate could not decode points.
+    #[error("{0}")]
+    Read(las::Error),
+    /// A point (0-based, counting every point of the file) with a NaN or infinite coordinate.
+    #[error("point {index} has a non-finite coordinate")]
+    NonFinite { index: usize },
+    /// The file ended before the point count its header announces.
+    #[error("header announces {announced} points but the file holds {held}")]
+    Short { announced: u64, held: u64 },
+    /// The file holds no point.
+    #[error("no points")]
+    NoPoints,
+    /// The file holds points, but none of the wanted class; `present` lists `class (count)`.
+    #[error("no point of class {class}; classes present: {present}")]
+    NoPointOfClass { class: u8, present: String },
+}
+
+/// A LAS/LAZ input read batch by batch, keeping the points of `class` (all when `None`).
+/// Coordinates are the scaled and offset real-world values.
+pub struct LasPoints {
+    reader: las::Reader,
+    class: Option<u8>,
+    total: u64,
+    read: u64,
+    kept: u64,
+    classes_seen: [u64; 256],
+}
+
+impl LasPoints {
+    /// Opens a LAS/LAZ file; an unopenable file is named by the `las` crate's error.
+    pub fn open(path: &Path, class: Option<u8>) -> Result<LasPoints, LasError> {
+        check_file_claims(path)?;
+        let reader = las::Reader::from_path(path).map_err(LasError::Open)?;
+        Ok(LasPoints::new(reader, class))
+    }
+
+    /// Reads LAS/LAZ from bytes already in memory (stdin, a sniffed `LASF` signature).
+    pub fn from_bytes(bytes: Vec<u8>, class: Option<u8>) -> Result<LasPoints, LasError> {
+        let mut cursor = Cursor::new(bytes);
+        let len = cursor.get_ref().len() as u64;
+        input_limits::las::check(&mut cursor, len).map_err(LasError::Claim)?;
+        cursor.set_position(0);
+        let reader = las::Reader::new(cursor).map_err(LasError::Open)?;
+        Ok(LasPoints::new(reader, class))
+    }
+
+    fn new(reader: las::Reader, class: Option<u8>) -> LasPoints {
+        let total = reader.header().number_of_points();
+        LasPoints { reader, class, total, read: 0, kept: 0, classes_seen: [0; 256] }
+    }
+
+    /// The CRS from the WKT VLR (LAS 1.4), if the file has a non-empty one.
+    pub fn wkt_crs(&self) -> Option<String> {
+        let bytes = self.reader.header().get_wkt_crs_bytes()?;
+        Some(String::from_utf8_lossy(bytes).trim_end_matches('\0').trim().to_string()).filter(|s| !s.is_empty())
+    }
+
+    /// The EPSG code of the GeoTIFF key VLRs (LAS 1.0–1.3): the projected code, else the
+    /// geographic one; `None` for user-defined (32767) or absent codes.
+    pub fn geotiff_epsg(&self) -> Option<u16> {
+        let keys = self.reader.header().get_geotiff_crs().ok()??;
+        let code = keys.get_projected_crs_geo_key_value().or_else(|| keys.get_geodetic_crs_geo_key_value())?;
+        (code != 0 && code < 32767).then_some(code)
+    }
+
+    /// The next batch of kept points (at most [`BATCH_POINTS`] read); empty at the end.
+    pub fn next_batch(&mut self) -> Result<Vec<[f64; 3]>, LasError> {
+        let mut kept = Vec::new();
+        while kept.is_empty() && self.read < self.total {
+            let batch = self.reader.read_points(BATCH_POINTS as u64).map_err(LasError::Read)?;
+            if batch.is_empty() {
+                break;
+            }
+            let first = self.read as usize;
+            self.read += batch.len() as u64;
+            for (i, ((x, y), (z, c))) in batch.x().zip(batch.y()).zip(batch.z().zip(batch.classification())).enumerate() {
+                self.classes_seen[c as usize] += 1;
+                if self.class.is_some_and(|k| k != c) {
+                    continue;
+                }
+                if !(x.is_finite() && y.is_finite() && z.is_finite()) {
+                    return Err(LasError::NonFinite { index: first + i });
+                }
+                kept.push([x, y, z]);
+            }
+        }
+        self.kept += kept.len() as u64;
+        Ok(kept)
+    }
+
+    /// After the last batch: whether the file held what its header announced and at least one
+    /// kept point.
+    pub fn check_end(&self) -> Result<(), LasError> {
+        if self.read < self.total {
+            return Err(LasError::Short { announced: self.total, held: self.read });
+        }
+        if self.kept > 0 {
+            return Ok(());
+        }
+        let present: Vec<String> =
+            self.classes_seen.iter().enumerate().filter(|(_, n)| **n > 0).map(|(c, n)| format!("{c} ({n})")).collect();
+        Err(match self.class {
+            Some(class) => LasError::NoPointOfClass { class, present: present.join(", ") },
+            None => LasError::NoPoints,
+        })
+    }
+}
+
+/// Checks what the header of the file at `path` claims against its size before the `las` crate
+/// sizes allocations by it. Skipped where the file cannot be opened or is not a regular file
+/// (the `las` crate then names the error, or reads a stream).
+fn check_file_claims(path: &Path) -> Result<(), LasError> {
+    let Ok(mut f) = std::fs::File::open(path) else { return Ok(()) };
+    let Ok(meta) = f.metadata() else { return Ok(()) };
+    if !meta.is_file() {
+        return Ok(());
+    }
+    input_limits::las::check(&mut f, meta.len()).map_err(LasError::Claim)
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+    use las::point::Classification;
+
+    /// A LAS 1.2 file of the given (x, y, z, class) points, written by the `las` crate.
+    pub(crate) fn las_bytes(points: &[([f64; 3], u8)]) -> Vec<u8> {
+        let mut writer = las::Writer::new(Cursor::new(Vec::new()), las::Header::default()).unwrap();
+        for &([x, y, z], class) in points {
+            let classification = Classification::new(class).unwrap();
+            writer.write_point(las::Point { x, y, z, classification, ..Default::default() }).unwrap();
+        }
+        writer.into_inner().unwrap().into_inner()
+    }
+
+    fn all(las: &mut LasPoints) -> Result<Vec<[f64; 3]>, LasError> {
+        let mut out = Vec::new();
+        loop {
+            let batch = las.next_batch()?;
+            if batch.is_empty() {
+                return Ok(out);
+            }
+            out.extend(batch);
+        }
+    }
+
+    #[test]
+    fn the_class_filter_keeps_one_class() {
+        let bytes = las_bytes(&[([1.0, 2.0, 3.0], 2), ([4.0, 5.0, 6.0], 1), ([7.0, 8.0, 9.0], 2)]);
+        let mut las = LasPoints::from_bytes(bytes.clone(), Some(2)).unwrap();
+        assert_eq!(all(&mut las).unwrap(), [[1.0, 2.0, 3.0], [7.0, 8.0, 9.0]]);
+        assert!(las.check_end().is_ok());
+        let mut las = LasPoints::from_bytes(bytes, None).unwrap();
+        assert_eq!(all(&mut las).unwrap().len(), 3);
+        assert_eq!((las.wkt_crs(), las.geotiff_epsg()), (None, None));
+    }
+
+    #[test]
+    fn no_point_of_the_class_lists_the_classes_present() {
+        let mut las = LasPoints::from_bytes(las_bytes(&[([1.0, 2.0, 3.0], 2), ([4.0, 5.0, 6.0], 1)]), Some(17)).unwrap();
+        assert_eq!(all(&mut las).unwrap(), Vec::<[f64; 3]>::new());
+        assert_eq!(las.check_end().unwrap_err().to_string(), "no point of class 17; classes present: 1 (1), 2 (1)");
+    }
+
+    #[test]
+    fn a_truncated_file_is_refused_before_decoding() {
+        let bytes = las_bytes(&[([1.0, 2.0, 3.0], 2), ([4.0, 5.0, 6.0], 2)]);
+        let cut = bytes[..bytes.len() - 10].to_vec();
+        assert!(matches!(LasPoints::from_bytes(cut, None), Err(LasError::Claim(_))));
+    }
+}
