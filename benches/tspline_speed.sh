@@ -13,8 +13,12 @@
 #  memory - peak RSS per cell of a fit on a ~10^7-cell float32 raster (Kilauea resampled up);
 #  assembly - BEFORE=path/to/older/geofit against this one on the LiDAR DEM and Kilauea at two
 #           tolerances each: CPU time, control points, independent max error (the per-element
-#           normal-equation assembly, BENCHMARKS.md "Fit assembly per element").
-# usage: benches/tspline_speed.sh path/to/geofit [all|solve|eval|memory|assembly]  (markdown on stdout)
+#           normal-equation assembly, BENCHMARKS.md "Fit assembly per element");
+#  speedup - issue 19's "at least 3× faster than today": BEFORE=path/to/geofit-of-the-issue's-day
+#           against this one on the six fixture rows (LiDAR DEM, BAG, Kilauea at two tolerances
+#           each), RUNS (3) runs of each interleaved so both see the same load, median CPU s;
+#           control points of both and this binary's max error checked independently.
+# usage: benches/tspline_speed.sh path/to/geofit [all|solve|eval|memory|assembly|speedup]  (markdown on stdout)
 set -uo pipefail
 BIN="$(realpath "${1:?usage: tspline_speed.sh path/to/geofit [all|solve|eval|memory]}")"
 PART="${2:-all}"
@@ -119,8 +123,45 @@ assembly_section() {
   echo
 }
 
+median() { printf '%s\n' "$@" | sort -g | awk '{a[NR]=$1} END {print (NR % 2) ? a[(NR + 1) / 2] : (a[NR / 2] + a[NR / 2 + 1]) / 2}'; }
+
+# CPU s (user + sys) of one fit, nothing else
+fit_cpu() {
+  local bin="$1" input="$2" e="$3" ext="$4"
+  /usr/bin/time -f "%U %S" -o "$T/cpu.time" "$bin" -q fit "$input" -o "$T/cpu.$ext" --max-error "$e" --device cpu 2>/dev/null
+  read -r user sys < "$T/cpu.time"
+  awk -v u="$user" -v s="$sys" 'BEGIN { printf "%.2f", u + s }'
+}
+
+speedup_section() {
+  local before="${BEFORE:?speedup: set BEFORE=path/to/older/geofit}" runs="${RUNS:-3}"
+  echo "## Fit CPU time against the issue's day, interleaved (issue 19: at least 3x faster)"
+  echo
+  echo "Machine: $(nproc) cores shared with other jobs, load before: $(cut -d' ' -f1-3 /proc/loadavg); $(date -u +%Y-%m-%d); median of $runs interleaved runs each"
+  echo
+  echo '| raster | E | before CPU s | after CPU s | speed-up | control points before / after | max error after (independent) | check after |'
+  echo '|---|---|---|---|---|---|---|---|'
+  for spec in "giswqs-lidar_dem.tif 0.5" "giswqs-lidar_dem.tif 0.25" "ons-bag_JD211_public_Release_1-4_UTM.bag 0.25" "ons-bag_JD211_public_Release_1-4_UTM.bag 0.1" "gmt_Kilauea.utm.nc 20" "gmt_Kilauea.utm.nc 5"; do
+    set -- $spec
+    local f="$TER/$1" e="$2" bs=() as=() b a
+    for _ in $(seq "$runs"); do
+      bs+=("$(fit_cpu "$(realpath "$before")" "$f" "$e" tmesh)")
+      as+=("$(fit_cpu "$BIN" "$f" "$e" tmb)")
+    done
+    b=($(fit_row "$(realpath "$before")" "$f" "$e" before tmesh))
+    a=($(fit_row "$BIN" "$f" "$e" after tmb))
+    local mb ma
+    mb=$(median "${bs[@]}") ma=$(median "${as[@]}")
+    echo "| $1 | $e | $mb | $ma | $(awk -v b="$mb" -v a="$ma" 'BEGIN { printf "%.2f", b / a }')x | ${b[2]} / ${a[2]} | ${a[3]} | ${a[4]} |"
+  done
+  echo
+  echo "Load after: $(cut -d' ' -f1-3 /proc/loadavg)"
+  echo
+}
+
 case "$PART" in
   solve) solve_section ;;
+  speedup) speedup_section ;;
   eval) eval_section ;;
   memory) memory_section ;;
   assembly) assembly_section ;;
