@@ -5,7 +5,7 @@
 use raster_io::Raster;
 use raster_proc::warp::WarpField;
 use tspline::fit::{Domain, Samples, Scattered};
-use tspline::format::{DataMask, Georef};
+use tspline::format::Georef;
 use tspline::tolerance::CellTolerance;
 use tspline_raster::indirect::{self, WarpChoice};
 use tspline_raster::screening::{self, RasterTolerance, ScreenError, Screening};
@@ -34,7 +34,6 @@ pub(super) struct Prepared {
     pub name: String,
     pub samples: Samples,
     pub georef: Georef,
-    pub mask: DataMask,
     /// `--indirect`: the warp field and the original cells as scattered points.
     pub field: Option<WarpField>,
     pub points: Option<Scattered>,
@@ -243,7 +242,7 @@ pub(super) fn prepare(args: &Args, config: &Config) -> Result<Prepared, CliError
         _ => None,
     };
     drop(uncertainty);
-    let (mut samples, georef, mask) = (layout.samples, layout.georef, layout.mask);
+    let (mut samples, georef) = (layout.samples, layout.georef);
     let points = match (&original, &field) {
         (Some(o), Some(f)) => Some(indirect::scatter_forward(o, f, &georef, &mut samples)),
         _ => None,
@@ -260,5 +259,5 @@ pub(super) fn prepare(args: &Args, config: &Config) -> Result<Prepared, CliError
             "warning: {name} holds integer values (precision 1); a tolerance of {e_min} is below the data's own precision and forces interpolation of every cell"
         ));
     }
-    Ok(Prepared { name, samples, georef, mask, field, points, cell_tolerance, e_min, e_text, valid, domain, outliers })
+    Ok(Prepared { name, samples, georef, field, points, cell_tolerance, e_min, e_text, valid, domain, outliers })
 }
