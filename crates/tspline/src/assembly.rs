@@ -190,7 +190,7 @@ pub(crate) fn per_cell(
         .map(|c| -> Result<Sums, TsplineError> {
             let (j0, j1) = (c * chunk, ((c + 1) * chunk).min(units));
             let mut rows = CellRows::new(sys);
-            let raster = |rows: &mut CellRows, q: usize| rows.add_point((q % w) as f64, (q / w) as f64, samples.z[q]);
+            let raster = |rows: &mut CellRows, q: usize| rows.add_point((q % w) as f64, (q / w) as f64, samples.z.get(q));
             match (pts, region, asm) {
                 (Some(p), _, _) => (j0..j1).for_each(|q| rows.add_point(p.st[q][0], p.st[q][1], p.z[q])),
                 (None, Some(r), _) => r.for_rows(j0, j1, |q| raster(&mut rows, q)),
@@ -221,7 +221,7 @@ fn device_rows(
         let t = o.model_rows(sp, &g)?;
         for r in 0..t.len() {
             let (ix, v) = t.row(r);
-            rows.add_given(ix, v, samples.z[jb * w + r]);
+            rows.add_given(ix, v, samples.z.get(jb * w + r));
         }
         jb += nr;
     }
@@ -334,8 +334,8 @@ fn uncovered_cells(sys: System<'_>, samples: &Samples, region: Option<&Region>, 
             if q >= samples.z.len() {
                 break;
             }
-            if word & (1u64 << b) == 0 && region.is_none_or(|r| r.contains(q)) && !samples.z[q].is_nan() {
-                rows.get_or_insert_with(|| CellRows::new(sys)).add_point((q % w) as f64, (q / w) as f64, samples.z[q]);
+            if word & (1u64 << b) == 0 && region.is_none_or(|r| r.contains(q)) && !samples.z.get(q).is_nan() {
+                rows.get_or_insert_with(|| CellRows::new(sys)).add_point((q % w) as f64, (q / w) as f64, samples.z.get(q));
             }
         }
     }
@@ -506,7 +506,7 @@ impl<'a> Elements<'a> {
             for x in 0..nc {
                 let i = i0 + x;
                 let q = j * w + i;
-                let d = self.samples.z[q];
+                let d = self.samples.z.get(q);
                 if d.is_nan() || self.region.is_some_and(|r| !r.contains(q)) {
                     continue;
                 }
@@ -626,13 +626,13 @@ mod tests {
     /// A wavy raster over `w`×`h` cells with a few no-data holes.
     fn raster(w: usize, h: usize) -> Samples {
         let mut seed = 5u64;
-        let z = (0..w * h)
+        let z: Vec<f64> = (0..w * h)
             .map(|q| {
                 let (i, j) = ((q % w) as f64, (q / w) as f64);
                 if lcg(&mut seed) < 0.05 { f64::NAN } else { (i * 0.21).sin() * 3.0 + j * 0.07 + (i * j * 0.003).cos() }
             })
             .collect();
-        Samples { width: w, height: h, z }
+        Samples { width: w, height: h, z: z.into() }
     }
 
     /// The upper-triangle pattern of every pair of overlapping supports.
@@ -668,7 +668,7 @@ mod tests {
         let n = pb.knots.len();
         let (mut ata, mut atd) = (vec![0.0; n * n], vec![0.0; n]);
         let mut scratch = Vec::new();
-        for (q, &d) in s.z.iter().enumerate() {
+        for (q, d) in s.z.iter().enumerate() {
             if d.is_nan() {
                 continue;
             }
@@ -748,7 +748,7 @@ mod tests {
                 let q = (lcg(&mut seed) * (w * h) as f64) as usize;
                 let mut z = vec![f64::NAN; w * h];
                 z[q] = 1.0 + lcg(&mut seed);
-                let s = Samples { width: w, height: h, z };
+                let s = Samples { width: w, height: h, z: z.into() };
                 let old = per_cell(sys, &s, None, None, None).unwrap();
                 let new = by_elements(sys, &s, None);
                 assert!(old.vals == new.vals && old.rhs == new.rhs && old.support == new.support, "{degree:?} cell {q}");

@@ -296,7 +296,7 @@ mod tests {
                 z.push(v);
             }
         }
-        Samples { width: w, height: h, z }
+        Samples { width: w, height: h, z: z.into() }
     }
 
     #[test]

@@ -231,17 +231,16 @@ pub(super) fn prepare(args: &Args, config: &Config) -> Result<Prepared, CliError
     let e_min = tol.min_over(&raster);
     let e_text = tol.describe();
     let (raster, field, original) = warp(raster, &name, args, config)?;
-    let layout = raster_layout(&raster, &name)?;
-    drop(raster); // the samples hold the data from here on (halves the peak for big rasters)
-    let cell_tolerance = match (&uncertainty, args.max_error_from_uncertainty) {
+    // the samples take the raster's values (rows flipped in place, f32 when they are f32)
+    let layout = raster_layout(raster, &name)?;
+    let cell_tolerance = match (uncertainty, args.max_error_from_uncertainty) {
         (Some(u), Some(k)) => {
             let us = raster_layout(u, &name)?.samples;
-            let u32s: Vec<f32> = us.z.iter().map(|&v| v as f32).collect();
+            let u32s: Vec<f32> = us.z.iter().map(|v| v as f32).collect();
             Some(CellTolerance { k, floor: args.max_error.unwrap_or(0.0), uncertainty: std::sync::Arc::new(u32s) })
         }
         _ => None,
     };
-    drop(uncertainty);
     let (mut samples, georef) = (layout.samples, layout.georef);
     let points = match (&original, &field) {
         (Some(o), Some(f)) => Some(indirect::scatter_forward(o, f, &georef, &mut samples)),
