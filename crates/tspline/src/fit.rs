@@ -897,30 +897,83 @@ const PASS_BLOCK_EVAL: usize = 1 << 22;
 /// kernel per block): the dense evaluators amortise their per-call set-up (e.g. an element
 /// extraction) over a block, and only one block of heights is held at a time.
 pub fn eval_errors(pb: &PbSpline, samples: &Samples, backend: &Backend, errs: &mut [f64]) -> Result<(), TsplineError> {
+    let pass = ErrorPass::new(pb, samples, backend)?;
+    for (b, out) in errs.chunks_mut(pass.block_cells()).enumerate() {
+        pass.block(b * pass.rows, out)?;
+    }
+    Ok(())
+}
+
+/// The count of valid cells over the tolerance and the leaves holding them ([`summarize`]'s
+/// `over_tolerance` and leaf list), by the error pass of [`eval_errors`] into one block-sized
+/// buffer instead of a per-cell array: the same errors, so the same verdict. Coarsening's global
+/// tries ask this first, so a failed try leaves the kept errors as they are and needs no copy
+/// of them to undo (docs/decisions.md#float32-samples).
+pub(crate) fn over_tolerance(mesh: &TMesh, pb: &PbSpline, samples: &Samples, backend: &Backend, tol: &Tolerance) -> Result<(usize, Vec<CellId>), TsplineError> {
+    let pass = ErrorPass::new(pb, samples, backend)?;
     let w = samples.width;
-    let sub = (PASS_BLOCK / w.max(1)).max(1);
-    let br = ((PASS_BLOCK_EVAL.max(16 * pb.cells.len()) / w.max(1)).max(1) / sub).max(1) * sub;
-    let sp = match backend {
-        Backend::OpenCl(o) => Some(o.upload(pb)?),
-        Backend::Cpu => None,
-    };
-    // CPU: one extraction for all blocks (as the OpenCL upload above), not one per block; each
-    // block still takes the path PbSpline::eval_grid would (same numbers).
-    let ex = (sp.is_none() && pb.use_extraction(br * w)).then(|| crate::extraction::Extraction::new(pb, true));
-    for (b, out) in errs.chunks_mut(br * w).enumerate() {
-        let j0 = b * br;
+    let n = samples.z.len();
+    let mut buf = vec![0.0; pass.block_cells().min(n)];
+    let (mut count, mut over) = (0, Vec::new());
+    for q0 in (0..n).step_by(pass.block_cells()) {
+        let out = &mut buf[..pass.block_cells().min(n - q0)];
+        pass.block(q0 / w, out)?;
+        let (acc, o) = over_in(mesh, pb, &|q| ((q % w) as f64, (q / w) as f64), out, q0, tol);
+        count += acc.over;
+        over.extend(o);
+    }
+    over.sort_unstable();
+    over.dedup();
+    Ok((count, over))
+}
+
+/// The error pass over a raster in big row blocks: the dense evaluators amortise their per-call
+/// set-up (an element extraction, an OpenCL upload) over all blocks.
+struct ErrorPass<'a> {
+    pb: &'a PbSpline,
+    samples: &'a Samples,
+    backend: &'a Backend<'a>,
+    sp: Option<crate::ocl_eval::OclSpline>,
+    ex: Option<crate::extraction::Extraction>,
+    /// Rows per parallel chunk of the |Δz| loop and per evaluation block.
+    sub: usize,
+    rows: usize,
+}
+
+impl<'a> ErrorPass<'a> {
+    fn new(pb: &'a PbSpline, samples: &'a Samples, backend: &'a Backend<'a>) -> Result<ErrorPass<'a>, TsplineError> {
+        let w = samples.width;
+        let sub = (PASS_BLOCK / w.max(1)).max(1);
+        let rows = ((PASS_BLOCK_EVAL.max(16 * pb.cells.len()) / w.max(1)).max(1) / sub).max(1) * sub;
+        let sp = match backend {
+            Backend::OpenCl(o) => Some(o.upload(pb)?),
+            Backend::Cpu => None,
+        };
+        // CPU: one extraction for all blocks (as the OpenCL upload above), not one per block; each
+        // block still takes the path PbSpline::eval_grid would (same numbers).
+        let ex = (sp.is_none() && pb.use_extraction(rows * w)).then(|| crate::extraction::Extraction::new(pb, true));
+        Ok(ErrorPass { pb, samples, backend, sp, ex, sub, rows })
+    }
+
+    fn block_cells(&self) -> usize {
+        self.rows * self.samples.width
+    }
+
+    /// |Δz| of the rows from `j0` on into `out` (whole rows).
+    fn block(&self, j0: usize, out: &mut [f64]) -> Result<(), TsplineError> {
+        let (pb, w) = (self.pb, self.samples.width);
         let g = GridSpec { s0: 0.0, t0: j0 as f64, ds: 1.0, dt: 1.0, ns: w, nt: out.len() / w };
-        let z = match (backend, &sp, &ex) {
+        let z = match (self.backend, &self.sp, &self.ex) {
             (Backend::OpenCl(o), Some(sp), _) => o.eval_grid(sp, &g)?,
             (_, _, Some(ex)) if pb.use_extraction(out.len()) => ex.eval_grid(pb, &g, true),
             _ => pb.eval_grid(&g, true),
         };
-        match samples.z.slice(j0 * w, j0 * w + out.len()) {
-            HeightsSlice::F64(d) => errors_into(out, &z, d, sub * w),
-            HeightsSlice::F32(d) => errors_into(out, &z, d, sub * w),
+        match self.samples.z.slice(j0 * w, j0 * w + out.len()) {
+            HeightsSlice::F64(d) => errors_into(out, &z, d, self.sub * w),
+            HeightsSlice::F32(d) => errors_into(out, &z, d, self.sub * w),
         }
+        Ok(())
     }
-    Ok(())
 }
 
 /// |Δz| of the surface heights `z` against the data `d` into `out` (NaN where `d` has no data,
@@ -963,6 +1016,26 @@ pub fn summarize(mesh: &TMesh, pb: &PbSpline, w: usize, errs: &[f64], tol: &Tole
 
 /// [`summarize`] with the parameter position of error `q` given by `pos`.
 pub(crate) fn summarize_at(mesh: &TMesh, pb: &PbSpline, pos: &(dyn Fn(usize) -> (f64, f64) + Sync), errs: &[f64], tol: &Tolerance) -> (ErrorStats, Vec<CellId>) {
+    let (acc, over) = over_in(mesh, pb, pos, errs, 0, tol);
+    let n = acc.n;
+    if n == 0 {
+        return (ErrorStats::default(), over);
+    }
+    let mean = acc.sum / n as f64;
+    let sigma = (acc.sumsq / n as f64 - mean * mean).max(0.0).sqrt();
+    let mid = n / 2;
+    let mut median = nth_smallest_f32(errs, mid) as f64;
+    if n % 2 == 0 {
+        let lo = nth_smallest_f32(errs, mid - 1) as f64;
+        median = 0.5 * (median + lo);
+    }
+    (ErrorStats { count: n, mean, sigma, median, max: acc.max, rms: (acc.sumsq / n as f64).sqrt(), over_tolerance: acc.over }, over)
+}
+
+/// The statistics of `errs` (errors `offset..` of the raster or point list) and the leaf cells
+/// whose closed box holds one over the tolerance (sorted, each once): the scan of [`summarize_at`]
+/// without the median, summed over fixed blocks in order.
+fn over_in(mesh: &TMesh, pb: &PbSpline, pos: &(dyn Fn(usize) -> (f64, f64) + Sync), errs: &[f64], offset: usize, tol: &Tolerance) -> (ErrAcc, Vec<CellId>) {
     // Leaves whose closed box holds (s, t): through the PB-spline's bucket grid when its cell
     // list is the mesh's leaves in id order (checked per hit), else through the R-tree.
     let leaf_ids: Vec<CellId> = mesh.leaves().collect();
@@ -1007,7 +1080,7 @@ pub(crate) fn summarize_at(mesh: &TMesh, pb: &PbSpline, pos: &(dyn Fn(usize) -> 
         .par_chunks(PASS_BLOCK)
         .enumerate()
         .map(|(b, ch)| {
-            let q0 = b * PASS_BLOCK;
+            let q0 = offset + b * PASS_BLOCK;
             let mut acc = ErrAcc::default();
             let mut over = Vec::new();
             let mut interior: Option<crate::mesh::Rect> = None;
@@ -1064,19 +1137,7 @@ pub(crate) fn summarize_at(mesh: &TMesh, pb: &PbSpline, pos: &(dyn Fn(usize) -> 
     }
     over.sort_unstable();
     over.dedup();
-    let n = acc.n;
-    if n == 0 {
-        return (ErrorStats::default(), over);
-    }
-    let mean = acc.sum / n as f64;
-    let sigma = (acc.sumsq / n as f64 - mean * mean).max(0.0).sqrt();
-    let mid = n / 2;
-    let mut median = nth_smallest_f32(errs, mid) as f64;
-    if n % 2 == 0 {
-        let lo = nth_smallest_f32(errs, mid - 1) as f64;
-        median = 0.5 * (median + lo);
-    }
-    (ErrorStats { count: n, mean, sigma, median, max: acc.max, rms: (acc.sumsq / n as f64).sqrt(), over_tolerance: acc.over }, over)
+    (acc, over)
 }
 
 /// The `k`-th smallest (0-based, in `f32::total_cmp` order) of the non-NaN `errs` rounded to
