@@ -127,7 +127,7 @@ pub(crate) fn coarsen(
         if cand.is_empty() {
             break;
         }
-        let surface = best_pb.clone();
+        let surface = &best_pb;
         let mut geom = |s: f64, t: f64| {
             let z = surface.point(s, t)[2];
             (s, t, if z.is_nan() { 0.0 } else { z })

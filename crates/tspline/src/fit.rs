@@ -1024,11 +1024,12 @@ pub(crate) fn summarize_at(mesh: &TMesh, pb: &PbSpline, pos: &(dyn Fn(usize) -> 
     let mean = acc.sum / n as f64;
     let sigma = (acc.sumsq / n as f64 - mean * mean).max(0.0).sqrt();
     let mid = n / 2;
-    let mut median = nth_smallest_f32(errs, mid) as f64;
-    if n % 2 == 0 {
-        let lo = nth_smallest_f32(errs, mid - 1) as f64;
-        median = 0.5 * (median + lo);
-    }
+    let median = if n % 2 == 0 {
+        let [m, lo] = nth_smallest_f32(errs, [mid, mid - 1]);
+        0.5 * (m as f64 + lo as f64)
+    } else {
+        nth_smallest_f32(errs, [mid])[0] as f64
+    };
     (ErrorStats { count: n, mean, sigma, median, max: acc.max, rms: (acc.sumsq / n as f64).sqrt(), over_tolerance: acc.over }, over)
 }
 
@@ -1141,11 +1142,12 @@ fn over_in(mesh: &TMesh, pb: &PbSpline, pos: &(dyn Fn(usize) -> (f64, f64) + Syn
 }
 
 /// The `k`-th smallest (0-based, in `f32::total_cmp` order) of the non-NaN `errs` rounded to
-/// f32, without a copy of them: a radix selection in two counting passes over 16 bits of the
-/// f32's order key each (a sort key whose unsigned order is `total_cmp`'s). Equal to sorting an
-/// f32 copy and taking element `k`, in 2 · 2¹⁶ counters instead of 4 bytes per cell
-/// (docs/decisions.md#float32-samples). `k` must be below the number of non-NaN errors.
-pub(crate) fn nth_smallest_f32(errs: &[f64], k: usize) -> f32 {
+/// f32, for each `k` of `ranks`, without a copy of them: a radix selection in two counting
+/// passes over 16 bits of the f32's order key each (a key whose unsigned order is
+/// `total_cmp`'s), both ranks in the same passes. Equal to sorting an f32 copy and taking its
+/// elements `ranks`, in a few 2¹⁶-counter histograms instead of 4 bytes per cell
+/// (docs/decisions.md#float32-samples). Every rank must be below the number of non-NaN errors.
+pub(crate) fn nth_smallest_f32<const N: usize>(errs: &[f64], ranks: [usize; N]) -> [f32; N] {
     fn key(e: f64) -> u32 {
         let b = (e as f32).to_bits();
         if b >> 31 == 1 { !b } else { b | 0x8000_0000 }
@@ -1153,23 +1155,30 @@ pub(crate) fn nth_smallest_f32(errs: &[f64], k: usize) -> f32 {
     fn from_key(k: u32) -> f32 {
         f32::from_bits(if k >> 31 == 1 { k & 0x7fff_ffff } else { !k })
     }
-    let counts = |digit: &(dyn Fn(u32) -> Option<usize> + Sync)| -> Vec<u64> {
+    const DIGITS: usize = 1 << 16;
+    // `N` histograms; `count(key, histograms)` adds one error's key where it belongs
+    fn counts<F: Fn(u32, &mut [Vec<u64>]) + Sync>(errs: &[f64], n: usize, count: F) -> Vec<Vec<u64>> {
         errs.par_chunks(PASS_BLOCK)
-            .map(|ch| {
-                let mut c = vec![0u64; 1 << 16];
-                for &e in ch.iter().filter(|e| !e.is_nan()) {
-                    if let Some(d) = digit(key(e)) {
-                        c[d] += 1;
+            .fold(
+                || vec![vec![0u64; DIGITS]; n],
+                |mut c, ch| {
+                    for &e in ch.iter().filter(|e| !e.is_nan()) {
+                        count(key(e), &mut c);
                     }
-                }
-                c
-            })
-            .reduce(|| vec![0u64; 1 << 16], |mut a, b| {
-                a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
-                a
-            })
-    };
-    // the bucket holding rank `k`, and the rank within it
+                    c
+                },
+            )
+            .reduce(
+                || vec![vec![0u64; DIGITS]; n],
+                |mut a, b| {
+                    for (x, y) in a.iter_mut().zip(b) {
+                        x.iter_mut().zip(y).for_each(|(p, q)| *p += q);
+                    }
+                    a
+                },
+            )
+    }
+    // the digit holding rank `k`, and the rank within it
     let pick = |c: &[u64], mut k: u64| -> (u32, u64) {
         for (d, &n) in c.iter().enumerate() {
             if k < n {
@@ -1177,11 +1186,22 @@ pub(crate) fn nth_smallest_f32(errs: &[f64], k: usize) -> f32 {
             }
             k -= n;
         }
-        (u16::MAX as u32, 0) // k beyond the count: the caller's contract says it is not
+        (DIGITS as u32 - 1, 0) // beyond the count: the caller's contract says it is not
     };
-    let (hi, rest) = pick(&counts(&|key| Some((key >> 16) as usize)), k as u64);
-    let (lo, _) = pick(&counts(&|key| (key >> 16 == hi).then_some((key & 0xffff) as usize)), rest);
-    from_key(hi << 16 | lo)
+    let high = counts(errs, 1, |key, c| c[0][(key >> 16) as usize] += 1);
+    let his: [(u32, u64); N] = std::array::from_fn(|r| pick(&high[0], ranks[r] as u64));
+    let low = counts(errs, N, |key, c| {
+        for (r, &(hi, _)) in his.iter().enumerate() {
+            if key >> 16 == hi {
+                c[r][(key & 0xffff) as usize] += 1;
+            }
+        }
+    });
+    std::array::from_fn(|r| {
+        let (hi, rest) = his[r];
+        let (lo, _) = pick(&low[r], rest);
+        from_key(hi << 16 | lo)
+    })
 }
 
 /// Share of the PB points whose basis changed (new, or other knots) up to which an iteration
@@ -1635,7 +1655,9 @@ mod tests {
         let mut sorted: Vec<f32> = errs.iter().filter(|e| !e.is_nan()).map(|&e| e as f32).collect();
         sorted.sort_by(|a, b| a.total_cmp(b));
         for k in [0, 1, 2, 7, 1000, sorted.len() / 2 - 1, sorted.len() / 2, sorted.len() - 2, sorted.len() - 1] {
-            assert_eq!(nth_smallest_f32(&errs, k).to_bits(), sorted[k].to_bits(), "k = {k}");
+            assert_eq!(nth_smallest_f32(&errs, [k])[0].to_bits(), sorted[k].to_bits(), "k = {k}");
+            let [a, b] = nth_smallest_f32(&errs, [k, sorted.len() - 1 - k]);
+            assert_eq!((a.to_bits(), b.to_bits()), (sorted[k].to_bits(), sorted[sorted.len() - 1 - k].to_bits()), "k = {k}");
         }
     }
 
