@@ -10,7 +10,8 @@
 #  eval   - grid evaluation throughput: a regular cubic mesh of N×N cells of size 8 evaluated
 #           on its integer grid by `geofit eval` (CPU) vs scipy's `bisplev` on a tensor spline
 #           with as many coefficients, both in points per CPU-second;
-#  memory - peak RSS per cell of a fit on a ~10^7-cell float32 raster (Kilauea resampled up);
+#  memory - peak RSS per cell of a fit on a ~10^7-cell float32 raster (Kilauea resampled up;
+#           MEMORY_SIZES="3200x3125 10396x9619" adds 10^8 cells);
 #  assembly - BEFORE=path/to/older/geofit against this one on the LiDAR DEM and Kilauea at two
 #           tolerances each: CPU time, control points, independent max error (the per-element
 #           normal-equation assembly, BENCHMARKS.md "Fit assembly per element");
@@ -92,14 +93,21 @@ eval_section() {
 }
 
 memory_section() {
-  echo "## Peak memory per cell at ~10^7 cells (Kilauea resampled up to float32 3200x3125, E = 2 m, degree 1)"
+  # MEMORY_SIZES: "WxH ..." (default the 10^7-cell grid; add 10396x9619 for 10^8 cells, ~3 GiB
+  # of RSS before issue 19's float32 samples, a few minutes on 2 cores)
+  local sizes="${MEMORY_SIZES:-3200x3125}"
+  echo "## Peak memory per cell (Kilauea resampled up to float32, E = 2 m, degree 1)"
   echo
-  gdalwarp -q -overwrite -ts 3200 3125 -r bilinear -ot Float32 "$TER/gmt_Kilauea.utm.nc" "$T/k.tif" 2>/dev/null
-  /usr/bin/time -f "%e %U %S %M" -o "$T/m.time" "$BIN" fit "$T/k.tif" -o "$T/k.tmb" --max-error 2 --degree 1 --device cpu 2>/dev/null
-  read -r wall user sys kib < "$T/m.time"
   echo "| cells | wall s | CPU s | peak RSS MiB | bytes/cell |"
   echo "|---|---|---|---|---|"
-  echo "| 10000000 | $wall | $(echo "$user + $sys" | bc) | $((kib / 1024)) | $(echo "$kib * 1024 / 10000000" | bc -l | cut -c1-5) |"
+  for size in $sizes; do
+    local w="${size%x*}" h="${size#*x}"
+    gdalwarp -q -overwrite -ts "$w" "$h" -r bilinear -ot Float32 "$TER/gmt_Kilauea.utm.nc" "$T/k.tif" 2>/dev/null
+    /usr/bin/time -f "%e %U %S %M" -o "$T/m.time" "$BIN" fit "$T/k.tif" -o "$T/k.tmb" --max-error 2 --degree 1 --device cpu 2>/dev/null
+    read -r wall user sys kib < "$T/m.time"
+    echo "| $((w * h)) | $wall | $(echo "$user + $sys" | bc) | $((kib / 1024)) | $(echo "$kib * 1024 / ($w * $h)" | bc -l | cut -c1-5) |"
+    rm -f "$T/k.tif" "$T/k.tmb"
+  done
   echo
 }
 

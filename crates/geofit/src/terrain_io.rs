@@ -214,6 +214,6 @@ pub fn read_tmesh_arg(arg: &str) -> Result<TMeshFile, CliError> {
 }
 
 /// `r` in the fit's parameter layout (`tspline_raster::layout`), errors naming the input.
-pub fn raster_layout(r: &Raster, name: &str) -> Result<tspline_raster::layout::Layout, CliError> {
+pub fn raster_layout(r: Raster, name: &str) -> Result<tspline_raster::layout::Layout, CliError> {
     tspline_raster::layout::samples_from_raster(r).map_err(|e| CliError::findings(format!("{name}: {e}")))
 }

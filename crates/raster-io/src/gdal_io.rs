@@ -374,7 +374,6 @@ pub fn read_raster_window_typed(path: &Path, band: usize, window: Option<[usize;
     let is_f32 = band_type == GdalDataType::Float32;
     let scale = rb.scale().unwrap_or(1.0);
     let offset = rb.offset().unwrap_or(0.0);
-    let mut valid = vec![false; data.len()];
     for (i, v) in data.iter_mut().enumerate() {
         let is_nodata = match nodata {
             Some(nd) if nd.is_nan() => v.is_nan(),
@@ -387,8 +386,7 @@ pub fn read_raster_window_typed(path: &Path, band: usize, window: Option<[usize;
             *v = f64::NAN;
         } else {
             *v = *v * scale + offset;
-            valid[i] = v.is_finite();
-            if !valid[i] {
+            if !v.is_finite() {
                 *v = f64::NAN;
             }
         }
@@ -399,7 +397,7 @@ pub fn read_raster_window_typed(path: &Path, band: usize, window: Option<[usize;
             metadata.insert(item.key, item.value);
         }
     }
-    Ok((Raster { width, height, geotransform, crs, data, valid, nodata, metadata }, SampleType::holding(band_type)))
+    Ok((Raster { width, height, geotransform, crs, data, nodata, metadata }, SampleType::holding(band_type)))
 }
 
 /// The uncertainty layer that goes with the elevation in band 1 (issue 19): the band whose
@@ -429,7 +427,7 @@ pub fn choose_nodata(r: &Raster) -> f64 {
 /// [`choose_nodata`] for values stored as `t`: a marker is taken only when no valid value
 /// equals it at that precision (a Float32 -9999.0001 is -9999).
 pub fn choose_nodata_for(r: &Raster, t: SampleType) -> f64 {
-    let used = |c: f64| r.data.iter().zip(&r.valid).any(|(d, v)| *v && t.round(*d) == t.round(c));
+    let used = |c: f64| r.data.iter().any(|d| !d.is_nan() && t.round(*d) == t.round(c));
     let mut candidates: Vec<f64> = Vec::new();
     if let Some(nd) = r.nodata.filter(|v| v.is_finite() && t.round(*v).is_finite()) {
         candidates.push(nd);
@@ -460,7 +458,7 @@ fn to_mem_dataset_as<T: gdal::raster::GdalType + Copy>(r: &Raster, nodata: f64, 
     {
         let mut band = ds.rasterband(1).map_err(|e| gdal_msg(&e))?;
         band.set_no_data_value(Some(nodata)).map_err(|e| gdal_msg(&e))?;
-        let data: Vec<T> = r.data.iter().zip(&r.valid).map(|(d, v)| cast(if *v { *d } else { nodata })).collect();
+        let data: Vec<T> = r.data.iter().map(|d| cast(if d.is_nan() { nodata } else { *d })).collect();
         let mut buf = gdal::raster::Buffer::new((r.width, r.height), data);
         band.write((0, 0), (r.width, r.height), &mut buf).map_err(|e| gdal_msg(&e))?;
     }
@@ -671,7 +669,7 @@ mod tests {
         let back = read_raster(&p).unwrap();
         assert_eq!(back.width, 4);
         assert_eq!(back.geotransform, r.geotransform);
-        assert_eq!(back.valid, r.valid);
+        assert_eq!(back.valid_mask(), r.valid_mask());
         for (a, b) in back.data.iter().zip(&r.data) {
             assert!(a == b || (a.is_nan() && b.is_nan()));
         }
@@ -689,7 +687,7 @@ mod tests {
         let r = sample();
         write_raster(&r, &p, &WriteOptions::default()).unwrap();
         let back = read_raster(&p).unwrap();
-        assert_eq!(back.valid, r.valid);
+        assert_eq!(back.valid_mask(), r.valid_mask());
         for (a, b) in back.data.iter().zip(&r.data).filter(|(a, _)| a.is_finite()) {
             assert_eq!(a, b);
         }

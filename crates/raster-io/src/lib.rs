@@ -1,5 +1,5 @@
 //! raster-io: the terrain pipeline's file formats. Rasters through GDAL (GeoTIFF, netCDF,
-//! ESRI ASCII grid, anything GDAL opens) into one [`Raster`] type (f64 values, validity mask,
+//! ESRI ASCII grid, anything GDAL opens) into one [`Raster`] type (f64 values, NaN = no data,
 //! geotransform, CRS WKT), and scattered points from XYZ/CSV text and LAS/LAZ into
 //! [`PointCloud`]. Reading and writing only; processing (splatting, TIN, warping) lives in
 //! `raster-proc`.
@@ -18,7 +18,7 @@
 //! let mut out = Raster::new_empty(r.width, r.height, r.geotransform, r.crs.clone());
 //! for row in 0..r.height {
 //!     for col in 0..r.width {
-//!         if r.valid[r.index(col, row)] {
+//!         if r.is_valid(r.index(col, row)) {
 //!             out.set(col, row, -10.0);
 //!         }
 //!     }

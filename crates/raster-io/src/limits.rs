@@ -10,9 +10,9 @@
 /// The budget when available memory cannot be read: 2³³ cells (64 GiB of f64).
 pub const FALLBACK_MAX_CELLS: u64 = input_limits::budget::FALLBACK_MAX_UNITS;
 
-/// What one cell of a raster read through GDAL costs: the f64 value, the validity flag and
-/// GDAL's mask byte.
-pub const READ_BYTES_PER_CELL: u64 = 10;
+/// What one cell of a raster read through GDAL costs: the f64 value (NaN = no data, no flag
+/// beside it: docs/decisions.md#nan-is-no-data) and GDAL's mask byte.
+pub const READ_BYTES_PER_CELL: u64 = 9;
 
 /// The environment variable that sets the cell budget explicitly.
 pub const MAX_CELLS_ENV: &str = "GEOFIT_MAX_CELLS";

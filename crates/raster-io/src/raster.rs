@@ -1,5 +1,5 @@
 //! The in-memory raster every terrain stage shares: a north-up (or general affine) grid of f64
-//! values with a validity mask, its GDAL geotransform and CRS.
+//! values (NaN = no value), its GDAL geotransform and CRS.
 //!
 //! Conventions (fixed here once, spec §2.1 and A21):
 //! - `data` is row-major, row 0 is the FIRST row GDAL stores (the northern one for the usual
@@ -10,8 +10,9 @@
 //!   "cell (i, j) at (x0 + i·dx, y0 + j·dy)" is that centre with x0 = gt[0] + ½·gt[1].
 //! - "Pixel coordinates" (`px`, `py`) in this crate are continuous and centre-based: integer
 //!   values hit cell centres, so `(px, py) = (col, row)` is the centre of cell (col, row).
-//! - Invariant: `valid[i] == data[i].is_finite()`; invalid cells hold NaN in `data` so an
-//!   accidental use shows up. The file's own nodata marker is kept in `nodata` for writing back.
+//! - No data is NaN in `data` and nothing else: every value is finite or NaN (±∞ becomes NaN
+//!   on the way in), and there is no separate validity mask (docs/decisions.md#nan-is-no-data).
+//!   The file's own nodata marker is kept in `nodata` for writing back.
 
 use std::collections::BTreeMap;
 
@@ -20,7 +21,7 @@ use crate::error::RasterError;
 /// GDAL's six-number affine geotransform (see the module docs for the convention).
 pub type GeoTransform = [f64; 6];
 
-/// A single-band raster of f64 values with a validity mask.
+/// A single-band raster of f64 values, NaN where a cell has no value.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Raster {
     /// Number of columns.
@@ -31,10 +32,9 @@ pub struct Raster {
     pub geotransform: GeoTransform,
     /// Coordinate reference system as WKT (`None` when the file has none).
     pub crs: Option<String>,
-    /// Row-major values, NaN where `valid` is false.
+    /// Row-major values; NaN = no value. The data footprint of spec §2.2 / §9.1 item 3 is the
+    /// set of non-NaN cells (docs/decisions.md#nan-is-no-data).
     pub data: Vec<f64>,
-    /// The data-footprint bit mask of spec §2.2 / §9.1 item 3: true = value present.
-    pub valid: Vec<bool>,
     /// The nodata marker the file used (kept so a write can reuse it); `None` = none declared.
     pub nodata: Option<f64>,
     /// Dataset metadata of the default domain (key → value), e.g. the warp field stored by
@@ -65,7 +65,6 @@ impl Raster {
             geotransform,
             crs,
             data: vec![f64::NAN; n],
-            valid: vec![false; n],
             nodata: None,
             metadata: BTreeMap::new(),
         }
@@ -91,8 +90,7 @@ impl Raster {
             )));
         }
         check_geotransform(&geotransform)?;
-        let mut r = Raster { width, height, geotransform, crs, data, valid: Vec::new(), nodata: None, metadata: BTreeMap::new() };
-        r.valid = r.data.iter().map(|v| v.is_finite()).collect();
+        let mut r = Raster { width, height, geotransform, crs, data, nodata: None, metadata: BTreeMap::new() };
         for v in r.data.iter_mut() {
             if !v.is_finite() {
                 *v = f64::NAN;
@@ -119,35 +117,37 @@ impl Raster {
         if col >= self.width || row >= self.height {
             return None;
         }
-        let i = self.index(col, row);
-        if self.valid[i] {
-            Some(self.data[i])
-        } else {
-            None
-        }
+        let v = self.data[self.index(col, row)];
+        (!v.is_nan()).then_some(v)
+    }
+
+    /// Whether cell `q` (row-major index) has a value.
+    #[inline]
+    pub fn is_valid(&self, q: usize) -> bool {
+        !self.data[q].is_nan()
+    }
+
+    /// One flag per cell, true = value present: the footprint as a mask, for callers that
+    /// combine footprints (derived from the NaN cells each time; nothing stores it).
+    pub fn valid_mask(&self) -> Vec<bool> {
+        self.data.iter().map(|v| !v.is_nan()).collect()
     }
 
     /// Sets cell (col, row); a non-finite value clears it.
     #[inline]
     pub fn set(&mut self, col: usize, row: usize, value: f64) {
         let i = self.index(col, row);
-        if value.is_finite() {
-            self.data[i] = value;
-            self.valid[i] = true;
-        } else {
-            self.data[i] = f64::NAN;
-            self.valid[i] = false;
-        }
+        self.data[i] = if value.is_finite() { value } else { f64::NAN };
     }
 
     /// Number of cells with a value.
     pub fn valid_count(&self) -> usize {
-        self.valid.iter().filter(|v| **v).count()
+        self.data.iter().filter(|v| !v.is_nan()).count()
     }
 
     /// Number of cells without a value.
     pub fn nodata_count(&self) -> usize {
-        self.valid.len() - self.valid_count()
+        self.data.len() - self.valid_count()
     }
 
     /// True when the geotransform has no rotation/shear terms.
@@ -250,7 +250,7 @@ impl Raster {
                 continue;
             }
             let k = r * self.width + c;
-            if self.valid[k] {
+            if !self.data[k].is_nan() {
                 sum += w * self.data[k];
                 wsum += w;
             } else if missing == MissingCorners::Strict {
@@ -266,34 +266,22 @@ impl Raster {
 
     /// Finite minimum and maximum over the valid cells (`None` when there are none).
     pub fn min_max(&self) -> Option<(f64, f64)> {
-        let mut it = self.data.iter().zip(&self.valid).filter(|(_, v)| **v).map(|(d, _)| *d);
+        let mut it = self.data.iter().copied().filter(|d| !d.is_nan());
         let first = it.next()?;
         Some(it.fold((first, first), |(lo, hi), v| (lo.min(v), hi.max(v))))
     }
 
-    /// Checks the invariants (sizes, mask ⇔ finite values, invertible geotransform).
+    /// Checks the invariants (size, every value finite or NaN, invertible geotransform).
     pub fn validate(&self) -> Result<(), RasterError> {
         if self.width == 0 || self.height == 0 {
             return Err(RasterError::Invalid(format!("raster size {}×{} has no cells", self.width, self.height)));
         }
         let n = self.width * self.height;
-        if self.data.len() != n || self.valid.len() != n {
-            return Err(RasterError::Invalid(format!(
-                "raster {}×{} holds {} values and {} mask entries",
-                self.width,
-                self.height,
-                self.data.len(),
-                self.valid.len()
-            )));
+        if self.data.len() != n {
+            return Err(RasterError::Invalid(format!("raster {}×{} holds {} values", self.width, self.height, self.data.len())));
         }
-        if let Some(i) = self.data.iter().zip(&self.valid).position(|(d, v)| *v != d.is_finite()) {
-            return Err(RasterError::Invalid(format!(
-                "cell ({}, {}) mask says {} but value is {}",
-                i % self.width,
-                i / self.width,
-                self.valid[i],
-                self.data[i]
-            )));
+        if let Some(i) = self.data.iter().position(|d| d.is_infinite()) {
+            return Err(RasterError::Invalid(format!("cell ({}, {}) holds {} (no data is NaN)", i % self.width, i / self.width, self.data[i])));
         }
         check_geotransform(&self.geotransform)
     }

@@ -48,7 +48,7 @@ pub fn extrapolating_dilation_fill(r: &mut Raster, nb: Neighbourhood) -> Result<
             let (nc, nr) = (c + dx, rr + dy);
             if nc >= 0 && nr >= 0 && nc < w && nr < h {
                 let j = idx(nc, nr);
-                if !r.valid[j] && !queued[j] {
+                if !r.is_valid(j) && !queued[j] {
                     queued[j] = true;
                     front.push(j);
                 }
@@ -56,7 +56,7 @@ pub fn extrapolating_dilation_fill(r: &mut Raster, nb: Neighbourhood) -> Result<
         }
     };
     for i in 0..r.data.len() {
-        if r.valid[i] {
+        if r.is_valid(i) {
             push_unknown_neighbours(r, i, &mut front, &mut queued);
         }
     }
@@ -72,12 +72,12 @@ pub fn extrapolating_dilation_fill(r: &mut Raster, nb: Neighbourhood) -> Result<
                 let mut n = 0usize;
                 for &(dx, dy) in dirs {
                     let (nc, nr) = (c + dx, rr + dy);
-                    if nc < 0 || nr < 0 || nc >= w || nr >= h || !r.valid[idx(nc, nr)] {
+                    if nc < 0 || nr < 0 || nc >= w || nr >= h || !r.is_valid(idx(nc, nr)) {
                         continue;
                     }
                     let zn = r.data[idx(nc, nr)];
                     let (fc, fr) = (nc + dx, nr + dy);
-                    let slope = if fc >= 0 && fr >= 0 && fc < w && fr < h && r.valid[idx(fc, fr)] {
+                    let slope = if fc >= 0 && fr >= 0 && fc < w && fr < h && r.is_valid(idx(fc, fr)) {
                         r.data[idx(fc, fr)] - zn
                     } else {
                         0.0
@@ -90,8 +90,7 @@ pub fn extrapolating_dilation_fill(r: &mut Raster, nb: Neighbourhood) -> Result<
             .collect();
         let committed = std::mem::take(&mut front);
         for (&i, v) in committed.iter().zip(values) {
-            r.data[i] = v;
-            r.valid[i] = true;
+            r.data[i] = v; // finite: clamped between finite bounds
         }
         for &i in &committed {
             push_unknown_neighbours(r, i, &mut front, &mut queued);

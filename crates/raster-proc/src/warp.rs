@@ -97,7 +97,7 @@ impl SourceGrid {
         let mut runs = Vec::new();
         let mut cur = false;
         let mut n = 0u64;
-        for &v in &r.valid {
+        for v in r.data.iter().map(|d| !d.is_nan()) {
             if v == cur {
                 n += 1;
             } else {
@@ -678,7 +678,7 @@ mod tests {
         let back_field = field_of(&w).unwrap();
         assert!(back_field == field, "field changed in metadata");
         let u = unwarp_raster(&w, &back_field).unwrap();
-        assert_eq!(u.valid, r.valid);
+        assert_eq!(u.valid_mask(), r.valid_mask());
         assert_eq!(u.geotransform, r.geotransform);
         // values come back close (resampling twice smooths a little)
         let mut sq = 0.0;
@@ -693,7 +693,7 @@ mod tests {
     fn json_round_trip_exact_and_rle_mask() {
         let r = channel(50, 40);
         let g = SourceGrid::from_raster(&r);
-        assert_eq!(g.mask().unwrap(), r.valid);
+        assert_eq!(g.mask().unwrap(), r.valid_mask());
         let (mut f, _) = WarpField::build(&r, &WarpParams::default()).unwrap();
         f.source = Some(g);
         assert!(WarpField::from_json(&f.to_json()).unwrap() == f, "JSON round trip not exact");

@@ -18,7 +18,7 @@
 //!     }
 //! }
 //! let (warped, field, _) = warp_raster(&r, &WarpParams::default()).unwrap();
-//! let mut l = layout::samples_from_raster(&warped).unwrap();
+//! let mut l = layout::samples_from_raster(warped).unwrap();
 //! let pts = indirect::scatter_forward(&r, &field, &l.georef, &mut l.samples);
 //! assert_eq!(pts.z.len(), 40 * 30); // one point per valid original cell
 //! ```
@@ -105,9 +105,9 @@ fn keep_samples_near(samples: &mut Samples, st: &[[f64; 2]]) {
             }
         }
     }
-    for (z, n) in samples.z.iter_mut().zip(&near) {
+    for (q, n) in near.iter().enumerate() {
         if !n {
-            *z = f64::NAN;
+            samples.z.set_nan(q);
         }
     }
 }
@@ -131,9 +131,9 @@ mod tests {
 
     #[test]
     fn only_samples_at_the_corners_of_a_points_cell_stay() {
-        let mut s = Samples { width: 4, height: 3, z: vec![1.0; 12] };
+        let mut s = Samples { width: 4, height: 3, z: vec![1.0; 12].into() };
         keep_samples_near(&mut s, &[[1.5, 0.25]]);
-        let kept: Vec<usize> = (0..12).filter(|&q| !s.z[q].is_nan()).collect();
+        let kept: Vec<usize> = (0..12).filter(|&q| !s.z.get(q).is_nan()).collect();
         assert_eq!(kept, vec![1, 2, 5, 6]);
     }
 }

@@ -10,56 +10,58 @@
 //! ```
 //! use raster_io::Raster;
 //! use tspline_raster::layout::{samples_from_raster, EvalGrid};
+//! use tspline::format::DataMask;
 //! let mut r = Raster::new_empty(3, 2, [0.0, 2.0, 0.0, 4.0, 0.0, -2.0], Some("EPSG:25832".into()));
-//! r.data = vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0];
-//! r.valid = vec![true, false, true, true, true, true];
-//! let l = samples_from_raster(&r).unwrap();
-//! let grid = EvalGrid::of_mask(&l.georef, &l.mask);
+//! r.data = vec![1.0, f64::NAN, 3.0, 4.0, 5.0, 6.0];
+//! let l = samples_from_raster(r.clone()).unwrap();
+//! let grid = EvalGrid::of_mask(&l.georef, &DataMask::of_samples(&l.samples));
 //! assert_eq!(grid.raster.geotransform, r.geotransform);
-//! assert_eq!(grid.mask.unwrap(), r.valid); // the stored mask, back in the raster's row order
+//! assert_eq!(grid.mask.unwrap(), r.valid_mask()); // the stored mask, back in the raster's row order
 //! ```
 
 use raster_io::Raster;
-use tspline::fit::Samples;
+use tspline::fit::{Heights, Samples};
 use tspline::format::{DataMask, Georef};
 use tspline::GridSpec;
 
 use crate::Error;
 
-/// A raster in the fit's layout: heights (NaN = no data), the map back to world coordinates and
-/// the data mask the `.tmesh` stores.
+/// A raster in the fit's layout: heights (NaN = no data; the `.tmesh`'s data mask is made from
+/// them when the file is written, [`DataMask::of_samples`]) and the map back to world
+/// coordinates.
 pub struct Layout {
     pub samples: Samples,
     pub georef: Georef,
-    pub mask: DataMask,
 }
 
-/// `r` in the parameter layout. Needs an axis-aligned raster.
-pub fn samples_from_raster(r: &Raster) -> Result<Layout, Error> {
+/// `r` in the parameter layout. Needs an axis-aligned raster. Takes the raster so that its
+/// values become the samples in place: the rows are flipped inside the one array, which is
+/// then kept as f32 when every height is an f32 (a float32 raster: 4 bytes a cell;
+/// docs/decisions.md#float32-samples). Peak: the f64 values plus, while converting, the f32 copy.
+pub fn samples_from_raster(r: Raster) -> Result<Layout, Error> {
     let gt = r.geotransform;
     if gt[2] != 0.0 || gt[4] != 0.0 {
         return Err(Error::Rotated(gt));
     }
     let (w, h) = (r.width, r.height);
     let north_up = gt[5] < 0.0;
-    let mut z = vec![f64::NAN; w * h];
-    for row in 0..h {
-        let j = if north_up { h - 1 - row } else { row };
-        for i in 0..w {
-            let q = row * w + i;
-            if r.valid[q] {
-                z[j * w + i] = r.data[q];
-            }
-        }
-    }
     let x0 = gt[0] + 0.5 * gt[1];
     let (y0, dy) = if north_up { (gt[3] + (h as f64 - 0.5) * gt[5], -gt[5]) } else { (gt[3] + 0.5 * gt[5], gt[5]) };
-    let mask = DataMask { width: w, height: h, bits: z.iter().map(|v| !v.is_nan()).collect() };
-    Ok(Layout {
-        samples: Samples { width: w, height: h, z },
-        georef: Georef { x0, y0, dx: gt[1], dy, crs: r.crs.clone().unwrap_or_default() },
-        mask,
-    })
+    let georef = Georef { x0, y0, dx: gt[1], dy, crs: r.crs.unwrap_or_default() };
+    let mut z = r.data;
+    if north_up {
+        flip_rows(&mut z, w);
+    }
+    Ok(Layout { samples: Samples { width: w, height: h, z: Heights::compact(z) }, georef })
+}
+
+/// Reverses the order of the rows of `z` (`w` values each) in place.
+fn flip_rows(z: &mut [f64], w: usize) {
+    let h = z.len() / w.max(1);
+    for row in 0..h / 2 {
+        let (top, bottom) = z.split_at_mut((h - 1 - row) * w);
+        top[row * w..(row + 1) * w].swap_with_slice(&mut bottom[..w]);
+    }
 }
 
 /// Where each output cell lies in the parameter domain: one (s, t) per cell, or a regular grid
@@ -149,13 +151,12 @@ impl EvalGrid {
 
     /// Stores the evaluated heights `z` (row-major, NaN outside the mesh) in the raster, keeping
     /// a cell where it is finite, the stored mask keeps it (unless `ignore_mask`) and `extra`
-    /// (another raster's `valid`) keeps it.
-    pub fn fill(mut self, z: Vec<f64>, ignore_mask: bool, extra: Option<&[bool]>) -> Raster {
+    /// (another raster of the same size) has a value there.
+    pub fn fill(mut self, z: Vec<f64>, ignore_mask: bool, extra: Option<&Raster>) -> Raster {
         let stored = if ignore_mask { None } else { self.mask.as_deref() };
         for (q, v) in z.into_iter().enumerate() {
-            if v.is_finite() && stored.is_none_or(|m| m[q]) && extra.is_none_or(|m| m[q]) {
+            if v.is_finite() && stored.is_none_or(|m| m[q]) && extra.is_none_or(|m| m.is_valid(q)) {
                 self.raster.data[q] = v;
-                self.raster.valid[q] = true;
             }
         }
         self.raster
@@ -183,7 +184,7 @@ mod tests {
         let gt = if north_up { [10.0, 1.0, 0.0, 20.0, 0.0, -1.0] } else { [10.0, 1.0, 0.0, 17.0, 0.0, 1.0] };
         let mut r = Raster::new_empty(2, 3, gt, None);
         r.data = (0..6).map(f64::from).collect();
-        r.valid = vec![true, true, false, true, true, true];
+        r.data[2] = f64::NAN;
         r
     }
 
@@ -200,7 +201,7 @@ mod tests {
     fn every_valid_cell_keeps_its_value_at_its_world_position() {
         for north_up in [true, false] {
             let r = raster(north_up);
-            let l = samples_from_raster(&r).unwrap();
+            let l = samples_from_raster(r.clone()).unwrap();
             for row in 0..3 {
                 for col in 0..2 {
                     let (x, y) = r.cell_centre(col, row);
@@ -208,28 +209,40 @@ mod tests {
                     let q = t.round() as usize * 2 + s.round() as usize;
                     assert!((s - s.round()).abs() < 1e-12 && (t - t.round()).abs() < 1e-12);
                     match r.get(col, row) {
-                        Some(v) => assert_eq!(l.samples.z[q], v),
-                        None => assert!(l.samples.z[q].is_nan() && !l.mask.bits[q]),
+                        Some(v) => assert_eq!(l.samples.z.get(q), v),
+                        None => assert!(l.samples.z.get(q).is_nan() && !DataMask::of_samples(&l.samples).bits[q]),
                     }
                 }
             }
         }
     }
 
+    /// Heights that are all f32 values are stored as f32, any other as f64, the same numbers.
+    #[test]
+    fn float32_heights_are_kept_in_four_bytes() {
+        let r = raster(true);
+        assert_eq!(samples_from_raster(r.clone()).unwrap().samples.z.bytes_per_cell(), 4);
+        let mut fine = r.clone();
+        fine.data[0] = 0.1; // not an f32
+        let l = samples_from_raster(fine).unwrap();
+        assert_eq!(l.samples.z.bytes_per_cell(), 8);
+        assert_eq!(l.samples.get(0, 2), 0.1);
+    }
+
     #[test]
     fn a_rotated_raster_is_refused() {
         let mut r = raster(true);
         r.geotransform[2] = 0.1;
-        assert!(matches!(samples_from_raster(&r), Err(Error::Rotated(_))));
+        assert!(matches!(samples_from_raster(r), Err(Error::Rotated(_))));
     }
 
     #[test]
     fn the_default_grid_returns_the_fitted_rasters_cells_and_mask() {
         let r = raster(true);
-        let l = samples_from_raster(&r).unwrap();
-        let g = EvalGrid::of_mask(&l.georef, &l.mask);
+        let l = samples_from_raster(r.clone()).unwrap();
+        let g = EvalGrid::of_mask(&l.georef, &DataMask::of_samples(&l.samples));
         assert_eq!(g.raster.geotransform, r.geotransform);
-        assert_eq!(g.mask.as_deref(), Some(&r.valid[..]));
+        assert_eq!(g.mask, Some(r.valid_mask()));
         // every output cell's (s, t) is the parameter of its world centre
         for (q, st) in g.params.list().iter().enumerate() {
             let (x, y) = g.raster.cell_centre(q % 2, q / 2);
@@ -240,11 +253,12 @@ mod tests {
     #[test]
     fn fill_keeps_finite_values_inside_both_masks() {
         let r = raster(true);
-        let l = samples_from_raster(&r).unwrap();
-        let g = EvalGrid::of_mask(&l.georef, &l.mask);
-        let extra = [true, false, true, true, true, true];
+        let l = samples_from_raster(r.clone()).unwrap();
+        let g = EvalGrid::of_mask(&l.georef, &DataMask::of_samples(&l.samples));
+        let mut extra = r.clone();
+        extra.data = vec![0.0, f64::NAN, 0.0, 0.0, 0.0, 0.0];
         let out = g.fill(vec![1.0, 2.0, 3.0, f64::NAN, 5.0, 6.0], false, Some(&extra));
-        assert_eq!(out.valid, vec![true, false, false, false, true, true]);
+        assert_eq!(out.valid_mask(), vec![true, false, false, false, true, true]);
         assert_eq!(out.data[0], 1.0);
     }
 }

@@ -1,5 +1,5 @@
 //! T-splines on rasters: what lies between a GDAL raster (`raster_io::Raster`, rows from the top,
-//! a `valid` flag per cell) and a T-spline fit or evaluation (`tspline`, parameters s = column,
+//! NaN for no data) and a T-spline fit or evaluation (`tspline`, parameters s = column,
 //! t = row counted from the bottom, NaN for no data).
 //!
 //! - [`layout`]: the one place the rows are flipped (docs/decisions.md#A21), both ways.
@@ -15,12 +15,11 @@
 //! ```
 //! use raster_io::Raster;
 //! let mut r = Raster::new_empty(2, 2, [100.0, 1.0, 0.0, 202.0, 0.0, -1.0], None);
-//! r.data = vec![1.0, 2.0, 3.0, 4.0];
-//! r.valid = vec![true, true, true, false];
-//! let layout = tspline_raster::layout::samples_from_raster(&r).unwrap();
-//! assert_eq!(layout.samples.z[0], 3.0);                // bottom-left
-//! assert!(layout.samples.z[1].is_nan());               // the bottom-right cell has no data
-//! assert_eq!(layout.samples.z[2..], [1.0, 2.0]);       // the top row comes last
+//! r.data = vec![1.0, 2.0, 3.0, f64::NAN];
+//! let layout = tspline_raster::layout::samples_from_raster(r).unwrap();
+//! assert_eq!(layout.samples.z.get(0), 3.0);           // bottom-left
+//! assert!(layout.samples.z.get(1).is_nan());          // the bottom-right cell has no data
+//! assert_eq!([layout.samples.z.get(2), layout.samples.z.get(3)], [1.0, 2.0]); // the top row comes last
 //! assert_eq!(layout.georef.world(0.0, 0.0), (100.5, 200.5)); // s, t of the bottom-left centre
 //! ```
 

@@ -12,14 +12,13 @@
 //! let mut r = Raster::new_empty(9, 9, [0.0, 1.0, 0.0, 9.0, 0.0, -1.0], None);
 //! for q in 0..81 {
 //!     r.data[q] = (q % 9) as f64 * 0.1;
-//!     r.valid[q] = true;
 //! }
 //! r.data[40] = 50.0; // a spike in the middle
 //! let tol = RasterTolerance::uniform(0.5);
 //! let screen = screen_blunders(&mut r, 10.0, true, &tol).unwrap();
 //! assert_eq!(screen.found.len(), 1);
 //! assert_eq!(screen.position(screen.found[0].index).row, 4);
-//! assert!(!r.valid[40]); // excluded
+//! assert!(!r.is_valid(40)); // excluded
 //! ```
 
 use raster_io::Raster;
@@ -29,9 +28,8 @@ use tspline::blunders::{self, Blunder};
 /// it) become no data.
 pub fn declare_nodata(r: &mut Raster, v: f64) {
     let v32 = v as f32;
-    for (d, ok) in r.data.iter_mut().zip(r.valid.iter_mut()) {
-        if *ok && (*d == v || (v32.is_finite() && *d as f32 == v32)) {
-            *ok = false;
+    for d in r.data.iter_mut() {
+        if *d == v || (v32.is_finite() && *d as f32 == v32) {
             *d = f64::NAN;
         }
     }
@@ -60,7 +58,7 @@ impl RasterTolerance<'_> {
 
     /// The smallest tolerance over the valid cells (∞ when none is valid).
     pub fn min_over(&self, r: &Raster) -> f64 {
-        (0..r.valid.len()).filter(|&q| r.valid[q]).map(|q| self.at(q)).fold(f64::INFINITY, f64::min)
+        (0..r.data.len()).filter(|&q| r.is_valid(q)).map(|q| self.at(q)).fold(f64::INFINITY, f64::min)
     }
 
     /// How a user would write it: `0.5`, `max(0.1, 2 × uncertainty)`, `2 × uncertainty`.
@@ -75,7 +73,7 @@ impl RasterTolerance<'_> {
 
     /// The valid cells without a positive finite tolerance (no uncertainty and no floor).
     pub fn uncovered(&self, r: &Raster) -> Vec<usize> {
-        (0..r.valid.len()).filter(|&q| r.valid[q] && !(self.at(q) > 0.0 && self.at(q).is_finite())).collect()
+        (0..r.data.len()).filter(|&q| r.is_valid(q) && !(self.at(q) > 0.0 && self.at(q).is_finite())).collect()
     }
 }
 
@@ -123,19 +121,12 @@ pub struct BeyondPrecision {
 }
 
 /// Finds isolated cells more than `k` × their tolerance off their neighbourhood's prediction and,
-/// when `reject`, makes them no data. Cells without data become NaN (the scans read NaN as no
-/// data). Values beyond ±1e100 get the library's own refusal (the range its sums stay finite in).
+/// when `reject`, makes them no data (NaN, as every cell without data already is). Values beyond ±1e100 get the library's own refusal (the range its sums stay finite in).
 pub fn screen_blunders(r: &mut Raster, k: f64, reject: bool, tol: &RasterTolerance) -> Result<Screening, ScreenError> {
-    for (d, ok) in r.data.iter_mut().zip(&r.valid) {
-        if !ok {
-            *d = f64::NAN;
-        }
-    }
     tspline::fit::check_value_range(&r.data)?;
     let found = blunders::detect(&r.data, r.width, r.height, &|q| k * tol.at(q));
     if reject {
         for b in &found {
-            r.valid[b.index] = false;
             r.data[b.index] = f64::NAN;
         }
     }
@@ -170,9 +161,8 @@ mod tests {
     fn a_float32_nodata_marker_is_matched_at_float32_precision() {
         let mut r = Raster::new_empty(3, 1, [0.0, 1.0, 0.0, 1.0, 0.0, -1.0], None);
         r.data = vec![-3.4028234663852886e38, 1.0, (-3.4028235e38f32) as f64];
-        r.valid = vec![true; 3];
         declare_nodata(&mut r, -3.4028235e38);
-        assert_eq!(r.valid, vec![false, true, false]);
+        assert_eq!(r.valid_mask(), vec![false, true, false]);
         assert!(r.data[0].is_nan());
     }
 
@@ -184,7 +174,7 @@ mod tests {
         assert_eq!(t.describe(), "max(0.5, 2 × uncertainty)");
         let no_floor = RasterTolerance { floor: None, k: Some(2.0), uncertainty: Some(&u) };
         let mut r = Raster::new_empty(3, 1, [0.0, 1.0, 0.0, 1.0, 0.0, -1.0], None);
-        r.valid = vec![true; 3];
+        r.data = vec![1.0; 3];
         assert_eq!(no_floor.uncovered(&r), vec![1]);
     }
 
@@ -192,7 +182,6 @@ mod tests {
     fn an_undeclared_1e30_is_refused_with_its_position() {
         let mut r = Raster::new_empty(5, 5, [100.0, 2.0, 0.0, 50.0, 0.0, -2.0], None);
         r.data = vec![1.0; 25];
-        r.valid = vec![true; 25];
         r.data[7] = 1e30;
         let err = screen_blunders(&mut r, 10.0, false, &RasterTolerance::uniform(0.1)).unwrap_err();
         let ScreenError::BeyondPrecision(b) = err else { panic!("{err}") };

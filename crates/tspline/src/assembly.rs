@@ -190,7 +190,7 @@ pub(crate) fn per_cell(
         .map(|c| -> Result<Sums, TsplineError> {
             let (j0, j1) = (c * chunk, ((c + 1) * chunk).min(units));
             let mut rows = CellRows::new(sys);
-            let raster = |rows: &mut CellRows, q: usize| rows.add_point((q % w) as f64, (q / w) as f64, samples.z[q]);
+            let raster = |rows: &mut CellRows, q: usize| rows.add_point((q % w) as f64, (q / w) as f64, samples.z.get(q));
             match (pts, region, asm) {
                 (Some(p), _, _) => (j0..j1).for_each(|q| rows.add_point(p.st[q][0], p.st[q][1], p.z[q])),
                 (None, Some(r), _) => r.for_rows(j0, j1, |q| raster(&mut rows, q)),
@@ -221,7 +221,7 @@ fn device_rows(
         let t = o.model_rows(sp, &g)?;
         for r in 0..t.len() {
             let (ix, v) = t.row(r);
-            rows.add_given(ix, v, samples.z[jb * w + r]);
+            rows.add_given(ix, v, samples.z.get(jb * w + r));
         }
         jb += nr;
     }
@@ -334,8 +334,8 @@ fn uncovered_cells(sys: System<'_>, samples: &Samples, region: Option<&Region>, 
             if q >= samples.z.len() {
                 break;
             }
-            if word & (1u64 << b) == 0 && region.is_none_or(|r| r.contains(q)) && !samples.z[q].is_nan() {
-                rows.get_or_insert_with(|| CellRows::new(sys)).add_point((q % w) as f64, (q / w) as f64, samples.z[q]);
+            if word & (1u64 << b) == 0 && region.is_none_or(|r| r.contains(q)) && !samples.z.get(q).is_nan() {
+                rows.get_or_insert_with(|| CellRows::new(sys)).add_point((q % w) as f64, (q / w) as f64, samples.z.get(q));
             }
         }
     }
@@ -492,21 +492,27 @@ impl<'a> Elements<'a> {
         self.ws_by_col.extend((0..nc * m).map(|q| self.ws[(q % m) * nc + q / m]));
     }
 
-    /// Fills `b` and `d` with the element's valid cells (of the region); cells on a flagged
-    /// border edge go cell by cell. Returns the number of cells gathered.
+    /// Adds the element's valid cells (of the region) to its block sums, [`BATCH_CELLS`] rows
+    /// of `b` and `d` at a time; cells on a flagged border edge go cell by cell. Returns the
+    /// number of cells added.
     fn gather_cells(&mut self, e: Element, i0: usize, i1: usize, j0: usize, j1: usize) -> usize {
         let (nc, nr, m) = (i1 - i0, j1 - j0, self.funcs.len());
         let m4 = m.next_multiple_of(TILE);
         let w = self.samples.width;
         self.b.clear();
         self.d.clear();
+        self.gram.clear();
+        self.gram.resize(m4 * m4, 0.0);
+        self.moments.clear();
+        self.moments.resize(2 * m4, 0.0);
+        let mut count = 0;
         for y in 0..nr {
             let j = j0 + y;
             self.row_denominators(nc, nr, y);
             for x in 0..nc {
                 let i = i0 + x;
                 let q = j * w + i;
-                let d = self.samples.z[q];
+                let d = self.samples.z.get(q);
                 if d.is_nan() || self.region.is_some_and(|r| !r.contains(q)) {
                     continue;
                 }
@@ -522,9 +528,26 @@ impl<'a> Elements<'a> {
                 self.b.extend(ws.iter().zip(&self.nt_row).map(|(a, b)| a * b / den));
                 self.b.resize(self.b.len() + m4 - m, 0.0);
                 self.d.push(d);
+                if self.d.len() == BATCH_CELLS {
+                    count += self.add_batch();
+                }
             }
         }
-        self.d.len()
+        count + self.add_batch()
+    }
+
+    /// The gathered rows `b`, `d` into the element's BᵀB, Bᵀd and column sums, then emptied.
+    /// The sums go on from where the previous batch left them, cell by cell in order: the
+    /// same operations as one pass over all the element's cells, with `b` bounded (an element
+    /// of the first iterations spans millions of cells: 40 B each for degree 1).
+    fn add_batch(&mut self) -> usize {
+        let m4 = self.funcs.len().next_multiple_of(TILE);
+        gram_upper(&self.b, m4, &mut self.gram);
+        moments(&self.b, m4, &self.d, &mut self.moments);
+        let n = self.d.len();
+        self.b.clear();
+        self.d.clear();
+        n
     }
 
     /// Σ w N at every cell of element row `y` into `den`, each summed over the functions in
@@ -550,8 +573,6 @@ impl<'a> Elements<'a> {
         let sys = self.sys;
         let m = self.funcs.len();
         let m4 = m.next_multiple_of(TILE);
-        gram_upper(&self.b, m4, &mut self.gram);
-        moments(&self.b, m4, &self.d, &mut self.moments);
         let s = &mut self.rows.sums;
         for x in 0..m {
             let px = self.funcs[x] as usize;
@@ -578,17 +599,24 @@ impl<'a> Elements<'a> {
 /// Register tile of the element Gram matrix (functions are padded to a multiple of it).
 const TILE: usize = 4;
 
+/// Cells of an element gathered before they are added to its sums (`Elements::add_batch`):
+/// bounds the rows buffer to 2¹⁶ · (functions + d) values (docs/decisions.md#float32-samples).
+const BATCH_CELLS: usize = 1 << 16;
+
 /// The upper block triangle of BᵀB for cell-major rows `b` of `m4` values (a multiple of
 /// [`TILE`]) into `out` (`m4`×`m4`, row-major; entries below the diagonal tiles are not
 /// written). Why tiles: a TILE×TILE block of sums stays in registers while the cells stream
 /// by, so each loaded value feeds TILE products (a dot product per entry loads two values
-/// per product). Each entry is summed over the cells in order: deterministic.
-fn gram_upper(b: &[f64], m4: usize, out: &mut Vec<f64>) {
-    out.clear();
-    out.resize(m4 * m4, 0.0);
+/// per product). Each entry is summed over the cells in order: deterministic. The sums start
+/// from `out`'s values (zeros for a new element, a previous batch's sums for the next batch):
+/// the same sequence of additions as one pass over all the cells.
+fn gram_upper(b: &[f64], m4: usize, out: &mut [f64]) {
     for x0 in (0..m4).step_by(TILE) {
         for y0 in (x0..m4).step_by(TILE) {
             let mut acc = [[0.0f64; TILE]; TILE];
+            for i in 0..TILE {
+                acc[i].copy_from_slice(&out[(x0 + i) * m4 + y0..(x0 + i) * m4 + y0 + TILE]);
+            }
             for row in b.chunks_exact(m4) {
                 let (bx, by) = (&row[x0..x0 + TILE], &row[y0..y0 + TILE]);
                 for i in 0..TILE {
@@ -604,10 +632,9 @@ fn gram_upper(b: &[f64], m4: usize, out: &mut Vec<f64>) {
     }
 }
 
-/// Bᵀd into `out[..m4]` and the column sums of B into `out[m4..]` (cells in order).
-fn moments(b: &[f64], m4: usize, d: &[f64], out: &mut Vec<f64>) {
-    out.clear();
-    out.resize(2 * m4, 0.0);
+/// Bᵀd added to `out[..m4]` and the column sums of B to `out[m4..]` (cells in order, from
+/// `out`'s values on, as [`gram_upper`]).
+fn moments(b: &[f64], m4: usize, d: &[f64], out: &mut [f64]) {
     let (bd, sum) = out.split_at_mut(m4);
     for (row, &dc) in b.chunks_exact(m4).zip(d) {
         for ((x, s), &r) in bd.iter_mut().zip(sum.iter_mut()).zip(row) {
@@ -626,13 +653,13 @@ mod tests {
     /// A wavy raster over `w`×`h` cells with a few no-data holes.
     fn raster(w: usize, h: usize) -> Samples {
         let mut seed = 5u64;
-        let z = (0..w * h)
+        let z: Vec<f64> = (0..w * h)
             .map(|q| {
                 let (i, j) = ((q % w) as f64, (q / w) as f64);
                 if lcg(&mut seed) < 0.05 { f64::NAN } else { (i * 0.21).sin() * 3.0 + j * 0.07 + (i * j * 0.003).cos() }
             })
             .collect();
-        Samples { width: w, height: h, z }
+        Samples { width: w, height: h, z: z.into() }
     }
 
     /// The upper-triangle pattern of every pair of overlapping supports.
@@ -668,7 +695,7 @@ mod tests {
         let n = pb.knots.len();
         let (mut ata, mut atd) = (vec![0.0; n * n], vec![0.0; n]);
         let mut scratch = Vec::new();
-        for (q, &d) in s.z.iter().enumerate() {
+        for (q, d) in s.z.iter().enumerate() {
             if d.is_nan() {
                 continue;
             }
@@ -748,7 +775,7 @@ mod tests {
                 let q = (lcg(&mut seed) * (w * h) as f64) as usize;
                 let mut z = vec![f64::NAN; w * h];
                 z[q] = 1.0 + lcg(&mut seed);
-                let s = Samples { width: w, height: h, z };
+                let s = Samples { width: w, height: h, z: z.into() };
                 let old = per_cell(sys, &s, None, None, None).unwrap();
                 let new = by_elements(sys, &s, None);
                 assert!(old.vals == new.vals && old.rhs == new.rhs && old.support == new.support, "{degree:?} cell {q}");

@@ -127,7 +127,7 @@ pub(crate) fn coarsen(
         if cand.is_empty() {
             break;
         }
-        let surface = best_pb.clone();
+        let surface = &best_pb;
         let mut geom = |s: f64, t: f64| {
             let z = surface.point(s, t)[2];
             (s, t, if z.is_nan() { 0.0 } else { z })
@@ -202,37 +202,67 @@ pub(crate) fn coarsen(
 }
 
 /// The values of `errs` a try is about to overwrite: the cells of its local region (in the
-/// region's row order), or all of them for a global re-check (that buffer is kept for reuse).
+/// region's row order), or all of them for a global re-check of scattered points. A global try
+/// on a raster writes `errs` only once it has passed ([`fit::over_tolerance`] decides first), so
+/// it saves nothing: no copy of 8 bytes per cell (docs/decisions.md#float32-samples).
 #[derive(Default)]
 struct Undo {
-    /// The local try's region (`None`: `saved` holds every cell).
-    region: Option<fit::Region>,
+    kept: Kept,
     saved: Vec<f64>,
+}
+
+/// What an [`Undo`] holds.
+#[derive(Default)]
+enum Kept {
+    /// The try leaves `errs` as it is unless it passes.
+    #[default]
+    Nothing,
+    /// The local try's region: `saved` holds its cells.
+    Region(fit::Region),
+    /// `saved` holds every value.
+    All,
 }
 
 impl Undo {
     fn save(&mut self, region: Option<fit::Region>, errs: &[f64]) {
         self.saved.clear();
-        match &region {
+        self.kept = match region {
             Some(r) => {
                 self.saved.reserve(r.len());
                 r.for_rows(0, r.rows(), |q| self.saved.push(errs[q]));
+                Kept::Region(r)
             }
-            None => self.saved.extend_from_slice(errs),
+            None => {
+                self.saved.extend_from_slice(errs);
+                Kept::All
+            }
+        };
+    }
+
+    /// Nothing to put back: the try writes `errs` only if it passes.
+    fn nothing(&mut self) {
+        self.saved.clear();
+        self.kept = Kept::Nothing;
+    }
+
+    fn region(&self) -> Option<&fit::Region> {
+        match &self.kept {
+            Kept::Region(r) => Some(r),
+            _ => None,
         }
-        self.region = region;
     }
 
     fn restore(&self, errs: &mut [f64]) {
-        match &self.region {
-            Some(r) => {
+        match &self.kept {
+            Kept::Region(r) => {
                 let mut k = 0;
                 r.for_rows(0, r.rows(), |q| {
                     errs[q] = self.saved[k];
                     k += 1;
                 });
             }
-            None => errs.copy_from_slice(&self.saved),
+            Kept::All => errs.copy_from_slice(&self.saved),
+            Kept::Nothing => {}
         }
     }
 }
@@ -269,8 +299,19 @@ fn refit(
     };
     fit::set_z(m, &mut pb, &z);
     let region = local.map(|(_, r)| r);
+    if region.is_none() && pts.is_none() {
+        // a global try on a raster: the verdict first, from a block-sized buffer; `errs` is
+        // written (the same values) only when the try passes
+        undo.nothing();
+        let (count, over) = fit::over_tolerance(m, &pb, samples, backend, tol)?;
+        if count > 0 {
+            return Ok((pb, ErrorStats { over_tolerance: count, ..ErrorStats::default() }, over));
+        }
+        let (err, over) = fit::check(m, &pb, samples, None, None, backend, errs, tol)?;
+        return Ok((pb, err, over));
+    }
     undo.save(region, errs);
-    let (err, over) = fit::check(m, &pb, samples, pts, undo.region.as_ref(), backend, errs, tol)?;
+    let (err, over) = fit::check(m, &pb, samples, pts, undo.region(), backend, errs, tol)?;
     Ok((pb, err, over))
 }
 
@@ -296,7 +337,7 @@ mod tests {
                 z.push(v);
             }
         }
-        Samples { width: w, height: h, z }
+        Samples { width: w, height: h, z: z.into() }
     }
 
     #[test]

@@ -65,18 +65,127 @@ use crate::tolerance::{CellTolerance, Tolerance};
 use crate::TsplineError;
 
 /// A raster in parameter layout: value (i, j) at (s = i, t = j), row-major from the bottom row,
-/// NaN = no data.
+/// NaN = no data (docs/decisions.md#nan-is-no-data).
 #[derive(Debug, Clone)]
 pub struct Samples {
     pub width: usize,
     pub height: usize,
-    pub z: Vec<f64>,
+    pub z: Heights,
+}
+
+/// The heights of [`Samples`] at the precision the raster holds them: 4 bytes a cell when every
+/// height is exactly an f32 (a float32 raster), else 8 (docs/decisions.md#float32-samples).
+/// Every f32 is an f64 exactly, so the fit reads the same numbers either way.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Heights {
+    F64(Vec<f64>),
+    F32(Vec<f32>),
+}
+
+/// A block of [`Heights`], for the loops that run over many cells: they are written once,
+/// generic over the element type ([`Height`]), and dispatched per block.
+pub enum HeightsSlice<'a> {
+    F64(&'a [f64]),
+    F32(&'a [f32]),
+}
+
+/// A stored height: f32 or f64, read as f64.
+pub trait Height: Copy + Send + Sync {
+    fn f64(self) -> f64;
+}
+
+impl Height for f64 {
+    #[inline(always)]
+    fn f64(self) -> f64 {
+        self
+    }
+}
+
+impl Height for f32 {
+    #[inline(always)]
+    fn f64(self) -> f64 {
+        self as f64
+    }
+}
+
+impl From<Vec<f64>> for Heights {
+    fn from(z: Vec<f64>) -> Heights {
+        Heights::F64(z)
+    }
+}
+
+impl Heights {
+    /// f32 storage when every value (NaN included) survives the round trip f64 → f32 → f64,
+    /// else the f64 values as they are.
+    pub fn compact(z: Vec<f64>) -> Heights {
+        if z.iter().all(|&v| v.is_nan() || (v as f32) as f64 == v) {
+            Heights::F32(z.iter().map(|&v| v as f32).collect())
+        } else {
+            Heights::F64(z)
+        }
+    }
+
+    #[inline]
+    pub fn get(&self, q: usize) -> f64 {
+        match self {
+            Heights::F64(v) => v[q],
+            Heights::F32(v) => v[q] as f64,
+        }
+    }
+
+    /// Makes cell `q` no data.
+    pub fn set_nan(&mut self, q: usize) {
+        match self {
+            Heights::F64(v) => v[q] = f64::NAN,
+            Heights::F32(v) => v[q] = f32::NAN,
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        match self {
+            Heights::F64(v) => v.len(),
+            Heights::F32(v) => v.len(),
+        }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Bytes per cell as stored (8 or 4).
+    pub fn bytes_per_cell(&self) -> usize {
+        match self {
+            Heights::F64(_) => 8,
+            Heights::F32(_) => 4,
+        }
+    }
+
+    /// Every value as f64, in order.
+    pub fn iter(&self) -> impl Iterator<Item = f64> + '_ {
+        (0..self.len()).map(|q| self.get(q))
+    }
+
+    /// The cells `start..end`.
+    pub fn slice(&self, start: usize, end: usize) -> HeightsSlice<'_> {
+        match self {
+            Heights::F64(v) => HeightsSlice::F64(&v[start..end]),
+            Heights::F32(v) => HeightsSlice::F32(&v[start..end]),
+        }
+    }
+
+    /// An f64 copy of every value.
+    pub fn to_f64(&self) -> Vec<f64> {
+        match self {
+            Heights::F64(v) => v.clone(),
+            Heights::F32(v) => v.iter().map(|&x| x as f64).collect(),
+        }
+    }
 }
 
 impl Samples {
     #[inline]
     pub fn get(&self, i: usize, j: usize) -> f64 {
-        self.z[j * self.width + i]
+        self.z.get(j * self.width + i)
     }
 
     /// Standard bilinear interpolation (spec eq. 4.1 in the corrected form of §2.1 / A2); NaN
@@ -703,12 +812,13 @@ pub fn fit_drag(pb: &PbSpline, samples: &Samples, steps: usize, threshold: f64, 
 /// Not `raster_proc::dilate::extrapolating_dilation_fill` on purpose: that one (the warp's, A6)
 /// continues slopes by linear extrapolation and must clamp the result; dragging only needs a
 /// continuous reference surface, and a mean of known values never leaves their range. It also
-/// works on NaN-coded [`Samples`] rather than a `Raster` with a validity mask.
+/// works on [`Samples`] in the parameter layout rather than on a `Raster`. The result is f64
+/// (the means are not f32 values).
 pub fn mean_dilation_fill(samples: &Samples) -> Samples {
     let (w, h) = (samples.width, samples.height);
-    let mut z = samples.z.clone();
+    let mut z = samples.z.to_f64();
     if z.iter().all(|v| v.is_nan()) {
-        return samples.clone();
+        return Samples { width: w, height: h, z: z.into() };
     }
     let nbrs = |q: usize| {
         let (i, j) = ((q % w) as isize, (q / w) as isize);
@@ -740,7 +850,7 @@ pub fn mean_dilation_fill(samples: &Samples) -> Samples {
         next.dedup();
         front = next;
     }
-    Samples { width: w, height: h, z }
+    Samples { width: w, height: h, z: z.into() }
 }
 
 /// The parameter pair of PB point i (the centre knots).
@@ -787,32 +897,94 @@ const PASS_BLOCK_EVAL: usize = 1 << 22;
 /// kernel per block): the dense evaluators amortise their per-call set-up (e.g. an element
 /// extraction) over a block, and only one block of heights is held at a time.
 pub fn eval_errors(pb: &PbSpline, samples: &Samples, backend: &Backend, errs: &mut [f64]) -> Result<(), TsplineError> {
+    let pass = ErrorPass::new(pb, samples, backend)?;
+    for (b, out) in errs.chunks_mut(pass.block_cells()).enumerate() {
+        pass.block(b * pass.rows, out)?;
+    }
+    Ok(())
+}
+
+/// The count of valid cells over the tolerance and the leaves holding them ([`summarize`]'s
+/// `over_tolerance` and leaf list), by the error pass of [`eval_errors`] into one block-sized
+/// buffer instead of a per-cell array: the same errors, so the same verdict. Coarsening's global
+/// tries ask this first, so a failed try leaves the kept errors as they are and needs no copy
+/// of them to undo (docs/decisions.md#float32-samples).
+pub(crate) fn over_tolerance(mesh: &TMesh, pb: &PbSpline, samples: &Samples, backend: &Backend, tol: &Tolerance) -> Result<(usize, Vec<CellId>), TsplineError> {
+    let pass = ErrorPass::new(pb, samples, backend)?;
     let w = samples.width;
-    let sub = (PASS_BLOCK / w.max(1)).max(1);
-    let br = ((PASS_BLOCK_EVAL.max(16 * pb.cells.len()) / w.max(1)).max(1) / sub).max(1) * sub;
-    let sp = match backend {
-        Backend::OpenCl(o) => Some(o.upload(pb)?),
-        Backend::Cpu => None,
-    };
-    // CPU: one extraction for all blocks (as the OpenCL upload above), not one per block; each
-    // block still takes the path PbSpline::eval_grid would (same numbers).
-    let ex = (sp.is_none() && pb.use_extraction(br * w)).then(|| crate::extraction::Extraction::new(pb, true));
-    for (b, out) in errs.chunks_mut(br * w).enumerate() {
-        let j0 = b * br;
+    let n = samples.z.len();
+    let mut buf = vec![0.0; pass.block_cells().min(n)];
+    let (mut count, mut over) = (0, Vec::new());
+    for q0 in (0..n).step_by(pass.block_cells()) {
+        let out = &mut buf[..pass.block_cells().min(n - q0)];
+        pass.block(q0 / w, out)?;
+        let (acc, o) = over_in(mesh, pb, &|q| ((q % w) as f64, (q / w) as f64), out, q0, tol);
+        count += acc.over;
+        over.extend(o);
+    }
+    over.sort_unstable();
+    over.dedup();
+    Ok((count, over))
+}
+
+/// The error pass over a raster in big row blocks: the dense evaluators amortise their per-call
+/// set-up (an element extraction, an OpenCL upload) over all blocks.
+struct ErrorPass<'a> {
+    pb: &'a PbSpline,
+    samples: &'a Samples,
+    backend: &'a Backend<'a>,
+    sp: Option<crate::ocl_eval::OclSpline>,
+    ex: Option<crate::extraction::Extraction>,
+    /// Rows per parallel chunk of the |Δz| loop and per evaluation block.
+    sub: usize,
+    rows: usize,
+}
+
+impl<'a> ErrorPass<'a> {
+    fn new(pb: &'a PbSpline, samples: &'a Samples, backend: &'a Backend<'a>) -> Result<ErrorPass<'a>, TsplineError> {
+        let w = samples.width;
+        let sub = (PASS_BLOCK / w.max(1)).max(1);
+        let rows = ((PASS_BLOCK_EVAL.max(16 * pb.cells.len()) / w.max(1)).max(1) / sub).max(1) * sub;
+        let sp = match backend {
+            Backend::OpenCl(o) => Some(o.upload(pb)?),
+            Backend::Cpu => None,
+        };
+        // CPU: one extraction for all blocks (as the OpenCL upload above), not one per block; each
+        // block still takes the path PbSpline::eval_grid would (same numbers).
+        let ex = (sp.is_none() && pb.use_extraction(rows * w)).then(|| crate::extraction::Extraction::new(pb, true));
+        Ok(ErrorPass { pb, samples, backend, sp, ex, sub, rows })
+    }
+
+    fn block_cells(&self) -> usize {
+        self.rows * self.samples.width
+    }
+
+    /// |Δz| of the rows from `j0` on into `out` (whole rows).
+    fn block(&self, j0: usize, out: &mut [f64]) -> Result<(), TsplineError> {
+        let (pb, w) = (self.pb, self.samples.width);
         let g = GridSpec { s0: 0.0, t0: j0 as f64, ds: 1.0, dt: 1.0, ns: w, nt: out.len() / w };
-        let z = match (backend, &sp, &ex) {
+        let z = match (self.backend, &self.sp, &self.ex) {
             (Backend::OpenCl(o), Some(sp), _) => o.eval_grid(sp, &g)?,
             (_, _, Some(ex)) if pb.use_extraction(out.len()) => ex.eval_grid(pb, &g, true),
             _ => pb.eval_grid(&g, true),
         };
-        let d = &samples.z[j0 * w..j0 * w + out.len()];
-        out.par_chunks_mut(sub * w).zip(z.par_chunks(sub * w)).zip(d.par_chunks(sub * w)).for_each(|((o, zc), dc)| {
-            for ((e, &zk), &dk) in o.iter_mut().zip(zc).zip(dc) {
-                *e = if dk.is_nan() { f64::NAN } else if zk.is_nan() { f64::INFINITY } else { (zk - dk).abs() };
-            }
-        });
+        match self.samples.z.slice(j0 * w, j0 * w + out.len()) {
+            HeightsSlice::F64(d) => errors_into(out, &z, d, self.sub * w),
+            HeightsSlice::F32(d) => errors_into(out, &z, d, self.sub * w),
+        }
+        Ok(())
     }
-    Ok(())
+}
+
+/// |Δz| of the surface heights `z` against the data `d` into `out` (NaN where `d` has no data,
+/// +∞ where the surface is undefined), in parallel over chunks of `chunk` cells.
+fn errors_into<T: Height>(out: &mut [f64], z: &[f64], d: &[T], chunk: usize) {
+    out.par_chunks_mut(chunk).zip(z.par_chunks(chunk)).zip(d.par_chunks(chunk)).for_each(|((o, zc), dc)| {
+        for ((e, &zk), &dk) in o.iter_mut().zip(zc).zip(dc) {
+            let dk = dk.f64();
+            *e = if dk.is_nan() { f64::NAN } else if zk.is_nan() { f64::INFINITY } else { (zk - dk).abs() };
+        }
+    });
 }
 
 /// [`eval_errors`] restricted to the cells of `region` (PB-spline path, point by point).
@@ -823,7 +995,7 @@ pub(crate) fn eval_errors_region(pb: &PbSpline, samples: &Samples, region: &Regi
         let j0 = b * sub;
         let j1 = j0 + out.len() / w;
         region.for_rows(j0, j1, |q| {
-            let dk = samples.z[q];
+            let dk = samples.z.get(q);
             out[q - j0 * w] = if dk.is_nan() {
                 f64::NAN
             } else {
@@ -836,14 +1008,35 @@ pub(crate) fn eval_errors_region(pb: &PbSpline, samples: &Samples, region: &Regi
 
 /// Statistics of `errs` over the valid cells (summed over fixed blocks in order: independent of
 /// the thread count) and the leaf cells whose closed box holds a cell over the tolerance.
-/// The median is taken on an f32 copy (exact to f32 rounding); the maximum and the tolerance
-/// test use the f64 errors.
+/// The median is that of the errors rounded to f32 ([`nth_smallest_f32`], no copy of the
+/// errors); the maximum and the tolerance test use the f64 errors.
 pub fn summarize(mesh: &TMesh, pb: &PbSpline, w: usize, errs: &[f64], tol: &Tolerance) -> (ErrorStats, Vec<CellId>) {
     summarize_at(mesh, pb, &|q| ((q % w) as f64, (q / w) as f64), errs, tol)
 }
 
 /// [`summarize`] with the parameter position of error `q` given by `pos`.
 pub(crate) fn summarize_at(mesh: &TMesh, pb: &PbSpline, pos: &(dyn Fn(usize) -> (f64, f64) + Sync), errs: &[f64], tol: &Tolerance) -> (ErrorStats, Vec<CellId>) {
+    let (acc, over) = over_in(mesh, pb, pos, errs, 0, tol);
+    let n = acc.n;
+    if n == 0 {
+        return (ErrorStats::default(), over);
+    }
+    let mean = acc.sum / n as f64;
+    let sigma = (acc.sumsq / n as f64 - mean * mean).max(0.0).sqrt();
+    let mid = n / 2;
+    let median = if n % 2 == 0 {
+        let [m, lo] = nth_smallest_f32(errs, [mid, mid - 1]);
+        0.5 * (m as f64 + lo as f64)
+    } else {
+        nth_smallest_f32(errs, [mid])[0] as f64
+    };
+    (ErrorStats { count: n, mean, sigma, median, max: acc.max, rms: (acc.sumsq / n as f64).sqrt(), over_tolerance: acc.over }, over)
+}
+
+/// The statistics of `errs` (errors `offset..` of the raster or point list) and the leaf cells
+/// whose closed box holds one over the tolerance (sorted, each once): the scan of [`summarize_at`]
+/// without the median, summed over fixed blocks in order.
+fn over_in(mesh: &TMesh, pb: &PbSpline, pos: &(dyn Fn(usize) -> (f64, f64) + Sync), errs: &[f64], offset: usize, tol: &Tolerance) -> (ErrAcc, Vec<CellId>) {
     // Leaves whose closed box holds (s, t): through the PB-spline's bucket grid when its cell
     // list is the mesh's leaves in id order (checked per hit), else through the R-tree.
     let leaf_ids: Vec<CellId> = mesh.leaves().collect();
@@ -888,7 +1081,7 @@ pub(crate) fn summarize_at(mesh: &TMesh, pb: &PbSpline, pos: &(dyn Fn(usize) -> 
         .par_chunks(PASS_BLOCK)
         .enumerate()
         .map(|(b, ch)| {
-            let q0 = b * PASS_BLOCK;
+            let q0 = offset + b * PASS_BLOCK;
             let mut acc = ErrAcc::default();
             let mut over = Vec::new();
             let mut interior: Option<crate::mesh::Rect> = None;
@@ -945,21 +1138,70 @@ pub(crate) fn summarize_at(mesh: &TMesh, pb: &PbSpline, pos: &(dyn Fn(usize) -> 
     }
     over.sort_unstable();
     over.dedup();
-    let n = acc.n;
-    if n == 0 {
-        return (ErrorStats::default(), over);
+    (acc, over)
+}
+
+/// The `k`-th smallest (0-based, in `f32::total_cmp` order) of the non-NaN `errs` rounded to
+/// f32, for each `k` of `ranks`, without a copy of them: a radix selection in two counting
+/// passes over 16 bits of the f32's order key each (a key whose unsigned order is
+/// `total_cmp`'s), both ranks in the same passes. Equal to sorting an f32 copy and taking its
+/// elements `ranks`, in a few 2¹⁶-counter histograms instead of 4 bytes per cell
+/// (docs/decisions.md#float32-samples). Every rank must be below the number of non-NaN errors.
+pub(crate) fn nth_smallest_f32<const N: usize>(errs: &[f64], ranks: [usize; N]) -> [f32; N] {
+    fn key(e: f64) -> u32 {
+        let b = (e as f32).to_bits();
+        if b >> 31 == 1 { !b } else { b | 0x8000_0000 }
     }
-    let mut e32: Vec<f32> = errs.iter().filter(|e| !e.is_nan()).map(|&e| e as f32).collect();
-    let mean = acc.sum / n as f64;
-    let sigma = (acc.sumsq / n as f64 - mean * mean).max(0.0).sqrt();
-    let mid = n / 2;
-    let (_, m, _) = e32.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
-    let mut median = *m as f64;
-    if n % 2 == 0 {
-        let lo = e32[..mid].iter().cloned().fold(f32::MIN, f32::max) as f64;
-        median = 0.5 * (median + lo);
+    fn from_key(k: u32) -> f32 {
+        f32::from_bits(if k >> 31 == 1 { k & 0x7fff_ffff } else { !k })
     }
-    (ErrorStats { count: n, mean, sigma, median, max: acc.max, rms: (acc.sumsq / n as f64).sqrt(), over_tolerance: acc.over }, over)
+    const DIGITS: usize = 1 << 16;
+    // `N` histograms; `count(key, histograms)` adds one error's key where it belongs
+    fn counts<F: Fn(u32, &mut [Vec<u64>]) + Sync>(errs: &[f64], n: usize, count: F) -> Vec<Vec<u64>> {
+        errs.par_chunks(PASS_BLOCK)
+            .fold(
+                || vec![vec![0u64; DIGITS]; n],
+                |mut c, ch| {
+                    for &e in ch.iter().filter(|e| !e.is_nan()) {
+                        count(key(e), &mut c);
+                    }
+                    c
+                },
+            )
+            .reduce(
+                || vec![vec![0u64; DIGITS]; n],
+                |mut a, b| {
+                    for (x, y) in a.iter_mut().zip(b) {
+                        x.iter_mut().zip(y).for_each(|(p, q)| *p += q);
+                    }
+                    a
+                },
+            )
+    }
+    // the digit holding rank `k`, and the rank within it
+    let pick = |c: &[u64], mut k: u64| -> (u32, u64) {
+        for (d, &n) in c.iter().enumerate() {
+            if k < n {
+                return (d as u32, k);
+            }
+            k -= n;
+        }
+        (DIGITS as u32 - 1, 0) // beyond the count: the caller's contract says it is not
+    };
+    let high = counts(errs, 1, |key, c| c[0][(key >> 16) as usize] += 1);
+    let his: [(u32, u64); N] = std::array::from_fn(|r| pick(&high[0], ranks[r] as u64));
+    let low = counts(errs, N, |key, c| {
+        for (r, &(hi, _)) in his.iter().enumerate() {
+            if key >> 16 == hi {
+                c[r][(key & 0xffff) as usize] += 1;
+            }
+        }
+    });
+    std::array::from_fn(|r| {
+        let (hi, rest) = his[r];
+        let (lo, _) = pick(&low[r], rest);
+        from_key(hi << 16 | lo)
+    })
 }
 
 /// Share of the PB points whose basis changed (new, or other knots) up to which an iteration
@@ -1103,7 +1345,16 @@ pub const MAX_ABS_VALUE: f64 = 1e100;
 /// Fails with [`TsplineError::ValueRange`] when a finite value of `z` has |z| > [`MAX_ABS_VALUE`]
 /// (non-finite values are no data and skipped).
 pub fn check_value_range(z: &[f64]) -> Result<(), TsplineError> {
-    let (min, max) = z.iter().filter(|v| v.is_finite()).fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+    check_range_of(z.iter().copied())
+}
+
+/// [`check_value_range`] over stored heights.
+fn check_heights_range(z: &Heights) -> Result<(), TsplineError> {
+    check_range_of(z.iter())
+}
+
+fn check_range_of(z: impl Iterator<Item = f64>) -> Result<(), TsplineError> {
+    let (min, max) = z.filter(|v| v.is_finite()).fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(v), b.max(v)));
     // no finite value at all is not a range problem: the fit names the empty raster itself
     if min <= max && (min.abs() > MAX_ABS_VALUE || max.abs() > MAX_ABS_VALUE) {
         return Err(TsplineError::ValueRange { min, max, limit: MAX_ABS_VALUE });
@@ -1170,8 +1421,10 @@ pub(crate) fn check(
 /// rounding between the loop's and `eval`'s evaluation paths, and the other half stays for
 /// the paths not checked here (the OpenCL kernels).
 pub(crate) fn tolerances(samples: &Samples, pts: Option<&Scattered>, opts: &FitOptions) -> Result<(Tolerance, Tolerance), TsplineError> {
-    let data = pts.map_or(&samples.z, |p| &p.z);
-    let zscale = data.iter().filter(|v| v.is_finite()).fold(0.0f64, |m, v| m.max(v.abs()));
+    let zscale = match pts {
+        Some(p) => p.z.iter().filter(|v| v.is_finite()).fold(0.0f64, |m, v| m.max(v.abs())),
+        None => samples.z.iter().filter(|v| v.is_finite()).fold(0.0f64, |m, v| m.max(v.abs())),
+    };
     let (cells, min_tol) = match &opts.cell_tolerance {
         None => (None, opts.max_error),
         Some(c) => {
@@ -1181,7 +1434,7 @@ pub(crate) fn tolerances(samples: &Samples, pts: Option<&Scattered>, opts: &FitO
             if c.uncertainty.len() != samples.z.len() {
                 return Err(TsplineError::Fit(format!("{} per-cell tolerances for {} cells", c.uncertainty.len(), samples.z.len())));
             }
-            let min = c.min_over(|q| !samples.z[q].is_nan()).unwrap_or(opts.max_error);
+            let min = c.min_over(|q| !samples.z.get(q).is_nan()).unwrap_or(opts.max_error);
             if !(min > 0.0 && min.is_finite()) {
                 return Err(TsplineError::Fit(format!("the per-cell tolerance must be positive at every valid cell, got {min}")));
             }
@@ -1240,8 +1493,8 @@ pub(crate) fn check_written(
     errs.par_chunks_mut(rows * w).enumerate().for_each(|(b, out)| {
         let j0 = b * rows;
         let z = eval_rows_as_eval(&written, ex.as_ref(), w, j0, j0 + out.len() / w);
-        for ((e, zk), dk) in out.iter_mut().zip(z).zip(&samples.z[j0 * w..]) {
-            *e = err_of(zk, *dk);
+        for (k, (e, zk)) in out.iter_mut().zip(z).enumerate() {
+            *e = err_of(zk, samples.z.get(j0 * w + k));
         }
     });
     Ok(summarize(mesh, pb, w, errs, tol))
@@ -1263,7 +1516,7 @@ fn fit_impl(
     if samples.valid_count() == 0 {
         return Err(TsplineError::Fit("the raster has no valid cell".into()));
     }
-    check_value_range(&samples.z)?;
+    check_heights_range(&samples.z)?;
     if let Some(p) = pts {
         check_value_range(&p.z)?;
     }
@@ -1385,12 +1638,32 @@ mod tests {
 
     fn sample(pb: &PbSpline, w: usize, h: usize) -> Samples {
         let g = GridSpec { s0: 0.0, t0: 0.0, ds: 1.0, dt: 1.0, ns: w, nt: h };
-        Samples { width: w, height: h, z: pb.eval_grid(&g, true) }
+        Samples { width: w, height: h, z: pb.eval_grid(&g, true).into() }
+    }
+
+    /// The radix selection agrees with sorting an f32 copy, across signs, zeros, infinities,
+    /// ties and values that round to the same f32.
+    #[test]
+    fn nth_smallest_f32_is_the_sorted_f32_copys_element() {
+        let mut seed = 3u64;
+        let mut rnd = || {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut errs: Vec<f64> = (0..200_000).map(|_| (rnd() - 0.3) * 10f64.powi((rnd() * 12.0) as i32 - 6)).collect();
+        errs.extend([0.0, -0.0, f64::INFINITY, f64::NEG_INFINITY, f64::NAN, f64::NAN, 1.0, 1.0 + 1e-12, 1.0]);
+        let mut sorted: Vec<f32> = errs.iter().filter(|e| !e.is_nan()).map(|&e| e as f32).collect();
+        sorted.sort_by(|a, b| a.total_cmp(b));
+        for k in [0, 1, 2, 7, 1000, sorted.len() / 2 - 1, sorted.len() / 2, sorted.len() - 2, sorted.len() - 1] {
+            assert_eq!(nth_smallest_f32(&errs, [k])[0].to_bits(), sorted[k].to_bits(), "k = {k}");
+            let [a, b] = nth_smallest_f32(&errs, [k, sorted.len() - 1 - k]);
+            assert_eq!((a.to_bits(), b.to_bits()), (sorted[k].to_bits(), sorted[sorted.len() - 1 - k].to_bits()), "k = {k}");
+        }
     }
 
     #[test]
     fn bilinear_standard_form() {
-        let s = Samples { width: 2, height: 2, z: vec![1.0, 2.0, 3.0, f64::NAN] };
+        let s = Samples { width: 2, height: 2, z: vec![1.0, 2.0, 3.0, f64::NAN].into() };
         assert_eq!(s.bilinear(0.0, 0.0), 1.0);
         assert_eq!(s.bilinear(1.0, 0.0), 2.0); // integer position next to a no-data corner
         assert_eq!(s.bilinear(0.5, 0.0), 1.5);
@@ -1404,7 +1677,7 @@ mod tests {
     #[test]
     fn synthetic_truth_recovered() {
         for degree in [Degree::Linear, Degree::Cubic] {
-            let samples0 = Samples { width: 65, height: 65, z: vec![0.0; 65 * 65] };
+            let samples0 = Samples { width: 65, height: 65, z: vec![0.0; 65 * 65].into() };
             let mut opts = FitOptions::new(degree, 1e-9);
             opts.overhang = 0.0;
             let mut truth = initial_mesh(&samples0, &opts);
@@ -1452,7 +1725,7 @@ mod tests {
     fn final_check_evaluates_as_eval_does() {
         let (w, h) = (70, 50);
         let z: Vec<f64> = (0..w * h).map(|q| ((q % w) as f64 * 0.21).sin() * 7.0 + ((q / w) as f64 * 0.13).cos() * 4.0).collect();
-        let s = Samples { width: w, height: h, z };
+        let s = Samples { width: w, height: h, z: z.into() };
         for (degree, method) in [(Degree::Cubic, Method::Lsq), (Degree::Linear, Method::Drag)] {
             let mut o = FitOptions::new(degree, 0.5);
             o.method = method;
@@ -1519,7 +1792,7 @@ mod tests {
         assert_eq!(d.t0 + d.nt as f64 * d.cell, 59.5); // the top edge (first raster row)
         let d = Domain::anchored(100, 60, 25.0, false);
         assert_eq!(d.t0, -0.5);
-        let samples = Samples { width: 100, height: 60, z: vec![1.0; 6000] };
+        let samples = Samples { width: 100, height: 60, z: vec![1.0; 6000].into() };
         let mut o = FitOptions::new(Degree::Cubic, 0.1);
         o.domain = Some(Domain::anchored(100, 60, 25.0, true));
         let m = initial_mesh(&samples, &o);
@@ -1531,8 +1804,8 @@ mod tests {
     #[test]
     fn plane_needs_only_the_initial_mesh() {
         let (w, h) = (120, 80);
-        let z = (0..w * h).map(|q| 12.0 + 0.3 * (q % w) as f64 - 0.7 * (q / w) as f64).collect();
-        let s = Samples { width: w, height: h, z };
+        let z: Vec<f64> = (0..w * h).map(|q| 12.0 + 0.3 * (q % w) as f64 - 0.7 * (q / w) as f64).collect();
+        let s = Samples { width: w, height: h, z: z.into() };
         let r = fit(&s, &FitOptions::new(Degree::Linear, 1e-6), &Backend::Cpu, &mut |_| {}).unwrap();
         assert_eq!(r.stop, StopReason::ToleranceReached);
         assert_eq!(r.iterations.len(), 1);
@@ -1553,7 +1826,7 @@ mod tests {
                 }
             })
             .collect();
-        let s = Samples { width: w, height: h, z };
+        let s = Samples { width: w, height: h, z: z.into() };
         for (degree, method) in [(Degree::Linear, Method::Lsq), (Degree::Cubic, Method::Lsq), (Degree::Linear, Method::Drag)] {
             let mut o = FitOptions::new(degree, 0.25);
             o.method = method;
@@ -1573,8 +1846,8 @@ mod tests {
     #[test]
     fn control_point_cap_is_reported() {
         let (w, h) = (64, 64);
-        let z = (0..w * h).map(|q| ((q % w) as f64 * 0.3).sin() * 10.0).collect();
-        let s = Samples { width: w, height: h, z };
+        let z: Vec<f64> = (0..w * h).map(|q| ((q % w) as f64 * 0.3).sin() * 10.0).collect();
+        let s = Samples { width: w, height: h, z: z.into() };
         let mut o = FitOptions::new(Degree::Linear, 0.01);
         o.max_points = Some(60);
         let r = fit(&s, &o, &Backend::Cpu, &mut |_| {}).unwrap();
@@ -1584,14 +1857,14 @@ mod tests {
 
     #[test]
     fn bad_inputs() {
-        let s = Samples { width: 3, height: 3, z: vec![f64::NAN; 9] };
+        let s = Samples { width: 3, height: 3, z: vec![f64::NAN; 9].into() };
         assert!(fit(&s, &FitOptions::new(Degree::Linear, 1.0), &Backend::Cpu, &mut |_| {}).is_err());
-        let s = Samples { width: 1, height: 1, z: vec![5.0] };
+        let s = Samples { width: 1, height: 1, z: vec![5.0].into() };
         assert!(fit(&s, &FitOptions::new(Degree::Linear, 0.0), &Backend::Cpu, &mut |_| {}).is_err());
         let r = fit(&s, &FitOptions::new(Degree::Cubic, 0.1), &Backend::Cpu, &mut |_| {}).unwrap();
         assert_eq!(r.stop, StopReason::ToleranceReached);
         // constant raster
-        let s = Samples { width: 10, height: 7, z: vec![-3.0; 70] };
+        let s = Samples { width: 10, height: 7, z: vec![-3.0; 70].into() };
         let r = fit(&s, &FitOptions::new(Degree::Cubic, 1e-9), &Backend::Cpu, &mut |_| {}).unwrap();
         assert_eq!(r.iterations.len(), 1);
     }

@@ -58,7 +58,8 @@ impl Georef {
     }
 }
 
-/// Bit mask of the data footprint at raster resolution (spec §2.2 masking).
+/// Bit mask of the data footprint at raster resolution (spec §2.2 masking), as the `.tmesh` and
+/// `.tmb` files store it; made from NaN heights by [`DataMask::of_samples`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct DataMask {
     pub width: usize,
@@ -68,6 +69,13 @@ pub struct DataMask {
 }
 
 impl DataMask {
+    /// The mask of a raster in the fit's layout: a cell has data where its height is not NaN.
+    /// The only place a mask is made from data (docs/decisions.md#nan-is-no-data): in memory,
+    /// NaN says "no data"; the mask is how the file stores that.
+    pub fn of_samples(samples: &crate::fit::Samples) -> DataMask {
+        DataMask { width: samples.width, height: samples.height, bits: samples.z.iter().map(|v| !v.is_nan()).collect() }
+    }
+
     pub fn get(&self, i: usize, j: usize) -> bool {
         self.bits[j * self.width + i]
     }

@@ -400,14 +400,14 @@ mod tests {
         use crate::fit::{fit, Backend, FitOptions, Samples};
         let (w, h) = (61usize, 47usize);
         let mut seed = 9u64;
-        let z = (0..w * h)
+        let z: Vec<f64> = (0..w * h)
             .map(|i| {
                 let (x, y) = ((i % w) as f64, (i / w) as f64);
                 let channel = if (x - 0.6 * y - 12.0).abs() < 2.0 { -4.0 } else { 0.0 };
                 20.0 * (-((x - 30.0).powi(2) + (y - 20.0).powi(2)) / 200.0).exp() + channel + 0.3 * lcg(&mut seed)
             })
             .collect();
-        let samples = Samples { width: w, height: h, z };
+        let samples = Samples { width: w, height: h, z: z.into() };
         for (degree, e) in [(Degree::Linear, 1.0), (Degree::Cubic, 1.0), (Degree::Cubic, 0.4)] {
             let r = fit(&samples, &FitOptions::new(degree, e), &Backend::Cpu, &mut |_| {}).unwrap();
             assert!(r.mesh.leaf_count() > 40, "the fit refined");

@@ -38,7 +38,7 @@
 //! let height = |s: f64, t: f64| 10.0 + 0.3 * s + 2.0 * (s / 7.0).sin() * (t / 5.0).cos();
 //! let mut z: Vec<f64> = (0..w * h).map(|q| height((q % w) as f64, (q / w) as f64)).collect();
 //! z[15 * w + 20] = f64::NAN; // no data
-//! let samples = Samples { width: w, height: h, z };
+//! let samples = Samples { width: w, height: h, z: z.into() };
 //! let result = fit(&samples, &FitOptions::new(Degree::Cubic, 0.05), &Backend::Cpu, &mut |_| {}).unwrap();
 //! assert_eq!(result.stop, StopReason::ToleranceReached);
 //!

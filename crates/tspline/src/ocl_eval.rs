@@ -333,8 +333,8 @@ mod tests {
         let m = refined(Degree::Cubic);
         let pb = PbSpline::build(&m);
         let (w, h) = (96usize, 80usize);
-        let z = (0..w * h).map(|q| ((q % w) as f64 * 0.2).sin() * 5.0 + (q / w) as f64 * 0.1).collect();
-        let samples = Samples { width: w, height: h, z };
+        let z: Vec<f64> = (0..w * h).map(|q| ((q % w) as f64 * 0.2).sin() * 5.0 + (q / w) as f64 * 0.1).collect();
+        let samples = Samples { width: w, height: h, z: z.into() };
         let a = fit_drag(&pb, &samples, 25, 0.0, &Backend::Cpu).unwrap();
         let b = fit_drag(&pb, &samples, 25, 0.0, &Backend::OpenCl(&ocl)).unwrap();
         for (x, y) in a.iter().zip(&b) {

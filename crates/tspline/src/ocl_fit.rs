@@ -229,13 +229,13 @@ mod tests {
             }
             let pb = PbSpline::build(&m);
             let (w, h) = (58, 42);
-            let z = (0..w * h)
+            let z: Vec<f64> = (0..w * h)
                 .map(|q| {
                     let (x, y) = ((q % w) as f64, (q / w) as f64);
                     if (x - 20.0).powi(2) + (y - 15.0).powi(2) < 30.0 { f64::NAN } else { (x * 0.2).sin() * 5.0 + 0.1 * x * y / 10.0 }
                 })
                 .collect();
-            let samples = crate::fit::Samples { width: w, height: h, z };
+            let samples = crate::fit::Samples { width: w, height: h, z: z.into() };
             let cpu = crate::fit::fit_lsq(&m, &pb, &samples).unwrap();
             let dev = crate::fit::fit_lsq_with(&m, &pb, &samples, Some(&o)).unwrap();
             let worst = cpu.iter().zip(&dev).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);

@@ -835,7 +835,7 @@ mod tests {
             let mut samples = Vec::new();
             for tile in 0..2usize {
                 let z: Vec<f64> = (0..w * h).map(|q| f((q % w + tile * w) as f64, (q / w) as f64)).collect();
-                let s = Samples { width: w, height: h, z };
+                let s = Samples { width: w, height: h, z: z.into() };
                 let mut o = FitOptions::new(degree, e);
                 o.domain = Some(Domain::anchored(w, h, 8.0, false));
                 let r = crate::fit::fit(&s, &o, &Backend::Cpu, &mut |_| {}).unwrap();

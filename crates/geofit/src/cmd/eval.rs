@@ -92,14 +92,14 @@ fn output_grid(args: &Args, file: &TMeshFile, write_opts: &mut WriteOptions) -> 
     }
 }
 
-/// --mask: the cells valid in a raster of the output's size.
-fn extra_mask(args: &Args, out: &Raster) -> Result<Option<Vec<bool>>, CliError> {
+/// --mask: a raster of the output's size whose cells without a value stay empty.
+fn extra_mask(args: &Args, out: &Raster) -> Result<Option<Raster>, CliError> {
     let Some(m) = &args.mask else { return Ok(None) };
     let (r, name) = read_raster_arg(m)?;
     if r.width != out.width || r.height != out.height {
         return Err(CliError::usage(format!("--mask {name} is {}×{}, the output grid is {}×{}", r.width, r.height, out.width, out.height)));
     }
-    Ok(Some(r.valid))
+    Ok(Some(r))
 }
 
 fn evaluate(args: &Args, config: &Config, file: &TMeshFile, params: &Params) -> Result<Vec<f64>, CliError> {
@@ -151,7 +151,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     let grid = output_grid(&args, &file, &mut write_opts)?;
     let extra = extra_mask(&args, &grid.raster)?;
     let z = evaluate(&args, config, &file, &grid.params)?;
-    let out = grid.fill(z, args.no_mask, extra.as_deref());
+    let out = grid.fill(z, args.no_mask, extra.as_ref());
     write_raster_arg(&out, args.output.as_deref(), &write_opts)?;
     Ok(Exit::Ok)
 }

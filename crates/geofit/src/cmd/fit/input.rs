@@ -5,7 +5,7 @@
 use raster_io::Raster;
 use raster_proc::warp::WarpField;
 use tspline::fit::{Domain, Samples, Scattered};
-use tspline::format::{DataMask, Georef};
+use tspline::format::Georef;
 use tspline::tolerance::CellTolerance;
 use tspline_raster::indirect::{self, WarpChoice};
 use tspline_raster::screening::{self, RasterTolerance, ScreenError, Screening};
@@ -34,7 +34,6 @@ pub(super) struct Prepared {
     pub name: String,
     pub samples: Samples,
     pub georef: Georef,
-    pub mask: DataMask,
     /// `--indirect`: the warp field and the original cells as scattered points.
     pub field: Option<WarpField>,
     pub points: Option<Scattered>,
@@ -232,18 +231,17 @@ pub(super) fn prepare(args: &Args, config: &Config) -> Result<Prepared, CliError
     let e_min = tol.min_over(&raster);
     let e_text = tol.describe();
     let (raster, field, original) = warp(raster, &name, args, config)?;
-    let layout = raster_layout(&raster, &name)?;
-    drop(raster); // the samples hold the data from here on (halves the peak for big rasters)
-    let cell_tolerance = match (&uncertainty, args.max_error_from_uncertainty) {
+    // the samples take the raster's values (rows flipped in place, f32 when they are f32)
+    let layout = raster_layout(raster, &name)?;
+    let cell_tolerance = match (uncertainty, args.max_error_from_uncertainty) {
         (Some(u), Some(k)) => {
             let us = raster_layout(u, &name)?.samples;
-            let u32s: Vec<f32> = us.z.iter().map(|&v| v as f32).collect();
+            let u32s: Vec<f32> = us.z.iter().map(|v| v as f32).collect();
             Some(CellTolerance { k, floor: args.max_error.unwrap_or(0.0), uncertainty: std::sync::Arc::new(u32s) })
         }
         _ => None,
     };
-    drop(uncertainty);
-    let (mut samples, georef, mask) = (layout.samples, layout.georef, layout.mask);
+    let (mut samples, georef) = (layout.samples, layout.georef);
     let points = match (&original, &field) {
         (Some(o), Some(f)) => Some(indirect::scatter_forward(o, f, &georef, &mut samples)),
         _ => None,
@@ -260,5 +258,5 @@ pub(super) fn prepare(args: &Args, config: &Config) -> Result<Prepared, CliError
             "warning: {name} holds integer values (precision 1); a tolerance of {e_min} is below the data's own precision and forces interpolation of every cell"
         ));
     }
-    Ok(Prepared { name, samples, georef, mask, field, points, cell_tolerance, e_min, e_text, valid, domain, outliers })
+    Ok(Prepared { name, samples, georef, field, points, cell_tolerance, e_min, e_text, valid, domain, outliers })
 }

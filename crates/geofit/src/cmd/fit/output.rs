@@ -2,7 +2,7 @@
 //! that reached its tolerance, unless --keep-partial) and the JSON report.
 
 use tspline::fit::{FitResult, IterationStats, Method, StopReason};
-use tspline::format::{Encoding, TMeshFile};
+use tspline::format::{DataMask, Encoding, TMeshFile};
 use tspline_raster::indirect;
 
 use super::input::{OutlierReport, Prepared};
@@ -127,7 +127,8 @@ pub(super) fn write(args: &Args, config: &Config, p: Prepared, result: FitResult
             indirect::map_back(&mut mesh, f, &p.georef);
             (None, Some(f.to_json()))
         }
-        None => (Some(p.mask), None),
+        // The fit does not change its samples: their NaN cells are the footprint to store.
+        None => (Some(DataMask::of_samples(&p.samples)), None),
     };
     let file = TMeshFile { mesh, georef: p.georef, mask, warp };
     // A fit that missed --max-error is a failed step: no mesh for the next one (make) unless

@@ -80,9 +80,8 @@ pub(super) fn run(a: StitchArgs, config: &Config) -> CmdResult {
     crate::terrain_io::gdal_notices(config);
     let (raster, _) = raster_io::read_raster_window_typed(Path::new(&a.source), 1, Some(px)).map_err(crate::terrain_io::raster_err)?;
     let name = format!("{} (tile {})", a.source, a.tile);
-    let layout = crate::terrain_io::raster_layout(&raster, &name)?;
+    let layout = crate::terrain_io::raster_layout(raster, &name)?;
     let (samples, georef) = (layout.samples, layout.georef);
-    drop(raster);
     if georef.x0 != own_file.georef.x0 || georef.y0 != own_file.georef.y0 {
         return Err(CliError::usage(format!("{}: the mesh of tile {} was not fitted on this tile's window of {}", a.meshes.replace("{id}", &a.tile), a.tile, a.source)));
     }
@@ -99,9 +98,8 @@ pub(super) fn run(a: StitchArgs, config: &Config) -> CmdResult {
         return Err(CliError::usage(format!("{}: the plan's halo is under 2 px; the seams need the cells on both sides: plan with --halo 2 (or more)", a.plan)));
     }
     let (halo, _) = raster_io::read_raster_window_typed(Path::new(&a.source), 1, Some(hp)).map_err(crate::terrain_io::raster_err)?;
-    let halo_layout = crate::terrain_io::raster_layout(&halo, &name)?;
+    let halo_layout = crate::terrain_io::raster_layout(halo, &name)?;
     let (hs, hg) = (halo_layout.samples, halo_layout.georef);
-    drop(halo);
     let ho = tiling::raster::frame_offset(&tiles, hg.x0, hg.y0, hg.dx, hg.dy);
     let source = |s: i64, t: i64| -> f64 {
         let (i, j) = (s - ho[0] as i64, t - ho[1] as i64);
