@@ -78,7 +78,11 @@ fn factor_and_solve(a: &SymCsr, b: &[f64], csc: (&[usize], &[usize], &[f64]), ma
     if bytes > max_bytes {
         return Err(CholeskyError::FactorTooLarge { bytes, limit: max_bytes });
     }
-    let par = if rayon::current_num_threads() > 1 { Par::rayon(0) } else { Par::Seq };
+    // Sequential: faer's parallel supernodal factorisation gives thread-count dependent last
+    // bits (tests.rs `cholesky_bits_do_not_depend_on_the_thread_count`), which the crate's
+    // promise of the same answer on any machine excludes; measured CPU-neutral on 2 cores
+    // (BENCHMARKS.md "Fit CPU on the largest mesh").
+    let par = Par::Seq;
     let mut l = vec![0.0; symbolic.len_val()];
     let mut buf = MemBuffer::new(symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default()));
     symbolic
