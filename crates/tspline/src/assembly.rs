@@ -650,6 +650,36 @@ mod tests {
     use crate::mesh::Degree;
     use crate::testing::{lcg, refined_mesh};
 
+    /// The batched sums (`Elements::add_batch`) must be the one-pass sums to the bit, and both
+    /// the plain BᵀB, Bᵀd and column sums (checked against dot products written out here).
+    #[test]
+    fn gram_and_moments_in_batches_equal_one_pass() {
+        let (m4, cells, cut) = (8, 11, 4);
+        let b: Vec<f64> = (0..m4 * cells).map(|k| ((k * 37 % 23) as f64 - 11.0) / 7.0).collect();
+        let d: Vec<f64> = (0..cells).map(|c| (c as f64).sin()).collect();
+        let (mut g1, mut m1) = (vec![0.0; m4 * m4], vec![0.0; 2 * m4]);
+        gram_upper(&b, m4, &mut g1);
+        moments(&b, m4, &d, &mut m1);
+        let (mut g2, mut m2) = (vec![0.0; m4 * m4], vec![0.0; 2 * m4]);
+        for (rows, ds) in [(&b[..cut * m4], &d[..cut]), (&b[cut * m4..], &d[cut..])] {
+            gram_upper(rows, m4, &mut g2);
+            moments(rows, m4, ds, &mut m2);
+        }
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&g1), bits(&g2));
+        assert_eq!(bits(&m1), bits(&m2));
+        let at = |c: usize, x: usize| b[c * m4 + x];
+        for x in 0..m4 {
+            for y in x..m4 {
+                let dot: f64 = (0..cells).map(|c| at(c, x) * at(c, y)).sum();
+                assert!((g1[x * m4 + y] - dot).abs() < 1e-12, "BᵀB[{x}][{y}]");
+            }
+            let bd: f64 = (0..cells).map(|c| at(c, x) * d[c]).sum();
+            let col: f64 = (0..cells).map(|c| at(c, x)).sum();
+            assert!((m1[x] - bd).abs() < 1e-12 && (m1[m4 + x] - col).abs() < 1e-12, "moments[{x}]");
+        }
+    }
+
     /// A wavy raster over `w`×`h` cells with a few no-data holes.
     fn raster(w: usize, h: usize) -> Samples {
         let mut seed = 5u64;
