@@ -16,7 +16,7 @@
 //! let l = samples_from_raster(r.clone()).unwrap();
 //! let grid = EvalGrid::of_mask(&l.georef, &DataMask::of_samples(&l.samples));
 //! assert_eq!(grid.raster.geotransform, r.geotransform);
-//! assert_eq!(grid.mask.unwrap(), r.valid_mask()); // the stored mask, back in the raster's row order
+//! assert_eq!(grid.mask.unwrap().to_rows(), r.valid_mask()); // the stored mask, back in the raster's row order
 //! ```
 
 use raster_io::Raster;
@@ -86,7 +86,30 @@ impl Params {
 pub struct EvalGrid {
     pub raster: Raster,
     pub params: Params,
-    pub mask: Option<Vec<bool>>,
+    pub mask: Option<Footprint>,
+}
+
+/// The cells a stored mask keeps, read in place: the `.tmesh` data mask counts rows from the
+/// bottom (the fit's layout), the warp's footprint from the top (its raster's). One mask type,
+/// [`DataMask`], for both; no row-flipped copy (docs/decisions.md#nan-is-no-data).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Footprint {
+    pub mask: DataMask,
+    pub rows_from_bottom: bool,
+}
+
+impl Footprint {
+    /// Whether output cell `q` (row-major, north-up) is inside the footprint.
+    pub fn keeps(&self, q: usize) -> bool {
+        let w = self.mask.width;
+        let (col, row) = (q % w, q / w);
+        let j = if self.rows_from_bottom { self.mask.height - 1 - row } else { row };
+        self.mask.get(col, j)
+    }
+    /// Every cell's [`Footprint::keeps`], north-up row-major (for tests and reports).
+    pub fn to_rows(&self) -> Vec<bool> {
+        (0..self.mask.width * self.mask.height).map(|q| self.keeps(q)).collect()
+    }
 }
 
 /// Outputs larger than this many cells are refused: they would not be written anyway.
@@ -110,20 +133,14 @@ impl EvalGrid {
     pub fn of_warp_source(src: &raster_proc::warp::SourceGrid, crs: Option<String>, to_param: impl Fn(f64, f64) -> (f64, f64)) -> Result<EvalGrid, raster_proc::ProcError> {
         let raster = Raster::new_empty(src.width, src.height, src.geotransform, src.crs.clone().or(crs));
         let params = Params::List(cell_params(&raster, to_param));
-        Ok(EvalGrid { raster, params, mask: Some(src.mask()?) })
+        let mask = DataMask { width: src.width, height: src.height, bits: src.mask()? };
+        Ok(EvalGrid { raster, params, mask: Some(Footprint { mask, rows_from_bottom: false }) })
     }
 
     /// The raster a mesh was fitted on, north-up, with its stored data mask.
     pub fn of_mask(georef: &Georef, mask: &DataMask) -> EvalGrid {
-        let (w, h) = (mask.width, mask.height);
-        let mut grid = EvalGrid::regular(georef, w, h, 0.0, 0.0);
-        let mut keep = vec![false; w * h];
-        for row in 0..h {
-            for col in 0..w {
-                keep[row * w + col] = mask.get(col, h - 1 - row);
-            }
-        }
-        grid.mask = Some(keep);
+        let mut grid = EvalGrid::regular(georef, mask.width, mask.height, 0.0, 0.0);
+        grid.mask = Some(Footprint { mask: mask.clone(), rows_from_bottom: true });
         grid
     }
 
@@ -153,9 +170,9 @@ impl EvalGrid {
     /// a cell where it is finite, the stored mask keeps it (unless `ignore_mask`) and `extra`
     /// (another raster of the same size) has a value there.
     pub fn fill(mut self, z: Vec<f64>, ignore_mask: bool, extra: Option<&Raster>) -> Raster {
-        let stored = if ignore_mask { None } else { self.mask.as_deref() };
+        let stored = if ignore_mask { None } else { self.mask.as_ref() };
         for (q, v) in z.into_iter().enumerate() {
-            if v.is_finite() && stored.is_none_or(|m| m[q]) && extra.is_none_or(|m| m.is_valid(q)) {
+            if v.is_finite() && stored.is_none_or(|m| m.keeps(q)) && extra.is_none_or(|m| m.is_valid(q)) {
                 self.raster.data[q] = v;
             }
         }
@@ -242,7 +259,7 @@ mod tests {
         let l = samples_from_raster(r.clone()).unwrap();
         let g = EvalGrid::of_mask(&l.georef, &DataMask::of_samples(&l.samples));
         assert_eq!(g.raster.geotransform, r.geotransform);
-        assert_eq!(g.mask, Some(r.valid_mask()));
+        assert_eq!(g.mask.map(|m| m.to_rows()), Some(r.valid_mask()));
         // every output cell's (s, t) is the parameter of its world centre
         for (q, st) in g.params.list().iter().enumerate() {
             let (x, y) = g.raster.cell_centre(q % 2, q / 2);
