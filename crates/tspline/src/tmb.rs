@@ -582,6 +582,29 @@ mod tests {
         assert_eq!(back.mesh.points, canonical(&f.mesh).points);
     }
 
+    /// A mesh of anisotropic 2-splits (rectangles, docs/decisions.md#anisotropic-splits-issue-19)
+    /// is not a quadtree: it takes the explicit form and reads back to the XML's mesh, which
+    /// evaluates to the same bits.
+    #[test]
+    fn anisotropic_mesh_takes_the_explicit_form() {
+        let mut m = crate::testing::aniso_mesh(Degree::Cubic, 7, 3);
+        for p in &mut m.points {
+            p.z = (p.s * 0.21).sin() * 5.0 + 0.1 * p.t;
+        }
+        let f = TMeshFile { mesh: m, georef: Georef::identity(), mask: None, warp: None };
+        let b = bytes(&f, true);
+        let mut d = flate2::read::ZlibDecoder::new(&b[17..b.len() - 4]);
+        let mut v = Vec::new();
+        d.read_to_end(&mut v).unwrap();
+        assert_eq!(v[1] & QUADTREE, 0);
+        let fb = read(&b).unwrap();
+        let fx = crate::format::read(&bytes(&f, false)).unwrap();
+        assert_eq!(fb.mesh.points, canonical(&fx.mesh).points);
+        let g = GridSpec { s0: -16.0, t0: 0.0, ds: 0.5, dt: 0.5, ns: 161, nt: 129 };
+        let (zb, zx) = (PbSpline::build(&fb.mesh).eval_grid(&g, true), PbSpline::build(&fx.mesh).eval_grid(&g, true));
+        assert!(zb.iter().zip(&zx).all(|(a, b)| a.to_bits() == b.to_bits()));
+    }
+
     /// Every truncation and a flipped byte anywhere give a Format error, never a panic or a
     /// different mesh (a flip in the deflate stream's unused padding bits changes nothing).
     #[test]
