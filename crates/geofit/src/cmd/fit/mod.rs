@@ -140,7 +140,7 @@ pub struct Args {
     #[arg(long)]
     pub no_coarsen: bool,
     /// How the refinement splits a cell over the tolerance: `quad` (into four), or `aniso` (in
-    /// two across the direction the residual varies in, or in four; not with --tile).
+    /// two across the direction the residual varies in, or in four; not with --tile or --srcwin).
     #[arg(long, value_enum, default_value_t = SplitArg::Quad)]
     pub split: SplitArg,
     /// Write a JSON report (options, per-iteration table, stop reason) to this path.
