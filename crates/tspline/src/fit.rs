@@ -1454,10 +1454,12 @@ fn kink_gains(pb: &PbSpline, samples: &Samples, r: Rect) -> (f64, f64) {
             if d.abs() < 1e-300 {
                 continue;
             }
-            for row in col + 1..n {
-                let f = a[row][col] / d;
-                for k in col..=n {
-                    a[row][k] -= f * a[col][k];
+            let (top, below) = a.split_at_mut(col + 1);
+            let pivot = &top[col];
+            for r in below.iter_mut() {
+                let f = r[col] / d;
+                for (x, p) in r[col..].iter_mut().zip(&pivot[col..]) {
+                    *x -= f * p;
                 }
             }
         }
