@@ -1336,7 +1336,7 @@ pub(crate) fn refine(
     }
     let dirs: Vec<SplitDir> = match opts.split {
         SplitRule::Quad => vec![SplitDir::Quad; splittable.len()],
-        SplitRule::Anisotropic => splittable.par_iter().map(|&c| split_direction(pb, samples, mesh.cells[c as usize].rect)).collect(),
+        SplitRule::Anisotropic => splittable.par_iter().map(|&c| split_direction(pb, samples, mesh.cells[c as usize].rect, opts.max_error)).collect(),
     };
     let mut next = mesh.clone();
     let mut geom = |s: f64, t: f64| (s, t, {
@@ -1361,6 +1361,11 @@ pub(crate) fn refine(
 /// How much more one split direction must explain than the other to be chosen alone.
 const ANISO_RATIO: f64 = 1.5;
 
+/// A leaf whose residual (on the cells [`kink_gains`] looks at) reaches this many times the
+/// tolerance is split into four: it is too coarse in both directions, and the kinks' direction
+/// means something only near the tolerance (measured: BENCHMARKS.md, anisotropic refinement).
+const ANISO_FAR: f64 = 4.0;
+
 /// Raster cells per side of a leaf that [`kink_gains`] looks at, at most.
 const KINK_SAMPLES: f64 = 24.0;
 
@@ -1368,18 +1373,21 @@ const KINK_SAMPLES: f64 = 24.0;
 /// e = data − surface at the valid raster cells in its closed box: with u, v the cell's
 /// coordinates scaled to [−1, 1], the least-squares fit of e by {1, u, v, uv} is compared with
 /// the fits that add a kink at the s mid-point ({|u|, |u|v}: what a knot line across s adds) and
-/// at the t mid-point ({|v|, u|v|}). A 2-split across the direction whose kink explains
-/// [`ANISO_RATIO`] times more of e than the other's; else a 4-split. A side shorter than 2
+/// at the t mid-point ({|v|, u|v|}). A 4-split where |e| reaches [`ANISO_FAR`] times the
+/// tolerance `e_max`; else a 2-split across the direction whose kink explains [`ANISO_RATIO`]
+/// times more of e than the other's; else a 4-split. A side shorter than 2
 /// (the sample spacing, spec §2.2) is not halved; the aspect stays at most
 /// [`crate::mesh::MAX_ASPECT`]. docs/decisions.md#anisotropic-splits-issue-19
-pub(crate) fn split_direction(pb: &PbSpline, samples: &Samples, r: Rect) -> SplitDir {
+pub(crate) fn split_direction(pb: &PbSpline, samples: &Samples, r: Rect, e_max: f64) -> SplitDir {
     let (w, h) = (r.width(), r.height());
     let can_s = w >= 2.0;
     let can_t = h >= 2.0;
     let dir = match (can_s, can_t) {
         (false, false) | (true, true) => {
-            let (gs, gt) = kink_gains(pb, samples, r);
-            if gs > ANISO_RATIO * gt {
+            let (gs, gt, emax) = kink_gains(pb, samples, r);
+            if emax > ANISO_FAR * e_max {
+                SplitDir::Quad
+            } else if gs > ANISO_RATIO * gt {
                 SplitDir::S
             } else if gt > ANISO_RATIO * gs {
                 SplitDir::T
@@ -1393,8 +1401,9 @@ pub(crate) fn split_direction(pb: &PbSpline, samples: &Samples, r: Rect) -> Spli
     crate::mesh::aspect_capped(&r, dir, 1.0)
 }
 
-/// (SSE explained by the s kink, by the t kink) of the residual in `r` (see [`split_direction`]).
-fn kink_gains(pb: &PbSpline, samples: &Samples, r: Rect) -> (f64, f64) {
+/// (SSE explained by the s kink, by the t kink, max |e|) of the residual in `r` (see
+/// [`split_direction`]).
+fn kink_gains(pb: &PbSpline, samples: &Samples, r: Rect) -> (f64, f64, f64) {
     let sm = 0.5 * (r.s_min + r.s_max);
     let tm = 0.5 * (r.t_min + r.t_max);
     let (hw, hh) = (0.5 * r.width(), 0.5 * r.height());
@@ -1406,6 +1415,7 @@ fn kink_gains(pb: &PbSpline, samples: &Samples, r: Rect) -> (f64, f64) {
     let mut g = [[0.0f64; 8]; 8];
     let mut m = [0.0f64; 8];
     let mut ee = 0.0;
+    let mut emax = 0.0f64;
     if i1 >= i0 && j1 >= j0 {
         // at most KINK_SAMPLES² cells of a large leaf (a regular subsample): the direction of a
         // coarse leaf's residual does not need every cell, and early iterations mark most of
@@ -1424,6 +1434,7 @@ fn kink_gains(pb: &PbSpline, samples: &Samples, r: Rect) -> (f64, f64) {
                     continue;
                 }
                 let e = d - z;
+                emax = emax.max(e.abs());
                 let u = (i as f64 - sm) / hw;
                 let f = [1.0, u, v, u * v, u.abs(), u.abs() * v, v.abs(), u * v.abs()];
                 for a in 0..8 {
@@ -1480,7 +1491,7 @@ fn kink_gains(pb: &PbSpline, samples: &Samples, r: Rect) -> (f64, f64) {
     let base = explained(&[0, 1, 2, 3]);
     let gs = (explained(&[0, 1, 2, 3, 4, 5]) - base).max(0.0);
     let gt = (explained(&[0, 1, 2, 3, 6, 7]) - base).max(0.0);
-    (gs, gt)
+    (gs, gt, emax)
 }
 
 /// The largest |z| a fit accepts: 1e100, so that squares (1e200) and sums of squares over any
