@@ -707,3 +707,38 @@ fn damaged_binary_tmesh_is_exit_3() {
         }
     }
 }
+
+/// `fit --split aniso` (issue 19, docs/decisions.md#anisotropic-splits-issue-19): the written
+/// mesh (.tmesh and .tmb) meets --max-error on the independent check with fewer control points
+/// than the default 4-splits; the report names the rule; a tile window refuses it.
+#[test]
+fn aniso_splits_meet_the_tolerance_with_fewer_points() {
+    if !python_ok() || !common::tool("gdal_translate") {
+        return;
+    }
+    let Some(input) = common::fixture("terrain/giswqs-lidar_dem.tif") else { return };
+    let input = input.to_str().unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let p = |n: &str| dir.path().join(n).to_str().unwrap().to_string();
+    let mut points = Vec::new();
+    for split in ["quad", "aniso"] {
+        let (mesh, tmb, report, eval) = (p(&format!("{split}.tmesh")), p(&format!("{split}.tmb")), p(&format!("{split}.json")), p(&format!("{split}.tif")));
+        let o = common::run(&["fit", input, "-o", &mesh, "--max-error", "0.5", "--device", "cpu", "--split", split, "--report", &report], None);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let rep: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
+        assert_eq!(rep.get("split").map(|v| v.as_str().unwrap()), (split == "aniso").then_some("anisotropic"));
+        points.push(rep["control_points"].as_u64().unwrap());
+        let o = common::run(&["fit", input, "-o", &tmb, "--max-error", "0.5", "--device", "cpu", "--split", split], None);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        for m in [&mesh, &tmb] {
+            let o = common::run(&["eval", m, "-o", &eval], None);
+            assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+            let chk = Command::new("python3").args([&script("tspline_maxerror.py"), input, &eval, "0.5"]).output().unwrap();
+            assert!(chk.status.success(), "{split} {m}: {}{}", String::from_utf8_lossy(&chk.stdout), String::from_utf8_lossy(&chk.stderr));
+        }
+    }
+    assert!(points[1] < points[0], "aniso {} control points, quad {}", points[1], points[0]);
+    let o = common::run(&["fit", input, "-o", &p("w.tmesh"), "--max-error", "0.5", "--split", "aniso", "--srcwin", "0", "0", "200", "200", "--tile-cell", "64"], None);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("square cells"), "{}", String::from_utf8_lossy(&o.stderr));
+}

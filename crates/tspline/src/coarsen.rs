@@ -75,7 +75,7 @@ fn candidates(mesh: &TMesh, failed: &HashSet<CellId>) -> Vec<CellId> {
     (0..mesh.cells.len() as CellId)
         .filter(|c| {
             let cell = &mesh.cells[*c as usize];
-            cell.alive && !failed.contains(c) && cell.children.is_some_and(|k| k.iter().all(|&k| mesh.cells[k as usize].is_leaf()))
+            cell.alive && !failed.contains(c) && cell.children.is_some_and(|k| k.iter().all(|k| mesh.cells[k as usize].is_leaf()))
         })
         .collect()
 }
@@ -136,7 +136,7 @@ pub(crate) fn coarsen(
         for &c in &cand {
             m.coarsen(c)?;
         }
-        m.repair(1.0, &mut geom);
+        m.repair_with(1.0, opts.split, &mut geom);
         let mut merged: Vec<CellId> = cand.iter().copied().filter(|&c| m.cells[c as usize].is_leaf()).collect();
         let merged_any = !merged.is_empty();
         let kept = loop {
@@ -160,7 +160,7 @@ pub(crate) fn coarsen(
                 .copied()
                 .filter(|&c| {
                     let r = m.cells[c as usize].rect;
-                    over_rects.iter().any(|&o| distance(r, o) <= reach * r.width())
+                    over_rects.iter().any(|&o| distance(r, o) <= reach * r.width().max(r.height()))
                 })
                 .collect();
             if bad.is_empty() {
@@ -168,11 +168,12 @@ pub(crate) fn coarsen(
             }
             for &c in &bad {
                 if m.cells[c as usize].is_leaf() {
-                    m.split(c, &mut geom);
+                    let dir = m.cells[c as usize].split_as;
+                    m.split_dir(c, dir, &mut geom);
                 }
                 failed.insert(c);
             }
-            m.repair(1.0, &mut geom);
+            m.repair_with(1.0, opts.split, &mut geom);
             merged.retain(|&c| m.cells[c as usize].is_leaf());
         };
         let Some((pb_m, err)) = kept else {

@@ -59,7 +59,7 @@ use std::time::Instant;
 use rayon::prelude::*;
 
 use crate::eval::{GridSpec, PbSpline};
-use crate::mesh::{CellId, Degree, TMesh};
+use crate::mesh::{CellId, Degree, Rect, SplitDir, SplitRule, TMesh};
 use crate::ocl_eval::OclEvaluator;
 use crate::tolerance::{CellTolerance, Tolerance};
 use crate::TsplineError;
@@ -264,6 +264,9 @@ pub struct FitOptions {
     /// A fixed initial mesh instead of the overhang rule (A8): a tile of a plan, whose domain
     /// must meet its neighbours' exactly along the seams (docs/decisions.md#raster-tiles-and-seams).
     pub domain: Option<Domain>,
+    /// 4-splits only (A13), or 2-splits across the direction the residual needs
+    /// (docs/decisions.md#anisotropic-splits-issue-19). Not with `domain` (tiles need squares).
+    pub split: SplitRule,
 }
 
 /// The initial mesh of a tile: `ns × nt` square cells of side `cell` from (s0, t0). Square
@@ -294,7 +297,7 @@ impl Domain {
 
 impl FitOptions {
     pub fn new(degree: Degree, max_error: f64) -> FitOptions {
-        FitOptions { degree, max_error, max_points: None, max_iterations: 100, method: Method::Lsq, overhang: 0.25, initial_cells: 4, drag_steps: 40, local_updates: true, opencl_assembly: false, coarsen: true, cell_tolerance: None, domain: None }
+        FitOptions { degree, max_error, max_points: None, max_iterations: 100, method: Method::Lsq, overhang: 0.25, initial_cells: 4, drag_steps: 40, local_updates: true, opencl_assembly: false, coarsen: true, cell_tolerance: None, domain: None, split: SplitRule::Quad }
     }
 }
 
@@ -1295,10 +1298,12 @@ pub(crate) enum Refined {
 }
 
 /// One refinement: split the splittable leaves over the tolerance, repair; or the reason to
-/// stop (minimum cell size, control-point cap).
+/// stop (minimum cell size, control-point cap). [`SplitRule::Anisotropic`]: each leaf is split
+/// as [`split_direction`] chooses from the residual inside it.
 pub(crate) fn refine(
     mesh: &TMesh,
     pb: &PbSpline,
+    samples: &Samples,
     opts: &FitOptions,
     over_leaves: Vec<CellId>,
     err: &ErrorStats,
@@ -1306,27 +1311,44 @@ pub(crate) fn refine(
     let mut marked = over_leaves;
     marked.sort_unstable();
     marked.dedup();
-    let splittable: Vec<CellId> = marked
-        .into_iter()
-        .filter(|&c| {
-            let r = mesh.cells[c as usize].rect;
-            r.width().min(r.height()) >= 2.0
-        })
-        .collect();
+    let can_split = |c: CellId| {
+        let r = mesh.cells[c as usize].rect;
+        match opts.split {
+            SplitRule::Quad => r.width().min(r.height()) >= 2.0,
+            SplitRule::Anisotropic => r.width().max(r.height()) >= 2.0,
+        }
+    };
+    if opts.split == SplitRule::Anisotropic {
+        // A leaf at the minimum size that is still over the tolerance has no split left; its
+        // surface there is set by the blending functions of the leaves around it, which 2-splits
+        // may have left long (a 1:2 balance only along the shared side): those leaves (closed
+        // boxes that touch it) are split instead (docs/decisions.md#anisotropic-splits-issue-19).
+        let stuck: Vec<CellId> = marked.iter().copied().filter(|&c| !can_split(c)).collect();
+        for c in stuck {
+            marked.extend(mesh.leaves_in(mesh.cells[c as usize].rect).into_iter().filter(|&n| can_split(n)));
+        }
+        marked.sort_unstable();
+        marked.dedup();
+    }
+    let splittable: Vec<CellId> = marked.into_iter().filter(|&c| can_split(c)).collect();
     if splittable.is_empty() {
         return Ok(Refined::Stop(StopReason::MinCellSize { cells_over: err.over_tolerance }));
     }
+    let dirs: Vec<SplitDir> = match opts.split {
+        SplitRule::Quad => vec![SplitDir::Quad; splittable.len()],
+        SplitRule::Anisotropic => splittable.par_iter().map(|&c| split_direction(pb, samples, mesh.cells[c as usize].rect, opts.max_error)).collect(),
+    };
     let mut next = mesh.clone();
     let mut geom = |s: f64, t: f64| (s, t, {
         let z = pb.point(s, t)[2];
         if z.is_nan() { 0.0 } else { z }
     });
-    for &c in &splittable {
+    for (&c, &dir) in splittable.iter().zip(&dirs) {
         if next.cells[c as usize].is_leaf() {
-            next.split(c, &mut geom);
+            next.split_dir(c, dir, &mut geom);
         }
     }
-    next.repair(1.0, &mut geom);
+    next.repair_with(1.0, opts.split, &mut geom);
     if let Some(cap) = opts.max_points {
         let n = next.active_points().iter().filter(|a| **a).count();
         if n > cap {
@@ -1334,6 +1356,142 @@ pub(crate) fn refine(
         }
     }
     Ok(Refined::Next(next, splittable.len()))
+}
+
+/// How much more one split direction must explain than the other to be chosen alone.
+const ANISO_RATIO: f64 = 1.5;
+
+/// A leaf whose residual (on the cells [`kink_gains`] looks at) reaches this many times the
+/// tolerance is split into four: it is too coarse in both directions, and the kinks' direction
+/// means something only near the tolerance (measured: BENCHMARKS.md, anisotropic refinement).
+const ANISO_FAR: f64 = 4.0;
+
+/// Raster cells per side of a leaf that [`kink_gains`] looks at, at most.
+const KINK_SAMPLES: f64 = 24.0;
+
+/// The anisotropic split of a leaf `r` over the tolerance, chosen from the residual
+/// e = data − surface at the valid raster cells in its closed box: with u, v the cell's
+/// coordinates scaled to [−1, 1], the least-squares fit of e by {1, u, v, uv} is compared with
+/// the fits that add a kink at the s mid-point ({|u|, |u|v}: what a knot line across s adds) and
+/// at the t mid-point ({|v|, u|v|}). A 4-split where |e| reaches [`ANISO_FAR`] times the
+/// tolerance `e_max`; else a 2-split across the direction whose kink explains [`ANISO_RATIO`]
+/// times more of e than the other's; else a 4-split. A side shorter than 2
+/// (the sample spacing, spec §2.2) is not halved; the aspect stays at most
+/// [`crate::mesh::MAX_ASPECT`]. docs/decisions.md#anisotropic-splits-issue-19
+pub(crate) fn split_direction(pb: &PbSpline, samples: &Samples, r: Rect, e_max: f64) -> SplitDir {
+    let (w, h) = (r.width(), r.height());
+    let can_s = w >= 2.0;
+    let can_t = h >= 2.0;
+    let dir = match (can_s, can_t) {
+        (false, false) | (true, true) => {
+            let (gs, gt, emax) = kink_gains(pb, samples, r);
+            if emax > ANISO_FAR * e_max {
+                SplitDir::Quad
+            } else if gs > ANISO_RATIO * gt {
+                SplitDir::S
+            } else if gt > ANISO_RATIO * gs {
+                SplitDir::T
+            } else {
+                SplitDir::Quad
+            }
+        }
+        (true, false) => return SplitDir::S,
+        (false, true) => return SplitDir::T,
+    };
+    crate::mesh::aspect_capped(&r, dir, 1.0)
+}
+
+/// (SSE explained by the s kink, by the t kink, max |e|) of the residual in `r` (see
+/// [`split_direction`]).
+fn kink_gains(pb: &PbSpline, samples: &Samples, r: Rect) -> (f64, f64, f64) {
+    let sm = 0.5 * (r.s_min + r.s_max);
+    let tm = 0.5 * (r.t_min + r.t_max);
+    let (hw, hh) = (0.5 * r.width(), 0.5 * r.height());
+    let i0 = r.s_min.ceil().max(0.0);
+    let j0 = r.t_min.ceil().max(0.0);
+    let i1 = r.s_max.floor().min(samples.width as f64 - 1.0);
+    let j1 = r.t_max.floor().min(samples.height as f64 - 1.0);
+    // Gram of the 8 functions [1, u, v, uv, |u|, |u|v, |v|, u|v|] and their moments with e
+    let mut g = [[0.0f64; 8]; 8];
+    let mut m = [0.0f64; 8];
+    let mut ee = 0.0;
+    let mut emax = 0.0f64;
+    if i1 >= i0 && j1 >= j0 {
+        // at most KINK_SAMPLES² cells of a large leaf (a regular subsample): the direction of a
+        // coarse leaf's residual does not need every cell, and early iterations mark most of
+        // the raster
+        let step = |n: f64| ((n / KINK_SAMPLES).ceil() as usize).max(1);
+        let (si, sj) = (step(i1 - i0 + 1.0), step(j1 - j0 + 1.0));
+        for j in (j0 as usize..=j1 as usize).step_by(sj) {
+            let v = (j as f64 - tm) / hh;
+            for i in (i0 as usize..=i1 as usize).step_by(si) {
+                let d = samples.get(i, j);
+                if d.is_nan() {
+                    continue;
+                }
+                let z = pb.point(i as f64, j as f64)[2];
+                if !z.is_finite() {
+                    continue;
+                }
+                let e = d - z;
+                emax = emax.max(e.abs());
+                let u = (i as f64 - sm) / hw;
+                let f = [1.0, u, v, u * v, u.abs(), u.abs() * v, v.abs(), u * v.abs()];
+                for a in 0..8 {
+                    m[a] += f[a] * e;
+                    for b in a..8 {
+                        g[a][b] += f[a] * f[b];
+                    }
+                }
+                ee += e * e;
+            }
+        }
+    }
+    let explained = |idx: &[usize]| -> f64 {
+        // bᵀ G⁻¹ b on the subset (a tiny ridge keeps a rank-deficient subset solvable)
+        let n = idx.len();
+        let mut a = vec![vec![0.0f64; n + 1]; n];
+        for (p, &ia) in idx.iter().enumerate() {
+            for (q, &ib) in idx.iter().enumerate() {
+                a[p][q] = if ia <= ib { g[ia][ib] } else { g[ib][ia] };
+            }
+            a[p][p] += 1e-9 * (1.0 + g[ia][ia]);
+            a[p][n] = m[ia];
+        }
+        for col in 0..n {
+            let piv = (col..n).max_by(|&x, &y| a[x][col].abs().total_cmp(&a[y][col].abs())).unwrap_or(col);
+            a.swap(col, piv);
+            let d = a[col][col];
+            if d.abs() < 1e-300 {
+                continue;
+            }
+            let (top, below) = a.split_at_mut(col + 1);
+            let pivot = &top[col];
+            for r in below.iter_mut() {
+                let f = r[col] / d;
+                for (x, p) in r[col..].iter_mut().zip(&pivot[col..]) {
+                    *x -= f * p;
+                }
+            }
+        }
+        let mut x = vec![0.0f64; n];
+        for row in (0..n).rev() {
+            let d = a[row][row];
+            if d.abs() < 1e-300 {
+                continue;
+            }
+            let mut acc = a[row][n];
+            for k in row + 1..n {
+                acc -= a[row][k] * x[k];
+            }
+            x[row] = acc / d;
+        }
+        idx.iter().zip(&x).map(|(&i, xi)| m[i] * xi).sum::<f64>().clamp(0.0, ee)
+    };
+    let base = explained(&[0, 1, 2, 3]);
+    let gs = (explained(&[0, 1, 2, 3, 4, 5]) - base).max(0.0);
+    let gt = (explained(&[0, 1, 2, 3, 6, 7]) - base).max(0.0);
+    (gs, gt, emax)
 }
 
 /// The largest |z| a fit accepts: 1e100, so that squares (1e200) and sums of squares over any
@@ -1517,6 +1675,10 @@ fn fit_impl(
         return Err(TsplineError::Fit("the raster has no valid cell".into()));
     }
     check_heights_range(&samples.z)?;
+    if opts.split != SplitRule::Quad && opts.domain.is_some() {
+        // docs/decisions.md#anisotropic-splits-issue-19: the seam stitch needs square cells
+        return Err(TsplineError::Fit("anisotropic splits are not available for tiles of a plan (their seams need square cells)".into()));
+    }
     if let Some(p) = pts {
         check_value_range(&p.z)?;
     }
@@ -1615,7 +1777,7 @@ fn fit_impl(
         if it >= opts.max_iterations {
             return Ok(FitResult { mesh, iterations, stop: StopReason::MaxIterations });
         }
-        match refine(&mesh, &pb, opts, over_leaves, &err)? {
+        match refine(&mesh, &pb, samples, opts, over_leaves, &err)? {
             Refined::Stop(stop) => return Ok(FitResult { mesh, iterations, stop }),
             Refined::Next(next, n_split) => {
                 refined = n_split;
@@ -1904,5 +2066,100 @@ mod tests {
         }
         let whole = solve(&a, &rhs, &prior).unwrap();
         assert!(whole.iter().zip(&z).all(|(p, q)| (p - q).abs() < 1e-12));
+    }
+
+    /// A ridge: heights that vary along s only (a sharp profile), the same in every row. The
+    /// anisotropic refinement cuts across s and needs fewer control points than 4-splits at the
+    /// same tolerance, which both meet at every raster cell on an evaluation of the output mesh
+    /// alone; and the blending functions of the anisotropic mesh stay linearly independent.
+    #[test]
+    fn aniso_fits_a_ridge_with_fewer_points() {
+        let (w, h) = (97usize, 65usize);
+        let profile = |x: f64| 8.0 * (-((x - 40.0) / 3.0).powi(2)).exp() + 0.05 * x + 2.0 * (x * 0.3).sin();
+        let z: Vec<f64> = (0..w * h).map(|q| profile((q % w) as f64)).collect();
+        let samples = Samples { width: w, height: h, z: z.into() };
+        for degree in [Degree::Linear, Degree::Cubic] {
+            let e = 0.05;
+            let mut n = Vec::new();
+            for rule in [SplitRule::Quad, SplitRule::Anisotropic] {
+                let mut o = FitOptions::new(degree, e);
+                o.split = rule;
+                let r = fit(&samples, &o, &Backend::Cpu, &mut |_| {}).unwrap();
+                assert_eq!(r.stop, StopReason::ToleranceReached, "{degree:?} {rule:?}");
+                let pb = PbSpline::build(&as_written(&r.mesh).unwrap());
+                let mut errs = vec![0.0; w * h];
+                eval_errors(&pb, &samples, &Backend::Cpu, &mut errs).unwrap();
+                let max = errs.iter().cloned().fold(0.0, f64::max);
+                assert!(max <= e, "{degree:?} {rule:?}: max |dz| {max}");
+                if rule == SplitRule::Anisotropic {
+                    assert!(r.mesh.leaves().any(|c| { let q = r.mesh.cells[c as usize].rect; q.width() < q.height() }), "no cell cut across s");
+                    assert_linearly_independent(&r.mesh);
+                }
+                n.push(pb.point_ids.len());
+            }
+            eprintln!("ridge {degree:?}: quad {} control points, aniso {}", n[0], n[1]);
+            assert!(n[1] < n[0], "{degree:?}: aniso {} control points, quad {}", n[1], n[0]);
+        }
+    }
+
+    /// The blending functions of `mesh` (rational, as the fit uses them: independent iff the
+    /// N_i are, Σ w N > 0) are linearly independent: their Gram
+    /// matrix, sampled at 4×4 points per leaf cell, has a Cholesky factor whose smallest pivot
+    /// is not negligible next to the largest diagonal entry.
+    pub(crate) fn assert_linearly_independent(mesh: &TMesh) {
+        let pb = PbSpline::build(mesh);
+        let n = pb.point_ids.len();
+        assert!(n < 3000, "a small mesh: {n} points");
+        let mut g = vec![0.0f64; n * n];
+        let mut scratch = Vec::new();
+        let mut row: Vec<(u32, f64)> = Vec::new();
+        for c in mesh.leaves() {
+            let r = mesh.cells[c as usize].rect;
+            for a in 0..4 {
+                for b in 0..4 {
+                    let s = r.s_min + (a as f64 + 0.5) / 4.0 * r.width();
+                    let t = r.t_min + (b as f64 + 0.5) / 4.0 * r.height();
+                    row.clear();
+                    pb.for_each_basis(s, t, &mut scratch, |i, v| row.push((i, v)));
+                    for &(i, vi) in &row {
+                        for &(j, vj) in &row {
+                            g[i as usize * n + j as usize] += vi * vj;
+                        }
+                    }
+                }
+            }
+        }
+        let dmax = (0..n).map(|i| g[i * n + i]).fold(0.0, f64::max);
+        // dense Cholesky, lower triangle in place
+        let mut min_pivot = f64::INFINITY;
+        for j in 0..n {
+            let mut d = g[j * n + j];
+            for k in 0..j {
+                d -= g[j * n + k] * g[j * n + k];
+            }
+            min_pivot = min_pivot.min(d);
+            assert!(d > 1e-10 * dmax, "dependent blending functions: pivot {d} of {dmax} at point {j} of {n}");
+            let d = d.sqrt();
+            g[j * n + j] = d;
+            for i in j + 1..n {
+                let mut v = g[i * n + j];
+                for k in 0..j {
+                    v -= g[i * n + k] * g[j * n + k];
+                }
+                g[i * n + j] = v / d;
+            }
+        }
+        eprintln!("linear independence: {n} blending functions, smallest Cholesky pivot {min_pivot:.3e} of largest diagonal {dmax:.3e}");
+    }
+
+    /// Random anisotropic meshes (2- and 4-splits, anisotropic repair): linearly independent
+    /// blending functions, linear and cubic.
+    #[test]
+    fn aniso_meshes_are_linearly_independent() {
+        for degree in [Degree::Linear, Degree::Cubic] {
+            for seed in [11u64, 12, 13] {
+                assert_linearly_independent(&crate::testing::aniso_mesh(degree, seed, 3));
+            }
+        }
     }
 }

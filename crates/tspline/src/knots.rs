@@ -422,4 +422,41 @@ mod tests {
             }
         }
     }
+
+    /// Knots of the points of a 2-split rectangle: a cell [0,4]×[0,4] of a 2×1 grid split
+    /// across s has its new points at s = 2; their s knots see the cut, their t knots the cell's
+    /// full height (no cut across t).
+    #[test]
+    fn split_rectangle_knots() {
+        let mut m = TMesh::grid(Degree::Linear, 0.0, 0.0, 4.0, 2, 1);
+        let mut g = |s: f64, t: f64| (s, t, 0.0);
+        m.split_dir(0, crate::mesh::SplitDir::S, &mut g);
+        let k = infer(&m, 2.0, 4.0);
+        assert_eq!(&k.s[..3], &[0.0, 2.0, 4.0]);
+        assert_eq!(&k.t[..3], &[0.0, 4.0, 4.0]);
+        // the old corner (4, 0) still sees 4 to its west (the cut is at 2 only for t in [0,4])
+        let k = infer(&m, 4.0, 0.0);
+        assert_eq!(&k.s[..3], &[2.0, 4.0, 8.0]);
+        let mut m = TMesh::grid(Degree::Cubic, 0.0, 0.0, 4.0, 3, 3);
+        let c = m.leaves_in(crate::mesh::Rect::new(5.0, 5.0, 5.0, 5.0))[0];
+        let kids = m.split_dir(c, crate::mesh::SplitDir::T, &mut g);
+        m.split_dir(kids.as_slice()[1], crate::mesh::SplitDir::S, &mut g);
+        // (6, 6): the mid-point of the upper half's... the cut across s of [4,8]×[6,8] at s = 6
+        let k = infer(&m, 6.0, 8.0);
+        assert_eq!(k.s, [0.0, 4.0, 6.0, 8.0, 12.0]);
+        assert_eq!(k.t, [4.0, 6.0, 8.0, 12.0, 12.0]);
+        let k = infer(&m, 4.0, 6.0);
+        assert_eq!(k.s, [0.0, 0.0, 4.0, 6.0, 8.0]);
+        assert_eq!(k.t, [0.0, 4.0, 6.0, 8.0, 12.0]);
+    }
+
+    /// The batch inference equals the rays on random anisotropic meshes.
+    #[test]
+    fn batch_equals_rays_on_aniso_meshes() {
+        for degree in [Degree::Linear, Degree::Cubic] {
+            for seed in [5u64, 6] {
+                assert_batch_equals_rays(&crate::testing::aniso_mesh(degree, seed, 4), &format!("aniso {seed}"));
+            }
+        }
+    }
 }

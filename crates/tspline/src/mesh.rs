@@ -101,9 +101,62 @@ pub struct Cell {
     pub corners: [PointId; 4],
     pub rect: Rect,
     pub parent: Option<CellId>,
-    pub children: Option<[CellId; 4]>,
+    pub children: Option<Children>,
+    /// How the cell was last split (kept after coarsening, so that a split back restores it).
+    pub split_as: SplitDir,
     /// False once removed by coarsening.
     pub alive: bool,
+}
+
+/// How a cell is split: into four at its centre, or in two across s (a cut at the s mid-point:
+/// west and east halves) or across t (south and north halves).
+/// docs/decisions.md#anisotropic-splits-issue-19
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum SplitDir {
+    #[default]
+    Quad,
+    S,
+    T,
+}
+
+/// Which splits the refinement and the repair may make (docs/decisions.md#anisotropic-splits-issue-19).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SplitRule {
+    /// Every split is a 4-split (A13): cells stay squares of dyadic size.
+    #[default]
+    Quad,
+    /// A cell is split in two across the direction that needs it, or in four when both do;
+    /// cells are rectangles of aspect at most [`MAX_ASPECT`].
+    Anisotropic,
+}
+
+/// The largest aspect ratio (longer side / shorter side) anisotropic splits make.
+pub const MAX_ASPECT: f64 = 4.0;
+
+/// The children of a split cell: four (a 4-split, in the order NW, NE, SW, SE) or two (a 2-split:
+/// west, east or south, north).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Children {
+    ids: [CellId; 4],
+    len: u8,
+}
+
+impl Children {
+    pub fn as_slice(&self) -> &[CellId] {
+        &self.ids[..self.len as usize]
+    }
+    pub fn iter(&self) -> impl Iterator<Item = CellId> + '_ {
+        self.as_slice().iter().copied()
+    }
+}
+
+impl IntoIterator for Children {
+    type Item = CellId;
+    type IntoIter = std::iter::Take<std::array::IntoIter<CellId, 4>>;
+    fn into_iter(self) -> Self::IntoIter {
+        self.ids.into_iter().take(self.len as usize)
+    }
 }
 
 impl Cell {
@@ -182,7 +235,7 @@ impl TMesh {
                     c
                 )));
             }
-            cells.push(Cell { corners: *c, rect: Rect::new(a.s, cc.t, b.s, a.t), parent: None, children: None, alive: true });
+            cells.push(Cell { corners: *c, rect: Rect::new(a.s, cc.t, b.s, a.t), parent: None, children: None, split_as: SplitDir::Quad, alive: true });
         }
         if cells.is_empty() {
             return Err(TsplineError::InvalidMesh("the mesh has no cells".into()));
@@ -342,6 +395,15 @@ impl TMesh {
     /// geometry is set by `geom(s, t) -> (x, y, z)` (interpolated from the current surface).
     /// The parent stays in the tree. Returns the children ids.
     pub fn split(&mut self, cell: CellId, geom: &mut dyn FnMut(f64, f64) -> (f64, f64, f64)) -> [CellId; 4] {
+        let k = self.split_dir(cell, SplitDir::Quad, geom);
+        k.ids
+    }
+
+    /// Splits a leaf cell into four ([`SplitDir::Quad`], as [`TMesh::split`]) or in two at the
+    /// mid-point of one side: [`SplitDir::S`] cuts at the s mid-point (children west, east),
+    /// [`SplitDir::T`] at the t mid-point (children south, north). The two new points of a
+    /// 2-split are the mid-points of the two sides the cut crosses.
+    pub fn split_dir(&mut self, cell: CellId, dir: SplitDir, geom: &mut dyn FnMut(f64, f64) -> (f64, f64, f64)) -> Children {
         let c = self.cells[cell as usize].clone();
         assert!(c.is_leaf(), "split of a non-leaf cell");
         let r = c.rect;
@@ -359,25 +421,40 @@ impl TMesh {
             }
         };
         let [nw, ne, sw, se] = c.corners;
-        let n = pt(self, sm, r.t_max);
-        let s_ = pt(self, sm, r.t_min);
-        let w = pt(self, r.s_min, tm);
-        let e = pt(self, r.s_max, tm);
-        let ctr = pt(self, sm, tm);
-        let kids = [
-            ([nw, n, w, ctr], Rect::new(r.s_min, tm, sm, r.t_max)),
-            ([n, ne, ctr, e], Rect::new(sm, tm, r.s_max, r.t_max)),
-            ([w, ctr, sw, s_], Rect::new(r.s_min, r.t_min, sm, tm)),
-            ([ctr, e, s_, se], Rect::new(sm, r.t_min, r.s_max, tm)),
-        ];
-        let mut ids = [0; 4];
+        let kids: Vec<([PointId; 4], Rect)> = match dir {
+            SplitDir::Quad => {
+                let n = pt(self, sm, r.t_max);
+                let s_ = pt(self, sm, r.t_min);
+                let w = pt(self, r.s_min, tm);
+                let e = pt(self, r.s_max, tm);
+                let ctr = pt(self, sm, tm);
+                vec![
+                    ([nw, n, w, ctr], Rect::new(r.s_min, tm, sm, r.t_max)),
+                    ([n, ne, ctr, e], Rect::new(sm, tm, r.s_max, r.t_max)),
+                    ([w, ctr, sw, s_], Rect::new(r.s_min, r.t_min, sm, tm)),
+                    ([ctr, e, s_, se], Rect::new(sm, r.t_min, r.s_max, tm)),
+                ]
+            }
+            SplitDir::S => {
+                let n = pt(self, sm, r.t_max);
+                let s_ = pt(self, sm, r.t_min);
+                vec![([nw, n, sw, s_], Rect::new(r.s_min, r.t_min, sm, r.t_max)), ([n, ne, s_, se], Rect::new(sm, r.t_min, r.s_max, r.t_max))]
+            }
+            SplitDir::T => {
+                let w = pt(self, r.s_min, tm);
+                let e = pt(self, r.s_max, tm);
+                vec![([w, e, sw, se], Rect::new(r.s_min, r.t_min, r.s_max, tm)), ([nw, ne, w, e], Rect::new(r.s_min, tm, r.s_max, r.t_max))]
+            }
+        };
+        let mut ids = Children { ids: [0; 4], len: kids.len() as u8 };
         for (k, (corners, rect)) in kids.into_iter().enumerate() {
             let id = self.cells.len() as CellId;
-            self.cells.push(Cell { corners, rect, parent: Some(cell), children: None, alive: true });
+            self.cells.push(Cell { corners, rect, parent: Some(cell), children: None, split_as: SplitDir::Quad, alive: true });
             self.tree.insert(CellEntry { id, env: rect.aabb() });
-            ids[k] = id;
+            ids.ids[k] = id;
         }
         self.cells[cell as usize].children = Some(ids);
+        self.cells[cell as usize].split_as = dir;
         ids
     }
 
@@ -413,19 +490,24 @@ impl TMesh {
 
     /// Whether a leaf needs a split by the repair rules (A13, see module doc).
     pub fn needs_repair(&self, cell: CellId) -> bool {
-        let r = self.cells[cell as usize].rect;
-        violates_repair_rules(&r, self.neighbours(cell).into_iter().map(|(side, n)| (side, self.cells[n as usize].rect)))
+        self.repair_need(cell).any()
     }
 
-    /// [`TMesh::needs_repair`] of every leaf at once, indexed by cell id (false for non-leaves):
+    /// The directions in which a leaf needs a split by the repair rules (see [`RepairNeed`]).
+    pub fn repair_need(&self, cell: CellId) -> RepairNeed {
+        let r = self.cells[cell as usize].rect;
+        repair_need(&r, self.neighbours(cell).into_iter().map(|(side, n)| (side, self.cells[n as usize].rect)))
+    }
+
+    /// [`TMesh::repair_need`] of every leaf at once, indexed by cell id (none for non-leaves):
     /// the neighbours come from the leaves' sides sorted by line ([`SideIndex`]) instead of an
     /// R-tree query per leaf.
-    fn leaves_needing_repair(&self) -> Vec<bool> {
+    fn leaves_needing_repair(&self) -> Vec<RepairNeed> {
         let sides = SideIndex::new(self);
-        let mut out = vec![false; self.cells.len()];
+        let mut out = vec![RepairNeed::default(); self.cells.len()];
         for c in self.leaves() {
             let r = self.cells[c as usize].rect;
-            out[c as usize] = violates_repair_rules(&r, sides.neighbours(&r));
+            out[c as usize] = repair_need(&r, sides.neighbours(&r));
         }
         out
     }
@@ -434,6 +516,13 @@ impl TMesh {
     /// never split (their children would undercut the sample spacing, spec §2.2); returns how
     /// many splits were done.
     pub fn repair(&mut self, min_size: f64, geom: &mut dyn FnMut(f64, f64) -> (f64, f64, f64)) -> usize {
+        self.repair_with(min_size, SplitRule::Quad, geom)
+    }
+
+    /// [`TMesh::repair`] under a split rule: [`SplitRule::Quad`] splits a violating leaf into
+    /// four (A13); [`SplitRule::Anisotropic`] splits it only across the direction(s) whose rule
+    /// it violates ([`aniso_repair_split`]), never below `2·min_size` along the split side.
+    pub fn repair_with(&mut self, min_size: f64, rule: SplitRule, geom: &mut dyn FnMut(f64, f64) -> (f64, f64, f64)) -> usize {
         let mut splits = 0;
         let mut todo: Vec<CellId> = self.leaves().collect();
         // The first round visits every leaf: its checks are answered from one batch over the
@@ -452,23 +541,27 @@ impl TMesh {
                     continue;
                 }
                 let r = self.cells[c as usize].rect;
-                if r.width().min(r.height()) < 2.0 * min_size {
+                if rule == SplitRule::Quad && r.width().min(r.height()) < 2.0 * min_size {
                     continue;
                 }
-                let needs = match &flags {
+                let need = match &flags {
                     Some(f) if !touched[c as usize] => f[c as usize],
-                    _ => self.needs_repair(c),
+                    _ => self.repair_need(c),
                 };
-                if !needs {
+                let dir = match rule {
+                    SplitRule::Quad => need.any().then_some(SplitDir::Quad),
+                    SplitRule::Anisotropic => aniso_repair_split(&r, need, min_size),
+                };
+                let Some(dir) = dir else {
                     continue;
-                }
+                };
                 let nbrs: Vec<CellId> = self.neighbours(c).into_iter().map(|(_, n)| n).collect();
                 for &n in &nbrs {
                     if let Some(t) = touched.get_mut(n as usize) {
                         *t = true;
                     }
                 }
-                let kids = self.split(c, geom);
+                let kids = self.split_dir(c, dir, geom);
                 splits += 1;
                 next.extend(nbrs);
                 next.extend(kids);
@@ -534,23 +627,72 @@ impl TMesh {
     }
 }
 
+/// The directions in which a leaf violates the repair rules: `s` (its width must be halved: a
+/// south or north neighbour is more than twice as fine along the shared side, or both carry a
+/// hanging vertex on its south and north sides) and `t` (the same with west and east and the
+/// height). A13's square cells need a split when either is set.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct RepairNeed {
+    pub s: bool,
+    pub t: bool,
+}
+
+impl RepairNeed {
+    pub fn any(self) -> bool {
+        self.s || self.t
+    }
+}
+
 /// The repair rules (A13) for a leaf `r` with its leaf neighbours: a 1:2 violation on any
-/// side, or hanging vertices on two opposite sides (rule 2: they could be joined).
-fn violates_repair_rules(r: &Rect, neighbours: impl Iterator<Item = (Side, Rect)>) -> bool {
+/// side, or hanging vertices on two opposite sides (rule 2: they could be joined), per
+/// direction (rectangles: the balance is along the shared side).
+fn repair_need(r: &Rect, neighbours: impl Iterator<Item = (Side, Rect)>) -> RepairNeed {
     let mut hanging = [false; 4];
+    let mut need = RepairNeed::default();
     for (side, o) in neighbours {
         let (mine, theirs) = match side {
             Side::West | Side::East => (r.height(), o.height()),
             Side::South | Side::North => (r.width(), o.width()),
         };
         if theirs * 2.0 < mine {
-            return true; // 1:2 balance violated
+            // 1:2 balance violated: halve the side shared with the finer neighbour
+            match side {
+                Side::West | Side::East => need.t = true,
+                Side::South | Side::North => need.s = true,
+            }
         }
         if theirs < mine {
             hanging[side as usize] = true;
         }
     }
-    (hanging[Side::West as usize] && hanging[Side::East as usize]) || (hanging[Side::South as usize] && hanging[Side::North as usize])
+    need.t |= hanging[Side::West as usize] && hanging[Side::East as usize];
+    need.s |= hanging[Side::South as usize] && hanging[Side::North as usize];
+    need
+}
+
+/// The anisotropic repair split of a leaf `r` with repair need `need`: across each direction
+/// that needs it and whose side is at least `2·min_size`; four when both remain, or when a
+/// 2-split would make a child of aspect above [`MAX_ASPECT`] (and the other side can be halved).
+pub(crate) fn aniso_repair_split(r: &Rect, need: RepairNeed, min_size: f64) -> Option<SplitDir> {
+    let s = need.s && r.width() >= 2.0 * min_size;
+    let t = need.t && r.height() >= 2.0 * min_size;
+    match (s, t) {
+        (false, false) => None,
+        (true, true) => Some(SplitDir::Quad),
+        (true, false) => Some(aspect_capped(r, SplitDir::S, min_size)),
+        (false, true) => Some(aspect_capped(r, SplitDir::T, min_size)),
+    }
+}
+
+/// `dir`, or a 4-split when the 2-split's children would exceed [`MAX_ASPECT`] and the other
+/// side is at least `2·min_size`.
+pub(crate) fn aspect_capped(r: &Rect, dir: SplitDir, min_size: f64) -> SplitDir {
+    let (w, h) = (r.width(), r.height());
+    match dir {
+        SplitDir::S if h > MAX_ASPECT * 0.5 * w && h >= 2.0 * min_size => SplitDir::Quad,
+        SplitDir::T if w > MAX_ASPECT * 0.5 * h && w >= 2.0 * min_size => SplitDir::Quad,
+        d => d,
+    }
 }
 
 /// The leaves' sides grouped by the line they lie on: for each [`Side`] `d`, the leaves whose
@@ -762,8 +904,8 @@ mod tests {
             assert_side_index_finds_neighbours(&m);
             let batch = m.leaves_needing_repair();
             for c in m.leaves() {
-                assert_eq!(batch[c as usize], m.needs_repair(c), "trial {trial}, cell {c}");
-                checked += usize::from(batch[c as usize]);
+                assert_eq!(batch[c as usize], m.repair_need(c), "trial {trial}, cell {c}");
+                checked += usize::from(batch[c as usize].any());
             }
             let mut want = m.clone();
             let n_want = repair_one_by_one(&mut want, 1.0, &mut g);
@@ -775,5 +917,76 @@ mod tests {
             assert_eq!(cells(&m), cells(&want), "trial {trial}");
         }
         assert!(checked > 10, "the meshes had leaves to repair");
+    }
+
+    /// A 2-split makes two rectangles and the two mid-points of the sides its cut crosses,
+    /// shared with the neighbour that already has one; a later split back after coarsening
+    /// reuses the recorded direction.
+    #[test]
+    fn two_splits_make_rectangles() {
+        let mut m = TMesh::grid(Degree::Cubic, 0.0, 0.0, 4.0, 2, 1);
+        let mut g = |s: f64, t: f64| (s, t, 0.0);
+        let n0 = m.points.len();
+        let k = m.split_dir(0, SplitDir::T, &mut g);
+        assert_eq!(k.as_slice().len(), 2);
+        assert_eq!(m.cells[k.as_slice()[0] as usize].rect, Rect::new(0.0, 0.0, 4.0, 2.0));
+        assert_eq!(m.cells[k.as_slice()[1] as usize].rect, Rect::new(0.0, 2.0, 4.0, 4.0));
+        assert_eq!(m.points.len(), n0 + 2); // (0, 2) and (4, 2)
+        // the east cell across s: (6, 0) and (6, 4) are new, (4, 2) is a hanging vertex of it
+        let k2 = m.split_dir(1, SplitDir::S, &mut g);
+        assert_eq!(m.points.len(), n0 + 4);
+        assert_eq!(m.cells[k2.as_slice()[0] as usize].rect, Rect::new(4.0, 0.0, 6.0, 4.0));
+        assert_eq!(m.leaf_count(), 4);
+        // every leaf has its four corners at its rectangle's corners
+        for c in m.leaves() {
+            let cell = &m.cells[c as usize];
+            let r = cell.rect;
+            let want = [(r.s_min, r.t_max), (r.s_max, r.t_max), (r.s_min, r.t_min), (r.s_max, r.t_min)];
+            for (p, w) in cell.corners.iter().zip(want) {
+                assert_eq!((m.points[*p as usize].s, m.points[*p as usize].t), w);
+            }
+        }
+        // the written form round-trips (from_cells accepts it: no overlaps, no I-points)
+        let c = m.compacted();
+        assert_eq!(c.leaf_count(), 4);
+        m.coarsen(0).unwrap();
+        assert_eq!(m.cells[0].split_as, SplitDir::T);
+        assert_eq!(m.leaf_count(), 3);
+        // the merged west cell is as high as the east halves: balanced
+        assert!(m.leaves().all(|c| !m.needs_repair(c)));
+    }
+
+    /// The anisotropic repair on random 2- and 4-split meshes: afterwards no leaf has a
+    /// neighbour more than twice as fine along a shared side, none has hanging vertices on two
+    /// opposite sides, and no cell is longer than MAX_ASPECT times its width (or vice versa).
+    #[test]
+    fn aniso_repair_keeps_balance_and_rule_2_on_rectangles() {
+        for seed in [1u64, 2, 3, 4] {
+            let m = crate::testing::aniso_mesh(Degree::Cubic, seed, 4);
+            let mut two = 0;
+            for c in m.leaves() {
+                let r = m.cells[c as usize].rect;
+                let need = m.repair_need(c);
+                // a side at the minimum (1: children would undercut the sample spacing) may keep its need
+                assert!(!((need.s && r.width() >= 2.0) || (need.t && r.height() >= 2.0)), "seed {seed}: cell {c} {r:?} still needs {need:?}");
+                assert!(r.width() <= MAX_ASPECT * r.height() && r.height() <= MAX_ASPECT * r.width(), "seed {seed}: {r:?}");
+                two += usize::from(r.width() != r.height());
+            }
+            assert!(two > 10, "seed {seed}: the mesh has rectangles ({two})");
+            // the written form is a valid T-mesh
+            m.compacted();
+        }
+    }
+
+    /// Quad meshes: the per-direction need is the old single verdict (either direction).
+    #[test]
+    fn quad_repair_is_unchanged_by_the_directional_need() {
+        let mut m = TMesh::grid(Degree::Linear, 0.0, 0.0, 8.0, 3, 1);
+        let mut g = |s: f64, t: f64| (s, t, 0.0);
+        let kids = m.split(0, &mut g);
+        m.split(kids[1], &mut g);
+        // cell 1 (8 wide) has a west neighbour of height 2: t must be halved, not s
+        assert_eq!(m.repair_need(1), RepairNeed { s: false, t: true });
+        assert!(m.needs_repair(1));
     }
 }

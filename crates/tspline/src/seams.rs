@@ -539,6 +539,10 @@ fn refit_loop(
     backend: &Backend,
     progress: &mut dyn FnMut(&IterationStats),
 ) -> Result<Stitched, TsplineError> {
+    if opts.split != crate::mesh::SplitRule::Quad {
+        // docs/decisions.md#anisotropic-splits-issue-19: the seams need square cells
+        return Err(TsplineError::Fit("anisotropic splits are not available for tiles of a plan (their seams need square cells)".into()));
+    }
     let (tol, tol_final) = crate::fit::tolerances(samples, None, opts)?;
     let mut iterations = Vec::new();
     let mut errs = vec![f64::NAN; samples.z.len()];
@@ -573,7 +577,7 @@ fn refit_loop(
         } else if it >= opts.max_iterations {
             Some(StopReason::MaxIterations)
         } else {
-            match crate::fit::refine(&mesh, &pb, opts, over, &err)? {
+            match crate::fit::refine(&mesh, &pb, samples, opts, over, &err)? {
                 crate::fit::Refined::Stop(s) => Some(s),
                 crate::fit::Refined::Next(next, n) => {
                     refined = n;

@@ -1,7 +1,7 @@
 //! Helpers shared by the crate's unit tests (one pseudo-random source, one test mesh), so the
 //! tests of the CPU paths and of their OpenCL twins run on the same data.
 
-use crate::mesh::{Degree, Rect, TMesh};
+use crate::mesh::{Degree, Rect, SplitDir, SplitRule, TMesh};
 
 /// Deterministic pseudo-random numbers in [0, 1) (64-bit LCG, top 53 bits).
 pub(crate) fn lcg(seed: &mut u64) -> f64 {
@@ -43,4 +43,37 @@ pub(crate) fn benchmark_surface(n: usize) -> (crate::eval::PbSpline, Vec<[f64; 2
     let side = n * 10 + 1;
     let st: Vec<[f64; 2]> = (0..side * side).map(|q| [(q % side) as f64, (side - 1 - q / side) as f64]).collect();
     (pb, st)
+}
+
+/// Random anisotropic refinement of a grid of 16-square cells: `rounds` rounds of 2- and
+/// 4-splits (each leaf with probability 0.25, the direction at random), each followed by the
+/// anisotropic repair (docs/decisions.md#anisotropic-splits-issue-19).
+pub(crate) fn aniso_mesh(degree: Degree, seed: u64, rounds: usize) -> TMesh {
+    let mut m = TMesh::grid(degree, -16.0, 0.0, 16.0, 5, 4);
+    let mut g = |s: f64, t: f64| (s, t, s * 0.5 - t);
+    let mut seed = seed;
+    for _ in 0..rounds {
+        for c in m.leaves().collect::<Vec<_>>() {
+            if lcg(&mut seed) >= 0.25 {
+                continue;
+            }
+            let r = m.cells[c as usize].rect;
+            let d = match (lcg(&mut seed) * 3.0) as usize {
+                0 => SplitDir::S,
+                1 => SplitDir::T,
+                _ => SplitDir::Quad,
+            };
+            let d = crate::mesh::aspect_capped(&r, d, 1.0);
+            let ok = match d {
+                SplitDir::S => r.width() >= 2.0,
+                SplitDir::T => r.height() >= 2.0,
+                SplitDir::Quad => r.width().min(r.height()) >= 2.0,
+            };
+            if ok {
+                m.split_dir(c, d, &mut g);
+            }
+        }
+        m.repair_with(1.0, SplitRule::Anisotropic, &mut g);
+    }
+    m
 }

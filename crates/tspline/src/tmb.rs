@@ -18,8 +18,11 @@
 //! - structure, flag [`QUADTREE`]: the leaf cells as a forest of quadtrees over `ns × nt` root
 //!   squares of side `c0` from (`s0`, `t0`) (f64, f64, f64, varint, varint): one bit per node in
 //!   depth-first order (children SW, SE, NW, NE), 1 = split at the centre, 0 = leaf — what
-//!   the fit produces (4-way splits of an initial grid), ~1.3 bits per leaf cell. Otherwise the
-//!   explicit form: the distinct s and t values (varint count + f64 each) and per cell four
+//!   the fit produces (4-way splits of an initial grid), ~1.3 bits per leaf cell. Flag
+//!   [`KDTREE`] (meshes of `fit --split aniso`, docs/decisions.md#anisotropic-splits-issue-19):
+//!   the same roots, two bits per node (0 leaf, 1 four children SW, SE, NW, NE, 2 cut across s:
+//!   W, E, 3 cut across t: S, N), a varint symbol count and the symbols four to a byte, low bits
+//!   first. Otherwise the explicit form: the distinct s and t values (varint count + f64 each) and per cell four
 //!   varint indices into them (s_min, s_max − s_min, t_min, t_max − t_min).
 //! - control points are the leaf corners in the canonical order of [`canonical`] (by t, then
 //!   s), so neither their count nor their parameters are stored. Heights: each f64 XOR-ed with
@@ -52,6 +55,9 @@ pub const XY: u8 = 2;
 pub const W: u8 = 4;
 pub const MASK: u8 = 8;
 pub const WARP: u8 = 16;
+/// Structure flag: leaf cells as a forest of 2-/4-split trees (anisotropic refinement, see
+/// [`kdtree`]); only when the quadtree form does not fit.
+pub const KDTREE: u8 = 32;
 /// Largest body a reader inflates (a corrupt length must not allocate terabytes).
 const MAX_BODY: u64 = 1 << 36;
 
@@ -168,17 +174,92 @@ fn quadtree(leaves: &[Rect]) -> Option<(f64, f64, f64, u64, u64, Vec<u8>)> {
     Some((s0, t0, c0, ns as u64, nt as u64, head))
 }
 
+/// The 2-/4-split tree encoding of the leaves (flag [`KDTREE`]), or None when they are not such
+/// a forest over a regular grid of squares: at each node, the leaves inside it decide the
+/// split (a cut at a mid-line exists where no leaf crosses it: both cuts are a 4-split, one is a
+/// 2-split); a leaf larger than a node, or a node with no cut, is not such a forest.
+fn kdtree(leaves: &[Rect]) -> Option<(f64, f64, f64, u64, u64, Vec<u8>)> {
+    use rstar::{primitives::Rectangle, RTree, AABB};
+    let c0 = leaves.iter().map(|r| r.width().max(r.height())).fold(0.0, f64::max);
+    let s0 = leaves.iter().map(|r| r.s_min).fold(f64::INFINITY, f64::min);
+    let t0 = leaves.iter().map(|r| r.t_min).fold(f64::INFINITY, f64::min);
+    let s1 = leaves.iter().map(|r| r.s_max).fold(f64::NEG_INFINITY, f64::max);
+    let t1 = leaves.iter().map(|r| r.t_max).fold(f64::NEG_INFINITY, f64::max);
+    let ns = ((s1 - s0) / c0).round();
+    let nt = ((t1 - t0) / c0).round();
+    if !(c0 > 0.0 && ns >= 1.0 && nt >= 1.0 && ns < 4e9 && nt < 4e9) {
+        return None;
+    }
+    let tree: RTree<Rectangle<[f64; 2]>> = RTree::bulk_load(leaves.iter().map(|r| Rectangle::from_corners([r.s_min, r.t_min], [r.s_max, r.t_max])).collect());
+    let mut syms: Vec<u8> = Vec::new();
+    let mut found = 0usize;
+    fn walk(r: Rect, depth: usize, tree: &RTree<Rectangle<[f64; 2]>>, syms: &mut Vec<u8>, found: &mut usize) -> bool {
+        // the leaves overlapping the node's interior
+        let inside: Vec<Rect> = tree
+            .locate_in_envelope_intersecting(&AABB::from_corners([r.s_min, r.t_min], [r.s_max, r.t_max]))
+            .map(|e| Rect::new(e.lower()[0], e.lower()[1], e.upper()[0], e.upper()[1]))
+            .filter(|o| o.s_max.min(r.s_max) > o.s_min.max(r.s_min) && o.t_max.min(r.t_max) > o.t_min.max(r.t_min))
+            .collect();
+        if inside.is_empty() || inside.iter().any(|o| o.s_min < r.s_min || o.s_max > r.s_max || o.t_min < r.t_min || o.t_max > r.t_max) {
+            return false; // a hole, or a leaf larger than the node
+        }
+        if inside.len() == 1 && inside[0] == r {
+            syms.push(0);
+            *found += 1;
+            return true;
+        }
+        if depth >= MAX_DEPTH {
+            return false;
+        }
+        let sm = 0.5 * (r.s_min + r.s_max);
+        let tm = 0.5 * (r.t_min + r.t_max);
+        let cut_s = !inside.iter().any(|o| o.s_min < sm && sm < o.s_max);
+        let cut_t = !inside.iter().any(|o| o.t_min < tm && tm < o.t_max);
+        let (sym, kids): (u8, Vec<Rect>) = match (cut_s, cut_t) {
+            (true, true) => (1, children(&r).to_vec()),
+            (true, false) => (2, vec![Rect::new(r.s_min, r.t_min, sm, r.t_max), Rect::new(sm, r.t_min, r.s_max, r.t_max)]),
+            (false, true) => (3, vec![Rect::new(r.s_min, r.t_min, r.s_max, tm), Rect::new(r.s_min, tm, r.s_max, r.t_max)]),
+            (false, false) => return false,
+        };
+        syms.push(sym);
+        kids.into_iter().all(|c| walk(c, depth + 1, tree, syms, found))
+    }
+    for j in 0..nt as u64 {
+        for i in 0..ns as u64 {
+            let r = Rect::new(s0 + i as f64 * c0, t0 + j as f64 * c0, s0 + (i + 1) as f64 * c0, t0 + (j + 1) as f64 * c0);
+            if !walk(r, 0, &tree, &mut syms, &mut found) {
+                return None;
+            }
+        }
+    }
+    if found != leaves.len() {
+        return None;
+    }
+    let mut packed = vec![0u8; syms.len().div_ceil(4)];
+    for (k, &v) in syms.iter().enumerate() {
+        packed[k / 4] |= v << (2 * (k % 4));
+    }
+    let mut head = Vec::new();
+    put_varint(&mut head, syms.len() as u64);
+    head.extend_from_slice(&packed);
+    Some((s0, t0, c0, ns as u64, nt as u64, head))
+}
+
 /// Writes the compact binary form of `f`.
 pub fn write(f: &TMeshFile, w: &mut dyn Write) -> std::io::Result<()> {
     let m = canonical(&f.mesh);
     let mut body = Vec::new();
     let leaves: Vec<Rect> = m.cells.iter().map(|c| c.rect).collect();
     let qt = quadtree(&leaves);
+    let kd = if qt.is_none() { kdtree(&leaves) } else { None };
     let xy = m.points.iter().any(|p| p.x.to_bits() != p.s.to_bits() || p.y.to_bits() != p.t.to_bits());
     let wt = m.points.iter().any(|p| p.w != 1.0);
     let mut flags = 0;
     if qt.is_some() {
         flags |= QUADTREE;
+    }
+    if kd.is_some() {
+        flags |= KDTREE;
     }
     if xy {
         flags |= XY;
@@ -200,7 +281,7 @@ pub fn write(f: &TMeshFile, w: &mut dyn Write) -> std::io::Result<()> {
     }
     put_varint(&mut body, g.crs.len() as u64);
     body.extend_from_slice(g.crs.as_bytes());
-    match qt {
+    match qt.or(kd) {
         Some((s0, t0, c0, ns, nt, bits)) => {
             for v in [s0, t0, c0] {
                 put_f64(&mut body, v);
@@ -377,14 +458,20 @@ fn parse_body(body: &[u8]) -> Result<TMeshFile, TsplineError> {
     let k = c.u8("degree")?;
     let degree = Degree::from_u32(k as u32).ok_or_else(|| c.err(format!("degree {k} is not supported (1 or 3)")))?;
     let flags = c.u8("flags")?;
-    if flags & !(QUADTREE | XY | W | MASK | WARP) != 0 {
+    if flags & !(QUADTREE | XY | W | MASK | WARP | KDTREE) != 0 || flags & (QUADTREE | KDTREE) == QUADTREE | KDTREE {
         return Err(c.err(format!("unknown flags {flags:#04x}")));
     }
     let georef = Georef { x0: c.f64("georef x0")?, y0: c.f64("georef y0")?, dx: c.f64("georef dx")?, dy: c.f64("georef dy")?, crs: c.string("CRS")? };
     if georef.dx == 0.0 || georef.dy == 0.0 {
         return Err(c.err("georef dx and dy must be non-zero"));
     }
-    let leaves = if flags & QUADTREE != 0 { read_quadtree(&mut c)? } else { read_explicit(&mut c)? };
+    let leaves = if flags & QUADTREE != 0 {
+        read_quadtree(&mut c)?
+    } else if flags & KDTREE != 0 {
+        read_kdtree(&mut c)?
+    } else {
+        read_explicit(&mut c)?
+    };
     // points: the leaf corners in canonical order
     let mut st: Vec<(f64, f64)> = leaves.iter().flat_map(|r| [(r.s_min, r.t_max), (r.s_max, r.t_max), (r.s_min, r.t_min), (r.s_max, r.t_min)]).collect();
     st.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.total_cmp(&b.0)));
@@ -453,6 +540,58 @@ fn read_quadtree(c: &mut Cursor) -> Result<Vec<Rect>, TsplineError> {
     }
     if k != nbits as usize {
         return Err(c.err(format!("{} quadtree bits left over", nbits as usize - k)));
+    }
+    Ok(leaves)
+}
+
+fn read_kdtree(c: &mut Cursor) -> Result<Vec<Rect>, TsplineError> {
+    let (s0, t0, c0) = (c.f64("root s0")?, c.f64("root t0")?, c.f64("root size")?);
+    if c0 <= 0.0 {
+        return Err(c.err("root size must be positive"));
+    }
+    let ns = c.varint("root columns")?;
+    let nt = c.varint("root rows")?;
+    let nsym = c.varint("tree symbol count")?;
+    if nsym < ns.saturating_mul(nt) || nsym.div_ceil(4) > (c.data.len() - c.pos) as u64 {
+        return Err(c.err(format!("tree of {nsym} symbols for {ns}×{nt} roots does not fit the body")));
+    }
+    let bytes = c.take(nsym.div_ceil(4) as usize, "tree symbols")?;
+    let sym = |k: usize| bytes[k / 4] >> (2 * (k % 4)) & 3;
+    let mut leaves = Vec::new();
+    let mut k = 0usize;
+    let mut stack: Vec<(Rect, usize)> = Vec::new();
+    for j in 0..nt {
+        for i in 0..ns {
+            stack.push((Rect::new(s0 + i as f64 * c0, t0 + j as f64 * c0, s0 + (i + 1) as f64 * c0, t0 + (j + 1) as f64 * c0), 0));
+            while let Some((r, depth)) = stack.pop() {
+                if k >= nsym as usize {
+                    return Err(c.err("the tree symbols end before the tree does"));
+                }
+                let v = sym(k);
+                k += 1;
+                if v == 0 {
+                    leaves.push(r);
+                    continue;
+                }
+                if depth >= MAX_DEPTH {
+                    return Err(c.err(format!("tree deeper than {MAX_DEPTH} levels")));
+                }
+                let sm = 0.5 * (r.s_min + r.s_max);
+                let tm = 0.5 * (r.t_min + r.t_max);
+                let kids: Vec<Rect> = match v {
+                    1 => children(&r).to_vec(),
+                    2 => vec![Rect::new(r.s_min, r.t_min, sm, r.t_max), Rect::new(sm, r.t_min, r.s_max, r.t_max)],
+                    _ => vec![Rect::new(r.s_min, r.t_min, r.s_max, tm), Rect::new(r.s_min, tm, r.s_max, r.t_max)],
+                };
+                // depth first in the writer's order: push in reverse
+                for ch in kids.into_iter().rev() {
+                    stack.push((ch, depth + 1));
+                }
+            }
+        }
+    }
+    if k != nsym as usize {
+        return Err(c.err(format!("{} tree symbols left over", nsym as usize - k)));
     }
     Ok(leaves)
 }
@@ -580,6 +719,45 @@ mod tests {
         assert_eq!(body_flags & QUADTREE, 0, "a mesh with a gap takes the explicit form");
         let back = read(&b).unwrap();
         assert_eq!(back.mesh.points, canonical(&f.mesh).points);
+    }
+
+    /// A mesh of anisotropic 2-splits (rectangles, docs/decisions.md#anisotropic-splits-issue-19)
+    /// is not a quadtree: it takes the 2-/4-split tree form (fewer bytes than the explicit one)
+    /// and reads back to the XML's mesh, which evaluates to the same bits; every truncation or
+    /// flipped byte of it is a format error or the same mesh.
+    #[test]
+    fn anisotropic_mesh_takes_the_kdtree_form() {
+        let mut m = crate::testing::aniso_mesh(Degree::Cubic, 7, 3);
+        for p in &mut m.points {
+            p.z = (p.s * 0.21).sin() * 5.0 + 0.1 * p.t;
+        }
+        let f = TMeshFile { mesh: m, georef: Georef::identity(), mask: None, warp: None };
+        let b = bytes(&f, true);
+        let mut d = flate2::read::ZlibDecoder::new(&b[17..b.len() - 4]);
+        let mut v = Vec::new();
+        d.read_to_end(&mut v).unwrap();
+        assert_eq!(v[1] & (QUADTREE | KDTREE), KDTREE);
+        let fb = read(&b).unwrap();
+        let fx = crate::format::read(&bytes(&f, false)).unwrap();
+        assert_eq!(fb.mesh.points, canonical(&fx.mesh).points);
+        let g = GridSpec { s0: -16.0, t0: 0.0, ds: 0.5, dt: 0.5, ns: 161, nt: 129 };
+        let (zb, zx) = (PbSpline::build(&fb.mesh).eval_grid(&g, true), PbSpline::build(&fx.mesh).eval_grid(&g, true));
+        assert!(zb.iter().zip(&zx).all(|(a, b)| a.to_bits() == b.to_bits()));
+        assert_eq!(bytes(&fb, true), b);
+        // the structure takes under a byte per leaf (the explicit form at least four)
+        let leaves: Vec<Rect> = canonical(&f.mesh).cells.iter().map(|c| c.rect).collect();
+        let (.., head) = kdtree(&leaves).unwrap();
+        assert!(head.len() < leaves.len(), "{} bytes for {} leaves", head.len(), leaves.len());
+        for n in 0..b.len() {
+            assert!(read(&b[..n]).is_err(), "truncated to {n} bytes");
+        }
+        for i in 0..b.len() {
+            let mut d = b.clone();
+            d[i] ^= 0x40;
+            if let Ok(g) = read(&d) {
+                assert_eq!(g.mesh.points, fb.mesh.points, "byte {i}");
+            }
+        }
     }
 
     /// Every truncation and a flipped byte anywhere give a Format error, never a panic or a

@@ -61,6 +61,15 @@ pub enum MethodArg {
     Drag,
 }
 
+/// How the refinement splits a cell over the tolerance (docs/decisions.md#anisotropic-splits-issue-19).
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SplitArg {
+    /// Into four at the centre (square cells).
+    Quad,
+    /// In two across the direction the residual needs, or in four (rectangles up to 4:1).
+    Aniso,
+}
+
 #[derive(ClapArgs, Debug)]
 #[command(about = "Fit a T-spline surface (T-mesh) to a raster within a maximum error", after_help = EXAMPLE)]
 pub struct Args {
@@ -130,6 +139,10 @@ pub struct Args {
     /// valid cell stays within --max-error).
     #[arg(long)]
     pub no_coarsen: bool,
+    /// How the refinement splits a cell over the tolerance: `quad` (into four), or `aniso` (in
+    /// two across the direction the residual varies in, or in four; not with --tile or --srcwin).
+    #[arg(long, value_enum, default_value_t = SplitArg::Quad)]
+    pub split: SplitArg,
     /// Write a JSON report (options, per-iteration table, stop reason) to this path.
     #[arg(long)]
     pub report: Option<String>,
@@ -199,6 +212,10 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     opts.overhang = args.overhang;
     opts.opencl_assembly = args.assembly == Assembly::Opencl;
     opts.coarsen = !args.no_coarsen;
+    opts.split = match args.split {
+        SplitArg::Quad => tspline::mesh::SplitRule::Quad,
+        SplitArg::Aniso => tspline::mesh::SplitRule::Anisotropic,
+    };
     opts.domain = prepared.domain;
     opts.method = match args.method {
         MethodArg::Lsq => Method::Lsq,

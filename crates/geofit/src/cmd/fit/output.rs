@@ -40,6 +40,9 @@ struct Report<'a> {
     valid_cells: usize,
     degree: u32,
     method: Method,
+    /// Only when not the default 4-splits (the reports of default fits stay as they were).
+    #[serde(skip_serializing_if = "is_quad")]
+    split: tspline::mesh::SplitRule,
     /// The tolerance; with a per-cell tolerance, its smallest value.
     max_error: f64,
     max_error_from_uncertainty: Option<f64>,
@@ -55,6 +58,10 @@ struct Report<'a> {
     seconds: f64,
     /// Peak resident memory of the process (Linux VmHWM), MiB; null elsewhere.
     peak_rss_mib: Option<f64>,
+}
+
+fn is_quad(s: &tspline::mesh::SplitRule) -> bool {
+    *s == tspline::mesh::SplitRule::Quad
 }
 
 /// The progress line of one iteration.
@@ -144,6 +151,10 @@ pub(super) fn write(args: &Args, config: &Config, p: Prepared, result: FitResult
             valid_cells: valid,
             degree: args.degree,
             method: done.method,
+            split: match args.split {
+                super::SplitArg::Quad => tspline::mesh::SplitRule::Quad,
+                super::SplitArg::Aniso => tspline::mesh::SplitRule::Anisotropic,
+            },
             max_error: p.e_min,
             max_error_from_uncertainty: args.max_error_from_uncertainty,
             outliers: p.outliers,
