@@ -18,15 +18,19 @@ export GEOFIT_SCHEMAS=X
 TILE=S/citygml/nrw/LoD2_32_332_5729_1_NW.gml
 export RAYON_NUM_THREADS=2
 
-# Reports carry run-dependent numbers (seconds, resident memory, file paths of this run); the
-# rest of each report is kept and hashed.
+# Reports carry run-dependent numbers (seconds, resident memory, file paths of this run) and the
+# OpenCL device's name, which PoCL makes from the machine's CPU ("opencl: Portable Computing
+# Language / pthread-<cpu>"): the device is hashed as its kind (opencl, cpu) only; the rest of
+# each report is kept and hashed.
 drop_timings() {
   python3 -c '
 import json, sys
 VOLATILE = ("seconds", "wall", "rss", "elapsed", "cpu_s", "peak", "time_s", "duration")
-def clean(v):
+def clean(v, key=""):
+    if key == "device" and isinstance(v, str):
+        return v.split(":")[0]
     if isinstance(v, dict):
-        return {k: clean(x) for k, x in v.items() if not any(w in k.lower() for w in VOLATILE)}
+        return {k: clean(x, k) for k, x in v.items() if not any(w in k.lower() for w in VOLATILE)}
     if isinstance(v, list):
         return [clean(x) for x in v]
     return v
