@@ -21,10 +21,13 @@ pub enum CholeskyError {
     NotPositiveDefinite,
 }
 
+/// Indices are u32 (a system with more entries takes the CG): half the memory of usize for
+/// the lower triangle, its cached copy and the symbolic factorisation (the solve is the fit's
+/// memory peak at 10⁸ raster cells).
 struct Cached {
-    col_ptr: Vec<usize>,
-    row_idx: Vec<usize>,
-    symbolic: SymbolicCholesky<usize>,
+    col_ptr: Vec<u32>,
+    row_idx: Vec<u32>,
+    symbolic: SymbolicCholesky<u32>,
 }
 
 thread_local! {
@@ -34,35 +37,41 @@ thread_local! {
 }
 
 /// The lower triangle of `a` in CSC: by symmetry column j of it is row j of the CSR from the
-/// diagonal on (columns sorted, so the rows of each CSC column are sorted too).
-fn lower_csc(a: &SymCsr) -> (Vec<usize>, Vec<usize>, Vec<f64>) {
+/// diagonal on (columns sorted, so the rows of each CSC column are sorted too). None when its
+/// entries do not fit u32 indices.
+fn lower_csc(a: &SymCsr) -> Option<(Vec<u32>, Vec<u32>, Vec<f64>)> {
     let n = a.n();
+    if a.cols.len() > u32::MAX as usize {
+        return None;
+    }
     let mut col_ptr = Vec::with_capacity(n + 1);
     let mut row_idx = Vec::with_capacity(a.cols.len() / 2 + n);
     let mut vals = Vec::with_capacity(a.cols.len() / 2 + n);
-    col_ptr.push(0usize);
+    col_ptr.push(0u32);
     for j in 0..n {
         for k in a.start[j]..a.start[j + 1] {
             let i = a.cols[k] as usize;
             if i >= j {
-                row_idx.push(i);
+                row_idx.push(i as u32);
                 vals.push(a.vals[k]);
             }
         }
-        col_ptr.push(row_idx.len());
+        col_ptr.push(row_idx.len() as u32);
     }
-    (col_ptr, row_idx, vals)
+    Some((col_ptr, row_idx, vals))
 }
 
 /// Solves A x = b by Cholesky plus one step of iterative refinement; the bool says whether
 /// the symbolic factorisation of this thread's previous call was re-used (same pattern,
 /// compared exactly). A factor of more than `max_factor_bytes` is not built.
 pub fn cholesky_solve(a: &SymCsr, b: &[f64], max_factor_bytes: usize) -> Result<(Vec<f64>, bool), CholeskyError> {
-    let (col_ptr, row_idx, vals) = lower_csc(a);
+    let Some((col_ptr, row_idx, vals)) = lower_csc(a) else {
+        return Err(CholeskyError::Symbolic("more entries than u32 indices address".into()));
+    };
     SYMBOLIC.with(|cache| factor_and_solve(a, b, (&col_ptr, &row_idx, &vals), max_factor_bytes, &mut cache.borrow_mut()))
 }
 
-fn factor_and_solve(a: &SymCsr, b: &[f64], csc: (&[usize], &[usize], &[f64]), max_bytes: usize, cache: &mut Option<Cached>) -> Result<(Vec<f64>, bool), CholeskyError> {
+fn factor_and_solve(a: &SymCsr, b: &[f64], csc: (&[u32], &[u32], &[f64]), max_bytes: usize, cache: &mut Option<Cached>) -> Result<(Vec<f64>, bool), CholeskyError> {
     let n = a.n();
     let (col_ptr, row_idx, vals) = csc;
     let sym = SymbolicSparseColMatRef::new_checked(n, n, col_ptr, None, row_idx);
@@ -88,7 +97,7 @@ fn factor_and_solve(a: &SymCsr, b: &[f64], csc: (&[usize], &[usize], &[f64]), ma
     symbolic
         .factorize_numeric_llt::<f64>(&mut l, mat, Side::Lower, Default::default(), par, MemStack::new(&mut buf), Default::default())
         .map_err(|_| CholeskyError::NotPositiveDefinite)?;
-    let llt = LltRef::<'_, usize, f64>::new(symbolic, &l);
+    let llt = LltRef::<'_, u32, f64>::new(symbolic, &l);
     let mut sbuf = MemBuffer::new(symbolic.solve_in_place_scratch::<f64>(1, par));
     let mut solve = |v: &mut [f64]| {
         let m = MatMut::from_column_major_slice_mut(v, n, 1);

@@ -481,9 +481,9 @@ impl<'a> Elements<'a> {
         self.ws.clear();
         self.nt.clear();
         for &p in &self.funcs {
-            let (kn, pc, w) = (&pb.knots[p as usize], &pb.poly[p as usize], pb.geom[p as usize][3]);
-            let fs = SpanPiece::at(&kn[0..5], &pc[..20], k, e.s0);
-            let ft = SpanPiece::at(&kn[5..10], &pc[20..], k, e.t0);
+            let (kn, (ps, pt), w) = (&pb.knots[p as usize], pb.pieces(p as usize), pb.geom[p as usize][3]);
+            let fs = SpanPiece::at(&kn[0..5], ps, k, e.s0);
+            let ft = SpanPiece::at(&kn[5..10], pt, k, e.t0);
             self.ws.extend((i0..i1).map(|i| w * fs.value(i as f64)));
             self.nt.extend((j0..j1).map(|j| ft.value(j as f64)));
         }

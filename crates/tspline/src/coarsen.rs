@@ -202,68 +202,31 @@ pub(crate) fn coarsen(
     Ok(Coarsened { mesh: best, pb: best_pb, rounds })
 }
 
-/// The values of `errs` a try is about to overwrite: the cells of its local region (in the
-/// region's row order), or all of them for a global re-check of scattered points. A global try
-/// on a raster writes `errs` only once it has passed ([`fit::over_tolerance`] decides first), so
-/// it saves nothing: no copy of 8 bytes per cell (docs/decisions.md#float32-samples).
+/// The values of `errs` a try is about to overwrite: all of them for a global re-check of
+/// scattered points. A try on a raster (global or local) writes `errs` only once it has passed
+/// ([`fit::over_tolerance`], [`fit::over_tolerance_region`] decide first), so it saves nothing:
+/// no copy of 8 bytes per cell, or per cell of its region
+/// (docs/decisions.md#coarsening-decides-before-it-writes).
 #[derive(Default)]
 struct Undo {
-    kept: Kept,
-    saved: Vec<f64>,
-}
-
-/// What an [`Undo`] holds.
-#[derive(Default)]
-enum Kept {
-    /// The try leaves `errs` as it is unless it passes.
-    #[default]
-    Nothing,
-    /// The local try's region: `saved` holds its cells.
-    Region(fit::Region),
-    /// `saved` holds every value.
-    All,
+    saved: Option<Vec<f64>>,
 }
 
 impl Undo {
-    fn save(&mut self, region: Option<fit::Region>, errs: &[f64]) {
-        self.saved.clear();
-        self.kept = match region {
-            Some(r) => {
-                self.saved.reserve(r.len());
-                r.for_rows(0, r.rows(), |q| self.saved.push(errs[q]));
-                Kept::Region(r)
-            }
-            None => {
-                self.saved.extend_from_slice(errs);
-                Kept::All
-            }
-        };
+    fn save_all(&mut self, errs: &[f64]) {
+        let v = self.saved.get_or_insert_with(Vec::new);
+        v.clear();
+        v.extend_from_slice(errs);
     }
 
     /// Nothing to put back: the try writes `errs` only if it passes.
     fn nothing(&mut self) {
-        self.saved.clear();
-        self.kept = Kept::Nothing;
-    }
-
-    fn region(&self) -> Option<&fit::Region> {
-        match &self.kept {
-            Kept::Region(r) => Some(r),
-            _ => None,
-        }
+        self.saved = None;
     }
 
     fn restore(&self, errs: &mut [f64]) {
-        match &self.kept {
-            Kept::Region(r) => {
-                let mut k = 0;
-                r.for_rows(0, r.rows(), |q| {
-                    errs[q] = self.saved[k];
-                    k += 1;
-                });
-            }
-            Kept::All => errs.copy_from_slice(&self.saved),
-            Kept::Nothing => {}
+        if let Some(v) = &self.saved {
+            errs.copy_from_slice(v);
         }
     }
 }
@@ -286,6 +249,7 @@ fn refit(
     undo: &mut Undo,
     tol: &Tolerance,
 ) -> Result<(PbSpline, ErrorStats, Vec<CellId>), TsplineError> {
+    fit::release_free_memory(samples.z.len());
     let mut pb = match backend {
         Backend::Cpu => fit::build_pb_incremental(m, old, changed),
         _ => fit::build_pb(m, backend)?,
@@ -300,19 +264,22 @@ fn refit(
     };
     fit::set_z(m, &mut pb, &z);
     let region = local.map(|(_, r)| r);
-    if region.is_none() && pts.is_none() {
-        // a global try on a raster: the verdict first, from a block-sized buffer; `errs` is
-        // written (the same values) only when the try passes
+    if pts.is_none() {
+        // a try on a raster: the verdict first, from a block-sized buffer; `errs` is written
+        // (the same values) only when the try passes
         undo.nothing();
-        let (count, over) = fit::over_tolerance(m, &pb, samples, backend, tol)?;
+        let (count, over) = match &region {
+            Some(r) => fit::over_tolerance_region(m, &pb, samples, r, tol),
+            None => fit::over_tolerance(m, &pb, samples, backend, tol)?,
+        };
         if count > 0 {
             return Ok((pb, ErrorStats { over_tolerance: count, ..ErrorStats::default() }, over));
         }
-        let (err, over) = fit::check(m, &pb, samples, None, None, backend, errs, tol)?;
+        let (err, over) = fit::check(m, &pb, samples, None, region.as_ref(), backend, errs, tol)?;
         return Ok((pb, err, over));
     }
-    undo.save(region, errs);
-    let (err, over) = fit::check(m, &pb, samples, pts, undo.region(), backend, errs, tol)?;
+    undo.save_all(errs);
+    let (err, over) = fit::check(m, &pb, samples, pts, None, backend, errs, tol)?;
     Ok((pb, err, over))
 }
 

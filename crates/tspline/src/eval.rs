@@ -116,9 +116,12 @@ pub struct PbSpline {
     pub point_ids: Vec<u32>,
     /// Per point: σ (5) then τ (5); K=1 uses the first 3 of each.
     pub knots: Vec<[f64; 10]>,
-    /// Per point: the basis as polynomial pieces, for fast evaluation: for σ then τ, for each of
-    /// the K+1 spans: 1/width and the monomial coefficients c0..c3 in x = (u − a)/width.
-    pub poly: Vec<[f64; 40]>,
+    /// Per point, [`PbSpline::poly_stride`] values: the basis as polynomial pieces, for fast
+    /// evaluation: for σ then τ, for each of the K+1 spans: 1/width and the monomial
+    /// coefficients c0..c3 in x = (u − a)/width ([`PbSpline::pieces`]). Only the K+1 spans of
+    /// the degree are stored (degree 1: 20 values a point, not 40: a PB-spline of 1.5·10⁵
+    /// points is 24 MB smaller, BENCHMARKS.md "Peak memory per cell without the copies").
+    pub poly: Vec<f64>,
     /// Per point: x, y, z, w.
     pub geom: Vec<[f64; 4]>,
     /// Leaf cell rectangles (s_min, t_min, s_max, t_max).
@@ -204,15 +207,12 @@ impl PbSpline {
             })
             .collect();
         let geom = point_ids.iter().map(|&i| mesh.points[i as usize]).map(|p| [p.x, p.y, p.z, p.w]).collect();
-        let poly = knots
-            .par_iter()
-            .map(|kn| {
-                let mut a = [0.0; 40];
-                a[..20].copy_from_slice(&basis_pieces(&kn[0..5], k));
-                a[20..].copy_from_slice(&basis_pieces(&kn[5..10], k));
-                a
-            })
-            .collect();
+        let half = 5 * (k + 1);
+        let mut poly = vec![0.0; knots.len() * 2 * half];
+        poly.par_chunks_mut(2 * half).zip(&knots).for_each(|(a, kn)| {
+            a[..half].copy_from_slice(&basis_pieces(&kn[0..5], k)[..half]);
+            a[half..].copy_from_slice(&basis_pieces(&kn[5..10], k)[..half]);
+        });
         let cells: Vec<[f64; 4]> =
             mesh.cells.iter().filter(|c| c.is_leaf()).map(|c| [c.rect.s_min, c.rect.t_min, c.rect.s_max, c.rect.t_max]).collect();
         let b = mesh.bounds();
@@ -250,6 +250,31 @@ impl PbSpline {
             ns,
         );
         PbSpline { degree: mesh.degree, point_ids, knots, poly, geom, cells, grid, pt_start, pt_items, cell_start, cell_items }
+    }
+
+    /// Values per point in [`PbSpline::poly`]: 5 (K+1) for σ, as many for τ.
+    #[inline]
+    pub fn poly_stride(&self) -> usize {
+        10 * (self.degree.k() + 1)
+    }
+
+    /// The polynomial pieces of point `p`'s basis: (σ, τ), 5 values per span.
+    #[inline]
+    pub fn pieces(&self, p: usize) -> (&[f64], &[f64]) {
+        let st = self.poly_stride();
+        self.poly[p * st..(p + 1) * st].split_at(st / 2)
+    }
+
+    /// [`PbSpline::poly`] laid out with 40 values a point (σ at 0, τ at 20), as the OpenCL
+    /// kernels read it.
+    pub fn poly_40(&self) -> Vec<f64> {
+        let mut out = vec![0.0; 40 * self.knots.len()];
+        for (p, o) in out.chunks_exact_mut(40).enumerate() {
+            let (ps, pt) = self.pieces(p);
+            o[..ps.len()].copy_from_slice(ps);
+            o[20..20 + pt.len()].copy_from_slice(pt);
+        }
+        out
     }
 
     #[inline]
@@ -374,12 +399,12 @@ impl PbSpline {
             if s < kn[0] || s > kn[k + 1] || t < kn[5] || t > kn[5 + k + 1] {
                 return None;
             }
-            let pc = &self.poly[pi as usize];
-            let bs = basis_poly(&kn[0..5], &pc[..20], k, s, ls);
+            let (ps, pt) = self.pieces(pi as usize);
+            let bs = basis_poly(&kn[0..5], ps, k, s, ls);
             if bs == 0.0 {
                 return None;
             }
-            let bt = basis_poly(&kn[5..10], &pc[20..], k, t, lt);
+            let bt = basis_poly(&kn[5..10], pt, k, t, lt);
             if bt == 0.0 {
                 return None;
             }

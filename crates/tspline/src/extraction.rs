@@ -536,9 +536,9 @@ fn extract_cell(pb: &PbSpline, ci: usize, sc: &mut Scratch<'_>, data: &mut Vec<f
                 if !(kn[0] < b && kn[k + 1] > a && kn[5] < d && kn[5 + k + 1] > c_) {
                     continue;
                 }
-                let pc = &pb.poly[p as usize];
+                let (ps, pt) = pb.pieces(p as usize);
                 let (mut fs, mut ft) = ([0.0; 4], [0.0; 4]);
-                if !factor(&kn[0..5], &pc[..20], k, a, b, &mut fs) || !factor(&kn[5..10], &pc[20..], k, c_, d, &mut ft) {
+                if !factor(&kn[0..5], ps, k, a, b, &mut fs) || !factor(&kn[5..10], pt, k, c_, d, &mut ft) {
                     continue;
                 }
                 let g = pb.geom[p as usize];

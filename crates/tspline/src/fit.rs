@@ -596,10 +596,6 @@ impl Region {
     pub fn len(&self) -> usize {
         self.count
     }
-    /// Rows of the raster the set is over.
-    pub(crate) fn rows(&self) -> usize {
-        self.h
-    }
     pub fn is_empty(&self) -> bool {
         self.count == 0
     }
@@ -656,6 +652,7 @@ pub(crate) fn fit_lsq_local(
         }
     }
     let mut a = pattern(pb, &extra, free);
+    drop(extra);
     let prior: Vec<f64> = pb.geom.iter().map(|g| g[2]).collect();
     let sys = crate::assembly::System { pattern: &a, pb, free, prior: &prior };
     let sums = match (pts, &asm) {
@@ -671,6 +668,7 @@ pub(crate) fn fit_lsq_local(
         return Err(TsplineError::Fit("no valid raster cell lies inside the mesh".into()));
     }
     let mean_diag = supported.iter().sum::<f64>() / supported.len() as f64;
+    drop(supported);
     // A9 regulariser
     for i in 0..n {
         if !is_free(i) {
@@ -708,6 +706,10 @@ pub(crate) fn fit_lsq_local(
             }
         }
     }
+    // what the solve does not read goes before the factor is built (the solve's memory is the
+    // fit's peak at 10⁸ cells: BENCHMARKS.md "Peak memory per cell without the copies")
+    drop((triples, diag, support));
+    release_free_memory(samples.z.len());
     match free {
         Some(f) => solve_free(&a, &rhs, &prior, f),
         None => solve(&a, &rhs, &prior),
@@ -997,16 +999,64 @@ pub(crate) fn eval_errors_region(pb: &PbSpline, samples: &Samples, region: &Regi
     errs.par_chunks_mut(sub * w).enumerate().for_each(|(b, out)| {
         let j0 = b * sub;
         let j1 = j0 + out.len() / w;
-        region.for_rows(j0, j1, |q| {
-            let dk = samples.z.get(q);
-            out[q - j0 * w] = if dk.is_nan() {
-                f64::NAN
-            } else {
-                let zk = pb.point((q % w) as f64, (q / w) as f64)[2];
-                if zk.is_nan() { f64::INFINITY } else { (zk - dk).abs() }
-            };
-        });
+        region.for_rows(j0, j1, |q| out[q - j0 * w] = region_error(pb, samples, q));
     });
+}
+
+/// |Δz| at raster cell `q` on the PB-spline path ([`eval_errors_region`]'s value).
+#[inline]
+fn region_error(pb: &PbSpline, samples: &Samples, q: usize) -> f64 {
+    let w = samples.width;
+    let dk = samples.z.get(q);
+    if dk.is_nan() {
+        f64::NAN
+    } else {
+        let zk = pb.point((q % w) as f64, (q / w) as f64)[2];
+        if zk.is_nan() { f64::INFINITY } else { (zk - dk).abs() }
+    }
+}
+
+/// [`over_tolerance`] of a local try: the count of valid cells of `region` over the tolerance
+/// and the leaves holding them, from the errors [`eval_errors_region`] would write, computed
+/// one row block at a time into a block-sized buffer (no per-cell array). Coarsening's local
+/// tries ask this first and write `errs` only once a try has passed, so a failed try needs no
+/// copy of the region's old errors to undo (docs/decisions.md#coarsening-decides-before-it-writes).
+/// Cells outside `region` keep errors within the tolerance (every kept state passes at every
+/// cell), so the verdict and the leaves are those of [`summarize`] over the whole updated array.
+pub(crate) fn over_tolerance_region(mesh: &TMesh, pb: &PbSpline, samples: &Samples, region: &Region, tol: &Tolerance) -> (usize, Vec<CellId>) {
+    let w = samples.width;
+    let sub = (PASS_BLOCK / w.max(1)).max(1);
+    let blocks = samples.height.div_ceil(sub);
+    let pos = |q: usize| ((q % w) as f64, (q / w) as f64);
+    let scan = OverScan::new(mesh, pb, &pos, tol);
+    let parts: Vec<(usize, Vec<CellId>)> = (0..blocks)
+        .into_par_iter()
+        .map_init(Vec::new, |buf: &mut Vec<f64>, b| {
+            let j0 = b * sub;
+            let j1 = (j0 + sub).min(samples.height);
+            buf.clear();
+            buf.resize((j1 - j0) * w, f64::NAN);
+            let mut any = false;
+            region.for_rows(j0, j1, |q| {
+                buf[q - j0 * w] = region_error(pb, samples, q);
+                any = true;
+            });
+            if !any {
+                return (0, Vec::new());
+            }
+            let (acc, over) = scan.chunk(buf, j0 * w);
+            (acc.over, over)
+        })
+        .collect();
+    let mut count = 0;
+    let mut over = Vec::new();
+    for (c, o) in parts {
+        count += c;
+        over.extend(o);
+    }
+    over.sort_unstable();
+    over.dedup();
+    (count, over)
 }
 
 /// Statistics of `errs` over the valid cells (summed over fixed blocks in order: independent of
@@ -1040,12 +1090,42 @@ pub(crate) fn summarize_at(mesh: &TMesh, pb: &PbSpline, pos: &(dyn Fn(usize) -> 
 /// whose closed box holds one over the tolerance (sorted, each once): the scan of [`summarize_at`]
 /// without the median, summed over fixed blocks in order.
 fn over_in(mesh: &TMesh, pb: &PbSpline, pos: &(dyn Fn(usize) -> (f64, f64) + Sync), errs: &[f64], offset: usize, tol: &Tolerance) -> (ErrAcc, Vec<CellId>) {
-    // Leaves whose closed box holds (s, t): through the PB-spline's bucket grid when its cell
-    // list is the mesh's leaves in id order (checked per hit), else through the R-tree.
-    let leaf_ids: Vec<CellId> = mesh.leaves().collect();
-    let same_order = leaf_ids.len() == pb.cells.len();
-    let leaves_at = |s: f64, t: f64, f: &mut dyn FnMut(CellId, crate::mesh::Rect)| {
-        if same_order {
+    let scan = OverScan::new(mesh, pb, pos, tol);
+    let parts: Vec<(ErrAcc, Vec<CellId>)> = errs.par_chunks(PASS_BLOCK).enumerate().map(|(b, ch)| scan.chunk(ch, offset + b * PASS_BLOCK)).collect();
+    let mut acc = ErrAcc::default();
+    let mut over = Vec::new();
+    for (a, o) in parts {
+        acc.merge(&a);
+        over.extend(o);
+    }
+    over.sort_unstable();
+    over.dedup();
+    (acc, over)
+}
+
+/// The per-block scan of [`over_in`]: statistics of a run of errors and the leaves holding the
+/// ones over the tolerance.
+struct OverScan<'a> {
+    mesh: &'a TMesh,
+    pb: &'a PbSpline,
+    pos: &'a (dyn Fn(usize) -> (f64, f64) + Sync),
+    tol: &'a Tolerance,
+    leaf_ids: Vec<CellId>,
+    same_order: bool,
+}
+
+impl<'a> OverScan<'a> {
+    fn new(mesh: &'a TMesh, pb: &'a PbSpline, pos: &'a (dyn Fn(usize) -> (f64, f64) + Sync), tol: &'a Tolerance) -> OverScan<'a> {
+        let leaf_ids: Vec<CellId> = mesh.leaves().collect();
+        let same_order = leaf_ids.len() == pb.cells.len();
+        OverScan { mesh, pb, pos, tol, leaf_ids, same_order }
+    }
+
+    /// Leaves whose closed box holds (s, t): through the PB-spline's bucket grid when its cell
+    /// list is the mesh's leaves in id order (checked per hit), else through the R-tree.
+    fn leaves_at(&self, s: f64, t: f64, f: &mut dyn FnMut(CellId, crate::mesh::Rect)) {
+        let (mesh, pb) = (self.mesh, self.pb);
+        if self.same_order {
             let (bi, _) = pb.grid.index_range(s, s, true);
             let (bj, _) = pb.grid.index_range(t, t, false);
             let b = (bj * pb.grid.ns + bi) as usize;
@@ -1057,7 +1137,7 @@ fn over_in(mesh: &TMesh, pb: &PbSpline, pos: &(dyn Fn(usize) -> (f64, f64) + Syn
                 if s < c[0] || s > c[2] || t < c[1] || t > c[3] {
                     continue;
                 }
-                let id = leaf_ids[ci as usize];
+                let id = self.leaf_ids[ci as usize];
                 let r = mesh.cells[id as usize].rect;
                 if nh == hits.len() || r != crate::mesh::Rect::new(c[0], c[1], c[2], c[3]) {
                     ok = false;
@@ -1079,69 +1159,58 @@ fn over_in(mesh: &TMesh, pb: &PbSpline, pos: &(dyn Fn(usize) -> (f64, f64) + Syn
                 f(c, cell.rect);
             }
         }
-    };
-    let parts: Vec<(ErrAcc, Vec<CellId>)> = errs
-        .par_chunks(PASS_BLOCK)
-        .enumerate()
-        .map(|(b, ch)| {
-            let q0 = offset + b * PASS_BLOCK;
-            let mut acc = ErrAcc::default();
-            let mut over = Vec::new();
-            let mut interior: Option<crate::mesh::Rect> = None;
-            for (k, &e) in ch.iter().enumerate() {
-                if e.is_nan() {
-                    continue;
-                }
-                let tq = tol.at(q0 + k);
-                acc.push(e, tq);
-                if e <= tq {
-                    continue;
-                }
-                let (s, t) = pos(q0 + k);
-                if let Some(r) = interior {
-                    if r.s_min < s && s < r.s_max && r.t_min < t && t < r.t_max {
-                        continue; // the only leaf holding this cell is already collected
-                    }
-                }
-                interior = None;
-                let mut hits: [CellId; 4] = [0; 4];
-                let mut nh = 0;
-                let mut owner = None;
-                leaves_at(s, t, &mut |c, r| {
-                    if nh < hits.len() {
-                        hits[nh] = c;
-                        nh += 1;
-                    } else {
-                        over.push(c);
-                    }
-                    if r.s_min < s && s < r.s_max && r.t_min < t && t < r.t_max {
-                        interior = Some(r);
-                    }
-                    if r.s_min <= s && s < r.s_max && r.t_min <= t && t < r.t_max && r.width().min(r.height()) >= 2.0 {
-                        owner = Some(c);
-                    }
-                });
-                // A7: a cell on a shared edge or corner marks only the leaf whose half-open box
-                // holds it, unless that one is at the minimum size
-                match owner {
-                    Some(c) => over.push(c),
-                    None => over.extend_from_slice(&hits[..nh]),
+    }
+
+    /// Errors `ch` of cells (points) `q0..`: their sums (NaN skipped) and the leaves holding
+    /// those over the tolerance (sorted, each once).
+    fn chunk(&self, ch: &[f64], q0: usize) -> (ErrAcc, Vec<CellId>) {
+        let mut acc = ErrAcc::default();
+        let mut over = Vec::new();
+        let mut interior: Option<crate::mesh::Rect> = None;
+        for (k, &e) in ch.iter().enumerate() {
+            if e.is_nan() {
+                continue;
+            }
+            let tq = self.tol.at(q0 + k);
+            acc.push(e, tq);
+            if e <= tq {
+                continue;
+            }
+            let (s, t) = (self.pos)(q0 + k);
+            if let Some(r) = interior {
+                if r.s_min < s && s < r.s_max && r.t_min < t && t < r.t_max {
+                    continue; // the only leaf holding this cell is already collected
                 }
             }
-            over.sort_unstable();
-            over.dedup();
-            (acc, over)
-        })
-        .collect();
-    let mut acc = ErrAcc::default();
-    let mut over = Vec::new();
-    for (a, o) in parts {
-        acc.merge(&a);
-        over.extend(o);
+            interior = None;
+            let mut hits: [CellId; 4] = [0; 4];
+            let mut nh = 0;
+            let mut owner = None;
+            self.leaves_at(s, t, &mut |c, r| {
+                if nh < hits.len() {
+                    hits[nh] = c;
+                    nh += 1;
+                } else {
+                    over.push(c);
+                }
+                if r.s_min < s && s < r.s_max && r.t_min < t && t < r.t_max {
+                    interior = Some(r);
+                }
+                if r.s_min <= s && s < r.s_max && r.t_min <= t && t < r.t_max && r.width().min(r.height()) >= 2.0 {
+                    owner = Some(c);
+                }
+            });
+            // A7: a cell on a shared edge or corner marks only the leaf whose half-open box
+            // holds it, unless that one is at the minimum size
+            match owner {
+                Some(c) => over.push(c),
+                None => over.extend_from_slice(&hits[..nh]),
+            }
+        }
+        over.sort_unstable();
+        over.dedup();
+        (acc, over)
     }
-    over.sort_unstable();
-    over.dedup();
-    (acc, over)
 }
 
 /// The `k`-th smallest (0-based, in `f32::total_cmp` order) of the non-NaN `errs` rounded to
@@ -1289,6 +1358,31 @@ pub(crate) fn local_update(old: &PbSpline, new: &PbSpline, n_points: usize, w: u
         return None;
     }
     Some((free, region))
+}
+
+/// Rasters from which [`release_free_memory`] trims (2²⁴ cells).
+const TRIM_CELLS: usize = 1 << 24;
+
+/// Hands the allocator's free pages back to the system (glibc's `malloc_trim`; elsewhere
+/// nothing). Why: glibc keeps freed blocks below its (dynamic, up to 32 MiB) mmap threshold in
+/// its arenas, so the partial sums of one assembly and the PB-spline of the previous iteration
+/// stayed resident under the next solve's factor; called before each solve and each
+/// iteration, it takes tens of MiB off the peak (~30 MiB at 10⁷ cells) for a few ms per call
+/// (BENCHMARKS.md "Peak memory per cell without the copies").
+/// Only for rasters of [`TRIM_CELLS`] cells or more, where the per-cell arrays leave little
+/// room: each call costs page faults later (+4 % CPU on the 1.6·10⁶-cell BAG fit).
+pub(crate) fn release_free_memory(cells: usize) {
+    let _ = cells;
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    if cells >= TRIM_CELLS {
+        extern "C" {
+            fn malloc_trim(pad: usize) -> std::os::raw::c_int;
+        }
+        // SAFETY: glibc's malloc_trim takes no pointer and may be called at any time
+        unsafe {
+            malloc_trim(0);
+        }
+    }
 }
 
 pub(crate) enum Refined {
@@ -1698,15 +1792,20 @@ fn fit_impl(
     let (w, h) = (samples.width, samples.height);
     for it in 0.. {
         let t0 = Instant::now();
-        let mut pb = match (&prev, backend) {
+        // the previous PB-spline serves the incremental build and the local update's
+        // comparison only: dropped before the solve (a PB-spline of 1.5·10⁵ points is ~70 MiB)
+        let old = prev.take();
+        release_free_memory(samples.z.len());
+        let mut pb = match (&old, backend) {
             (Some(old), Backend::Cpu) => build_pb_incremental(&mesh, old, &split_rects),
             _ => build_pb(&mesh, backend)?,
         };
         let t_build = t0.elapsed().as_secs_f64();
-        let local = match (&prev, opts.method, opts.local_updates) {
+        let local = match (&old, opts.method, opts.local_updates) {
             (Some(old), Method::Lsq, true) if pts.is_none() => local_update(old, &pb, mesh.points.len(), w, h),
             _ => None,
         };
+        drop(old);
         let z = match (opts.method, &local) {
             (Method::Lsq, Some((free, region))) => fit_lsq_local(&mesh, &pb, samples, None, Some(free), Some(region), None)?,
             (Method::Lsq, None) => fit_lsq_local(&mesh, &pb, samples, pts, None, None, asm.as_ref())?,
@@ -1725,6 +1824,7 @@ fn fit_impl(
             // the tolerance is declared only on a fresh check of every cell
             (err, over_leaves) = check(&mesh, &pb, samples, pts, None, backend, &mut errs, &tol)?;
         }
+        drop(local);
         let t_check = t0.elapsed().as_secs_f64();
         let st = IterationStats {
             iteration: it,
@@ -1741,38 +1841,45 @@ fn fit_impl(
         progress(&st);
         iterations.push(st);
         if err.over_tolerance == 0 {
+            // the coarsened mesh's cells over the tolerance on its fresh check (None: it passed)
+            let mut missed = None;
             if may_coarsen {
-                // rasters: the pre-coarsening mesh is the fallback of the fresh check below
-                let before = pts.is_none().then(|| mesh.clone());
                 let c = crate::coarsen::coarsen(mesh, pb, samples, pts, opts, backend, &mut errs, it + 1, progress, &tol)?;
                 mesh = c.mesh;
                 pb = c.pb;
                 // the tolerance is declared only on a fresh check of every cell (scattered data:
                 // every round coarsen::refit kept was already checked at every point)
-                if let (Some(before), false) = (before, c.rounds.is_empty()) {
-                    let (f, _) = check(&mesh, &pb, samples, None, None, backend, &mut errs, &tol)?;
+                if pts.is_none() && !c.rounds.is_empty() {
+                    let (f, over) = check(&mesh, &pb, samples, None, None, backend, &mut errs, &tol)?;
                     if f.over_tolerance > 0 {
-                        // cannot happen when the checks above are sound; keep the guarantee anyway
-                        mesh = before;
-                        pb = build_pb(&mesh, backend)?;
-                    } else {
-                        iterations.extend(c.rounds);
+                        // cannot happen when the checks above are sound; keep the guarantee
+                        // anyway: refine where the coarsened mesh misses, coarsening off (no copy
+                        // of the pre-coarsening mesh is kept for this:
+                        // docs/decisions.md#coarsening-decides-before-it-writes)
+                        missed = Some((f, over));
                     }
-                } else {
-                    iterations.extend(c.rounds);
+                }
+                iterations.extend(c.rounds);
+            }
+            match missed {
+                Some(m) => {
+                    may_coarsen = false;
+                    (err, over_leaves) = m;
+                }
+                None => {
+                    // The acceptance: the mesh as written, evaluated as `geofit eval` evaluates it.
+                    let (fin, over) = check_written(&mesh, &pb, samples, pts, &mut errs, &tol_final)?;
+                    if fin.over_tolerance == 0 {
+                        if let Some(last) = iterations.last_mut() {
+                            last.error = fin;
+                        }
+                        return Ok(FitResult { mesh, iterations, stop: StopReason::ToleranceReached });
+                    }
+                    // beyond the margin: refine where the written mesh misses, as for any miss
+                    may_coarsen = false;
+                    (err, over_leaves) = (fin, over);
                 }
             }
-            // The acceptance: the mesh as written, evaluated as `geofit eval` evaluates it.
-            let (fin, over) = check_written(&mesh, &pb, samples, pts, &mut errs, &tol_final)?;
-            if fin.over_tolerance == 0 {
-                if let Some(last) = iterations.last_mut() {
-                    last.error = fin;
-                }
-                return Ok(FitResult { mesh, iterations, stop: StopReason::ToleranceReached });
-            }
-            // beyond the margin: refine where the written mesh misses, as for any miss
-            may_coarsen = false;
-            (err, over_leaves) = (fin, over);
         }
         if it >= opts.max_iterations {
             return Ok(FitResult { mesh, iterations, stop: StopReason::MaxIterations });

@@ -102,7 +102,7 @@ impl PbBuffers {
     pub fn upload(dev: &OclDevice, pb: &PbSpline) -> Result<PbBuffers, TsplineError> {
         Ok(PbBuffers {
             knots: dev.buf(pb.knots.as_flattened())?,
-            poly: dev.buf(pb.poly.as_flattened())?,
+            poly: dev.buf(&pb.poly_40())?,
             geom: dev.buf(pb.geom.as_flattened())?,
             cells: dev.buf(pb.cells.as_flattened())?,
             pstart: dev.buf(&pb.pt_start)?,
