@@ -1,5 +1,5 @@
 // T-spline kernels (spec §6.3/§6.4): surface evaluation, knot derivation, dragging vectors.
-// The CPU twins live in eval.rs / knots.rs / fit.rs and follow the same operation order.
+// The CPU twins live in eval.rs / knots.rs / fit/ and follow the same operation order.
 // Double precision throughout (PoCL supports cl_khr_fp64). Built after common.cl (grid_t,
 // bucket_of, basis_poly, locate).
 
