@@ -123,19 +123,55 @@ fn children(r: &Rect) -> [Rect; 4] {
 /// Depth limit of a quadtree (2⁶⁰ subdivisions is far past f64 resolution).
 const MAX_DEPTH: usize = 60;
 
+/// The lattice of equal squares both tree forms start from: the largest leaf's size, from the
+/// leaves' lower-left corner, as many columns and rows as cover them.
+#[derive(Debug, Clone, Copy)]
+struct Roots {
+    s0: f64,
+    t0: f64,
+    c0: f64,
+    ns: u64,
+    nt: u64,
+}
+
+impl Roots {
+    /// The lattice of `leaves`, or None when it is degenerate (no extent, ≥ 4·10⁹ roots a side).
+    fn of_leaves(leaves: &[Rect]) -> Option<Roots> {
+        let c0 = leaves.iter().map(|r| r.width().max(r.height())).fold(0.0, f64::max);
+        let s0 = leaves.iter().map(|r| r.s_min).fold(f64::INFINITY, f64::min);
+        let t0 = leaves.iter().map(|r| r.t_min).fold(f64::INFINITY, f64::min);
+        let s1 = leaves.iter().map(|r| r.s_max).fold(f64::NEG_INFINITY, f64::max);
+        let t1 = leaves.iter().map(|r| r.t_max).fold(f64::NEG_INFINITY, f64::max);
+        let ns = ((s1 - s0) / c0).round();
+        let nt = ((t1 - t0) / c0).round();
+        if !(c0 > 0.0 && ns >= 1.0 && nt >= 1.0 && ns < 4e9 && nt < 4e9) {
+            return None;
+        }
+        Some(Roots { s0, t0, c0, ns: ns as u64, nt: nt as u64 })
+    }
+
+    /// The lattice as a tree form's header stores it.
+    fn read(c: &mut Cursor) -> Result<Roots, TsplineError> {
+        let (s0, t0, c0) = (c.f64("root s0")?, c.f64("root t0")?, c.f64("root size")?);
+        if c0 <= 0.0 {
+            return Err(c.err("root size must be positive"));
+        }
+        let ns = c.varint("root columns")?;
+        let nt = c.varint("root rows")?;
+        Ok(Roots { s0, t0, c0, ns, nt })
+    }
+
+    /// The root squares row by row from the bottom: the order in which both forms walk them.
+    fn cells(self) -> impl Iterator<Item = Rect> {
+        let Roots { s0, t0, c0, ns, nt } = self;
+        (0..nt).flat_map(move |j| (0..ns).map(move |i| Rect::new(s0 + i as f64 * c0, t0 + j as f64 * c0, s0 + (i + 1) as f64 * c0, t0 + (j + 1) as f64 * c0)))
+    }
+}
+
 /// The quadtree encoding of the leaves, or None when they are not a quadtree forest over a
 /// regular grid of squares.
 fn quadtree(leaves: &[Rect]) -> Option<(f64, f64, f64, u64, u64, Vec<u8>)> {
-    let c0 = leaves.iter().map(|r| r.width().max(r.height())).fold(0.0, f64::max);
-    let s0 = leaves.iter().map(|r| r.s_min).fold(f64::INFINITY, f64::min);
-    let t0 = leaves.iter().map(|r| r.t_min).fold(f64::INFINITY, f64::min);
-    let s1 = leaves.iter().map(|r| r.s_max).fold(f64::NEG_INFINITY, f64::max);
-    let t1 = leaves.iter().map(|r| r.t_max).fold(f64::NEG_INFINITY, f64::max);
-    let ns = ((s1 - s0) / c0).round();
-    let nt = ((t1 - t0) / c0).round();
-    if !(c0 > 0.0 && ns >= 1.0 && nt >= 1.0 && ns < 4e9 && nt < 4e9) {
-        return None;
-    }
+    let roots = Roots::of_leaves(leaves)?;
     let set: HashSet<[u64; 4]> = leaves.iter().map(rect_key).collect();
     let mut bits = Vec::new();
     let mut found = 0usize;
@@ -151,13 +187,8 @@ fn quadtree(leaves: &[Rect]) -> Option<(f64, f64, f64, u64, u64, Vec<u8>)> {
         bits.push(true);
         children(&r).into_iter().all(|c| walk(c, depth + 1, set, bits, found))
     }
-    for j in 0..nt as u64 {
-        for i in 0..ns as u64 {
-            let r = Rect::new(s0 + i as f64 * c0, t0 + j as f64 * c0, s0 + (i + 1) as f64 * c0, t0 + (j + 1) as f64 * c0);
-            if !walk(r, 0, &set, &mut bits, &mut found) {
-                return None;
-            }
-        }
+    if !roots.cells().all(|r| walk(r, 0, &set, &mut bits, &mut found)) {
+        return None;
     }
     if found != leaves.len() {
         return None;
@@ -171,7 +202,7 @@ fn quadtree(leaves: &[Rect]) -> Option<(f64, f64, f64, u64, u64, Vec<u8>)> {
     let mut head = Vec::new();
     put_varint(&mut head, bits.len() as u64);
     head.extend_from_slice(&packed);
-    Some((s0, t0, c0, ns as u64, nt as u64, head))
+    Some((roots.s0, roots.t0, roots.c0, roots.ns, roots.nt, head))
 }
 
 /// The 2-/4-split tree encoding of the leaves (flag [`KDTREE`]), or None when they are not such
@@ -180,16 +211,7 @@ fn quadtree(leaves: &[Rect]) -> Option<(f64, f64, f64, u64, u64, Vec<u8>)> {
 /// 2-split); a leaf larger than a node, or a node with no cut, is not such a forest.
 fn kdtree(leaves: &[Rect]) -> Option<(f64, f64, f64, u64, u64, Vec<u8>)> {
     use rstar::{primitives::Rectangle, RTree, AABB};
-    let c0 = leaves.iter().map(|r| r.width().max(r.height())).fold(0.0, f64::max);
-    let s0 = leaves.iter().map(|r| r.s_min).fold(f64::INFINITY, f64::min);
-    let t0 = leaves.iter().map(|r| r.t_min).fold(f64::INFINITY, f64::min);
-    let s1 = leaves.iter().map(|r| r.s_max).fold(f64::NEG_INFINITY, f64::max);
-    let t1 = leaves.iter().map(|r| r.t_max).fold(f64::NEG_INFINITY, f64::max);
-    let ns = ((s1 - s0) / c0).round();
-    let nt = ((t1 - t0) / c0).round();
-    if !(c0 > 0.0 && ns >= 1.0 && nt >= 1.0 && ns < 4e9 && nt < 4e9) {
-        return None;
-    }
+    let roots = Roots::of_leaves(leaves)?;
     let tree: RTree<Rectangle<[f64; 2]>> = RTree::bulk_load(leaves.iter().map(|r| Rectangle::from_corners([r.s_min, r.t_min], [r.s_max, r.t_max])).collect());
     let mut syms: Vec<u8> = Vec::new();
     let mut found = 0usize;
@@ -224,13 +246,8 @@ fn kdtree(leaves: &[Rect]) -> Option<(f64, f64, f64, u64, u64, Vec<u8>)> {
         syms.push(sym);
         kids.into_iter().all(|c| walk(c, depth + 1, tree, syms, found))
     }
-    for j in 0..nt as u64 {
-        for i in 0..ns as u64 {
-            let r = Rect::new(s0 + i as f64 * c0, t0 + j as f64 * c0, s0 + (i + 1) as f64 * c0, t0 + (j + 1) as f64 * c0);
-            if !walk(r, 0, &tree, &mut syms, &mut found) {
-                return None;
-            }
-        }
+    if !roots.cells().all(|r| walk(r, 0, &tree, &mut syms, &mut found)) {
+        return None;
     }
     if found != leaves.len() {
         return None;
@@ -242,7 +259,7 @@ fn kdtree(leaves: &[Rect]) -> Option<(f64, f64, f64, u64, u64, Vec<u8>)> {
     let mut head = Vec::new();
     put_varint(&mut head, syms.len() as u64);
     head.extend_from_slice(&packed);
-    Some((s0, t0, c0, ns as u64, nt as u64, head))
+    Some((roots.s0, roots.t0, roots.c0, roots.ns, roots.nt, head))
 }
 
 /// Writes the compact binary form of `f`.
@@ -500,12 +517,8 @@ fn parse_body(body: &[u8]) -> Result<TMeshFile, TsplineError> {
 }
 
 fn read_quadtree(c: &mut Cursor) -> Result<Vec<Rect>, TsplineError> {
-    let (s0, t0, c0) = (c.f64("root s0")?, c.f64("root t0")?, c.f64("root size")?);
-    if c0 <= 0.0 {
-        return Err(c.err("root size must be positive"));
-    }
-    let ns = c.varint("root columns")?;
-    let nt = c.varint("root rows")?;
+    let roots = Roots::read(c)?;
+    let (ns, nt) = (roots.ns, roots.nt);
     let nbits = c.varint("quadtree bit count")?;
     if nbits < ns.saturating_mul(nt) || nbits.div_ceil(8) > (c.data.len() - c.pos) as u64 {
         return Err(c.err(format!("quadtree of {nbits} bits for {ns}×{nt} roots does not fit the body")));
@@ -515,26 +528,24 @@ fn read_quadtree(c: &mut Cursor) -> Result<Vec<Rect>, TsplineError> {
     let mut leaves = Vec::new();
     let mut k = 0usize;
     let mut stack: Vec<(Rect, usize)> = Vec::new();
-    for j in 0..nt {
-        for i in 0..ns {
-            stack.push((Rect::new(s0 + i as f64 * c0, t0 + j as f64 * c0, s0 + (i + 1) as f64 * c0, t0 + (j + 1) as f64 * c0), 0));
-            while let Some((r, depth)) = stack.pop() {
-                if k >= nbits as usize {
-                    return Err(c.err("the quadtree bits end before the tree does"));
-                }
-                let split = bit(k);
-                k += 1;
-                if !split {
-                    leaves.push(r);
-                    continue;
-                }
-                if depth >= MAX_DEPTH {
-                    return Err(c.err(format!("quadtree deeper than {MAX_DEPTH} levels")));
-                }
-                // depth first in the order SW, SE, NW, NE: push in reverse
-                for ch in children(&r).into_iter().rev() {
-                    stack.push((ch, depth + 1));
-                }
+    for root in roots.cells() {
+        stack.push((root, 0));
+        while let Some((r, depth)) = stack.pop() {
+            if k >= nbits as usize {
+                return Err(c.err("the quadtree bits end before the tree does"));
+            }
+            let split = bit(k);
+            k += 1;
+            if !split {
+                leaves.push(r);
+                continue;
+            }
+            if depth >= MAX_DEPTH {
+                return Err(c.err(format!("quadtree deeper than {MAX_DEPTH} levels")));
+            }
+            // depth first in the order SW, SE, NW, NE: push in reverse
+            for ch in children(&r).into_iter().rev() {
+                stack.push((ch, depth + 1));
             }
         }
     }
@@ -545,12 +556,8 @@ fn read_quadtree(c: &mut Cursor) -> Result<Vec<Rect>, TsplineError> {
 }
 
 fn read_kdtree(c: &mut Cursor) -> Result<Vec<Rect>, TsplineError> {
-    let (s0, t0, c0) = (c.f64("root s0")?, c.f64("root t0")?, c.f64("root size")?);
-    if c0 <= 0.0 {
-        return Err(c.err("root size must be positive"));
-    }
-    let ns = c.varint("root columns")?;
-    let nt = c.varint("root rows")?;
+    let roots = Roots::read(c)?;
+    let (ns, nt) = (roots.ns, roots.nt);
     let nsym = c.varint("tree symbol count")?;
     if nsym < ns.saturating_mul(nt) || nsym.div_ceil(4) > (c.data.len() - c.pos) as u64 {
         return Err(c.err(format!("tree of {nsym} symbols for {ns}×{nt} roots does not fit the body")));
@@ -560,33 +567,31 @@ fn read_kdtree(c: &mut Cursor) -> Result<Vec<Rect>, TsplineError> {
     let mut leaves = Vec::new();
     let mut k = 0usize;
     let mut stack: Vec<(Rect, usize)> = Vec::new();
-    for j in 0..nt {
-        for i in 0..ns {
-            stack.push((Rect::new(s0 + i as f64 * c0, t0 + j as f64 * c0, s0 + (i + 1) as f64 * c0, t0 + (j + 1) as f64 * c0), 0));
-            while let Some((r, depth)) = stack.pop() {
-                if k >= nsym as usize {
-                    return Err(c.err("the tree symbols end before the tree does"));
-                }
-                let v = sym(k);
-                k += 1;
-                if v == 0 {
-                    leaves.push(r);
-                    continue;
-                }
-                if depth >= MAX_DEPTH {
-                    return Err(c.err(format!("tree deeper than {MAX_DEPTH} levels")));
-                }
-                let sm = 0.5 * (r.s_min + r.s_max);
-                let tm = 0.5 * (r.t_min + r.t_max);
-                let kids: Vec<Rect> = match v {
-                    1 => children(&r).to_vec(),
-                    2 => vec![Rect::new(r.s_min, r.t_min, sm, r.t_max), Rect::new(sm, r.t_min, r.s_max, r.t_max)],
-                    _ => vec![Rect::new(r.s_min, r.t_min, r.s_max, tm), Rect::new(r.s_min, tm, r.s_max, r.t_max)],
-                };
-                // depth first in the writer's order: push in reverse
-                for ch in kids.into_iter().rev() {
-                    stack.push((ch, depth + 1));
-                }
+    for root in roots.cells() {
+        stack.push((root, 0));
+        while let Some((r, depth)) = stack.pop() {
+            if k >= nsym as usize {
+                return Err(c.err("the tree symbols end before the tree does"));
+            }
+            let v = sym(k);
+            k += 1;
+            if v == 0 {
+                leaves.push(r);
+                continue;
+            }
+            if depth >= MAX_DEPTH {
+                return Err(c.err(format!("tree deeper than {MAX_DEPTH} levels")));
+            }
+            let sm = 0.5 * (r.s_min + r.s_max);
+            let tm = 0.5 * (r.t_min + r.t_max);
+            let kids: Vec<Rect> = match v {
+                1 => children(&r).to_vec(),
+                2 => vec![Rect::new(r.s_min, r.t_min, sm, r.t_max), Rect::new(sm, r.t_min, r.s_max, r.t_max)],
+                _ => vec![Rect::new(r.s_min, r.t_min, r.s_max, tm), Rect::new(r.s_min, tm, r.s_max, r.t_max)],
+            };
+            // depth first in the writer's order: push in reverse
+            for ch in kids.into_iter().rev() {
+                stack.push((ch, depth + 1));
             }
         }
     }
