@@ -181,6 +181,9 @@ fn check_args(args: &Args) -> Result<Degree, CliError> {
     if args.warp == WarpMode::Full && !args.indirect {
         return Err(CliError::usage("--warp full chooses the warp of the indirect reduction: it needs --indirect"));
     }
+    if args.split == SplitArg::Aniso && (args.srcwin.is_some() || args.tile.is_some()) {
+        return Err(CliError::usage("--split aniso is not available for tiles of a plan (--tile, --srcwin): their seams need square cells"));
+    }
     if args.assembly == Assembly::Opencl {
         // The T29 kernel serves the direct least-squares fit only: say so instead of ignoring it,
         // and fail before reading (and warping) the raster when there is no OpenCL at all.
