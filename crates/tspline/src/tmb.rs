@@ -175,34 +175,22 @@ fn quadtree(leaves: &[Rect]) -> Option<(f64, f64, f64, u64, u64, Vec<u8>)> {
     let set: HashSet<[u64; 4]> = leaves.iter().map(rect_key).collect();
     let mut bits = Vec::new();
     let mut found = 0usize;
-    fn walk(r: Rect, depth: usize, set: &HashSet<[u64; 4]>, bits: &mut Vec<bool>, found: &mut usize) -> bool {
+    fn walk(r: Rect, depth: usize, set: &HashSet<[u64; 4]>, bits: &mut Vec<u8>, found: &mut usize) -> bool {
         if set.contains(&rect_key(&r)) {
-            bits.push(false);
+            bits.push(0);
             *found += 1;
             return true;
         }
         if depth >= MAX_DEPTH {
             return false;
         }
-        bits.push(true);
+        bits.push(1);
         children(&r).into_iter().all(|c| walk(c, depth + 1, set, bits, found))
     }
-    if !roots.cells().all(|r| walk(r, 0, &set, &mut bits, &mut found)) {
+    if !roots.cells().all(|r| walk(r, 0, &set, &mut bits, &mut found)) || found != leaves.len() {
         return None;
     }
-    if found != leaves.len() {
-        return None;
-    }
-    let mut packed = vec![0u8; bits.len().div_ceil(8)];
-    for (k, &b) in bits.iter().enumerate() {
-        if b {
-            packed[k / 8] |= 1 << (k % 8);
-        }
-    }
-    let mut head = Vec::new();
-    put_varint(&mut head, bits.len() as u64);
-    head.extend_from_slice(&packed);
-    Some((roots.s0, roots.t0, roots.c0, roots.ns, roots.nt, head))
+    Some((roots.s0, roots.t0, roots.c0, roots.ns, roots.nt, packed_symbols(&bits, TreeForm::Quad)))
 }
 
 /// The 2-/4-split tree encoding of the leaves (flag [`KDTREE`]), or None when they are not such
@@ -246,20 +234,10 @@ fn kdtree(leaves: &[Rect]) -> Option<(f64, f64, f64, u64, u64, Vec<u8>)> {
         syms.push(sym);
         kids.into_iter().all(|c| walk(c, depth + 1, tree, syms, found))
     }
-    if !roots.cells().all(|r| walk(r, 0, &tree, &mut syms, &mut found)) {
+    if !roots.cells().all(|r| walk(r, 0, &tree, &mut syms, &mut found)) || found != leaves.len() {
         return None;
     }
-    if found != leaves.len() {
-        return None;
-    }
-    let mut packed = vec![0u8; syms.len().div_ceil(4)];
-    for (k, &v) in syms.iter().enumerate() {
-        packed[k / 4] |= v << (2 * (k % 4));
-    }
-    let mut head = Vec::new();
-    put_varint(&mut head, syms.len() as u64);
-    head.extend_from_slice(&packed);
-    Some((roots.s0, roots.t0, roots.c0, roots.ns, roots.nt, head))
+    Some((roots.s0, roots.t0, roots.c0, roots.ns, roots.nt, packed_symbols(&syms, TreeForm::Kd)))
 }
 
 /// Writes the compact binary form of `f`.
@@ -483,9 +461,9 @@ fn parse_body(body: &[u8]) -> Result<TMeshFile, TsplineError> {
         return Err(c.err("georef dx and dy must be non-zero"));
     }
     let leaves = if flags & QUADTREE != 0 {
-        read_quadtree(&mut c)?
+        read_tree(&mut c, TreeForm::Quad)?
     } else if flags & KDTREE != 0 {
-        read_kdtree(&mut c)?
+        read_tree(&mut c, TreeForm::Kd)?
     } else {
         read_explicit(&mut c)?
     };
@@ -516,54 +494,67 @@ fn parse_body(body: &[u8]) -> Result<TMeshFile, TsplineError> {
     Ok(TMeshFile { mesh, georef, mask, warp })
 }
 
-fn read_quadtree(c: &mut Cursor) -> Result<Vec<Rect>, TsplineError> {
-    let roots = Roots::read(c)?;
-    let (ns, nt) = (roots.ns, roots.nt);
-    let nbits = c.varint("quadtree bit count")?;
-    if nbits < ns.saturating_mul(nt) || nbits.div_ceil(8) > (c.data.len() - c.pos) as u64 {
-        return Err(c.err(format!("quadtree of {nbits} bits for {ns}×{nt} roots does not fit the body")));
-    }
-    let bytes = c.take(nbits.div_ceil(8) as usize, "quadtree bits")?;
-    let bit = |k: usize| bytes[k / 8] >> (k % 8) & 1 == 1;
-    let mut leaves = Vec::new();
-    let mut k = 0usize;
-    let mut stack: Vec<(Rect, usize)> = Vec::new();
-    for root in roots.cells() {
-        stack.push((root, 0));
-        while let Some((r, depth)) = stack.pop() {
-            if k >= nbits as usize {
-                return Err(c.err("the quadtree bits end before the tree does"));
-            }
-            let split = bit(k);
-            k += 1;
-            if !split {
-                leaves.push(r);
-                continue;
-            }
-            if depth >= MAX_DEPTH {
-                return Err(c.err(format!("quadtree deeper than {MAX_DEPTH} levels")));
-            }
-            // depth first in the order SW, SE, NW, NE: push in reverse
-            for ch in children(&r).into_iter().rev() {
-                stack.push((ch, depth + 1));
-            }
-        }
-    }
-    if k != nbits as usize {
-        return Err(c.err(format!("{} quadtree bits left over", nbits as usize - k)));
-    }
-    Ok(leaves)
+/// The two tree forms as the reader walks them: a symbol per node, of one bit (quadtree: leaf
+/// or 4-split) or two (KDTREE: leaf, 4-split, cut across s, cut across t).
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum TreeForm {
+    Quad,
+    Kd,
 }
 
-fn read_kdtree(c: &mut Cursor) -> Result<Vec<Rect>, TsplineError> {
+impl TreeForm {
+    fn bits(self) -> usize {
+        match self {
+            TreeForm::Quad => 1,
+            TreeForm::Kd => 2,
+        }
+    }
+    /// (form, symbol, symbols) as the error messages name them.
+    fn names(self) -> (&'static str, &'static str, &'static str) {
+        match self {
+            TreeForm::Quad => ("quadtree", "bit", "bits"),
+            TreeForm::Kd => ("tree", "symbol", "symbols"),
+        }
+    }
+    /// The children a split symbol `v` (≠ 0) makes of `r`, in the writer's order.
+    fn children(self, v: u8, r: &Rect) -> Vec<Rect> {
+        let sm = 0.5 * (r.s_min + r.s_max);
+        let tm = 0.5 * (r.t_min + r.t_max);
+        match (self, v) {
+            (TreeForm::Quad, _) | (TreeForm::Kd, 1) => children(r).to_vec(),
+            (TreeForm::Kd, 2) => vec![Rect::new(r.s_min, r.t_min, sm, r.t_max), Rect::new(sm, r.t_min, r.s_max, r.t_max)],
+            _ => vec![Rect::new(r.s_min, r.t_min, r.s_max, tm), Rect::new(r.s_min, tm, r.s_max, r.t_max)],
+        }
+    }
+}
+
+/// A tree form's symbols as stored: their count (varint), then `form.bits()` bits each, from the
+/// low bits of each byte up.
+fn packed_symbols(syms: &[u8], form: TreeForm) -> Vec<u8> {
+    let bits = form.bits();
+    let mut packed = vec![0u8; (syms.len() * bits).div_ceil(8)];
+    for (k, &v) in syms.iter().enumerate() {
+        packed[k * bits / 8] |= v << (k * bits % 8);
+    }
+    let mut head = Vec::new();
+    put_varint(&mut head, syms.len() as u64);
+    head.extend_from_slice(&packed);
+    head
+}
+
+/// The leaves of a tree-form body: the roots, then each root's nodes depth first.
+fn read_tree(c: &mut Cursor, form: TreeForm) -> Result<Vec<Rect>, TsplineError> {
+    let (name, one, many) = form.names();
     let roots = Roots::read(c)?;
     let (ns, nt) = (roots.ns, roots.nt);
-    let nsym = c.varint("tree symbol count")?;
-    if nsym < ns.saturating_mul(nt) || nsym.div_ceil(4) > (c.data.len() - c.pos) as u64 {
-        return Err(c.err(format!("tree of {nsym} symbols for {ns}×{nt} roots does not fit the body")));
+    let per_byte = (8 / form.bits()) as u64;
+    let nsym = c.varint(&format!("{name} {one} count"))?;
+    if nsym < ns.saturating_mul(nt) || nsym.div_ceil(per_byte) > (c.data.len() - c.pos) as u64 {
+        return Err(c.err(format!("{name} of {nsym} {many} for {ns}×{nt} roots does not fit the body")));
     }
-    let bytes = c.take(nsym.div_ceil(4) as usize, "tree symbols")?;
-    let sym = |k: usize| bytes[k / 4] >> (2 * (k % 4)) & 3;
+    let bytes = c.take(nsym.div_ceil(per_byte) as usize, &format!("{name} {many}"))?;
+    let (bits, mask) = (form.bits(), (1u8 << form.bits()) - 1);
+    let sym = |k: usize| bytes[k * bits / 8] >> (k * bits % 8) & mask;
     let mut leaves = Vec::new();
     let mut k = 0usize;
     let mut stack: Vec<(Rect, usize)> = Vec::new();
@@ -571,7 +562,7 @@ fn read_kdtree(c: &mut Cursor) -> Result<Vec<Rect>, TsplineError> {
         stack.push((root, 0));
         while let Some((r, depth)) = stack.pop() {
             if k >= nsym as usize {
-                return Err(c.err("the tree symbols end before the tree does"));
+                return Err(c.err(format!("the {name} {many} end before the tree does")));
             }
             let v = sym(k);
             k += 1;
@@ -580,23 +571,16 @@ fn read_kdtree(c: &mut Cursor) -> Result<Vec<Rect>, TsplineError> {
                 continue;
             }
             if depth >= MAX_DEPTH {
-                return Err(c.err(format!("tree deeper than {MAX_DEPTH} levels")));
+                return Err(c.err(format!("{name} deeper than {MAX_DEPTH} levels")));
             }
-            let sm = 0.5 * (r.s_min + r.s_max);
-            let tm = 0.5 * (r.t_min + r.t_max);
-            let kids: Vec<Rect> = match v {
-                1 => children(&r).to_vec(),
-                2 => vec![Rect::new(r.s_min, r.t_min, sm, r.t_max), Rect::new(sm, r.t_min, r.s_max, r.t_max)],
-                _ => vec![Rect::new(r.s_min, r.t_min, r.s_max, tm), Rect::new(r.s_min, tm, r.s_max, r.t_max)],
-            };
-            // depth first in the writer's order: push in reverse
-            for ch in kids.into_iter().rev() {
+            // depth first in the writer's order (quadtree: SW, SE, NW, NE): push in reverse
+            for ch in form.children(v, &r).into_iter().rev() {
                 stack.push((ch, depth + 1));
             }
         }
     }
     if k != nsym as usize {
-        return Err(c.err(format!("{} tree symbols left over", nsym as usize - k)));
+        return Err(c.err(format!("{} {name} {many} left over", nsym as usize - k)));
     }
     Ok(leaves)
 }
