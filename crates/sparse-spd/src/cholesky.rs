@@ -61,6 +61,60 @@ fn lower_csc(a: &SymCsr) -> Option<(Vec<u32>, Vec<u32>, Vec<f64>)> {
     Some((col_ptr, row_idx, vals))
 }
 
+/// The lower triangle's pattern (CSC) of the symmetric pattern `start`, `cols` (as
+/// [`lower_csc`] lays it out); None when it does not fit u32 indices.
+fn lower_pattern(start: &[usize], cols: &[u32]) -> Option<(Vec<u32>, Vec<u32>)> {
+    let n = start.len().saturating_sub(1);
+    if cols.len() > u32::MAX as usize {
+        return None;
+    }
+    let mut col_ptr = Vec::with_capacity(n + 1);
+    let mut row_idx = Vec::with_capacity(cols.len() / 2 + n);
+    col_ptr.push(0u32);
+    for j in 0..n {
+        row_idx.extend(cols[start[j]..start[j + 1]].iter().copied().filter(|&i| i as usize >= j));
+        col_ptr.push(row_idx.len() as u32);
+    }
+    Some((col_ptr, row_idx))
+}
+
+/// A symbolic factorisation (AMD ordering and elimination structure) made ahead of the solve,
+/// on any thread, from the pattern alone: the caller can build it while it assembles the
+/// values, then [`install_symbolic`] it on the thread that solves.
+pub struct Symbolic(Cached);
+
+/// Whether this thread's cached symbolic factorisation is that of the pattern `start`, `cols`
+/// (a [`SymCsr`]'s, both triangles).
+pub fn symbolic_cached(start: &[usize], cols: &[u32]) -> bool {
+    let Some((col_ptr, row_idx)) = lower_pattern(start, cols) else { return false };
+    SYMBOLIC.with(|c| c.borrow().as_ref().is_some_and(|c| c.col_ptr == col_ptr && c.row_idx == row_idx))
+}
+
+/// Drops this thread's cached symbolic factorisation (before one for another pattern is built:
+/// two would be held at once otherwise).
+pub fn clear_symbolic() {
+    SYMBOLIC.with(|c| *c.borrow_mut() = None);
+}
+
+/// The symbolic factorisation of the pattern `start`, `cols` (a [`SymCsr`]'s): what
+/// [`cholesky_solve`] computes when its thread's cache has another pattern; the same ordering
+/// and structure, so the factor and the answer are the same bits either way.
+pub fn cholesky_symbolic(start: &[usize], cols: &[u32]) -> Result<Symbolic, CholeskyError> {
+    let n = start.len().saturating_sub(1);
+    let Some((col_ptr, row_idx)) = lower_pattern(start, cols) else {
+        return Err(CholeskyError::Symbolic("more entries than u32 indices address".into()));
+    };
+    let sym = SymbolicSparseColMatRef::new_checked(n, n, &col_ptr, None, &row_idx);
+    let symbolic = factorize_symbolic_cholesky(sym, Side::Lower, SymmetricOrdering::Amd, Default::default()).map_err(|e| CholeskyError::Symbolic(format!("{e:?}")))?;
+    Ok(Symbolic(Cached { col_ptr, row_idx, symbolic }))
+}
+
+/// Makes `s` this thread's cached symbolic factorisation: the next [`cholesky_solve`] of a
+/// matrix with its pattern re-uses it.
+pub fn install_symbolic(s: Symbolic) {
+    SYMBOLIC.with(|c| *c.borrow_mut() = Some(s.0));
+}
+
 /// Solves A x = b by Cholesky plus one step of iterative refinement; the bool says whether
 /// the symbolic factorisation of this thread's previous call was re-used (same pattern,
 /// compared exactly). A factor of more than `max_factor_bytes` is not built.

@@ -193,3 +193,22 @@ fn cholesky_bits_do_not_depend_on_the_thread_count() {
         assert!(one.iter().zip(&many).all(|(x, y)| x.to_bits() == y.to_bits()), "{threads} threads");
     }
 }
+
+/// A symbolic factorisation built ahead on another thread and installed is re-used by the
+/// solve, which gives the same bits as the solve that builds its own.
+#[test]
+fn symbolic_built_ahead_gives_the_same_bits() {
+    let a = stencil_2d(40, 2);
+    let (_, b) = known(&a);
+    clear_symbolic();
+    let (own, reused) = cholesky_solve(&a, &b, 1 << 30).unwrap();
+    assert!(!reused);
+    clear_symbolic();
+    assert!(!symbolic_cached(&a.start, &a.cols));
+    let sym = std::thread::scope(|s| s.spawn(|| cholesky_symbolic(&a.start, &a.cols).unwrap()).join().unwrap());
+    install_symbolic(sym);
+    assert!(symbolic_cached(&a.start, &a.cols));
+    let (ahead, reused) = cholesky_solve(&a, &b, 1 << 30).unwrap();
+    assert!(reused);
+    assert!(own.iter().zip(&ahead).all(|(x, y)| x.to_bits() == y.to_bits()));
+}

@@ -135,6 +135,17 @@ pub struct PbSpline {
     pub cell_items: Vec<u32>,
 }
 
+/// [`PbSpline::point_z_cached`]'s cache: the non-zero τ factors (PB index, N(t)) of the buckets
+/// met at one located t, per bucket column (a stamp marks the entries of the current t).
+#[derive(Debug, Default)]
+pub(crate) struct RowCache {
+    key: Option<(u64, bool)>,
+    stamp: u32,
+    /// Per bucket column: (stamp, bucket, range in `terms`).
+    slots: Vec<(u32, u32, u32, u32)>,
+    terms: Vec<(u32, f64)>,
+}
+
 /// A uniform grid over the domain's bounding box.
 #[derive(Debug, Clone, Copy)]
 pub struct BucketGrid {
@@ -361,6 +372,66 @@ impl PbSpline {
         [x / den, y / den, z / den]
     }
 
+    /// The height [`PbSpline::point`] gives at (s, t), to the bit, with the τ factors of a
+    /// bucket's points cached in `row` for as long as the (located) t stays the same: cells of
+    /// a raster row then evaluate each point's τ piece once per bucket instead of once per cell
+    /// (the local error checks evaluate a region's cells row by row; BENCHMARKS.md "Fit CPU on
+    /// the largest mesh, again"). Same terms (a point counts where its support holds (s, t) and
+    /// both factors are non-zero), same products w·N(s)·N(t), summed in the bucket's order.
+    #[inline]
+    pub(crate) fn point_z_cached(&self, s: f64, t: f64, row: &mut RowCache) -> f64 {
+        let Some((s, t, ls, lt)) = self.locate(s, t) else { return f64::NAN };
+        let k = self.degree.k();
+        let b = self.bucket(s, t);
+        let key = (t.to_bits(), lt);
+        if row.key != Some(key) {
+            row.key = Some(key);
+            row.stamp = row.stamp.wrapping_add(1);
+            row.terms.clear();
+            if row.slots.len() != self.grid.ns as usize {
+                row.slots = vec![(u32::MAX, 0, 0, 0); self.grid.ns as usize];
+            }
+        }
+        let slot = b % self.grid.ns as usize;
+        let (stamp, sb, from, to) = row.slots[slot];
+        let (from, to) = if stamp == row.stamp && sb == b as u32 {
+            (from as usize, to as usize)
+        } else {
+            let from = row.terms.len();
+            for &pi in &self.pt_items[self.pt_start[b] as usize..self.pt_start[b + 1] as usize] {
+                let kn = &self.knots[pi as usize];
+                if t < kn[5] || t > kn[5 + k + 1] {
+                    continue;
+                }
+                let bt = basis_poly(&kn[5..10], self.pieces(pi as usize).1, k, t, lt);
+                if bt != 0.0 {
+                    row.terms.push((pi, bt));
+                }
+            }
+            row.slots[slot] = (row.stamp, b as u32, from as u32, row.terms.len() as u32);
+            (from, row.terms.len())
+        };
+        let (mut z, mut den) = (0.0, 0.0);
+        for &(pi, bt) in &row.terms[from..to] {
+            let kn = &self.knots[pi as usize];
+            if s < kn[0] || s > kn[k + 1] {
+                continue;
+            }
+            let bs = basis_poly(&kn[0..5], self.pieces(pi as usize).0, k, s, ls);
+            if bs == 0.0 {
+                continue;
+            }
+            let g = &self.geom[pi as usize];
+            let wn = g[3] * bs * bt;
+            z += wn * g[2];
+            den += wn;
+        }
+        if den == 0.0 {
+            return f64::NAN;
+        }
+        z / den
+    }
+
     /// The unnormalised Σ w_i N_i at (s, t) (partition-of-unity checks), NaN outside.
     pub fn weight_sum(&self, s: f64, t: f64) -> f64 {
         let Some((s, t, ls, lt)) = self.locate(s, t) else { return f64::NAN };
@@ -531,6 +602,36 @@ mod tests {
     use crate::mesh::{ControlPoint, Degree, TMesh};
 
     use crate::testing::lcg;
+
+    /// The row-cached height is [`PbSpline::point`]'s to the bit (NaN where it is NaN), on
+    /// meshes with T-junctions and non-unit weights, at cells on and between mesh lines,
+    /// outside the domain and on its borders; one cache over many rows and also one per row.
+    #[test]
+    fn row_cached_heights_equal_point() {
+        let mut seed = 7u64;
+        for degree in [Degree::Linear, Degree::Cubic] {
+            let mut pb = PbSpline::build(&crate::testing::refined_mesh(degree));
+            for g in &mut pb.geom {
+                g[2] = 10.0 * lcg(&mut seed) - 5.0;
+                g[3] = 0.5 + lcg(&mut seed);
+            }
+            let (mut shared, mut checked) = (RowCache::default(), 0);
+            for j in -3..110 {
+                let mut row = RowCache::default();
+                for i in -3..110 {
+                    for (s, t) in [(i as f64, j as f64), (i as f64 + 0.25, j as f64 * 0.5)] {
+                        let want = self::PbSpline::point(&pb, s, t)[2];
+                        for cache in [&mut row, &mut shared] {
+                            let got = pb.point_z_cached(s, t, cache);
+                            assert!(got.to_bits() == want.to_bits() || (got.is_nan() && want.is_nan()), "{degree:?} ({s}, {t}): {got} vs {want}");
+                        }
+                        checked += want.is_finite() as usize;
+                    }
+                }
+            }
+            assert!(checked > 5000, "{checked} finite heights");
+        }
+    }
 
     #[test]
     fn polynomial_pieces_equal_cox_de_boor() {

@@ -502,13 +502,18 @@ impl TMesh {
     /// [`TMesh::repair_need`] of every leaf at once, indexed by cell id (none for non-leaves):
     /// the neighbours come from the leaves' sides sorted by line ([`SideIndex`]) instead of an
     /// R-tree query per leaf.
+    /// The leaves are independent of each other here (the mesh is read only), so they are
+    /// visited in parallel: the repair runs on the fit's one thread otherwise, and this batch
+    /// was most of it (BENCHMARKS.md "Fit CPU on the largest mesh, again").
     fn leaves_needing_repair(&self) -> Vec<RepairNeed> {
+        use rayon::prelude::*;
         let sides = SideIndex::new(self);
         let mut out = vec![RepairNeed::default(); self.cells.len()];
-        for c in self.leaves() {
-            let r = self.cells[c as usize].rect;
-            out[c as usize] = repair_need(&r, sides.neighbours(&r));
-        }
+        out.par_iter_mut().zip(self.cells.par_iter()).with_min_len(4096).for_each(|(o, c)| {
+            if c.is_leaf() {
+                *o = repair_need(&c.rect, sides.neighbours(&c.rect));
+            }
+        });
         out
     }
 
@@ -716,9 +721,9 @@ impl SideIndex {
             by_side[Side::South as usize].push((r.t_max + 0.0, r.s_min, r.s_max, r));
             by_side[Side::North as usize].push((r.t_min + 0.0, r.s_min, r.s_max, r));
         }
-        for v in &mut by_side {
-            v.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)));
-        }
+        // (line, start) is unique per side (leaves do not overlap): any sort gives one order
+        use rayon::prelude::*;
+        by_side.par_iter_mut().for_each(|v| v.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1))));
         SideIndex { by_side }
     }
 

@@ -41,3 +41,15 @@ pub fn solve_spd(a: &SymCsr, b: &[f64], x0: &[f64]) -> Result<(Vec<f64>, SolveIn
     let opts = SolveOptions { direct: !use_cg_only(), max_factor_bytes: MAX_FACTOR_BYTES, direct_accept: ACCEPT, cg };
     sparse_spd::solve_spd(a, b, x0, &opts)
 }
+
+/// Whether the direct solve of a system with the pattern `start`, `cols` would build a new
+/// symbolic factorisation (this thread's cached one is another pattern's; not in CG-only
+/// mode). When it would, the cached one is dropped now: the caller builds the new one ahead
+/// (`sparse_spd::cholesky_symbolic`), and two are not held at once.
+pub fn symbolic_needed(start: &[usize], cols: &[u32]) -> bool {
+    if use_cg_only() || sparse_spd::symbolic_cached(start, cols) {
+        return false;
+    }
+    sparse_spd::clear_symbolic();
+    true
+}

@@ -144,19 +144,21 @@ pub(crate) fn eval_errors_region(pb: &PbSpline, samples: &Samples, region: &Regi
     errs.par_chunks_mut(sub * w).enumerate().for_each(|(b, out)| {
         let j0 = b * sub;
         let j1 = j0 + out.len() / w;
-        region.for_rows(j0, j1, |q| out[q - j0 * w] = region_error(pb, samples, q));
+        let mut row = crate::eval::RowCache::default();
+        region.for_rows(j0, j1, |q| out[q - j0 * w] = region_error(pb, samples, q, &mut row));
     });
 }
 
-/// |Δz| at raster cell `q` on the PB-spline path ([`eval_errors_region`]'s value).
+/// |Δz| at raster cell `q` on the PB-spline path ([`eval_errors_region`]'s value): the height
+/// of [`PbSpline::point`], with the τ factors cached along the row in `row`.
 #[inline]
-pub(super) fn region_error(pb: &PbSpline, samples: &Samples, q: usize) -> f64 {
+pub(super) fn region_error(pb: &PbSpline, samples: &Samples, q: usize, row: &mut crate::eval::RowCache) -> f64 {
     let w = samples.width;
     let dk = samples.z.get(q);
     if dk.is_nan() {
         f64::NAN
     } else {
-        let zk = pb.point((q % w) as f64, (q / w) as f64)[2];
+        let zk = pb.point_z_cached((q % w) as f64, (q / w) as f64, row);
         if zk.is_nan() { f64::INFINITY } else { (zk - dk).abs() }
     }
 }
@@ -176,14 +178,14 @@ pub(crate) fn over_tolerance_region(mesh: &TMesh, pb: &PbSpline, samples: &Sampl
     let scan = OverScan::new(mesh, pb, &pos, tol);
     let parts: Vec<(usize, Vec<CellId>)> = (0..blocks)
         .into_par_iter()
-        .map_init(Vec::new, |buf: &mut Vec<f64>, b| {
+        .map_init(|| (Vec::new(), crate::eval::RowCache::default()), |(buf, row): &mut (Vec<f64>, crate::eval::RowCache), b| {
             let j0 = b * sub;
             let j1 = (j0 + sub).min(samples.height);
             buf.clear();
             buf.resize((j1 - j0) * w, f64::NAN);
             let mut any = false;
             region.for_rows(j0, j1, |q| {
-                buf[q - j0 * w] = region_error(pb, samples, q);
+                buf[q - j0 * w] = region_error(pb, samples, q, row);
                 any = true;
             });
             if !any {

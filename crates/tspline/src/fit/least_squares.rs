@@ -53,11 +53,13 @@ pub(super) fn pattern(pb: &PbSpline, extra: &[Vec<u32>], free: Option<&[bool]>) 
 /// that z_i − (wl·z_l + wr·z_r) is the second divided difference (zero on planes).
 pub(super) fn line_triples(mesh: &TMesh, pb: &PbSpline) -> Vec<Vec<(u32, u32, f64, f64)>> {
     let h = pb.degree.half();
-    let mut pb_of = std::collections::HashMap::with_capacity(pb.point_ids.len());
+    let mut pb_of = vec![u32::MAX; mesh.points.len()];
     for (i, &pid) in pb.point_ids.iter().enumerate() {
-        pb_of.insert(pid, i as u32);
+        pb_of[pid as usize] = i as u32;
     }
+    // in parallel: the points are independent, and this ran on the fit's one thread
     (0..pb.knots.len())
+        .into_par_iter()
         .map(|i| {
             let kn = &pb.knots[i];
             let p = mesh.points[pb.point_ids[i] as usize];
@@ -70,7 +72,10 @@ pub(super) fn line_triples(mesh: &TMesh, pb: &PbSpline) -> Vec<Vec<(u32, u32, f6
                 }
                 let (a, b) = if dim == 0 { ((lo, p.t), (hi, p.t)) } else { ((p.s, lo), (p.s, hi)) };
                 let (Some(pa), Some(pbb)) = (mesh.point_id_at(a.0, a.1), mesh.point_id_at(b.0, b.1)) else { continue };
-                let (Some(&ia), Some(&ib)) = (pb_of.get(&pa), pb_of.get(&pbb)) else { continue };
+                let (ia, ib) = (pb_of[pa as usize], pb_of[pbb as usize]);
+                if ia == u32::MAX || ib == u32::MAX {
+                    continue;
+                }
                 let wl = (hi - c) / (hi - lo);
                 let wr = (c - lo) / (hi - lo);
                 v.push((ia, ib, wl, wr));
@@ -215,10 +220,31 @@ pub(crate) fn fit_lsq_local(
     drop(extra);
     let prior: Vec<f64> = pb.geom.iter().map(|g| g[2]).collect();
     let sys = crate::assembly::System { pattern: &a, pb, free, prior: &prior };
-    let sums = match (pts, &asm) {
-        (None, None) => crate::assembly::by_elements(sys, samples, region),
-        _ => crate::assembly::per_cell(sys, samples, pts, region, asm.as_ref().map(|(o, sp)| (*o, sp)))?,
+    // The symbolic factorisation needs only the pattern of the system solved (the free block
+    // for a local update): it is built on the pool while the values are assembled, instead of
+    // on this thread after them (it was ~15 % of this thread's time on the BAG at 0.1 m,
+    // BENCHMARKS.md "Fit CPU on the largest mesh, again"); the same ordering, so the same bits.
+    let block = free.map(|f| free_block_pattern(&a, f));
+    let (b_start, b_cols) = block.as_ref().map_or((&a.start[..], &a.cols[..]), |(s, c)| (&s[..], &c[..]));
+    let ahead = asm.is_none() && crate::sparse::symbolic_needed(b_start, b_cols);
+    let assemble = || match (pts, &asm) {
+        (None, None) => Ok(crate::assembly::by_elements(sys, samples, region)),
+        _ => crate::assembly::per_cell(sys, samples, pts, region, asm.as_ref().map(|(o, sp)| (*o, sp))),
     };
+    let (symbolic, sums) = if ahead {
+        let (symbolic, sums) = rayon::join(|| sparse_spd::cholesky_symbolic(b_start, b_cols).ok(), || match (pts, region) {
+            (None, _) => Ok(crate::assembly::by_elements(sys, samples, region)),
+            _ => crate::assembly::per_cell(sys, samples, pts, region, None),
+        });
+        (symbolic, sums)
+    } else {
+        (None, assemble())
+    };
+    let sums = sums?;
+    if let Some(s) = symbolic {
+        sparse_spd::install_symbolic(s);
+    }
+    drop(block);
     let crate::assembly::Sums { vals, mut rhs, support } = sums;
     a.vals = vals;
     mirror_upper(&mut a);
@@ -299,6 +325,26 @@ pub(super) fn mirror_upper(a: &mut Csr) {
             }
         }
     }
+}
+
+/// The pattern of [`solve_free`]'s free block (rows of the free points, columns renumbered in
+/// order): what its Cholesky factorises.
+fn free_block_pattern(a: &Csr, free: &[bool]) -> (Vec<usize>, Vec<u32>) {
+    let n = a.n();
+    let mut new_of = vec![u32::MAX; n];
+    let mut q = 0u32;
+    for i in (0..n).filter(|&i| free[i]) {
+        new_of[i] = q;
+        q += 1;
+    }
+    let mut start = Vec::with_capacity(q as usize + 1);
+    let mut cols = Vec::new();
+    start.push(0);
+    for i in (0..n).filter(|&i| free[i]) {
+        cols.extend(a.cols[a.start[i]..a.start[i + 1]].iter().map(|&c| new_of[c as usize]));
+        start.push(cols.len());
+    }
+    (start, cols)
 }
 
 /// The solve of a local update: the held points' rows are identities (z = prior) and no free
