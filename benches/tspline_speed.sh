@@ -17,7 +17,7 @@
 #           normal-equation assembly, BENCHMARKS.md "Fit assembly per element");
 #  speedup - issue 19's "at least 3× faster than today": BEFORE=path/to/geofit-of-the-issue's-day
 #           against this one on the six fixture rows (LiDAR DEM, BAG, Kilauea at two tolerances
-#           each), RUNS (3) runs of each interleaved so both see the same load, median CPU s;
+#           each), RUNS (3) runs of each interleaved so both see the same load, median CPU s and wall s;
 #           control points of both and this binary's max error checked independently.
 # usage: benches/tspline_speed.sh path/to/geofit [all|solve|eval|memory|assembly|speedup]  (markdown on stdout)
 set -uo pipefail
@@ -133,12 +133,12 @@ assembly_section() {
 
 median() { printf '%s\n' "$@" | sort -g | awk '{a[NR]=$1} END {print (NR % 2) ? a[(NR + 1) / 2] : (a[NR / 2] + a[NR / 2 + 1]) / 2}'; }
 
-# CPU s (user + sys) of one fit, nothing else
+# "CPU-s wall-s" of one fit (CPU = user + sys), nothing else
 fit_cpu() {
   local bin="$1" input="$2" e="$3" ext="$4"
-  /usr/bin/time -f "%U %S" -o "$T/cpu.time" "$bin" -q fit "$input" -o "$T/cpu.$ext" --max-error "$e" --device cpu 2>/dev/null
-  read -r user sys < "$T/cpu.time"
-  awk -v u="$user" -v s="$sys" 'BEGIN { printf "%.2f", u + s }'
+  /usr/bin/time -f "%U %S %e" -o "$T/cpu.time" "$bin" -q fit "$input" -o "$T/cpu.$ext" --max-error "$e" --device cpu 2>/dev/null
+  read -r user sys wall < "$T/cpu.time"
+  awk -v u="$user" -v s="$sys" -v w="$wall" 'BEGIN { printf "%.2f %.2f", u + s, w }'
 }
 
 speedup_section() {
@@ -147,20 +147,20 @@ speedup_section() {
   echo
   echo "Machine: $(nproc) cores shared with other jobs, load before: $(cut -d' ' -f1-3 /proc/loadavg); $(date -u +%Y-%m-%d); median of $runs interleaved runs each"
   echo
-  echo '| raster | E | before CPU s | after CPU s | speed-up | control points before / after | max error after (independent) | check after |'
-  echo '|---|---|---|---|---|---|---|---|'
+  echo '| raster | E | before CPU s | after CPU s | CPU speed-up | before wall s | after wall s | wall speed-up | control points before / after | max error after (independent) | check after |'
+  echo '|---|---|---|---|---|---|---|---|---|---|---|'
   for spec in "giswqs-lidar_dem.tif 0.5" "giswqs-lidar_dem.tif 0.25" "ons-bag_JD211_public_Release_1-4_UTM.bag 0.25" "ons-bag_JD211_public_Release_1-4_UTM.bag 0.1" "gmt_Kilauea.utm.nc 20" "gmt_Kilauea.utm.nc 5"; do
     set -- $spec
-    local f="$TER/$1" e="$2" bs=() as=() b a
+    local f="$TER/$1" e="$2" bs=() as=() bw=() aw=() b a r
     for _ in $(seq "$runs"); do
-      bs+=("$(fit_cpu "$(realpath "$before")" "$f" "$e" tmesh)")
-      as+=("$(fit_cpu "$BIN" "$f" "$e" tmb)")
+      r=($(fit_cpu "$(realpath "$before")" "$f" "$e" tmesh)); bs+=("${r[0]}"); bw+=("${r[1]}")
+      r=($(fit_cpu "$BIN" "$f" "$e" tmb)); as+=("${r[0]}"); aw+=("${r[1]}")
     done
     b=($(fit_row "$(realpath "$before")" "$f" "$e" before tmesh))
     a=($(fit_row "$BIN" "$f" "$e" after tmb))
-    local mb ma
-    mb=$(median "${bs[@]}") ma=$(median "${as[@]}")
-    echo "| $1 | $e | $mb | $ma | $(awk -v b="$mb" -v a="$ma" 'BEGIN { printf "%.2f", b / a }')x | ${b[2]} / ${a[2]} | ${a[3]} | ${a[4]} |"
+    local mb ma mbw maw
+    mb=$(median "${bs[@]}") ma=$(median "${as[@]}") mbw=$(median "${bw[@]}") maw=$(median "${aw[@]}")
+    echo "| $1 | $e | $mb | $ma | $(awk -v b="$mb" -v a="$ma" 'BEGIN { printf "%.2f", b / a }')x | $mbw | $maw | $(awk -v b="$mbw" -v a="$maw" 'BEGIN { printf "%.2f", b / a }')x | ${b[2]} / ${a[2]} | ${a[3]} | ${a[4]} |"
   done
   echo
   echo "Load after: $(cut -d' ' -f1-3 /proc/loadavg)"

@@ -217,169 +217,250 @@ pub fn read(data: &[u8]) -> Result<TMeshFile, TsplineError> {
     if data.starts_with(crate::tmb::MAGIC) {
         return crate::tmb::read(data);
     }
-    let ferr = |pos: usize, msg: String| TsplineError::Format { pos: line_col(data, pos), msg };
+    let text_of = XmlText(data);
     let mut r = Reader::from_reader(data);
     r.config_mut().trim_text(false);
-    let mut stack: Vec<String> = Vec::new();
-    let mut degree = None;
-    let mut georef: Option<Georef> = None;
-    let mut points: Option<(usize, Vec<ControlPoint>)> = None;
-    let mut cells: Option<(usize, Vec<[PointId; 4]>)> = None;
-    let mut mask: Option<DataMask> = None;
-    let mut warp: Option<String> = None;
-    let mut pending_attrs: Vec<(String, String)> = Vec::new();
+    let mut parts = XmlParts::default();
+    let mut open: Vec<String> = Vec::new();
     let mut text = String::new();
     let mut text_pos = 0usize;
-    let mut root_seen = false;
     loop {
         let pos = r.buffer_position() as usize;
-        let ev = r.read_event().map_err(|e| ferr(pos, format!("not well-formed XML: {}", quote(&e.to_string()))))?;
+        let ev = r.read_event().map_err(|e| text_of.err(pos, format!("not well-formed XML: {}", quote(&e.to_string()))))?;
         match ev {
             Event::Start(ref e) | Event::Empty(ref e) => {
-                let name = quote(&String::from_utf8_lossy(e.local_name().as_ref())).into_owned();
-                let mut attrs = Vec::new();
-                for a in e.attributes() {
-                    let a = a.map_err(|x| ferr(pos, format!("<{name}>: bad attribute: {}", quote(&x.to_string()))))?;
-                    let v = a.unescape_value().map_err(|x| ferr(pos, format!("<{name}>: bad attribute value: {}", quote(&x.to_string()))))?.to_string();
-                    attrs.push((String::from_utf8_lossy(a.key.local_name().as_ref()).to_string(), v));
-                }
-                let get = |k: &str| attrs.iter().find(|(n, _)| n == k).map(|(_, v)| v.clone());
-                let num = |k: &str| -> Result<f64, TsplineError> {
-                    let v = get(k).ok_or_else(|| ferr(pos, format!("<{name}> lacks attribute {k}")))?;
-                    let x: f64 = v.trim().parse().map_err(|_| ferr(pos, format!("<{name}> {k}=\"{}\" is not a number", quote(&v))))?;
-                    if !x.is_finite() {
-                        return Err(ferr(pos, format!("<{name}> {k} is not finite")));
-                    }
-                    Ok(x)
-                };
-                let uint = |k: &str| -> Result<usize, TsplineError> {
-                    let v = get(k).ok_or_else(|| ferr(pos, format!("<{name}> lacks attribute {k}")))?;
-                    v.trim().parse().map_err(|_| ferr(pos, format!("<{name}> {k}=\"{}\" is not a non-negative integer", quote(&v))))
-                };
-                match (stack.len(), name.as_str()) {
-                    (0, "tmesh") => {
-                        root_seen = true;
-                        let ns = attrs.iter().find(|(n, _)| n == "xmlns").map(|(_, v)| v.as_str()).unwrap_or("");
-                        if ns != NAMESPACE {
-                            return Err(ferr(pos, format!("<tmesh> namespace is \"{}\", expected \"{NAMESPACE}\"", quote(ns))));
-                        }
-                        let k = uint("degree")?;
-                        degree = Some(Degree::from_u32(k as u32).ok_or_else(|| ferr(pos, format!("degree {k} is not supported (1 or 3)")))?);
-                    }
-                    (0, other) => return Err(ferr(pos, format!("root element is <{other}>, expected <tmesh>"))),
-                    (1, "georef") => {
-                        georef = Some(Georef { x0: num("x0")?, y0: num("y0")?, dx: num("dx")?, dy: num("dy")?, crs: String::new() });
-                        let g = georef.as_ref().unwrap();
-                        if g.dx == 0.0 || g.dy == 0.0 {
-                            return Err(ferr(pos, "<georef> dx and dy must be non-zero".into()));
-                        }
-                    }
-                    (2, "crs") => {}
-                    (1, "points") => points = Some((uint("count")?, Vec::new())),
-                    (1, "cells") => cells = Some((uint("count")?, Vec::new())),
-                    (1, "mask") => {
-                        if get("encoding").as_deref() != Some("rle") {
-                            return Err(ferr(pos, "<mask> encoding must be \"rle\"".into()));
-                        }
-                        mask = Some(DataMask { width: uint("width")?, height: uint("height")?, bits: Vec::new() });
-                    }
-                    (1, "warp") => {
-                        if get("encoding").as_deref() != Some("json") {
-                            return Err(ferr(pos, "<warp> encoding must be \"json\"".into()));
-                        }
-                        warp = Some(String::new());
-                    }
-                    (d, other) => return Err(ferr(pos, format!("unexpected element <{other}> at depth {d}"))),
-                }
-                pending_attrs = attrs;
+                let tag = StartTag::read(e, pos, &text_of)?;
+                parts.open(open.len(), &tag)?;
                 if matches!(ev, Event::Start(_)) {
-                    stack.push(name);
+                    open.push(tag.name);
                     text.clear();
                     text_pos = r.buffer_position() as usize;
                 }
             }
             Event::Text(t) => {
-                let s = t.decode().map_err(|e| ferr(pos, format!("bad text: {e}")))?;
-                let s = quick_xml::escape::unescape(&s).map_err(|e| ferr(pos, format!("bad text: {e}")))?;
+                let s = t.decode().map_err(|e| text_of.err(pos, format!("bad text: {e}")))?;
+                let s = quick_xml::escape::unescape(&s).map_err(|e| text_of.err(pos, format!("bad text: {e}")))?;
                 text.push_str(&s);
             }
             Event::GeneralRef(e) => {
-                let n = String::from_utf8_lossy(&e).to_string();
-                text.push_str(match n.as_str() {
-                    "amp" => "&",
-                    "lt" => "<",
-                    "gt" => ">",
-                    "quot" => "\"",
-                    "apos" => "'",
-                    _ => return Err(ferr(pos, format!("unknown entity &{};", quote(&n)))),
-                });
+                let name = String::from_utf8_lossy(&e).to_string();
+                let c = predefined_entity(&name).ok_or_else(|| text_of.err(pos, format!("unknown entity &{};", quote(&name))))?;
+                text.push_str(c);
             }
             Event::End(_) => {
-                let name = stack.pop().unwrap_or_default();
-                let tp = text_pos;
-                match name.as_str() {
-                    "crs" => {
-                        if let Some(g) = georef.as_mut() {
-                            g.crs = text.trim().to_string();
-                        }
-                    }
-                    "points" => {
-                        let (count, v) = points.as_mut().unwrap();
-                        let nums = parse_f64s(&text).map_err(|m| ferr(tp, format!("<points>: {m}")))?;
-                        if nums.len() != *count * 6 {
-                            return Err(ferr(tp, format!("<points count=\"{count}\"> holds {} numbers, expected {}", nums.len(), *count * 6)));
-                        }
-                        *v = nums.chunks_exact(6).map(|c| ControlPoint { s: c[0], t: c[1], x: c[2], y: c[3], z: c[4], w: c[5] }).collect();
-                    }
-                    "cells" => {
-                        let (count, v) = cells.as_mut().unwrap();
-                        let mut ids = Vec::with_capacity(*count * 4);
-                        for tok in text.split_ascii_whitespace() {
-                            ids.push(tok.parse::<u32>().map_err(|_| ferr(tp, format!("<cells>: \"{}\" is not a point index", quote(tok))))?);
-                        }
-                        if ids.len() != *count * 4 {
-                            return Err(ferr(tp, format!("<cells count=\"{count}\"> holds {} indices, expected {}", ids.len(), *count * 4)));
-                        }
-                        *v = ids.chunks_exact(4).map(|c| [c[0], c[1], c[2], c[3]]).collect();
-                    }
-                    "mask" => {
-                        let m = mask.as_mut().unwrap();
-                        let mut bit = false;
-                        let total = m.width * m.height;
-                        for tok in text.split_ascii_whitespace() {
-                            let n: usize = tok.parse().map_err(|_| ferr(tp, format!("<mask>: \"{}\" is not a run length", quote(tok))))?;
-                            if m.bits.len() + n > total {
-                                return Err(ferr(tp, format!("<mask>: runs exceed {}×{} cells", m.width, m.height)));
-                            }
-                            m.bits.extend(std::iter::repeat_n(bit, n));
-                            bit = !bit;
-                        }
-                        if m.bits.len() != total {
-                            return Err(ferr(tp, format!("<mask>: runs cover {} of {} cells", m.bits.len(), total)));
-                        }
-                    }
-                    "warp" => {
-                        *warp.as_mut().unwrap() = text.clone();
-                    }
-                    _ => {}
-                }
+                let name = open.pop().unwrap_or_default();
+                parts.close(&name, &text).map_err(|msg| text_of.err(text_pos, msg))?;
                 text.clear();
             }
             Event::Eof => break,
             _ => {}
         }
     }
-    let _ = pending_attrs;
-    if !root_seen {
-        return Err(ferr(0, "no <tmesh> element".into()));
+    parts.finish(&text_of)
+}
+
+/// The XML text being read, for turning a byte position into the line:column of a message.
+struct XmlText<'a>(&'a [u8]);
+
+impl XmlText<'_> {
+    fn err(&self, pos: usize, msg: String) -> TsplineError {
+        TsplineError::Format { pos: line_col(self.0, pos), msg }
     }
-    let end = data.len();
-    let degree = degree.ok_or_else(|| ferr(end, "<tmesh> lacks degree".into()))?;
-    let georef = georef.ok_or_else(|| ferr(end, "missing <georef>".into()))?;
-    let (_, points) = points.ok_or_else(|| ferr(end, "missing <points>".into()))?;
-    let (_, cells) = cells.ok_or_else(|| ferr(end, "missing <cells>".into()))?;
-    let mesh = TMesh::from_cells(degree, points, cells)?;
-    Ok(TMeshFile { mesh, georef, mask, warp })
+}
+
+/// One element's start tag: its name and attributes, and where it sits for messages.
+struct StartTag<'a> {
+    name: String,
+    attrs: Vec<(String, String)>,
+    pos: usize,
+    text_of: &'a XmlText<'a>,
+}
+
+impl<'a> StartTag<'a> {
+    fn read(e: &quick_xml::events::BytesStart, pos: usize, text_of: &'a XmlText<'a>) -> Result<StartTag<'a>, TsplineError> {
+        let name = quote(&String::from_utf8_lossy(e.local_name().as_ref())).into_owned();
+        let mut attrs = Vec::new();
+        for a in e.attributes() {
+            let a = a.map_err(|x| text_of.err(pos, format!("<{name}>: bad attribute: {}", quote(&x.to_string()))))?;
+            let v = a.unescape_value().map_err(|x| text_of.err(pos, format!("<{name}>: bad attribute value: {}", quote(&x.to_string()))))?.to_string();
+            attrs.push((String::from_utf8_lossy(a.key.local_name().as_ref()).to_string(), v));
+        }
+        Ok(StartTag { name, attrs, pos, text_of })
+    }
+
+    fn err(&self, msg: String) -> TsplineError {
+        self.text_of.err(self.pos, msg)
+    }
+
+    fn get(&self, key: &str) -> Option<&str> {
+        self.attrs.iter().find(|(n, _)| n == key).map(|(_, v)| v.as_str())
+    }
+
+    fn required(&self, key: &str) -> Result<&str, TsplineError> {
+        self.get(key).ok_or_else(|| self.err(format!("<{}> lacks attribute {key}", self.name)))
+    }
+
+    fn num(&self, key: &str) -> Result<f64, TsplineError> {
+        let v = self.required(key)?;
+        let x: f64 = v.trim().parse().map_err(|_| self.err(format!("<{}> {key}=\"{}\" is not a number", self.name, quote(v))))?;
+        if !x.is_finite() {
+            return Err(self.err(format!("<{}> {key} is not finite", self.name)));
+        }
+        Ok(x)
+    }
+
+    fn uint(&self, key: &str) -> Result<usize, TsplineError> {
+        let v = self.required(key)?;
+        v.trim().parse().map_err(|_| self.err(format!("<{}> {key}=\"{}\" is not a non-negative integer", self.name, quote(v))))
+    }
+}
+
+/// The five entities XML predefines; a `.tmesh` file declares no others.
+fn predefined_entity(name: &str) -> Option<&'static str> {
+    Some(match name {
+        "amp" => "&",
+        "lt" => "<",
+        "gt" => ">",
+        "quot" => "\"",
+        "apos" => "'",
+        _ => return None,
+    })
+}
+
+/// What the XML reader has collected so far: each element's start tag and text fill one part.
+#[derive(Default)]
+struct XmlParts {
+    root_seen: bool,
+    degree: Option<Degree>,
+    georef: Option<Georef>,
+    points: Option<(usize, Vec<ControlPoint>)>,
+    cells: Option<(usize, Vec<[PointId; 4]>)>,
+    mask: Option<DataMask>,
+    warp: Option<String>,
+}
+
+impl XmlParts {
+    /// A start tag at `depth` (0 = the root): checks where it may stand and reads its attributes.
+    fn open(&mut self, depth: usize, tag: &StartTag) -> Result<(), TsplineError> {
+        match (depth, tag.name.as_str()) {
+            (0, "tmesh") => {
+                self.root_seen = true;
+                let ns = tag.get("xmlns").unwrap_or("");
+                if ns != NAMESPACE {
+                    return Err(tag.err(format!("<tmesh> namespace is \"{}\", expected \"{NAMESPACE}\"", quote(ns))));
+                }
+                let k = tag.uint("degree")?;
+                self.degree = Some(Degree::from_u32(k as u32).ok_or_else(|| tag.err(format!("degree {k} is not supported (1 or 3)")))?);
+            }
+            (0, other) => return Err(tag.err(format!("root element is <{other}>, expected <tmesh>"))),
+            (1, "georef") => {
+                let g = Georef { x0: tag.num("x0")?, y0: tag.num("y0")?, dx: tag.num("dx")?, dy: tag.num("dy")?, crs: String::new() };
+                if g.dx == 0.0 || g.dy == 0.0 {
+                    return Err(tag.err("<georef> dx and dy must be non-zero".into()));
+                }
+                self.georef = Some(g);
+            }
+            (2, "crs") => {}
+            (1, "points") => self.points = Some((tag.uint("count")?, Vec::new())),
+            (1, "cells") => self.cells = Some((tag.uint("count")?, Vec::new())),
+            (1, "mask") => {
+                if tag.get("encoding") != Some("rle") {
+                    return Err(tag.err("<mask> encoding must be \"rle\"".into()));
+                }
+                self.mask = Some(DataMask { width: tag.uint("width")?, height: tag.uint("height")?, bits: Vec::new() });
+            }
+            (1, "warp") => {
+                if tag.get("encoding") != Some("json") {
+                    return Err(tag.err("<warp> encoding must be \"json\"".into()));
+                }
+                self.warp = Some(String::new());
+            }
+            (d, other) => return Err(tag.err(format!("unexpected element <{other}> at depth {d}"))),
+        }
+        Ok(())
+    }
+
+    /// An end tag: the element's text becomes its part; the message is placed at the text.
+    fn close(&mut self, name: &str, text: &str) -> Result<(), String> {
+        match name {
+            "crs" => {
+                if let Some(g) = self.georef.as_mut() {
+                    g.crs = text.trim().to_string();
+                }
+            }
+            "points" => {
+                if let Some((count, v)) = self.points.as_mut() {
+                    *v = parse_points(*count, text)?;
+                }
+            }
+            "cells" => {
+                if let Some((count, v)) = self.cells.as_mut() {
+                    *v = parse_cells(*count, text)?;
+                }
+            }
+            "mask" => {
+                if let Some(m) = self.mask.as_mut() {
+                    m.bits = parse_mask_runs(m.width, m.height, text)?;
+                }
+            }
+            "warp" => self.warp = Some(text.to_string()),
+            _ => {}
+        }
+        Ok(())
+    }
+
+    /// The file, once every required part was seen; a missing part is reported at the end of
+    /// the text, a missing root at its start.
+    fn finish(self, text_of: &XmlText) -> Result<TMeshFile, TsplineError> {
+        if !self.root_seen {
+            return Err(text_of.err(0, "no <tmesh> element".into()));
+        }
+        let missing = |what: &str| text_of.err(text_of.0.len(), what.to_string());
+        let degree = self.degree.ok_or_else(|| missing("<tmesh> lacks degree"))?;
+        let georef = self.georef.ok_or_else(|| missing("missing <georef>"))?;
+        let (_, points) = self.points.ok_or_else(|| missing("missing <points>"))?;
+        let (_, cells) = self.cells.ok_or_else(|| missing("missing <cells>"))?;
+        let mesh = TMesh::from_cells(degree, points, cells)?;
+        Ok(TMeshFile { mesh, georef, mask: self.mask, warp: self.warp })
+    }
+}
+
+fn parse_points(count: usize, text: &str) -> Result<Vec<ControlPoint>, String> {
+    let nums = parse_f64s(text).map_err(|m| format!("<points>: {m}"))?;
+    if nums.len() != count * 6 {
+        return Err(format!("<points count=\"{count}\"> holds {} numbers, expected {}", nums.len(), count * 6));
+    }
+    Ok(nums.chunks_exact(6).map(|c| ControlPoint { s: c[0], t: c[1], x: c[2], y: c[3], z: c[4], w: c[5] }).collect())
+}
+
+fn parse_cells(count: usize, text: &str) -> Result<Vec<[PointId; 4]>, String> {
+    let mut ids = Vec::with_capacity(count * 4);
+    for tok in text.split_ascii_whitespace() {
+        ids.push(tok.parse::<u32>().map_err(|_| format!("<cells>: \"{}\" is not a point index", quote(tok)))?);
+    }
+    if ids.len() != count * 4 {
+        return Err(format!("<cells count=\"{count}\"> holds {} indices, expected {}", ids.len(), count * 4));
+    }
+    Ok(ids.chunks_exact(4).map(|c| [c[0], c[1], c[2], c[3]]).collect())
+}
+
+/// Run lengths of alternating no-data / data (the format's mask, [`DataMask::runs`]) back to bits.
+fn parse_mask_runs(width: usize, height: usize, text: &str) -> Result<Vec<bool>, String> {
+    let total = width * height;
+    let mut bits = Vec::with_capacity(total);
+    let mut bit = false;
+    for tok in text.split_ascii_whitespace() {
+        let n: usize = tok.parse().map_err(|_| format!("<mask>: \"{}\" is not a run length", quote(tok)))?;
+        if bits.len() + n > total {
+            return Err(format!("<mask>: runs exceed {width}×{height} cells"));
+        }
+        bits.extend(std::iter::repeat_n(bit, n));
+        bit = !bit;
+    }
+    if bits.len() != total {
+        return Err(format!("<mask>: runs cover {} of {} cells", bits.len(), total));
+    }
+    Ok(bits)
 }
 
 fn parse_f64s(text: &str) -> Result<Vec<f64>, String> {
