@@ -71,7 +71,7 @@ pub fn basis_pieces(kn: &[f64], k: usize) -> [f64; 20] {
         }
         let h = b - a;
         let xs = [0.0, 1.0 / 3.0, 2.0 / 3.0, 1.0];
-        let v: Vec<f64> = (0..4).map(|m| basis(kn, k, if m == 3 { b } else { a + xs[m] * h }, m == 3)).collect();
+        let v: [f64; 4] = std::array::from_fn(|m| basis(kn, k, if m == 3 { b } else { a + xs[m] * h }, m == 3));
         // Newton divided differences on the nodes, then expand to monomials.
         let mut d = [v[0], v[1], v[2], v[3]];
         for lvl in 1..4 {
@@ -207,6 +207,15 @@ impl PbSpline {
 
     /// Compiles with knots computed elsewhere (the OpenCL knot kernel).
     pub fn from_parts(mesh: &TMesh, point_ids: Vec<u32>, knots: Vec<LocalKnots>) -> PbSpline {
+        PbSpline::from_parts_reusing(mesh, point_ids, knots, None)
+    }
+
+    /// [`PbSpline::from_parts`] taking the polynomial pieces of point i from `old`'s point
+    /// `reuse[i]` (u32::MAX: computed) — callers pass only points whose knots are `old`'s
+    /// knots of that point, and the pieces are a function of the knots alone, so they are the
+    /// bits `basis_pieces` would give (the incremental build after a refinement: most points
+    /// keep their knots).
+    pub(crate) fn from_parts_reusing(mesh: &TMesh, point_ids: Vec<u32>, knots: Vec<LocalKnots>, reuse: Option<(&PbSpline, &[u32])>) -> PbSpline {
         let k = mesh.degree.k();
         let knots: Vec<[f64; 10]> = knots
             .iter()
@@ -220,7 +229,15 @@ impl PbSpline {
         let geom = point_ids.iter().map(|&i| mesh.points[i as usize]).map(|p| [p.x, p.y, p.z, p.w]).collect();
         let half = 5 * (k + 1);
         let mut poly = vec![0.0; knots.len() * 2 * half];
-        poly.par_chunks_mut(2 * half).zip(&knots).for_each(|(a, kn)| {
+        poly.par_chunks_mut(2 * half).zip(&knots).enumerate().for_each(|(i, (a, kn))| {
+            if let Some((old, of)) = reuse {
+                let o = of[i];
+                if o != u32::MAX {
+                    debug_assert_eq!(&old.knots[o as usize], kn, "reused pieces need the same knots");
+                    a.copy_from_slice(&old.poly[o as usize * 2 * half..(o as usize + 1) * 2 * half]);
+                    return;
+                }
+            }
             a[..half].copy_from_slice(&basis_pieces(&kn[0..5], k)[..half]);
             a[half..].copy_from_slice(&basis_pieces(&kn[5..10], k)[..half]);
         });

@@ -249,8 +249,10 @@ pub fn build_pb_incremental(mesh: &TMesh, old: &PbSpline, split: &[crate::mesh::
             None
         })
         .collect();
+    // the points that keep their old knots keep their old polynomial pieces too
+    let reuse: Vec<u32> = point_ids.iter().zip(&knots).map(|(&i, kn)| if kn.is_some() { old_of[i as usize] } else { u32::MAX }).collect();
     let knots = crate::knots::infer_missing(mesh, &point_ids, knots);
-    PbSpline::from_parts(mesh, point_ids, knots)
+    PbSpline::from_parts_reusing(mesh, point_ids, knots, Some((old, &reuse)))
 }
 
 /// The initial mesh (A8): returns it with x = s, y = t, z = mean of the data.
@@ -621,8 +623,9 @@ mod tests {
         }
     }
 
-    /// The incremental PB-spline build (knots re-inferred only near split cells) equals a full
-    /// build after every refinement step of a fit on a bumpy surface.
+    /// The incremental PB-spline build (knots re-inferred only near split cells, polynomial
+    /// pieces kept where the knots are) equals a full build after every refinement step of a
+    /// fit on a bumpy surface.
     #[test]
     fn incremental_knots_equal_full_inference() {
         for degree in [Degree::Linear, Degree::Cubic] {
@@ -645,6 +648,8 @@ mod tests {
                 let full = PbSpline::build(&next);
                 assert_eq!(inc.point_ids, full.point_ids);
                 assert_eq!(inc.knots, full.knots, "{degree:?}");
+                // the polynomial pieces kept from `old` are the ones a full build computes
+                assert!(inc.poly.iter().zip(&full.poly).all(|(a, b)| a.to_bits() == b.to_bits()) && inc.poly.len() == full.poly.len(), "{degree:?}");
                 m = next;
                 old = full;
             }
