@@ -94,9 +94,14 @@ fn factor(kn: &[f64], pc: &[f64], k: usize, a: f64, b: f64, out: &mut [f64; 4]) 
     for j in 0..=k {
         if kn[j] <= a && b <= kn[j + 1] && kn[j] < kn[j + 1] {
             let p = &pc[5 * j..5 * j + 5];
-            let c = &mut out[..k + 1];
-            c.copy_from_slice(&p[1..k + 2]);
-            compose(c, (a - kn[j]) * p[0], (b - a) * p[0]);
+            // a fixed-size copy for the cubic case: a slice copy of run-time length k + 1 was a
+            // memmove call per factor (2.5 % of the BAG 0.1 fit's samples)
+            if k == 3 {
+                *out = [p[1], p[2], p[3], p[4]];
+            } else {
+                out.iter_mut().zip(&p[1..k + 2]).for_each(|(o, v)| *o = *v);
+            }
+            compose(&mut out[..k + 1], (a - kn[j]) * p[0], (b - a) * p[0]);
             return true;
         }
     }
@@ -441,12 +446,12 @@ impl CellElements {
         // Blending functions whose support meets the cell's interior.
         let cand = &mut self.cand;
         cand.clear();
-        for p in pb.points_in_buckets_once((s0, s1), (t0, t1), first) {
+        pb.for_points_in_buckets_once((s0, s1), (t0, t1), first, |p| {
             let kn = &pb.knots[p as usize];
             if kn[0] < s1 && kn[k + 1] > s0 && kn[5] < t1 && kn[5 + k + 1] > t0 {
                 cand.push(p);
             }
-        }
+        });
         // Element breaks: the cell's edges and every knot strictly inside.
         let (sb, tb) = (&mut self.sb, &mut self.tb);
         sb.clear();

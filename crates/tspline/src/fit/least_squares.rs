@@ -23,14 +23,14 @@ pub(super) fn pattern(pb: &PbSpline, extra: &[Vec<u32>], free: Option<&[bool]>) 
             }
             let a = &pb.knots[i];
             let mut v = Vec::new();
-            for q in pb.points_in_buckets_once((a[0], a[k + 1]), (a[5], a[5 + k + 1]), &first) {
+            pb.for_points_in_buckets_once((a[0], a[k + 1]), (a[5], a[5 + k + 1]), &first, |q| {
                 let c = &pb.knots[q as usize];
                 let ow = a[k + 1].min(c[k + 1]) - a[0].max(c[0]);
                 let oh = a[5 + k + 1].min(c[5 + k + 1]) - a[5].max(c[5]);
                 if ow > 0.0 && oh > 0.0 {
                     v.push(q);
                 }
-            }
+            });
             v.push(i as u32);
             v.extend_from_slice(&extra[i]);
             v.retain(|&q| is_free(q as usize));
