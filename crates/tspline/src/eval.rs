@@ -393,8 +393,9 @@ impl PbSpline {
     /// bucket's points cached in `row` for as long as the (located) t stays the same: cells of
     /// a raster row then evaluate each point's τ piece once per bucket instead of once per cell
     /// (the local error checks evaluate a region's cells row by row; BENCHMARKS.md "Fit CPU on
-    /// the largest mesh, again"). Same terms (a point counts where its support holds (s, t) and
-    /// both factors are non-zero), same products w·N(s)·N(t), summed in the bucket's order.
+    /// the largest mesh, again: bit-identical levers"). Same terms (a point counts where its
+    /// support holds (s, t) and both factors are non-zero), same products w·N(s)·N(t), summed
+    /// in the bucket's order.
     #[inline]
     pub(crate) fn point_z_cached(&self, s: f64, t: f64, row: &mut RowCache) -> f64 {
         let Some((s, t, ls, lt)) = self.locate(s, t) else { return f64::NAN };

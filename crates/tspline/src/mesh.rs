@@ -504,7 +504,7 @@ impl TMesh {
     /// R-tree query per leaf.
     /// The leaves are independent of each other here (the mesh is read only), so they are
     /// visited in parallel: the repair runs on the fit's one thread otherwise, and this batch
-    /// was most of it (BENCHMARKS.md "Fit CPU on the largest mesh, again").
+    /// was most of it (BENCHMARKS.md "Fit CPU on the largest mesh, again: bit-identical levers").
     fn leaves_needing_repair(&self) -> Vec<RepairNeed> {
         use rayon::prelude::*;
         let sides = SideIndex::new(self);

@@ -223,7 +223,8 @@ pub(crate) fn fit_lsq_local(
     // The symbolic factorisation needs only the pattern of the system solved (the free block
     // for a local update): it is built on the pool while the values are assembled, instead of
     // on this thread after them (it was ~15 % of this thread's time on the BAG at 0.1 m,
-    // BENCHMARKS.md "Fit CPU on the largest mesh, again"); the same ordering, so the same bits.
+    // BENCHMARKS.md "Fit CPU on the largest mesh, again: bit-identical levers"); the same
+    // ordering, so the same bits.
     let block = free.map(|f| free_block_pattern(&a, f));
     let (b_start, b_cols) = block.as_ref().map_or((&a.start[..], &a.cols[..]), |(s, c)| (&s[..], &c[..]));
     let ahead = asm.is_none() && crate::sparse::symbolic_needed(b_start, b_cols);
