@@ -135,6 +135,13 @@ pub struct PbSpline {
     pub cell_items: Vec<u32>,
 }
 
+/// A PB-spline reduced to its points and knots ([`PbSpline::into_knots`]); [`PbSpline::from_knots`]
+/// compiles the rest again.
+pub(crate) struct PbKnots {
+    point_ids: Vec<u32>,
+    knots: Vec<[f64; 10]>,
+}
+
 /// A uniform grid over the domain's bounding box.
 #[derive(Debug, Clone, Copy)]
 pub struct BucketGrid {
@@ -206,6 +213,24 @@ impl PbSpline {
                 a
             })
             .collect();
+        PbSpline::from_knot_rows(mesh, point_ids, knots)
+    }
+
+    /// What [`PbSpline::from_knots`] compiles the rest from: its points and their knots (a
+    /// tenth of a degree-1 PB-spline's memory; the polynomial pieces, geometry, leaf cells and
+    /// bucket lists are derived from them and the mesh).
+    pub(crate) fn into_knots(self) -> PbKnots {
+        PbKnots { point_ids: self.point_ids, knots: self.knots }
+    }
+
+    /// Compiles [`PbSpline::into_knots`]'s parts again on the mesh they were built on (its
+    /// points and leaves unchanged since): the same PB-spline, bit for bit.
+    pub(crate) fn from_knots(mesh: &TMesh, parts: PbKnots) -> PbSpline {
+        PbSpline::from_knot_rows(mesh, parts.point_ids, parts.knots)
+    }
+
+    fn from_knot_rows(mesh: &TMesh, point_ids: Vec<u32>, knots: Vec<[f64; 10]>) -> PbSpline {
+        let k = mesh.degree.k();
         let geom = point_ids.iter().map(|&i| mesh.points[i as usize]).map(|p| [p.x, p.y, p.z, p.w]).collect();
         let half = 5 * (k + 1);
         let mut poly = vec![0.0; knots.len() * 2 * half];
