@@ -46,7 +46,7 @@ pub(crate) fn entry(a: &SymCsr, i: usize, j: u32) -> usize {
 /// in rows 0..=i. Why: each partial sum of the assembly ([`CHUNKS`] of them, summed in
 /// parallel) held the whole pattern although only the upper triangle is ever added to — half
 /// of it zeros, ~60 MB at 1.5·10⁵ control points
-/// (docs/decisions.md#a-pb-spline-and-a-mesh-at-their-size-during-the-solve).
+/// (docs/decisions.md#knots-only-through-the-solve).
 pub(crate) struct Upper {
     lower: Vec<usize>,
     len: usize,

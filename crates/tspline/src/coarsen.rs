@@ -106,7 +106,7 @@ pub(crate) fn coarsen(
     let proxy_tol = opts.max_error;
     let reach = (opts.degree.k() + 1) as f64;
     let mut best = mesh;
-    let mut best_pb = KeptPb::Whole(pb);
+    let mut best_pb = KeptPb::new(pb);
     let mut failed: HashSet<CellId> = HashSet::new();
     let mut rounds = Vec::new();
     // what a try overwrote in `errs`, to put back when it fails (a raster's |Δz| per cell can
@@ -196,7 +196,7 @@ pub(crate) fn coarsen(
         progress(&st);
         rounds.push(st);
         best = m;
-        best_pb = KeptPb::Whole(pb_m);
+        best_pb = KeptPb::new(pb_m);
     }
     let pb = best_pb.into_whole(&best);
     Ok(Coarsened { mesh: best, pb, rounds })
@@ -213,39 +213,34 @@ fn geom_of(surface: &PbSpline) -> impl FnMut(f64, f64) -> (f64, f64, f64) + '_ {
 /// The kept state's PB-spline, or only its points and knots while a try on a large raster
 /// ([`fit::TRIM_CELLS`]) solves and checks: a PB-spline of 1.5·10⁵ points is ~50 MB, its knots
 /// ~12 MB, and the rest is compiled again from them and the kept mesh (bit for bit) if the try
-/// fails (docs/decisions.md#a-pb-spline-and-a-mesh-at-their-size-during-the-solve).
-enum KeptPb {
-    Whole(PbSpline),
-    Knots(PbKnots),
-    Moving,
+/// fails (docs/decisions.md#knots-only-through-the-solve).
+struct KeptPb {
+    /// None while released.
+    whole: Option<PbSpline>,
+    knots: PbKnots,
 }
 
 impl KeptPb {
+    fn new(pb: PbSpline) -> KeptPb {
+        KeptPb { whole: Some(pb), knots: PbKnots::default() }
+    }
+
     /// The PB-spline of `best` (the mesh it was built on), compiled again if it was released.
     fn get(&mut self, best: &TMesh) -> &PbSpline {
-        if let KeptPb::Knots(_) = self {
-            let KeptPb::Knots(parts) = std::mem::replace(self, KeptPb::Moving) else { unreachable!() };
-            *self = KeptPb::Whole(PbSpline::from_knots(best, parts));
-        }
-        match self {
-            KeptPb::Whole(pb) => pb,
-            _ => unreachable!("compiled above"),
-        }
+        self.whole.get_or_insert_with(|| PbSpline::from_knots(best, std::mem::take(&mut self.knots)))
     }
 
     /// Keeps only the points and knots.
     fn release(&mut self) {
-        if let KeptPb::Whole(_) = self {
-            let KeptPb::Whole(pb) = std::mem::replace(self, KeptPb::Moving) else { unreachable!() };
-            *self = KeptPb::Knots(pb.into_knots());
+        if let Some(pb) = self.whole.take() {
+            self.knots = pb.into_knots();
         }
     }
 
-    fn into_whole(mut self, best: &TMesh) -> PbSpline {
-        self.get(best);
-        match self {
-            KeptPb::Whole(pb) => pb,
-            _ => unreachable!("compiled above"),
+    fn into_whole(self, best: &TMesh) -> PbSpline {
+        match self.whole {
+            Some(pb) => pb,
+            None => PbSpline::from_knots(best, self.knots),
         }
     }
 }

@@ -383,7 +383,7 @@ impl TMesh {
     /// Gives back the spare capacity of the point and cell arrays and of the point index.
     /// Why: a clone has exact capacity and the first split after it doubles the arrays, so a
     /// refined or repaired mesh held up to twice its size through the solves that follow
-    /// (docs/decisions.md#a-pb-spline-and-a-mesh-at-their-size-during-the-solve).
+    /// (docs/decisions.md#knots-only-through-the-solve).
     pub fn shrink_to_fit(&mut self) {
         self.points.shrink_to_fit();
         self.cells.shrink_to_fit();

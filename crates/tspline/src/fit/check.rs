@@ -135,7 +135,7 @@ pub(crate) fn check_written(
 /// cells or more only its points and knots are kept while the written mesh's PB-spline and
 /// element extraction evaluate every cell, and the rest is compiled again for the leaves over
 /// the tolerance (the same PB-spline, bit for bit;
-/// docs/decisions.md#a-pb-spline-and-a-mesh-at-their-size-during-the-solve).
+/// docs/decisions.md#knots-only-through-the-solve).
 pub(crate) fn check_written_released(
     mesh: &TMesh,
     pb: PbSpline,

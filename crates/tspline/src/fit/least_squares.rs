@@ -191,7 +191,7 @@ pub(crate) fn fit_lsq_local(
 /// raster of [`TRIM_CELLS`] cells or more it keeps only the PB-spline's points and knots
 /// through the solve and compiles the rest again afterwards (the same PB-spline, bit for bit),
 /// so that it and the Cholesky factor are not alive together
-/// (docs/decisions.md#a-pb-spline-and-a-mesh-at-their-size-during-the-solve).
+/// (docs/decisions.md#knots-only-through-the-solve).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn fit_lsq_released(
     mesh: &TMesh,
