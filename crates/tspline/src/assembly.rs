@@ -41,7 +41,49 @@ pub(crate) fn entry(a: &SymCsr, i: usize, j: u32) -> usize {
     a.find(i, j).expect("pattern covers every overlapping pair")
 }
 
-/// Partial sums of the normal equations: `vals` the upper triangle in the pattern's layout.
+/// Where the upper triangle (j ≥ i) of the pattern lies in a compact array: entry k of row i,
+/// at or right of its diagonal, is at k − `lower[i]`, the count of entries left of the diagonal
+/// in rows 0..=i. Why: each partial sum of the assembly ([`CHUNKS`] of them, summed in
+/// parallel) held the whole pattern although only the upper triangle is ever added to — half
+/// of it zeros, ~60 MB at 1.5·10⁵ control points
+/// (docs/decisions.md#knots-only-through-the-solve).
+pub(crate) struct Upper {
+    lower: Vec<usize>,
+    len: usize,
+}
+
+impl Upper {
+    pub(crate) fn new(a: &SymCsr) -> Upper {
+        let n = a.n();
+        let mut lower = Vec::with_capacity(n);
+        let mut acc = 0;
+        for i in 0..n {
+            acc += a.cols[a.start[i]..a.start[i + 1]].partition_point(|&j| (j as usize) < i);
+            lower.push(acc);
+        }
+        Upper { lower, len: a.cols.len() - acc }
+    }
+
+    /// The compact position of entry (i, j), j ≥ i.
+    #[inline]
+    fn at(&self, a: &SymCsr, i: usize, j: u32) -> usize {
+        entry(a, i, j) - self.lower[i]
+    }
+
+    /// `upper` in the pattern's layout (entries left of the diagonal 0).
+    fn expand(&self, a: &SymCsr, upper: &[f64]) -> Vec<f64> {
+        let mut full = vec![0.0; a.cols.len()];
+        for i in 0..a.n() {
+            let (k0, k1) = (a.start[i], a.start[i + 1]);
+            let d = k0 + a.cols[k0..k1].partition_point(|&j| (j as usize) < i);
+            full[d..k1].copy_from_slice(&upper[d - self.lower[i]..k1 - self.lower[i]]);
+        }
+        full
+    }
+}
+
+/// Partial sums of the normal equations: `vals` the upper triangle, compact ([`Upper`]) while
+/// the parts are summed, in the pattern's layout once merged.
 pub(crate) struct Sums {
     pub vals: Vec<f64>,
     pub rhs: Vec<f64>,
@@ -59,13 +101,14 @@ impl Sums {
         self.support.iter_mut().zip(&o.support).for_each(|(x, y)| *x += y);
     }
 
-    /// Partial sums merged in order.
-    fn merged(parts: Vec<Sums>) -> Sums {
+    /// Partial sums merged in order, `vals` expanded to the pattern's layout.
+    fn merged(parts: Vec<Sums>, upper: &Upper, pattern: &SymCsr) -> Sums {
         let mut it = parts.into_iter();
         let mut first = it.next().expect("at least one part");
         for p in it {
             first.add(&p);
         }
+        first.vals = upper.expand(pattern, &first.vals);
         first
     }
 }
@@ -86,14 +129,15 @@ impl System<'_> {
         self.free.is_none_or(|f| f[i])
     }
 
-    fn zero_sums(&self) -> Sums {
-        Sums::zero(self.pattern.vals.len(), self.pb.knots.len())
+    fn zero_sums(&self, upper: &Upper) -> Sums {
+        Sums::zero(upper.len, self.pb.knots.len())
     }
 }
 
 /// Cell-by-cell accumulation of basis rows into [`Sums`]: the reference path.
 pub(crate) struct CellRows<'a> {
     sys: System<'a>,
+    upper: &'a Upper,
     pub sums: Sums,
     scratch: Vec<(u32, f64)>,
     row: Vec<(u32, f64)>,
@@ -104,8 +148,8 @@ pub(crate) struct CellRows<'a> {
 }
 
 impl<'a> CellRows<'a> {
-    pub(crate) fn new(sys: System<'a>) -> CellRows<'a> {
-        CellRows { sys, sums: sys.zero_sums(), scratch: Vec::new(), row: Vec::with_capacity(32), prev: Vec::with_capacity(32), pos: Vec::with_capacity(32 * 33 / 2) }
+    pub(crate) fn new(sys: System<'a>, upper: &'a Upper) -> CellRows<'a> {
+        CellRows { sys, upper, sums: sys.zero_sums(upper), scratch: Vec::new(), row: Vec::with_capacity(32), prev: Vec::with_capacity(32), pos: Vec::with_capacity(32 * 33 / 2) }
     }
 
     /// The datum `d` at parameter (s, t), its basis through the PB-spline's bucket grid
@@ -154,7 +198,7 @@ impl<'a> CellRows<'a> {
             for x in 0..m {
                 for y in x..m {
                     let (p, q) = (row[x].0.min(row[y].0), row[x].0.max(row[y].0));
-                    self.pos.push(entry(sys.pattern, p as usize, q));
+                    self.pos.push(self.upper.at(sys.pattern, p as usize, q));
                 }
             }
         }
@@ -182,6 +226,7 @@ pub(crate) fn per_cell(
     asm: Option<(&crate::ocl_fit::OclModel, &crate::ocl_fit::OclModelSpline)>,
 ) -> Result<Sums, TsplineError> {
     let w = samples.width;
+    let upper = Upper::new(sys.pattern);
     // units: raster rows, or the scattered points
     let units = pts.map_or(samples.height, |p| p.z.len());
     let chunk = units.div_ceil(CHUNKS).max(1);
@@ -189,7 +234,7 @@ pub(crate) fn per_cell(
         .into_par_iter()
         .map(|c| -> Result<Sums, TsplineError> {
             let (j0, j1) = (c * chunk, ((c + 1) * chunk).min(units));
-            let mut rows = CellRows::new(sys);
+            let mut rows = CellRows::new(sys, &upper);
             let raster = |rows: &mut CellRows, q: usize| rows.add_point((q % w) as f64, (q / w) as f64, samples.z.get(q));
             match (pts, region, asm) {
                 (Some(p), _, _) => (j0..j1).for_each(|q| rows.add_point(p.st[q][0], p.st[q][1], p.z[q])),
@@ -200,7 +245,7 @@ pub(crate) fn per_cell(
             Ok(rows.sums)
         })
         .collect::<Result<_, _>>()?;
-    Ok(Sums::merged(parts))
+    Ok(Sums::merged(parts, &upper, sys.pattern))
 }
 
 /// Raster rows j0..j1 with the OpenCL kernel's basis rows (2^16 cells of ELL at a time).
@@ -296,6 +341,7 @@ fn touched_leaves(pb: &PbSpline, free: Option<&[bool]>) -> Vec<u32> {
 /// The per-element assembly on a raster (module doc): every valid cell, or those of `region`.
 pub(crate) fn by_elements(sys: System<'_>, samples: &Samples, region: Option<&Region>) -> Sums {
     let pb = sys.pb;
+    let upper = Upper::new(sys.pattern);
     let first = first_buckets(pb, true);
     let leaves = touched_leaves(pb, sys.free);
     let covered = CellBits::new(samples.width, samples.height);
@@ -304,7 +350,7 @@ pub(crate) fn by_elements(sys: System<'_>, samples: &Samples, region: Option<&Re
     let mut parts: Vec<Sums> = leaves
         .par_chunks(chunk)
         .map(|ls| {
-            let mut acc = Elements::new(sys, samples, region);
+            let mut acc = Elements::new(sys, &upper, samples, region);
             for &ci in ls {
                 acc.add_leaf(ci as usize, &first);
             }
@@ -312,17 +358,17 @@ pub(crate) fn by_elements(sys: System<'_>, samples: &Samples, region: Option<&Re
         })
         .collect();
     // a part with no cell would only add zeros (and cost a pass over every entry)
-    match uncovered_cells(sys, samples, region, &covered.into_words()) {
+    match uncovered_cells(sys, &upper, samples, region, &covered.into_words()) {
         Some(rest) => parts.push(rest),
-        None if parts.is_empty() => parts.push(sys.zero_sums()),
+        None if parts.is_empty() => parts.push(sys.zero_sums(&upper)),
         None => {}
     }
-    Sums::merged(parts)
+    Sums::merged(parts, &upper, sys.pattern)
 }
 
 /// The valid cells (of `region`) that no leaf holds half-open, cell by cell: upper borders of
 /// the domain (A1) and cells outside it (which add nothing).
-fn uncovered_cells(sys: System<'_>, samples: &Samples, region: Option<&Region>, covered: &[u64]) -> Option<Sums> {
+fn uncovered_cells(sys: System<'_>, upper: &Upper, samples: &Samples, region: Option<&Region>, covered: &[u64]) -> Option<Sums> {
     let mut rows: Option<CellRows<'_>> = None;
     let w = samples.width;
     for (wi, &word) in covered.iter().enumerate() {
@@ -335,7 +381,7 @@ fn uncovered_cells(sys: System<'_>, samples: &Samples, region: Option<&Region>, 
                 break;
             }
             if word & (1u64 << b) == 0 && region.is_none_or(|r| r.contains(q)) && !samples.z.get(q).is_nan() {
-                rows.get_or_insert_with(|| CellRows::new(sys)).add_point((q % w) as f64, (q / w) as f64, samples.z.get(q));
+                rows.get_or_insert_with(|| CellRows::new(sys, upper)).add_point((q % w) as f64, (q / w) as f64, samples.z.get(q));
             }
         }
     }
@@ -413,12 +459,12 @@ struct Element {
 }
 
 impl<'a> Elements<'a> {
-    fn new(sys: System<'a>, samples: &'a Samples, region: Option<&'a Region>) -> Elements<'a> {
+    fn new(sys: System<'a>, upper: &'a Upper, samples: &'a Samples, region: Option<&'a Region>) -> Elements<'a> {
         Elements {
             sys,
             samples,
             region,
-            rows: CellRows::new(sys),
+            rows: CellRows::new(sys, upper),
             el: CellElements::default(),
             funcs: Vec::new(),
             ws: Vec::new(),
@@ -586,7 +632,7 @@ impl<'a> Elements<'a> {
                 let y_free = sys.is_free(py);
                 let v = self.gram[x * m4 + y];
                 match (x_free, y_free) {
-                    (true, true) => s.vals[entry(sys.pattern, px.min(py), px.max(py) as u32)] += v,
+                    (true, true) => s.vals[self.rows.upper.at(sys.pattern, px.min(py), px.max(py) as u32)] += v,
                     (true, false) => s.rhs[px] -= v * sys.prior[py],
                     (false, true) => s.rhs[py] -= v * sys.prior[px],
                     (false, false) => {}

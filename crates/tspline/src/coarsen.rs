@@ -23,7 +23,7 @@
 use std::collections::HashSet;
 use std::time::Instant;
 
-use crate::eval::PbSpline;
+use crate::eval::{PbKnots, PbSpline};
 use crate::fit::{self, Backend, ErrorStats, FitOptions, IterationStats, Samples, Scattered};
 use crate::mesh::{CellId, Rect, TMesh};
 use crate::tolerance::Tolerance;
@@ -106,7 +106,7 @@ pub(crate) fn coarsen(
     let proxy_tol = opts.max_error;
     let reach = (opts.degree.k() + 1) as f64;
     let mut best = mesh;
-    let mut best_pb = pb;
+    let mut best_pb = KeptPb::new(pb);
     let mut failed: HashSet<CellId> = HashSet::new();
     let mut rounds = Vec::new();
     // what a try overwrote in `errs`, to put back when it fails (a raster's |Δz| per cell can
@@ -119,7 +119,8 @@ pub(crate) fn coarsen(
             let all = candidates(&best, &failed);
             // a looser filter tries more merges but keeps fewer (Kilauea 5 m, degree 3: 31418
             // control points at 1·E, 32706 at 2·E, 33107 unfiltered, against 33132 without the pass)
-            let keep: Vec<bool> = all.par_iter().map(|&c| bilinear_proxy(&best_pb, samples, best.cells[c as usize].rect) <= proxy_tol).collect();
+            let surface = best_pb.get(&best);
+            let keep: Vec<bool> = all.par_iter().map(|&c| bilinear_proxy(surface, samples, best.cells[c as usize].rect) <= proxy_tol).collect();
             let (ok, no): (Vec<_>, Vec<_>) = all.into_iter().zip(keep).partition(|(_, k)| *k);
             failed.extend(no.into_iter().map(|(c, _)| c));
             ok.into_iter().map(|(c, _)| c).collect()
@@ -127,16 +128,12 @@ pub(crate) fn coarsen(
         if cand.is_empty() {
             break;
         }
-        let surface = &best_pb;
-        let mut geom = |s: f64, t: f64| {
-            let z = surface.point(s, t)[2];
-            (s, t, if z.is_nan() { 0.0 } else { z })
-        };
         let mut m = best.clone();
         for &c in &cand {
             m.coarsen(c)?;
         }
-        m.repair_with(1.0, opts.split, &mut geom);
+        m.repair_with(1.0, opts.split, &mut geom_of(best_pb.get(&best)));
+        m.shrink_to_fit();
         let mut merged: Vec<CellId> = cand.iter().copied().filter(|&c| m.cells[c as usize].is_leaf()).collect();
         let merged_any = !merged.is_empty();
         let kept = loop {
@@ -148,7 +145,7 @@ pub(crate) fn coarsen(
                 p.z = q.z;
             }
             let rects: Vec<Rect> = merged.iter().map(|&c| m.cells[c as usize].rect).collect();
-            let (pb_m, err, over) = refit(&mut m, &best_pb, &rects, samples, pts, backend, errs, &mut undo, tol)?;
+            let (pb_m, err, over) = refit(&mut m, &best, &mut best_pb, &rects, samples, pts, backend, errs, &mut undo, tol)?;
             if err.over_tolerance == 0 {
                 break Some((pb_m, err));
             }
@@ -166,6 +163,7 @@ pub(crate) fn coarsen(
             if bad.is_empty() {
                 bad = merged.clone(); // coupled further than the supports: give the round up
             }
+            let mut geom = geom_of(best_pb.get(&best));
             for &c in &bad {
                 if m.cells[c as usize].is_leaf() {
                     let dir = m.cells[c as usize].split_as;
@@ -174,6 +172,7 @@ pub(crate) fn coarsen(
                 failed.insert(c);
             }
             m.repair_with(1.0, opts.split, &mut geom);
+            m.shrink_to_fit();
             merged.retain(|&c| m.cells[c as usize].is_leaf());
         };
         let Some((pb_m, err)) = kept else {
@@ -197,9 +196,53 @@ pub(crate) fn coarsen(
         progress(&st);
         rounds.push(st);
         best = m;
-        best_pb = pb_m;
+        best_pb = KeptPb::new(pb_m);
     }
-    Ok(Coarsened { mesh: best, pb: best_pb, rounds })
+    let pb = best_pb.into_whole(&best);
+    Ok(Coarsened { mesh: best, pb, rounds })
+}
+
+/// The geometry of points a split adds: (s, t) and the current surface's height there.
+fn geom_of(surface: &PbSpline) -> impl FnMut(f64, f64) -> (f64, f64, f64) + '_ {
+    move |s: f64, t: f64| {
+        let z = surface.point(s, t)[2];
+        (s, t, if z.is_nan() { 0.0 } else { z })
+    }
+}
+
+/// The kept state's PB-spline, or only its points and knots while a try on a large raster
+/// ([`fit::TRIM_CELLS`]) solves and checks: a PB-spline of 1.5·10⁵ points is ~50 MB, its knots
+/// ~12 MB, and the rest is compiled again from them and the kept mesh (bit for bit) if the try
+/// fails (docs/decisions.md#knots-only-through-the-solve).
+struct KeptPb {
+    /// None while released.
+    whole: Option<PbSpline>,
+    knots: PbKnots,
+}
+
+impl KeptPb {
+    fn new(pb: PbSpline) -> KeptPb {
+        KeptPb { whole: Some(pb), knots: PbKnots::default() }
+    }
+
+    /// The PB-spline of `best` (the mesh it was built on), compiled again if it was released.
+    fn get(&mut self, best: &TMesh) -> &PbSpline {
+        self.whole.get_or_insert_with(|| PbSpline::from_knots(best, std::mem::take(&mut self.knots)))
+    }
+
+    /// Keeps only the points and knots.
+    fn release(&mut self) {
+        if let Some(pb) = self.whole.take() {
+            self.knots = pb.into_knots();
+        }
+    }
+
+    fn into_whole(self, best: &TMesh) -> PbSpline {
+        match self.whole {
+            Some(pb) => pb,
+            None => PbSpline::from_knots(best, self.knots),
+        }
+    }
 }
 
 /// The values of `errs` a try is about to overwrite: all of them for a global re-check of
@@ -236,11 +279,13 @@ impl Undo {
 /// are re-checked where the surface can have changed; scattered data (indirect reduction) are
 /// refitted and checked globally, as in the loop. Writes z into `m`; returns the PB-spline, the
 /// statistics and the leaves holding cells (points) over the tolerance; what the check
-/// overwrote in `errs` goes to `undo`.
+/// overwrote in `errs` goes to `undo`. `old` is the PB-spline of `best`; a try on a large
+/// raster releases it to its knots ([`KeptPb`]).
 #[allow(clippy::too_many_arguments)]
 fn refit(
     m: &mut TMesh,
-    old: &PbSpline,
+    best: &TMesh,
+    old: &mut KeptPb,
     changed: &[Rect],
     samples: &Samples,
     pts: Option<&Scattered>,
@@ -250,17 +295,31 @@ fn refit(
     tol: &Tolerance,
 ) -> Result<(PbSpline, ErrorStats, Vec<CellId>), TsplineError> {
     fit::release_free_memory(samples.z.len());
+    let old_pb = old.get(best);
     let mut pb = match backend {
-        Backend::Cpu => fit::build_pb_incremental(m, old, changed),
+        Backend::Cpu => fit::build_pb_incremental(m, old_pb, changed),
         _ => fit::build_pb(m, backend)?,
     };
     let local = match pts {
-        None => fit::local_update(old, &pb, m.points.len(), samples.width, samples.height),
+        None => fit::local_update(old_pb, &pb, m.points.len(), samples.width, samples.height),
         Some(_) => None,
     };
+    if pts.is_none() && samples.z.len() >= fit::TRIM_CELLS {
+        // on a large raster: the solve's factor and the kept PB-spline are not alive together
+        old.release();
+        fit::release_free_memory(samples.z.len());
+    }
     let z = match &local {
-        Some((free, region)) => fit::fit_lsq_region(m, &pb, samples, free, region)?,
-        None => fit::fit_lsq_local(m, &pb, samples, pts, None, None, None)?,
+        Some((free, region)) => {
+            let (z, p) = fit::fit_lsq_released(m, pb, samples, None, Some(free), Some(region), None)?;
+            pb = p;
+            z
+        }
+        None => {
+            let (z, p) = fit::fit_lsq_released(m, pb, samples, pts, None, None, None)?;
+            pb = p;
+            z
+        }
     };
     fit::set_z(m, &mut pb, &z);
     let region = local.map(|(_, r)| r);

@@ -146,6 +146,15 @@ pub(crate) struct RowCache {
     terms: Vec<(u32, f64)>,
 }
 
+/// A PB-spline reduced to its points and knots ([`PbSpline::into_knots`]); [`PbSpline::from_knots`]
+/// compiles the rest again.
+#[derive(Default)]
+pub(crate) struct PbKnots {
+    point_ids: Vec<u32>,
+    /// Per point: the K+2 knots in s, then the K+2 in t.
+    knots: Vec<f64>,
+}
+
 /// A uniform grid over the domain's bounding box.
 #[derive(Debug, Clone, Copy)]
 pub struct BucketGrid {
@@ -226,6 +235,44 @@ impl PbSpline {
                 a
             })
             .collect();
+        PbSpline::from_knot_rows(mesh, point_ids, knots, reuse)
+    }
+
+    /// What [`PbSpline::from_knots`] compiles the rest from: its points and their knots (a
+    /// tenth of a degree-1 PB-spline's memory; the polynomial pieces, geometry, leaf cells and
+    /// bucket lists are derived from them and the mesh).
+    pub(crate) fn into_knots(self) -> PbKnots {
+        // the K+2 knots of each direction (the rows hold zeros beyond them): degree 1 in 48
+        // bytes a point, not 80
+        let k = self.degree.k();
+        let mut knots = Vec::with_capacity(self.knots.len() * 2 * (k + 2));
+        for a in &self.knots {
+            knots.extend_from_slice(&a[..k + 2]);
+            knots.extend_from_slice(&a[5..5 + k + 2]);
+        }
+        PbKnots { point_ids: self.point_ids, knots }
+    }
+
+    /// Compiles [`PbSpline::into_knots`]'s parts again on the mesh they were built on (its
+    /// points and leaves unchanged since): the same PB-spline, bit for bit.
+    pub(crate) fn from_knots(mesh: &TMesh, parts: PbKnots) -> PbSpline {
+        let k = mesh.degree.k();
+        let rows = parts
+            .knots
+            .chunks_exact(2 * (k + 2))
+            .map(|c| {
+                let mut a = [0.0; 10];
+                a[..k + 2].copy_from_slice(&c[..k + 2]);
+                a[5..5 + k + 2].copy_from_slice(&c[k + 2..]);
+                a
+            })
+            .collect();
+        drop(parts.knots);
+        PbSpline::from_knot_rows(mesh, parts.point_ids, rows, None)
+    }
+
+    fn from_knot_rows(mesh: &TMesh, point_ids: Vec<u32>, knots: Vec<[f64; 10]>, reuse: Option<(&PbSpline, &[u32])>) -> PbSpline {
+        let k = mesh.degree.k();
         let geom = point_ids.iter().map(|&i| mesh.points[i as usize]).map(|p| [p.x, p.y, p.z, p.w]).collect();
         let half = 5 * (k + 1);
         let mut poly = vec![0.0; knots.len() * 2 * half];
@@ -654,6 +701,28 @@ mod tests {
                 }
             }
             assert!(checked > 5000, "{checked} finite heights");
+        }
+    }
+
+    /// A PB-spline reduced to its points and knots and compiled again is the same, bit for
+    /// bit (coarsening and the large-raster solves rely on it).
+    #[test]
+    fn knots_only_round_trip_is_exact() {
+        for degree in [Degree::Linear, Degree::Cubic] {
+            let mut m = crate::testing::aniso_mesh(degree, 7, 3);
+            let mut seed = 3u64;
+            for p in &mut m.points {
+                p.z = 10.0 * lcg(&mut seed) - 5.0;
+            }
+            let a = PbSpline::build(&m);
+            let b = PbSpline::from_knots(&m, a.clone().into_knots());
+            assert_eq!(a.point_ids, b.point_ids);
+            let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(a.knots.as_flattened()), bits(b.knots.as_flattened()), "{degree:?}");
+            assert_eq!(bits(&a.poly), bits(&b.poly));
+            assert_eq!(bits(a.geom.as_flattened()), bits(b.geom.as_flattened()));
+            assert_eq!(bits(a.cells.as_flattened()), bits(b.cells.as_flattened()));
+            assert_eq!((a.pt_start, a.pt_items, a.cell_start, a.cell_items), (b.pt_start, b.pt_items, b.cell_start, b.cell_items));
         }
     }
 

@@ -380,6 +380,16 @@ impl TMesh {
         out
     }
 
+    /// Gives back the spare capacity of the point and cell arrays and of the point index.
+    /// Why: a clone has exact capacity and the first split after it doubles the arrays, so a
+    /// refined or repaired mesh held up to twice its size through the solves that follow
+    /// (docs/decisions.md#knots-only-through-the-solve).
+    pub fn shrink_to_fit(&mut self) {
+        self.points.shrink_to_fit();
+        self.cells.shrink_to_fit();
+        self.point_at.shrink_to_fit();
+    }
+
     fn add_point(&mut self, s: f64, t: f64, z: f64) -> PointId {
         if let Some(&id) = self.point_at.get(&key(s, t)) {
             return id;

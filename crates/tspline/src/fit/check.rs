@@ -124,12 +124,46 @@ pub(crate) fn check_written(
     errs: &mut [f64],
     tol: &Tolerance,
 ) -> Result<(ErrorStats, Vec<CellId>), TsplineError> {
+    written_errors(mesh, samples, pts, errs)?;
+    Ok(match pts {
+        Some(p) => summarize_at(mesh, pb, &|q| (p.st[q][0], p.st[q][1]), errs, tol),
+        None => summarize(mesh, pb, samples.width, errs, tol),
+    })
+}
+
+/// [`check_written`] that needs `pb` only for the statistics: on a raster of [`TRIM_CELLS`]
+/// cells or more only its points and knots are kept while the written mesh's PB-spline and
+/// element extraction evaluate every cell, and the rest is compiled again for the leaves over
+/// the tolerance (the same PB-spline, bit for bit;
+/// docs/decisions.md#knots-only-through-the-solve).
+pub(crate) fn check_written_released(
+    mesh: &TMesh,
+    pb: PbSpline,
+    samples: &Samples,
+    pts: Option<&Scattered>,
+    errs: &mut [f64],
+    tol: &Tolerance,
+) -> Result<(ErrorStats, Vec<CellId>, PbSpline), TsplineError> {
+    if pts.is_some() || samples.z.len() < TRIM_CELLS {
+        let (stats, over) = check_written(mesh, &pb, samples, pts, errs, tol)?;
+        return Ok((stats, over, pb));
+    }
+    let parts = pb.into_knots();
+    release_free_memory(samples.z.len());
+    written_errors(mesh, samples, None, errs)?;
+    let pb = PbSpline::from_knots(mesh, parts);
+    let (stats, over) = summarize(mesh, &pb, samples.width, errs, tol);
+    Ok((stats, over, pb))
+}
+
+/// |Δz| of the mesh as written ([`as_written`]), evaluated as `geofit eval` does, into `errs`.
+fn written_errors(mesh: &TMesh, samples: &Samples, pts: Option<&Scattered>, errs: &mut [f64]) -> Result<(), TsplineError> {
     let written = PbSpline::build(&as_written(mesh)?);
     let err_of = |zk: f64, dk: f64| if dk.is_nan() { f64::NAN } else if zk.is_nan() { f64::INFINITY } else { (zk - dk).abs() };
     if let Some(p) = pts {
         let z = written.eval_z(&p.st, true);
         errs.par_iter_mut().zip(&z).zip(&p.z).for_each(|((e, zk), dk)| *e = err_of(*zk, *dk));
-        return Ok(summarize_at(mesh, pb, &|q| (p.st[q][0], p.st[q][1]), errs, tol));
+        return Ok(());
     }
     let (w, h) = (samples.width, samples.height);
     let ex = written.use_extraction(w * h).then(|| crate::extraction::Extraction::new(&written, true));
@@ -141,5 +175,5 @@ pub(crate) fn check_written(
             *e = err_of(zk, samples.z.get(j0 * w + k));
         }
     });
-    Ok(summarize(mesh, pb, w, errs, tol))
+    Ok(())
 }

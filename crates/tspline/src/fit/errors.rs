@@ -63,12 +63,11 @@ pub(crate) fn over_tolerance(mesh: &TMesh, pb: &PbSpline, samples: &Samples, bac
     let pass = ErrorPass::new(pb, samples, backend)?;
     let w = samples.width;
     let n = samples.z.len();
-    let mut buf = vec![0.0; pass.block_cells().min(n)];
     let (mut count, mut over) = (0, Vec::new());
     for q0 in (0..n).step_by(pass.block_cells()) {
-        let out = &mut buf[..pass.block_cells().min(n - q0)];
-        pass.block(q0 / w, out)?;
-        let (acc, o) = over_in(mesh, pb, &|q| ((q % w) as f64, (q / w) as f64), out, q0, tol);
+        // the errors in the evaluation's own array: one block-sized buffer, not two
+        let out = pass.block_errors(q0 / w, pass.block_cells().min(n - q0))?;
+        let (acc, o) = over_in(mesh, pb, &|q| ((q % w) as f64, (q / w) as f64), &out, q0, tol);
         count += acc.over;
         over.extend(o);
     }
@@ -109,21 +108,48 @@ impl<'a> ErrorPass<'a> {
         self.rows * self.samples.width
     }
 
+    /// Surface heights of the `cells` cells (whole rows) from row `j0` on.
+    fn heights(&self, j0: usize, cells: usize) -> Result<Vec<f64>, TsplineError> {
+        let (pb, w) = (self.pb, self.samples.width);
+        let g = GridSpec { s0: 0.0, t0: j0 as f64, ds: 1.0, dt: 1.0, ns: w, nt: cells / w };
+        Ok(match (self.backend, &self.sp, &self.ex) {
+            (Backend::OpenCl(o), Some(sp), _) => o.eval_grid(sp, &g)?,
+            (_, _, Some(ex)) if pb.use_extraction(cells) => ex.eval_grid(pb, &g, true),
+            _ => pb.eval_grid(&g, true),
+        })
+    }
+
     /// |Δz| of the rows from `j0` on into `out` (whole rows).
     fn block(&self, j0: usize, out: &mut [f64]) -> Result<(), TsplineError> {
-        let (pb, w) = (self.pb, self.samples.width);
-        let g = GridSpec { s0: 0.0, t0: j0 as f64, ds: 1.0, dt: 1.0, ns: w, nt: out.len() / w };
-        let z = match (self.backend, &self.sp, &self.ex) {
-            (Backend::OpenCl(o), Some(sp), _) => o.eval_grid(sp, &g)?,
-            (_, _, Some(ex)) if pb.use_extraction(out.len()) => ex.eval_grid(pb, &g, true),
-            _ => pb.eval_grid(&g, true),
-        };
+        let w = self.samples.width;
+        let z = self.heights(j0, out.len())?;
         match self.samples.z.slice(j0 * w, j0 * w + out.len()) {
             HeightsSlice::F64(d) => errors_into(out, &z, d, self.sub * w),
             HeightsSlice::F32(d) => errors_into(out, &z, d, self.sub * w),
         }
         Ok(())
     }
+
+    /// [`ErrorPass::block`] of `cells` cells written over the heights' own array.
+    fn block_errors(&self, j0: usize, cells: usize) -> Result<Vec<f64>, TsplineError> {
+        let w = self.samples.width;
+        let mut z = self.heights(j0, cells)?;
+        match self.samples.z.slice(j0 * w, j0 * w + cells) {
+            HeightsSlice::F64(d) => errors_in_place(&mut z, d, self.sub * w),
+            HeightsSlice::F32(d) => errors_in_place(&mut z, d, self.sub * w),
+        }
+        Ok(z)
+    }
+}
+
+/// [`errors_into`] with the heights `z` replaced by their errors.
+fn errors_in_place<T: Height>(z: &mut [f64], d: &[T], chunk: usize) {
+    z.par_chunks_mut(chunk).zip(d.par_chunks(chunk)).for_each(|(zc, dc)| {
+        for (e, &dk) in zc.iter_mut().zip(dc) {
+            let (zk, dk) = (*e, dk.f64());
+            *e = if dk.is_nan() { f64::NAN } else if zk.is_nan() { f64::INFINITY } else { (zk - dk).abs() };
+        }
+    });
 }
 
 /// |Δz| of the surface heights `z` against the data `d` into `out` (NaN where `d` has no data,

@@ -99,11 +99,6 @@ pub fn fit_lsq_with(mesh: &TMesh, pb: &PbSpline, samples: &Samples, asm: Option<
     fit_lsq_local(mesh, pb, samples, None, None, None, asm)
 }
 
-/// [`fit_lsq`] of the points marked `free` (the others held) on the cells of `region`.
-pub(crate) fn fit_lsq_region(mesh: &TMesh, pb: &PbSpline, samples: &Samples, free: &[bool], region: &Region) -> Result<Vec<f64>, TsplineError> {
-    fit_lsq_local(mesh, pb, samples, None, Some(free), Some(region), None)
-}
-
 /// Writes fitted heights (PB order) into the mesh and the PB-spline.
 pub(crate) fn set_z(mesh: &mut TMesh, pb: &mut PbSpline, z: &[f64]) {
     for (i, &pid) in pb.point_ids.iter().enumerate() {
@@ -194,6 +189,63 @@ pub(crate) fn fit_lsq_local(
     region: Option<&Region>,
     asm: Option<&crate::ocl_fit::OclModel>,
 ) -> Result<Vec<f64>, TsplineError> {
+    assemble(mesh, pb, samples, pts, free, region, asm)?.solve(free)
+}
+
+/// [`fit_lsq_local`] that needs `pb` only until the normal equations are assembled: on a
+/// raster of [`TRIM_CELLS`] cells or more it keeps only the PB-spline's points and knots
+/// through the solve and compiles the rest again afterwards (the same PB-spline, bit for bit),
+/// so that it and the Cholesky factor are not alive together
+/// (docs/decisions.md#knots-only-through-the-solve).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn fit_lsq_released(
+    mesh: &TMesh,
+    pb: PbSpline,
+    samples: &Samples,
+    pts: Option<&Scattered>,
+    free: Option<&[bool]>,
+    region: Option<&Region>,
+    asm: Option<&crate::ocl_fit::OclModel>,
+) -> Result<(Vec<f64>, PbSpline), TsplineError> {
+    let normal = assemble(mesh, &pb, samples, pts, free, region, asm)?;
+    if samples.z.len() < TRIM_CELLS {
+        return Ok((normal.solve(free)?, pb));
+    }
+    let parts = pb.into_knots();
+    release_free_memory(samples.z.len());
+    let z = normal.solve(free)?;
+    // the solve's arrays go back before the PB-spline and the error pass take memory again
+    release_free_memory(samples.z.len());
+    Ok((z, PbSpline::from_knots(mesh, parts)))
+}
+
+/// The assembled normal equations with the regulariser, and the current heights (the held
+/// points' values and the iterative solver's warm start).
+pub(crate) struct Normal {
+    a: Csr,
+    rhs: Vec<f64>,
+    prior: Vec<f64>,
+}
+
+impl Normal {
+    fn solve(self, free: Option<&[bool]>) -> Result<Vec<f64>, TsplineError> {
+        let Normal { a, rhs, prior } = self;
+        match free {
+            Some(f) => solve_free(&a, &rhs, &prior, f),
+            None => solve(&a, &rhs, &prior),
+        }
+    }
+}
+
+fn assemble(
+    mesh: &TMesh,
+    pb: &PbSpline,
+    samples: &Samples,
+    pts: Option<&Scattered>,
+    free: Option<&[bool]>,
+    region: Option<&Region>,
+    asm: Option<&crate::ocl_fit::OclModel>,
+) -> Result<Normal, TsplineError> {
     let n = pb.knots.len();
     // device rows only for the global raster assembly
     let asm = match (pts, region, asm) {
@@ -297,10 +349,7 @@ pub(crate) fn fit_lsq_local(
     // fit's peak at 10⁸ cells: BENCHMARKS.md "Peak memory per cell without the copies")
     drop((triples, diag, support));
     release_free_memory(samples.z.len());
-    match free {
-        Some(f) => solve_free(&a, &rhs, &prior, f),
-        None => solve(&a, &rhs, &prior),
-    }
+    Ok(Normal { a, rhs, prior })
 }
 
 /// The sparse solve; the current heights are the iterative fallback's warm start.

@@ -304,7 +304,7 @@ fn mean_of(samples: &Samples) -> f64 {
 }
 
 /// Rasters from which [`release_free_memory`] trims (2²⁴ cells).
-const TRIM_CELLS: usize = 1 << 24;
+pub(crate) const TRIM_CELLS: usize = 1 << 24;
 
 /// Hands the allocator's free pages back to the system (glibc's `malloc_trim`; elsewhere
 /// nothing). Why: glibc keeps freed blocks below its (dynamic, up to 32 MiB) mmap threshold in
@@ -408,7 +408,11 @@ fn fit_impl(
         drop(old);
         let z = match (opts.method, &local) {
             (Method::Lsq, Some((free, region))) => fit_lsq_local(&mesh, &pb, samples, None, Some(free), Some(region), None)?,
-            (Method::Lsq, None) => fit_lsq_local(&mesh, &pb, samples, pts, None, None, asm.as_ref())?,
+            (Method::Lsq, None) => {
+                let (z, p) = fit_lsq_released(&mesh, pb, samples, pts, None, None, asm.as_ref())?;
+                pb = p;
+                z
+            }
             (Method::Drag, _) => fit_drag(&pb, samples, opts.drag_steps, 0.01 * opts.max_error, backend)?,
         };
         if z.iter().any(|v| !v.is_finite()) {
@@ -468,7 +472,8 @@ fn fit_impl(
                 }
                 None => {
                     // The acceptance: the mesh as written, evaluated as `geofit eval` evaluates it.
-                    let (fin, over) = check_written(&mesh, &pb, samples, pts, &mut errs, &tol_final)?;
+                    let (fin, over, p) = check_written_released(&mesh, pb, samples, pts, &mut errs, &tol_final)?;
+                    pb = p;
                     if fin.over_tolerance == 0 {
                         if let Some(last) = iterations.last_mut() {
                             last.error = fin;

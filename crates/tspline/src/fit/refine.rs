@@ -145,6 +145,7 @@ pub(crate) fn refine(
         }
     }
     next.repair_with(1.0, opts.split, &mut geom);
+    next.shrink_to_fit();
     if let Some(cap) = opts.max_points {
         let n = next.active_points().iter().filter(|a| **a).count();
         if n > cap {
