@@ -328,6 +328,28 @@ pub(crate) fn release_free_memory(cells: usize) {
     }
 }
 
+/// Big blocks (8 MiB or more) come from the system and go back to it when freed, for the rest
+/// of the process (glibc's `mallopt(M_MMAP_THRESHOLD)`; elsewhere nothing). Why: glibc's
+/// threshold grows with the blocks freed (up to 32 MiB), so the solves' factors, partial sums
+/// and PB-splines of one iteration were kept in its arenas under the next one's; fixed at 8
+/// MiB, the 10⁸-cell fit peaks ~70 MiB lower, for ~6 s more system time in ~50 s
+/// (docs/decisions.md#big-blocks-from-the-system). Only for rasters of [`TRIM_CELLS`] cells
+/// or more, and not when the user set glibc's own `MALLOC_MMAP_THRESHOLD_`.
+pub(crate) fn big_blocks_from_system(cells: usize) {
+    let _ = cells;
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    if cells >= TRIM_CELLS && std::env::var_os("MALLOC_MMAP_THRESHOLD_").is_none() {
+        const M_MMAP_THRESHOLD: std::os::raw::c_int = -3;
+        extern "C" {
+            fn mallopt(param: std::os::raw::c_int, value: std::os::raw::c_int) -> std::os::raw::c_int;
+        }
+        // SAFETY: glibc's mallopt takes no pointer and may be called at any time
+        unsafe {
+            mallopt(M_MMAP_THRESHOLD, 8 << 20);
+        }
+    }
+}
+
 /// The approximation loop (Alg. 3). `progress` gets every iteration's statistics.
 pub fn fit(samples: &Samples, opts: &FitOptions, backend: &Backend, progress: &mut dyn FnMut(&IterationStats)) -> Result<FitResult, TsplineError> {
     fit_impl(samples, None, opts, backend, progress)
@@ -369,6 +391,7 @@ fn fit_impl(
         return Err(TsplineError::Fit("the raster has no valid cell".into()));
     }
     check_heights_range(&samples.z)?;
+    big_blocks_from_system(samples.z.len());
     if opts.split != SplitRule::Quad && opts.domain.is_some() {
         // docs/decisions.md#anisotropic-splits-issue-19: the seam stitch needs square cells
         return Err(TsplineError::Fit("anisotropic splits are not available for tiles of a plan (their seams need square cells)".into()));
