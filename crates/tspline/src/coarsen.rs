@@ -296,7 +296,7 @@ fn refit(
 ) -> Result<(PbSpline, ErrorStats, Vec<CellId>), TsplineError> {
     fit::release_free_memory(samples.z.len());
     let old_pb = old.get(best);
-    let mut pb = match backend {
+    let pb = match backend {
         Backend::Cpu => fit::build_pb_incremental(m, old_pb, changed),
         _ => fit::build_pb(m, backend)?,
     };
@@ -309,18 +309,9 @@ fn refit(
         old.release();
         fit::release_free_memory(samples.z.len());
     }
-    let z = match &local {
-        Some((free, region)) => {
-            let (z, p) = fit::fit_lsq_released(m, pb, samples, None, Some(free), Some(region), None)?;
-            pb = p;
-            z
-        }
-        None => {
-            let (z, p) = fit::fit_lsq_released(m, pb, samples, pts, None, None, None)?;
-            pb = p;
-            z
-        }
-    };
+    // a local update exists only for raster data (pts is None then)
+    let (free, region) = local.as_ref().map_or((None, None), |(f, r)| (Some(&f[..]), Some(r)));
+    let (z, mut pb) = fit::fit_lsq_released(m, pb, samples, pts, free, region, None)?;
     fit::set_z(m, &mut pb, &z);
     let region = local.map(|(_, r)| r);
     if pts.is_none() {
