@@ -40,29 +40,17 @@ thread_local! {
 /// diagonal on (columns sorted, so the rows of each CSC column are sorted too). None when its
 /// entries do not fit u32 indices.
 fn lower_csc(a: &SymCsr) -> Option<(Vec<u32>, Vec<u32>, Vec<f64>)> {
-    let n = a.n();
-    if a.cols.len() > u32::MAX as usize {
-        return None;
-    }
-    let mut col_ptr = Vec::with_capacity(n + 1);
-    let mut row_idx = Vec::with_capacity(a.cols.len() / 2 + n);
-    let mut vals = Vec::with_capacity(a.cols.len() / 2 + n);
-    col_ptr.push(0u32);
-    for j in 0..n {
-        for k in a.start[j]..a.start[j + 1] {
-            let i = a.cols[k] as usize;
-            if i >= j {
-                row_idx.push(i as u32);
-                vals.push(a.vals[k]);
-            }
-        }
-        col_ptr.push(row_idx.len() as u32);
+    let (col_ptr, row_idx) = lower_pattern(&a.start, &a.cols)?;
+    let mut vals = Vec::with_capacity(row_idx.len());
+    for j in 0..a.n() {
+        vals.extend((a.start[j]..a.start[j + 1]).filter(|&k| a.cols[k] as usize >= j).map(|k| a.vals[k]));
     }
     Some((col_ptr, row_idx, vals))
 }
 
-/// The lower triangle's pattern (CSC) of the symmetric pattern `start`, `cols` (as
-/// [`lower_csc`] lays it out); None when it does not fit u32 indices.
+/// The lower triangle's pattern (CSC) of the symmetric pattern `start`, `cols`: [`lower_csc`]
+/// without the values, all a symbolic factorisation needs; None when it does not fit u32
+/// indices.
 fn lower_pattern(start: &[usize], cols: &[u32]) -> Option<(Vec<u32>, Vec<u32>)> {
     let n = start.len().saturating_sub(1);
     if cols.len() > u32::MAX as usize {

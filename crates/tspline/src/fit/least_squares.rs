@@ -279,19 +279,14 @@ fn assemble(
     // ordering, so the same bits.
     let block = free.map(|f| free_block_pattern(&a, f));
     let (b_start, b_cols) = block.as_ref().map_or((&a.start[..], &a.cols[..]), |(s, c)| (&s[..], &c[..]));
-    let ahead = asm.is_none() && crate::sparse::symbolic_needed(b_start, b_cols);
-    let assemble = || match (pts, &asm) {
-        (None, None) => Ok(crate::assembly::by_elements(sys, samples, region)),
-        _ => crate::assembly::per_cell(sys, samples, pts, region, asm.as_ref().map(|(o, sp)| (*o, sp))),
+    let on_cpu = || match pts {
+        None => Ok(crate::assembly::by_elements(sys, samples, region)),
+        Some(_) => crate::assembly::per_cell(sys, samples, pts, region, None),
     };
-    let (symbolic, sums) = if ahead {
-        let (symbolic, sums) = rayon::join(|| sparse_spd::cholesky_symbolic(b_start, b_cols).ok(), || match (pts, region) {
-            (None, _) => Ok(crate::assembly::by_elements(sys, samples, region)),
-            _ => crate::assembly::per_cell(sys, samples, pts, region, None),
-        });
-        (symbolic, sums)
-    } else {
-        (None, assemble())
+    let (symbolic, sums) = match &asm {
+        Some((o, sp)) => (None, crate::assembly::per_cell(sys, samples, pts, region, Some((*o, sp)))),
+        None if crate::sparse::symbolic_needed(b_start, b_cols) => rayon::join(|| sparse_spd::cholesky_symbolic(b_start, b_cols).ok(), on_cpu),
+        None => (None, on_cpu()),
     };
     let sums = sums?;
     if let Some(s) = symbolic {
