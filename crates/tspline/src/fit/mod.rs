@@ -311,7 +311,9 @@ pub(crate) const TRIM_CELLS: usize = 1 << 24;
 /// its arenas, so the partial sums of one assembly and the PB-spline of the previous iteration
 /// stayed resident under the next solve's factor; called before each solve and each
 /// iteration, it takes tens of MiB off the peak (~30 MiB at 10⁷ cells) for a few ms per call
-/// (BENCHMARKS.md "Peak memory per cell without the copies").
+/// (BENCHMARKS.md "Peak memory per cell without the copies"). Since
+/// [`big_blocks_from_system`] fixes the threshold at 8 MiB on the same rasters, what it trims
+/// are the blocks below that.
 /// Only for rasters of [`TRIM_CELLS`] cells or more, where the per-cell arrays leave little
 /// room: each call costs page faults later (+4 % CPU on the 1.6·10⁶-cell BAG fit).
 pub(crate) fn release_free_memory(cells: usize) {
