@@ -3,7 +3,7 @@
 
 use std::cell::RefCell;
 
-use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::sparse::linalg::cholesky::{factorize_symbolic_cholesky, LltRef, SymbolicCholesky, SymmetricOrdering};
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use faer::{Conj, MatMut, Par, Side};
@@ -134,24 +134,64 @@ fn factor_and_solve(a: &SymCsr, b: &[f64], csc: (&[u32], &[u32], &[f64]), max_by
     // promise of the same answer on any machine excludes; measured CPU-neutral on 2 cores
     // (BENCHMARKS.md "Fit CPU on the largest mesh").
     let par = Par::Seq;
-    let mut l = vec![0.0; symbolic.len_val()];
-    let mut buf = MemBuffer::new(symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default()));
-    symbolic
-        .factorize_numeric_llt::<f64>(&mut l, mat, Side::Lower, Default::default(), par, MemStack::new(&mut buf), Default::default())
-        .map_err(|_| CholeskyError::NotPositiveDefinite)?;
-    let llt = LltRef::<'_, u32, f64>::new(symbolic, &l);
-    let mut sbuf = MemBuffer::new(symbolic.solve_in_place_scratch::<f64>(1, par));
-    let mut solve = |v: &mut [f64]| {
-        let m = MatMut::from_column_major_slice_mut(v, n, 1);
-        llt.solve_in_place_with_conj(Conj::No, m, par, MemStack::new(&mut sbuf));
-    };
-    let mut x = b.to_vec();
-    solve(&mut x);
-    // one refinement step: x += A⁻¹ (b − A x)
-    let mut r = vec![0.0; n];
-    a.mul(&x, &mut r);
-    r.iter_mut().zip(b).for_each(|(ri, bi)| *ri = bi - *ri);
-    solve(&mut r);
-    x.iter_mut().zip(&r).for_each(|(xi, di)| *xi += di);
-    Ok((x, reused))
+    let scratch = StackReq::or(symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default()), symbolic.solve_in_place_scratch::<f64>(1, par));
+    WORKSPACE.with(|w| {
+        let ws = &mut *w.borrow_mut();
+        let (l, buf) = ws.get_or_insert_with(Workspace::default).fit(symbolic.len_val(), scratch);
+        symbolic
+            .factorize_numeric_llt::<f64>(l, mat, Side::Lower, Default::default(), par, MemStack::new(buf), Default::default())
+            .map_err(|_| CholeskyError::NotPositiveDefinite)?;
+        let llt = LltRef::<'_, u32, f64>::new(symbolic, l);
+        let mut solve = |v: &mut [f64]| {
+            let m = MatMut::from_column_major_slice_mut(v, n, 1);
+            llt.solve_in_place_with_conj(Conj::No, m, par, MemStack::new(buf));
+        };
+        let mut x = b.to_vec();
+        solve(&mut x);
+        // one refinement step: x += A⁻¹ (b − A x)
+        let mut r = vec![0.0; n];
+        a.mul(&x, &mut r);
+        r.iter_mut().zip(b).for_each(|(ri, bi)| *ri = bi - *ri);
+        solve(&mut r);
+        x.iter_mut().zip(&r).for_each(|(xi, di)| *xi += di);
+        Ok((x, reused))
+    })
+}
+
+/// The numeric factor's values and faer's scratch, kept between the solves of a thread.
+/// Why: a fit solves a sequence of systems of similar size; allocated afresh, each factor
+/// (~100 MB at 5·10⁴ cubic control points) came from new pages, and their first-touch page
+/// faults were ~40 % of the BAG 0.1 m fit's (~0.2 s of its wall time; BENCHMARKS.md
+/// "Kept solver workspace"). Callers short of memory drop it with [`release_workspace`].
+#[derive(Default)]
+struct Workspace {
+    factor: Vec<f64>,
+    scratch: Option<MemBuffer>,
+}
+
+impl Workspace {
+    /// The factor's values (`len`, zeroed) and a scratch buffer that meets `req`, grown only
+    /// when they are too small (what was held is freed first: never two at once).
+    fn fit(&mut self, len: usize, req: StackReq) -> (&mut [f64], &mut MemBuffer) {
+        self.factor.clear();
+        self.factor.resize(len, 0.0);
+        let fits = |b: &MemBuffer| b.len() >= req.size_bytes() && (b.as_ptr() as usize) % req.align_bytes().max(1) == 0;
+        if !self.scratch.as_ref().is_some_and(fits) {
+            self.scratch = None;
+            self.scratch = Some(MemBuffer::new(req));
+        }
+        (&mut self.factor, self.scratch.as_mut().expect("set above"))
+    }
+}
+
+thread_local! {
+    /// This thread's [`Workspace`] (None until its first factorisation, or after
+    /// [`release_workspace`]).
+    static WORKSPACE: RefCell<Option<Workspace>> = const { RefCell::new(None) };
+}
+
+/// Frees this thread's kept factor values and scratch (the symbolic factorisation stays):
+/// for callers whose next steps need the memory more than the next solve needs the speed.
+pub fn release_workspace() {
+    WORKSPACE.with(|w| *w.borrow_mut() = None);
 }

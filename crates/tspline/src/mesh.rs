@@ -160,6 +160,13 @@ impl IntoIterator for Children {
 }
 
 impl Cell {
+    /// A leaf with the given corners (in the order (s_min,t_max),(s_max,t_max),(s_min,t_min),
+    /// (s_max,t_min)) and no parent.
+    fn leaf(corners: [PointId; 4], points: &[ControlPoint]) -> Cell {
+        let [a, b, c, _] = corners.map(|i| points[i as usize]);
+        Cell { corners, rect: Rect::new(a.s, c.t, b.s, a.t), parent: None, children: None, split_as: SplitDir::Quad, alive: true }
+    }
+
     pub fn is_leaf(&self) -> bool {
         self.alive && self.children.is_none()
     }
@@ -235,13 +242,12 @@ impl TMesh {
                     c
                 )));
             }
-            cells.push(Cell { corners: *c, rect: Rect::new(a.s, cc.t, b.s, a.t), parent: None, children: None, split_as: SplitDir::Quad, alive: true });
+            cells.push(Cell::leaf(*c, &points));
         }
         if cells.is_empty() {
             return Err(TsplineError::InvalidMesh("the mesh has no cells".into()));
         }
-        let entries = cells.iter().enumerate().map(|(i, c)| CellEntry { id: i as CellId, env: c.rect.aabb() }).collect();
-        let mesh = TMesh { degree, points, cells, tree: RTree::bulk_load(entries), point_at };
+        let mesh = TMesh::with_tree(degree, points, cells, point_at);
         // Overlap check: two leaves may share edges but not area.
         for (i, c) in mesh.cells.iter().enumerate() {
             for o in mesh.tree.locate_in_envelope_intersecting(&c.rect.aabb()) {
@@ -277,6 +283,21 @@ impl TMesh {
             }
         }
         Ok(mesh)
+    }
+
+    /// [`TMesh::from_cells`] without its checks, for leaves taken from a mesh that passed them
+    /// (a valid mesh stays valid when compacted): the checks query the R-tree once per cell and
+    /// once per point, and a fit compacts its mesh for every acceptance check and output.
+    fn from_valid_cells(degree: Degree, points: Vec<ControlPoint>, corners: Vec<[PointId; 4]>) -> TMesh {
+        let point_at = points.iter().enumerate().map(|(i, p)| (key(p.s, p.t), i as PointId)).collect();
+        let cells = corners.iter().map(|c| Cell::leaf(*c, &points)).collect();
+        TMesh::with_tree(degree, points, cells, point_at)
+    }
+
+    /// The mesh with its R-tree bulk loaded over `cells`.
+    fn with_tree(degree: Degree, points: Vec<ControlPoint>, cells: Vec<Cell>, point_at: HashMap<(u64, u64), PointId>) -> TMesh {
+        let entries = cells.iter().enumerate().map(|(i, c)| CellEntry { id: i as CellId, env: c.rect.aabb() }).collect();
+        TMesh { degree, points, cells, tree: RTree::bulk_load(entries), point_at }
     }
 
     /// A regular grid of `ns × nt` square cells of side `size` starting at (s0, t0); geometry
@@ -625,7 +646,9 @@ impl TMesh {
             }
         }
         let corners = self.cells.iter().filter(|c| c.is_leaf()).map(|c| c.corners.map(|p| remap[p as usize])).collect();
-        TMesh::from_cells(self.degree, points, corners).expect("a valid mesh stays valid when compacted")
+        let c = TMesh::from_valid_cells(self.degree, points, corners);
+        debug_assert!(TMesh::from_cells(c.degree, c.points.clone(), c.cells.iter().map(|c| c.corners).collect()).is_ok(), "a valid mesh stays valid when compacted");
+        c
     }
 
     /// Leaf cells crossed by the horizontal (`horizontal = true`) or vertical line through

@@ -157,8 +157,12 @@ pub(crate) fn check_written_released(
 }
 
 /// |Δz| of the mesh as written ([`as_written`]), evaluated as `geofit eval` does, into `errs`.
+/// The mesh as written is its compacted copy: the file holds the compacted leaves and points
+/// with round-trip floats, and reading builds them in the same order (test
+/// `written_mesh_is_the_compacted_mesh`); the text round trip itself took ~0.1 s of the BAG
+/// 0.1 m fit's one thread.
 fn written_errors(mesh: &TMesh, samples: &Samples, pts: Option<&Scattered>, errs: &mut [f64]) -> Result<(), TsplineError> {
-    let written = PbSpline::build(&as_written(mesh)?);
+    let written = PbSpline::build(&mesh.compacted());
     let err_of = |zk: f64, dk: f64| if dk.is_nan() { f64::NAN } else if zk.is_nan() { f64::INFINITY } else { (zk - dk).abs() };
     if let Some(p) = pts {
         let z = written.eval_z(&p.st, true);

@@ -189,7 +189,9 @@ pub(crate) fn fit_lsq_local(
     region: Option<&Region>,
     asm: Option<&crate::ocl_fit::OclModel>,
 ) -> Result<Vec<f64>, TsplineError> {
-    assemble(mesh, pb, samples, pts, free, region, asm)?.solve(free)
+    let z = assemble(mesh, pb, samples, pts, free, region, asm)?.solve(free)?;
+    release_solver_workspace(samples.z.len());
+    Ok(z)
 }
 
 /// [`fit_lsq_local`] that needs `pb` only until the normal equations are assembled: on a

@@ -317,7 +317,7 @@ pub(crate) const TRIM_CELLS: usize = 1 << 24;
 /// Only for rasters of [`TRIM_CELLS`] cells or more, where the per-cell arrays leave little
 /// room: each call costs page faults later (+4 % CPU on the 1.6·10⁶-cell BAG fit).
 pub(crate) fn release_free_memory(cells: usize) {
-    let _ = cells;
+    release_solver_workspace(cells);
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
     if cells >= TRIM_CELLS {
         extern "C" {
@@ -327,6 +327,15 @@ pub(crate) fn release_free_memory(cells: usize) {
         unsafe {
             malloc_trim(0);
         }
+    }
+}
+
+/// Frees the Cholesky's kept factor and scratch (`sparse_spd::release_workspace`) on rasters
+/// of [`TRIM_CELLS`] cells or more, where the per-cell arrays leave no room for them between
+/// solves; on smaller ones they stay for the next solve (no fresh pages to fault in).
+pub(crate) fn release_solver_workspace(cells: usize) {
+    if cells >= TRIM_CELLS {
+        sparse_spd::release_workspace();
     }
 }
 
@@ -470,46 +479,30 @@ fn fit_impl(
         progress(&st);
         iterations.push(st);
         if err.over_tolerance == 0 {
-            // the coarsened mesh's cells over the tolerance on its fresh check (None: it passed)
-            let mut missed = None;
             if may_coarsen {
                 let c = crate::coarsen::coarsen(mesh, pb, samples, pts, opts, backend, &mut errs, it + 1, progress, &tol)?;
                 mesh = c.mesh;
                 pb = c.pb;
-                // the tolerance is declared only on a fresh check of every cell (scattered data:
-                // every round coarsen::refit kept was already checked at every point)
-                if pts.is_none() && !c.rounds.is_empty() {
-                    let (f, over) = check(&mesh, &pb, samples, None, None, backend, &mut errs, &tol)?;
-                    if f.over_tolerance > 0 {
-                        // cannot happen when the checks above are sound; keep the guarantee
-                        // anyway: refine where the coarsened mesh misses, coarsening off (no copy
-                        // of the pre-coarsening mesh is kept for this:
-                        // docs/decisions.md#coarsening-decides-before-it-writes)
-                        missed = Some((f, over));
-                    }
-                }
                 iterations.extend(c.rounds);
             }
-            match missed {
-                Some(m) => {
-                    may_coarsen = false;
-                    (err, over_leaves) = m;
+            // The acceptance: the mesh as written, evaluated as `geofit eval` evaluates it, at
+            // every cell (also the fresh check of a coarsened mesh: docs/decisions.md#one-final-check).
+            // No solve follows unless it fails: the factor's memory goes back first.
+            sparse_spd::release_workspace();
+            let (fin, over, p) = check_written_released(&mesh, pb, samples, pts, &mut errs, &tol_final)?;
+            pb = p;
+            if fin.over_tolerance == 0 {
+                if let Some(last) = iterations.last_mut() {
+                    last.error = fin;
                 }
-                None => {
-                    // The acceptance: the mesh as written, evaluated as `geofit eval` evaluates it.
-                    let (fin, over, p) = check_written_released(&mesh, pb, samples, pts, &mut errs, &tol_final)?;
-                    pb = p;
-                    if fin.over_tolerance == 0 {
-                        if let Some(last) = iterations.last_mut() {
-                            last.error = fin;
-                        }
-                        return Ok(FitResult { mesh, iterations, stop: StopReason::ToleranceReached });
-                    }
-                    // beyond the margin: refine where the written mesh misses, as for any miss
-                    may_coarsen = false;
-                    (err, over_leaves) = (fin, over);
-                }
+                return Ok(FitResult { mesh, iterations, stop: StopReason::ToleranceReached });
             }
+            // beyond the margin, or a coarsened mesh that misses (not seen: the rounds check
+            // what they change): refine where the written mesh misses, coarsening off, so that
+            // refinement converges instead of merging the same cells back (no copy of the
+            // pre-coarsening mesh is kept: docs/decisions.md#coarsening-decides-before-it-writes)
+            may_coarsen = false;
+            (err, over_leaves) = (fin, over);
         }
         if it >= opts.max_iterations {
             return Ok(FitResult { mesh, iterations, stop: StopReason::MaxIterations });
@@ -614,6 +607,25 @@ mod tests {
                     assert!((r.mesh.points[id as usize].z - p.z).abs() < 1e-9);
                 }
             }
+        }
+    }
+
+    /// The final check evaluates the compacted mesh in place of the mesh read back from its
+    /// file: both are the same points (bit for bit), in the same order, and the same leaves.
+    #[test]
+    fn written_mesh_is_the_compacted_mesh() {
+        let (w, h) = (60, 45);
+        let z: Vec<f64> = (0..w * h).map(|q| ((q % w) as f64 * 0.37).sin() * 3.0 + ((q / w) as f64 * 0.29).cos() * 5.0 + 1e3).collect();
+        let s = Samples { width: w, height: h, z: z.into() };
+        for degree in [Degree::Linear, Degree::Cubic] {
+            let r = fit(&s, &FitOptions::new(degree, 0.2), &Backend::Cpu, &mut |_| {}).unwrap();
+            assert!(r.iterations.iter().any(|it| it.merged_cells > 0) || degree == Degree::Cubic, "a coarsened mesh (dead cells) is covered");
+            let (read, compact) = (as_written(&r.mesh).unwrap(), r.mesh.compacted());
+            let bits = |m: &TMesh| m.points.iter().map(|p| [p.s, p.t, p.x, p.y, p.z, p.w].map(f64::to_bits)).collect::<Vec<_>>();
+            assert_eq!(bits(&read), bits(&compact), "{degree:?}");
+            let leaves = |m: &TMesh| m.cells.iter().map(|c| (c.corners, c.is_leaf())).collect::<Vec<_>>();
+            assert_eq!(leaves(&read), leaves(&compact), "{degree:?}");
+            assert!(compact.points.len() < r.mesh.points.len() || compact.cells.len() < r.mesh.cells.len(), "compaction dropped something");
         }
     }
 
