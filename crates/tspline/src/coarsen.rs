@@ -112,11 +112,12 @@ pub(crate) fn coarsen(
     // what a try overwrote in `errs`, to put back when it fails (a raster's |Δz| per cell can
     // be 10⁸ values: a local try saves only the cells it re-checks)
     let mut undo = Undo::default();
+    let mut held = HeldBack::default();
     for _ in 0..MAX_ROUNDS {
         let t0 = Instant::now();
         let cand: Vec<CellId> = {
             use rayon::prelude::*;
-            let all = candidates(&best, &failed);
+            let all = held.to_try(&best, candidates(&best, &failed));
             // a looser filter tries more merges but keeps fewer (Kilauea 5 m, degree 3: 31418
             // control points at 1·E, 32706 at 2·E, 33107 unfiltered, against 33132 without the pass)
             let surface = best_pb.get(&best);
@@ -135,6 +136,7 @@ pub(crate) fn coarsen(
         m.repair_with(1.0, opts.split, &mut geom_of(best_pb.get(&best)));
         m.shrink_to_fit();
         let mut merged: Vec<CellId> = cand.iter().copied().filter(|&c| m.cells[c as usize].is_leaf()).collect();
+        held.add(cand.iter().copied().filter(|&c| !m.cells[c as usize].is_leaf()));
         let merged_any = !merged.is_empty();
         let kept = loop {
             if merged.is_empty() {
@@ -175,6 +177,7 @@ pub(crate) fn coarsen(
             m.shrink_to_fit();
             merged.retain(|&c| m.cells[c as usize].is_leaf());
         };
+        held.changed(merged.iter().map(|&c| m.cells[c as usize].rect));
         let Some((pb_m, err)) = kept else {
             if merged_any {
                 continue; // some were split back and are not tried again: the next round differs
@@ -200,6 +203,47 @@ pub(crate) fn coarsen(
     }
     let pb = best_pb.into_whole(&best);
     Ok(Coarsened { mesh: best, pb, rounds })
+}
+
+/// Candidates whose merge the repair split back, held back from the next rounds until a kept
+/// merge comes near them. Why: on the BAG at 0.1 m ~3200 of a round's ~3300 candidates were
+/// merged and split back again in every round (a clone, 3200 merges and a repair: ~0.15 s of
+/// the fit's one thread per round), and the last round did nothing else. The repair only
+/// splits where a merged cell has finer neighbours (1:2) or hanging vertices on opposite sides
+/// (A13); a round merges a subset of the candidates around such a cell or fewer, so the
+/// neighbours it is split back for stay, and only a merge kept nearby (which makes cells
+/// coarser) can change its verdict. "Nearby": within [`HELD_REACH`] times the larger of the
+/// two cells' sides (docs/decisions.md#coarsening-holds-back-what-repair-undid).
+#[derive(Default)]
+struct HeldBack {
+    cells: HashSet<CellId>,
+    /// The merges the last round kept.
+    kept: Vec<Rect>,
+}
+
+/// How far (in cell sides) a kept merge can change the repair's verdict on a merge.
+const HELD_REACH: f64 = 4.0;
+
+impl HeldBack {
+    /// The candidates to try this round: all but the held-back ones far from the last kept merges.
+    fn to_try(&mut self, mesh: &TMesh, all: Vec<CellId>) -> Vec<CellId> {
+        let near = |r: Rect| self.kept.iter().any(|&k| distance(r, k) <= HELD_REACH * r.width().max(r.height()).max(k.width()).max(k.height()));
+        let tried: Vec<CellId> = all.into_iter().filter(|c| !self.cells.contains(c) || near(mesh.cells[*c as usize].rect)).collect();
+        for c in &tried {
+            self.cells.remove(c);
+        }
+        tried
+    }
+
+    /// Candidates the repair split back this round.
+    fn add(&mut self, undone: impl Iterator<Item = CellId>) {
+        self.cells.extend(undone);
+    }
+
+    /// The merges this round keeps (none when it keeps none).
+    fn changed(&mut self, kept: impl Iterator<Item = Rect>) {
+        self.kept = kept.collect();
+    }
 }
 
 /// The geometry of points a split adds: (s, t) and the current surface's height there.
