@@ -586,9 +586,13 @@ impl TMesh {
                 if rule == SplitRule::Quad && r.width().min(r.height()) < 2.0 * min_size {
                     continue;
                 }
-                let need = match &flags {
-                    Some(f) if !touched[c as usize] => f[c as usize],
-                    _ => self.repair_need(c),
+                // one neighbour query answers both the check and, on a split, the touched list
+                let (need, mut nbrs) = match &flags {
+                    Some(f) if !touched[c as usize] => (f[c as usize], None),
+                    _ => {
+                        let (need, nbrs) = self.need_and_neighbours(c);
+                        (need, Some(nbrs))
+                    }
                 };
                 let dir = match rule {
                     SplitRule::Quad => need.any().then_some(SplitDir::Quad),
@@ -597,7 +601,7 @@ impl TMesh {
                 let Some(dir) = dir else {
                     continue;
                 };
-                let nbrs: Vec<CellId> = self.neighbours(c).into_iter().map(|(_, n)| n).collect();
+                let nbrs = nbrs.take().unwrap_or_else(|| self.neighbours(c).into_iter().map(|(_, n)| n).collect());
                 for &n in &nbrs {
                     if let Some(t) = touched.get_mut(n as usize) {
                         *t = true;
@@ -612,6 +616,14 @@ impl TMesh {
             todo = next;
         }
         splits
+    }
+
+    /// [`TMesh::repair_need`] of a leaf and its neighbours' ids, from one R-tree query.
+    fn need_and_neighbours(&self, cell: CellId) -> (RepairNeed, Vec<CellId>) {
+        let r = self.cells[cell as usize].rect;
+        let nbrs = self.neighbours(cell);
+        let need = repair_need(&r, nbrs.iter().map(|&(side, n)| (side, self.cells[n as usize].rect)));
+        (need, nbrs.into_iter().map(|(_, n)| n).collect())
     }
 
     /// Merging (spec §3.9, T28): the union of two meshes' leaf cells (C0 seam). Points at equal
