@@ -211,7 +211,9 @@ pub(crate) fn fit_lsq_released(
 ) -> Result<(Vec<f64>, PbSpline), TsplineError> {
     let normal = assemble(mesh, &pb, samples, pts, free, region, asm)?;
     if samples.z.len() < TRIM_CELLS {
-        return Ok((normal.solve(free)?, pb));
+        let z = normal.solve(free)?;
+        release_solver_workspace(samples.z.len());
+        return Ok((z, pb));
     }
     let parts = pb.into_knots();
     release_free_memory(samples.z.len());

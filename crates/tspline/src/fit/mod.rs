@@ -330,11 +330,18 @@ pub(crate) fn release_free_memory(cells: usize) {
     }
 }
 
+/// Rasters from this many cells on free the Cholesky's factor and scratch after every solve.
+/// Why: kept, they sit under the next error pass, whose per-cell arrays dominate on large
+/// rasters (10⁷ cells: 482 → 574 MiB peak with them kept); below it they are kept for the next
+/// solve (BAG, 2.5·10⁶ cells: ~0.2 s less of the fit's one thread for ~40 MiB more peak;
+/// BENCHMARKS.md "Kept solver workspace, one final check").
+pub(crate) const KEEP_WORKSPACE_BELOW_CELLS: usize = 1 << 23;
+
 /// Frees the Cholesky's kept factor and scratch (`sparse_spd::release_workspace`) on rasters
-/// of [`TRIM_CELLS`] cells or more, where the per-cell arrays leave no room for them between
-/// solves; on smaller ones they stay for the next solve (no fresh pages to fault in).
+/// of [`KEEP_WORKSPACE_BELOW_CELLS`] cells or more; on smaller ones they stay for the next
+/// solve (no fresh pages to fault in).
 pub(crate) fn release_solver_workspace(cells: usize) {
-    if cells >= TRIM_CELLS {
+    if cells >= KEEP_WORKSPACE_BELOW_CELLS {
         sparse_spd::release_workspace();
     }
 }
