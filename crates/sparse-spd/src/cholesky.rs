@@ -161,8 +161,9 @@ fn factor_and_solve(a: &SymCsr, b: &[f64], csc: (&[u32], &[u32], &[f64]), max_by
 /// The numeric factor's values and faer's scratch, kept between the solves of a thread.
 /// Why: a fit solves a sequence of systems of similar size; allocated afresh, each factor
 /// (~100 MB at 5·10⁴ cubic control points) came from new pages, and their first-touch page
-/// faults were ~40 % of the BAG 0.1 m fit's (~0.2 s of its wall time; BENCHMARKS.md
-/// "Kept solver workspace"). Callers short of memory drop it with [`release_workspace`].
+/// faults were ~40 % of the BAG 0.1 m fit's, inside the numeric factorisation (0.19–0.20 →
+/// 0.12–0.15 s per factor of 4.5·10⁴ unknowns; BENCHMARKS.md "Kept solver workspace, one final
+/// check"). Callers short of memory drop it with [`release_workspace`].
 #[derive(Default)]
 struct Workspace {
     factor: Vec<f64>,

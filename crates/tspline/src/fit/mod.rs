@@ -315,7 +315,8 @@ pub(crate) const TRIM_CELLS: usize = 1 << 24;
 /// [`big_blocks_from_system`] fixes the threshold at 8 MiB on the same rasters, what it trims
 /// are the blocks below that.
 /// Only for rasters of [`TRIM_CELLS`] cells or more, where the per-cell arrays leave little
-/// room: each call costs page faults later (+4 % CPU on the 1.6·10⁶-cell BAG fit).
+/// room: each call costs page faults later (+4 % CPU on the 1.6·10⁶-cell BAG fit). It also
+/// frees the Cholesky's kept workspace where [`release_solver_workspace`] would.
 pub(crate) fn release_free_memory(cells: usize) {
     release_solver_workspace(cells);
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
