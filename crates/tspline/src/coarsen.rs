@@ -227,8 +227,14 @@ const HELD_REACH: f64 = 4.0;
 impl HeldBack {
     /// The candidates to try this round: all but the held-back ones far from the last kept merges.
     fn to_try(&mut self, mesh: &TMesh, all: Vec<CellId>) -> Vec<CellId> {
+        #[cfg(test)]
+        if !tests::HOLD_BACK.get() {
+            return all;
+        }
         let near = |r: Rect| self.kept.iter().any(|&k| distance(r, k) <= HELD_REACH * r.width().max(r.height()).max(k.width()).max(k.height()));
         let tried: Vec<CellId> = all.into_iter().filter(|c| !self.cells.contains(c) || near(mesh.cells[*c as usize].rect)).collect();
+        #[cfg(test)]
+        tests::HELD_SKIPPED.set(tests::HELD_SKIPPED.get() + self.cells.len());
         for c in &tried {
             self.cells.remove(c);
         }
@@ -379,8 +385,54 @@ fn refit(
 
 #[cfg(test)]
 mod tests {
+    use std::cell::Cell;
+
     use crate::fit::{fit, eval_errors, Backend, FitOptions, Samples};
     use crate::mesh::Degree;
+
+    thread_local! {
+        /// Off: every candidate is tried in every round (coarsening as before `HeldBack`).
+        pub(super) static HOLD_BACK: Cell<bool> = const { Cell::new(true) };
+        /// Held-back candidates left out of the rounds so far (summed over the rounds).
+        pub(super) static HELD_SKIPPED: Cell<usize> = const { Cell::new(0) };
+    }
+
+    /// Holding back what the repair undid changes no result: the same leaves (cell rectangles)
+    /// and control points as trying every candidate in every round, on a raster where
+    /// candidates are held back. (Here even never retrying a held-back candidate gives the same
+    /// mesh: the reach of 4 cell sides is a margin, not a tuned value.)
+    #[test]
+    fn holding_back_keeps_the_coarsened_mesh() {
+        let (w, h) = (120, 100);
+        let mut seed = 11u64;
+        let z: Vec<f64> = (0..w * h)
+            .map(|q| {
+                let (x, y) = ((q % w) as f64, (q / w) as f64);
+                seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                let noise = ((seed >> 33) as f64 / (1u64 << 31) as f64 - 0.5) * 0.3;
+                5.0 * (x * 0.07).sin() * (y * 0.05).cos() + 0.02 * x + if (x - 60.0).abs() < 8.0 && (y - 50.0).abs() < 8.0 { noise * 4.0 } else { noise * 0.2 }
+            })
+            .collect();
+        let s = Samples { width: w, height: h, z: z.into() };
+        let mut skipped = 0;
+        for degree in [Degree::Linear, Degree::Cubic] {
+            let leaves = |hold: bool| {
+                HOLD_BACK.set(hold);
+                HELD_SKIPPED.set(0);
+                let r = fit(&s, &FitOptions::new(degree, 0.1), &Backend::Cpu, &mut |_| {}).unwrap();
+                HOLD_BACK.set(true);
+                let mut rects: Vec<[u64; 4]> = r.mesh.leaves().map(|c| r.mesh.cells[c as usize].rect).map(|q| [q.s_min, q.t_min, q.s_max, q.t_max].map(f64::to_bits)).collect();
+                rects.sort_unstable();
+                (rects, r.iterations.last().unwrap().control_points, HELD_SKIPPED.get())
+            };
+            let (all, n_all, _) = leaves(false);
+            let (held, n_held, k) = leaves(true);
+            assert_eq!(n_held, n_all, "{degree:?}");
+            assert!(held == all, "{degree:?}: other leaves");
+            skipped += k;
+        }
+        assert!(skipped > 0, "no candidate was held back: the test does not exercise HeldBack");
+    }
 
     /// A smooth hill with a few sharp pits on a plane: the loop's 4-way splits around the pits
     /// overshoot, so the pass must merge some back, and the result must still hold the
