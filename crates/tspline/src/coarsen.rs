@@ -117,7 +117,7 @@ pub(crate) fn coarsen(
         let t0 = Instant::now();
         let cand: Vec<CellId> = {
             use rayon::prelude::*;
-            let all = held.to_try(&best, candidates(&best, &failed));
+            let all = held.tried(&best, candidates(&best, &failed));
             // a looser filter tries more merges but keeps fewer (Kilauea 5 m, degree 3: 31418
             // control points at 1·E, 32706 at 2·E, 33107 unfiltered, against 33132 without the pass)
             let surface = best_pb.get(&best);
@@ -226,7 +226,7 @@ const HELD_REACH: f64 = 4.0;
 
 impl HeldBack {
     /// The candidates to try this round: all but the held-back ones far from the last kept merges.
-    fn to_try(&mut self, mesh: &TMesh, all: Vec<CellId>) -> Vec<CellId> {
+    fn tried(&mut self, mesh: &TMesh, all: Vec<CellId>) -> Vec<CellId> {
         #[cfg(test)]
         if !tests::HOLD_BACK.get() {
             return all;
@@ -361,7 +361,7 @@ fn refit(
     }
     // a local update exists only for raster data (pts is None then)
     let (free, region) = local.as_ref().map_or((None, None), |(f, r)| (Some(&f[..]), Some(r)));
-    let (z, mut pb) = fit::fit_lsq_released(m, pb, samples, pts, free, region, None)?;
+    let (z, mut pb) = fit::fit_lsq_released(fit::LsqProblem { mesh: &*m, samples, pts, free, region, asm: None }, pb)?;
     fit::set_z(m, &mut pb, &z);
     let region = local.map(|(_, r)| r);
     if pts.is_none() {

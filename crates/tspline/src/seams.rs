@@ -556,7 +556,7 @@ fn refit_loop(
         let mut pb = PbSpline::build(&mesh);
         let free: Vec<bool> = pb.point_ids.iter().map(|&id| !on_seam[id as usize]).collect();
         let t_build = t0.elapsed().as_secs_f64();
-        let z = crate::fit::fit_lsq_local(&mesh, &pb, samples, None, Some(&free), None, None)?;
+        let z = crate::fit::fit_lsq_local(crate::fit::LsqProblem { free: Some(&free), ..crate::fit::LsqProblem::global(&mesh, samples) }, &pb)?;
         if z.iter().any(|v| !v.is_finite()) {
             return Err(TsplineError::Fit(format!("stitch iteration {it}: the least-squares solution has non-finite control points")));
         }

@@ -89,14 +89,35 @@ pub(super) fn line_triples(mesh: &TMesh, pb: &PbSpline) -> Vec<Vec<(u32, u32, f6
 /// rational basis): z of every PB point; the current z are the warm start and the regulariser's
 /// prior. Returns the new z per PB point.
 pub fn fit_lsq(mesh: &TMesh, pb: &PbSpline, samples: &Samples) -> Result<Vec<f64>, TsplineError> {
-    fit_lsq_local(mesh, pb, samples, None, None, None, None)
+    fit_lsq_local(LsqProblem::global(mesh, samples), pb)
 }
 
 /// [`fit_lsq`] with the rows of the model matrix computed by the OpenCL kernel (spec T29,
 /// [`crate::ocl_fit`]) block by block when `asm` is given; the host accumulates the normal
 /// equations from them (the matrix is never stored whole).
 pub fn fit_lsq_with(mesh: &TMesh, pb: &PbSpline, samples: &Samples, asm: Option<&crate::ocl_fit::OclModel>) -> Result<Vec<f64>, TsplineError> {
-    fit_lsq_local(mesh, pb, samples, None, None, None, asm)
+    fit_lsq_local(LsqProblem { asm, ..LsqProblem::global(mesh, samples) }, pb)
+}
+
+/// One least-squares problem on a mesh: its data (a raster, or scattered points in its
+/// parameters), the points solved for (`free`; None: all, the others keep their heights), the
+/// raster cells whose data enter (`region`; None: all) and the OpenCL model rows (`asm`, used
+/// for the global raster assembly only).
+#[derive(Clone, Copy)]
+pub(crate) struct LsqProblem<'a> {
+    pub mesh: &'a TMesh,
+    pub samples: &'a Samples,
+    pub pts: Option<&'a Scattered>,
+    pub free: Option<&'a [bool]>,
+    pub region: Option<&'a Region>,
+    pub asm: Option<&'a crate::ocl_fit::OclModel>,
+}
+
+impl<'a> LsqProblem<'a> {
+    /// Every point free, every raster cell, on the CPU.
+    pub fn global(mesh: &'a TMesh, samples: &'a Samples) -> LsqProblem<'a> {
+        LsqProblem { mesh, samples, pts: None, free: None, region: None, asm: None }
+    }
 }
 
 /// Writes fitted heights (PB order) into the mesh and the PB-spline.
@@ -180,18 +201,8 @@ impl Region {
 /// [`fit_lsq`] with some control points held (`free[i] == false`: z_i stays at its current
 /// value, its data terms move to the right-hand side) and the data restricted to `region` (the
 /// supports of the free points; cells outside do not depend on them).
-pub(crate) fn fit_lsq_local(
-    mesh: &TMesh,
-    pb: &PbSpline,
-    samples: &Samples,
-    pts: Option<&Scattered>,
-    free: Option<&[bool]>,
-    region: Option<&Region>,
-    asm: Option<&crate::ocl_fit::OclModel>,
-) -> Result<Vec<f64>, TsplineError> {
-    let z = assemble(mesh, pb, samples, pts, free, region, asm)?.solve(free)?;
-    release_solver_workspace(samples.z.len());
-    Ok(z)
+pub(crate) fn fit_lsq_local(p: LsqProblem<'_>, pb: &PbSpline) -> Result<Vec<f64>, TsplineError> {
+    assemble(p, pb)?.solve(p.free)
 }
 
 /// [`fit_lsq_local`] that needs `pb` only until the normal equations are assembled: on a
@@ -199,21 +210,11 @@ pub(crate) fn fit_lsq_local(
 /// through the solve and compiles the rest again afterwards (the same PB-spline, bit for bit),
 /// so that it and the Cholesky factor are not alive together
 /// (docs/decisions.md#knots-only-through-the-solve).
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn fit_lsq_released(
-    mesh: &TMesh,
-    pb: PbSpline,
-    samples: &Samples,
-    pts: Option<&Scattered>,
-    free: Option<&[bool]>,
-    region: Option<&Region>,
-    asm: Option<&crate::ocl_fit::OclModel>,
-) -> Result<(Vec<f64>, PbSpline), TsplineError> {
-    let normal = assemble(mesh, &pb, samples, pts, free, region, asm)?;
+pub(crate) fn fit_lsq_released(p: LsqProblem<'_>, pb: PbSpline) -> Result<(Vec<f64>, PbSpline), TsplineError> {
+    let (mesh, samples, free) = (p.mesh, p.samples, p.free);
+    let normal = assemble(p, &pb)?;
     if samples.z.len() < TRIM_CELLS {
-        let z = normal.solve(free)?;
-        release_solver_workspace(samples.z.len());
-        return Ok((z, pb));
+        return Ok((normal.solve(free)?, pb));
     }
     let parts = pb.into_knots();
     release_free_memory(samples.z.len());
@@ -229,27 +230,24 @@ pub(crate) struct Normal {
     a: Csr,
     rhs: Vec<f64>,
     prior: Vec<f64>,
+    /// Raster cells of the fit (whether the solver's workspace is kept for the next solve).
+    cells: usize,
 }
 
 impl Normal {
     fn solve(self, free: Option<&[bool]>) -> Result<Vec<f64>, TsplineError> {
-        let Normal { a, rhs, prior } = self;
-        match free {
+        let Normal { a, rhs, prior, cells } = self;
+        let z = match free {
             Some(f) => solve_free(&a, &rhs, &prior, f),
             None => solve(&a, &rhs, &prior),
-        }
+        };
+        release_solver_workspace(cells);
+        z
     }
 }
 
-fn assemble(
-    mesh: &TMesh,
-    pb: &PbSpline,
-    samples: &Samples,
-    pts: Option<&Scattered>,
-    free: Option<&[bool]>,
-    region: Option<&Region>,
-    asm: Option<&crate::ocl_fit::OclModel>,
-) -> Result<Normal, TsplineError> {
+fn assemble(p: LsqProblem<'_>, pb: &PbSpline) -> Result<Normal, TsplineError> {
+    let LsqProblem { mesh, samples, pts, free, region, asm } = p;
     let n = pb.knots.len();
     // device rows only for the global raster assembly
     let asm = match (pts, region, asm) {
@@ -348,7 +346,7 @@ fn assemble(
     // fit's peak at 10⁸ cells: BENCHMARKS.md "Peak memory per cell without the copies")
     drop((triples, diag, support));
     release_free_memory(samples.z.len());
-    Ok(Normal { a, rhs, prior })
+    Ok(Normal { a, rhs, prior, cells: samples.z.len() })
 }
 
 /// The sparse solve; the current heights are the iterative fallback's warm start.

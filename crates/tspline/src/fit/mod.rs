@@ -315,10 +315,9 @@ pub(crate) const TRIM_CELLS: usize = 1 << 24;
 /// [`big_blocks_from_system`] fixes the threshold at 8 MiB on the same rasters, what it trims
 /// are the blocks below that.
 /// Only for rasters of [`TRIM_CELLS`] cells or more, where the per-cell arrays leave little
-/// room: each call costs page faults later (+4 % CPU on the 1.6·10⁶-cell BAG fit). It also
-/// frees the Cholesky's kept workspace where [`release_solver_workspace`] would.
+/// room: each call costs page faults later (+4 % CPU on the 1.6·10⁶-cell BAG fit).
 pub(crate) fn release_free_memory(cells: usize) {
-    release_solver_workspace(cells);
+    let _ = cells;
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
     if cells >= TRIM_CELLS {
         extern "C" {
@@ -340,7 +339,7 @@ pub(crate) const KEEP_WORKSPACE_BELOW_CELLS: usize = 1 << 23;
 
 /// Frees the Cholesky's kept factor and scratch (`sparse_spd::release_workspace`) on rasters
 /// of [`KEEP_WORKSPACE_BELOW_CELLS`] cells or more; on smaller ones they stay for the next
-/// solve (no fresh pages to fault in).
+/// solve (no fresh pages to fault in). Called after every least-squares solve (`Normal::solve`).
 pub(crate) fn release_solver_workspace(cells: usize) {
     if cells >= KEEP_WORKSPACE_BELOW_CELLS {
         sparse_spd::release_workspace();
@@ -449,9 +448,9 @@ fn fit_impl(
         };
         drop(old);
         let z = match (opts.method, &local) {
-            (Method::Lsq, Some((free, region))) => fit_lsq_local(&mesh, &pb, samples, None, Some(free), Some(region), None)?,
+            (Method::Lsq, Some((free, region))) => fit_lsq_local(LsqProblem { free: Some(free), region: Some(region), ..LsqProblem::global(&mesh, samples) }, &pb)?,
             (Method::Lsq, None) => {
-                let (z, p) = fit_lsq_released(&mesh, pb, samples, pts, None, None, asm.as_ref())?;
+                let (z, p) = fit_lsq_released(LsqProblem { pts, asm: asm.as_ref(), ..LsqProblem::global(&mesh, samples) }, pb)?;
                 pb = p;
                 z
             }
