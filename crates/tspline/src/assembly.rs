@@ -70,6 +70,15 @@ impl Upper {
         entry(a, i, j) - self.lower[i]
     }
 
+    /// Row `i` of the pattern from its diagonal on: its columns and the compact position of
+    /// the diagonal.
+    #[inline]
+    fn row_from_diagonal<'p>(&self, a: &'p SymCsr, i: usize) -> (&'p [u32], usize) {
+        let left = self.lower[i] - if i == 0 { 0 } else { self.lower[i - 1] };
+        let d = a.start[i] + left;
+        (&a.cols[d..a.start[i + 1]], d - self.lower[i])
+    }
+
     /// `upper` in the pattern's layout (entries left of the diagonal 0).
     fn expand(&self, a: &SymCsr, upper: &[f64]) -> Vec<f64> {
         let mut full = vec![0.0; a.cols.len()];
@@ -412,6 +421,8 @@ struct Elements<'a> {
     /// The element's BᵀB (upper tiles) and its Bᵀd, column sums ([`moments`]).
     gram: Vec<f64>,
     moments: Vec<f64>,
+    /// The element's free functions (positions in `funcs`) in PB order ([`Elements::scatter_products`]).
+    by_index: Vec<usize>,
 }
 
 /// One basis factor on the span that holds an element (the knots strictly inside a leaf cut
@@ -476,6 +487,7 @@ impl<'a> Elements<'a> {
             den: Vec::new(),
             gram: Vec::new(),
             moments: Vec::new(),
+            by_index: Vec::new(),
         }
     }
 
@@ -627,16 +639,39 @@ impl<'a> Elements<'a> {
                 s.rhs[px] += self.moments[x];
                 s.support[px] += self.moments[m4 + x];
             }
+            if sys.free.is_none() {
+                continue;
+            }
             for y in x..m {
                 let py = self.funcs[y] as usize;
-                let y_free = sys.is_free(py);
                 let v = self.gram[x * m4 + y];
-                match (x_free, y_free) {
-                    (true, true) => s.vals[self.rows.upper.at(sys.pattern, px.min(py), px.max(py) as u32)] += v,
+                match (x_free, sys.is_free(py)) {
                     (true, false) => s.rhs[px] -= v * sys.prior[py],
                     (false, true) => s.rhs[py] -= v * sys.prior[px],
-                    (false, false) => {}
+                    _ => {}
                 }
+            }
+        }
+        self.scatter_products(m4);
+    }
+
+    /// The free pairs' products into the upper triangle, row by row of the pattern: the
+    /// element's free functions in PB order, so that each row's columns are met in order by
+    /// one forward scan. Why: a binary search per product waited on each of its dependent
+    /// loads, ~6 % of the BAG 0.1 m fit's CPU time (`perf`). Every entry still receives one
+    /// addition per element: the same sums.
+    fn scatter_products(&mut self, m4: usize) {
+        let (sys, funcs) = (self.sys, &self.funcs);
+        self.by_index.clear();
+        self.by_index.extend((0..funcs.len()).filter(|&x| sys.is_free(funcs[x] as usize)));
+        self.by_index.sort_unstable_by_key(|&x| funcs[x]);
+        let vals = &mut self.rows.sums.vals;
+        for (a, &x) in self.by_index.iter().enumerate() {
+            let (cols, diag) = self.rows.upper.row_from_diagonal(sys.pattern, funcs[x] as usize);
+            let mut k = 0;
+            for &y in &self.by_index[a..] {
+                k += cols[k..].iter().position(|&j| j == funcs[y]).expect("pattern covers every overlapping pair");
+                vals[diag + k] += self.gram[x.min(y) * m4 + x.max(y)];
             }
         }
     }
