@@ -171,10 +171,14 @@ struct Workspace {
 }
 
 impl Workspace {
-    /// The factor's values (`len`, zeroed) and a scratch buffer that meets `req`, grown only
-    /// when they are too small (what was held is freed first: never two at once).
+    /// The factor's values (`len`; what they hold is overwritten: faer's numeric factorisation
+    /// zeroes them itself, so zeroing them here too was a second pass over the factor per
+    /// solve) and a scratch buffer that meets `req`, grown only when they are too small (what
+    /// was held is freed first: never two at once).
     fn fit(&mut self, len: usize, req: StackReq) -> (&mut [f64], &mut MemBuffer) {
-        self.factor.clear();
+        if len > self.factor.capacity() {
+            self.factor = Vec::new();
+        }
         self.factor.resize(len, 0.0);
         let fits = |b: &MemBuffer| b.len() >= req.size_bytes() && (b.as_ptr() as usize) % req.align_bytes().max(1) == 0;
         if !self.scratch.as_ref().is_some_and(fits) {
