@@ -57,7 +57,6 @@ pub mod eval;
 pub mod extraction;
 pub mod fit;
 pub mod format;
-mod coarsen;
 pub mod knots;
 pub mod mesh;
 mod ocl_device;

@@ -44,7 +44,7 @@
 //!   change — are re-evaluated; "tolerance reached" is declared only after a fresh check of
 //!   every cell. Knots are re-inferred only for points whose support meets a split cell.
 //!   The OpenCL model-matrix rows (T29) are in `ocl_fit` (kernel + CPU twin).
-//! - **Coarsening** (`crate::coarsen`, our extension of §3.9): after the tolerance is reached
+//! - **Coarsening** (`coarsen`, our extension of §3.9): after the tolerance is reached
 //!   (least squares on a raster), splits that were not needed are merged back in rounds, each
 //!   kept only when every valid cell stays within the tolerance; `coarsen: false` keeps the
 //!   loop's mesh. The local update also handles points removed since the previous state.
@@ -64,6 +64,8 @@ use crate::ocl_eval::OclEvaluator;
 use crate::tolerance::{CellTolerance, Tolerance};
 use crate::TsplineError;
 
+mod approximation;
+mod coarsen;
 mod check;
 mod drag;
 mod errors;
@@ -113,7 +115,7 @@ pub struct FitOptions {
     /// (`ocl_fit`, spec T29) instead of the CPU twin.
     pub opencl_assembly: bool,
     /// Least squares on a raster: after the tolerance is reached, merge back the splits it did
-    /// not need (`crate::coarsen`).
+    /// not need (`coarsen`).
     pub coarsen: bool,
     /// A tolerance per raster cell (from the survey's uncertainty) instead of `max_error`
     /// everywhere; `max_error` should then be the smallest of them (it scales the dragging
@@ -399,6 +401,15 @@ fn fit_impl(
     backend: &Backend,
     progress: &mut dyn FnMut(&IterationStats),
 ) -> Result<FitResult, TsplineError> {
+    check_inputs(samples, pts, opts)?;
+    big_blocks_from_system(samples.z.len());
+    approximation::Approximation::new(samples, pts, opts, backend)?.run(initial_mesh(samples, opts), progress)
+}
+
+/// The arguments and data a fit refuses before it starts: a tolerance that is not a positive
+/// number, an empty raster or one without a valid cell, values out of range, anisotropic
+/// splits on a tile of a plan.
+fn check_inputs(samples: &Samples, pts: Option<&Scattered>, opts: &FitOptions) -> Result<(), TsplineError> {
     if !(opts.max_error > 0.0 && opts.max_error.is_finite()) {
         return Err(TsplineError::Fit(format!("the maximum error must be a positive number, got {}", opts.max_error)));
     }
@@ -409,7 +420,6 @@ fn fit_impl(
         return Err(TsplineError::Fit("the raster has no valid cell".into()));
     }
     check_heights_range(&samples.z)?;
-    big_blocks_from_system(samples.z.len());
     if opts.split != SplitRule::Quad && opts.domain.is_some() {
         // docs/decisions.md#anisotropic-splits-issue-19: the seam stitch needs square cells
         return Err(TsplineError::Fit("anisotropic splits are not available for tiles of a plan (their seams need square cells)".into()));
@@ -417,115 +427,7 @@ fn fit_impl(
     if let Some(p) = pts {
         check_value_range(&p.z)?;
     }
-    let (tol, tol_final) = tolerances(samples, pts, opts)?;
-    // a final check that failed (rounding beyond the margin: not seen) turns coarsening off, so
-    // that refinement converges instead of merging the same cells back
-    let mut may_coarsen = opts.coarsen && opts.method == Method::Lsq;
-    let mut mesh = initial_mesh(samples, opts);
-    let mut iterations = Vec::new();
-    let mut refined = 0usize;
-    // |Δz| per raster cell of the current surface, kept across iterations (local updates
-    // re-check only the cells whose surface value can have changed)
-    let mut errs = vec![f64::NAN; pts.map_or(samples.z.len(), |p| p.z.len())];
-    let mut prev: Option<PbSpline> = None;
-    let asm = if opts.opencl_assembly && opts.method == Method::Lsq { Some(crate::ocl_fit::OclModel::new()?) } else { None };
-    let mut split_rects: Vec<crate::mesh::Rect> = Vec::new();
-    let (w, h) = (samples.width, samples.height);
-    for it in 0.. {
-        let t0 = Instant::now();
-        // the previous PB-spline serves the incremental build and the local update's
-        // comparison only: dropped before the solve (a PB-spline of 1.5·10⁵ points is ~70 MiB)
-        let old = prev.take();
-        release_free_memory(samples.z.len());
-        let mut pb = match (&old, backend) {
-            (Some(old), Backend::Cpu) => build_pb_incremental(&mesh, old, &split_rects),
-            _ => build_pb(&mesh, backend)?,
-        };
-        let t_build = t0.elapsed().as_secs_f64();
-        let local = match (&old, opts.method, opts.local_updates) {
-            (Some(old), Method::Lsq, true) if pts.is_none() => local_update(old, &pb, mesh.points.len(), w, h),
-            _ => None,
-        };
-        drop(old);
-        let z = match (opts.method, &local) {
-            (Method::Lsq, Some((free, region))) => fit_lsq_local(LsqProblem { free: Some(free), region: Some(region), ..LsqProblem::global(&mesh, samples) }, &pb)?,
-            (Method::Lsq, None) => {
-                let (z, p) = fit_lsq_released(LsqProblem { pts, asm: asm.as_ref(), ..LsqProblem::global(&mesh, samples) }, pb)?;
-                pb = p;
-                z
-            }
-            (Method::Drag, _) => fit_drag(&pb, samples, opts.drag_steps, 0.01 * opts.max_error, backend)?,
-        };
-        if z.iter().any(|v| !v.is_finite()) {
-            // the range check above makes this unreachable for sound solvers; a typed error
-            // rather than an invalid mesh (which would panic when written) if it happens anyway
-            return Err(TsplineError::Fit(format!("iteration {it}: the least-squares solution has non-finite control points")));
-        }
-        set_z(&mut mesh, &mut pb, &z);
-        let t_opt = t0.elapsed().as_secs_f64();
-        let region = local.as_ref().map(|(_, r)| r);
-        let (mut err, mut over_leaves) = check(&mesh, &pb, samples, pts, region, backend, &mut errs, &tol)?;
-        if err.over_tolerance == 0 && region.is_some() {
-            // the tolerance is declared only on a fresh check of every cell
-            (err, over_leaves) = check(&mesh, &pb, samples, pts, None, backend, &mut errs, &tol)?;
-        }
-        drop(local);
-        let t_check = t0.elapsed().as_secs_f64();
-        let st = IterationStats {
-            iteration: it,
-            control_points: pb.point_ids.len(),
-            cells: mesh.leaf_count(),
-            refined_cells: refined,
-            merged_cells: 0,
-            error: err.clone(),
-            seconds: t0.elapsed().as_secs_f64(),
-            seconds_build: t_build,
-            seconds_optimise: t_opt - t_build,
-            seconds_check: t_check - t_opt,
-        };
-        progress(&st);
-        iterations.push(st);
-        if err.over_tolerance == 0 {
-            if may_coarsen {
-                let c = crate::coarsen::coarsen(mesh, pb, samples, pts, opts, backend, &mut errs, it + 1, progress, &tol)?;
-                mesh = c.mesh;
-                pb = c.pb;
-                iterations.extend(c.rounds);
-            }
-            // The acceptance: the mesh as written, evaluated as `geofit eval` evaluates it, at
-            // every cell (also the fresh check of a coarsened mesh: docs/decisions.md#one-final-check).
-            // No solve follows unless it fails: the factor's memory goes back first.
-            sparse_spd::release_workspace();
-            let (fin, over, p) = check_written_released(&mesh, pb, samples, pts, &mut errs, &tol_final)?;
-            pb = p;
-            if fin.over_tolerance == 0 {
-                if let Some(last) = iterations.last_mut() {
-                    last.error = fin;
-                }
-                return Ok(FitResult { mesh, iterations, stop: StopReason::ToleranceReached });
-            }
-            // beyond the margin, or a coarsened mesh that misses (not seen: the rounds check
-            // what they change): refine where the written mesh misses, coarsening off, so that
-            // refinement converges instead of merging the same cells back (no copy of the
-            // pre-coarsening mesh is kept: docs/decisions.md#coarsening-decides-before-it-writes)
-            may_coarsen = false;
-            (err, over_leaves) = (fin, over);
-        }
-        if it >= opts.max_iterations {
-            return Ok(FitResult { mesh, iterations, stop: StopReason::MaxIterations });
-        }
-        match refine(&mesh, &pb, samples, opts, over_leaves, &err)? {
-            Refined::Stop(stop) => return Ok(FitResult { mesh, iterations, stop }),
-            Refined::Next(next, n_split) => {
-                refined = n_split;
-                // leaves of this mesh that the refinement (splits and repair) turned into parents
-                split_rects = mesh.leaves().filter(|&c| !next.cells[c as usize].is_leaf()).map(|c| mesh.cells[c as usize].rect).collect();
-                mesh = next;
-                prev = Some(pb);
-            }
-        }
-    }
-    unreachable!("the loop returns")
+    Ok(())
 }
 
 #[cfg(test)]

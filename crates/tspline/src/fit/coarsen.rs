@@ -86,123 +86,144 @@ fn distance(a: Rect, b: Rect) -> f64 {
     ds.max(dt)
 }
 
-/// Greedy coarsening of a fit that reached the tolerance (module doc). `pb` is the PB-spline
-/// of `mesh` with the fitted z, `errs` its |Δz| per raster cell (kept up to date);
-/// `first_round` numbers the statistics rows after the loop's iterations.
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn coarsen(
-    mesh: TMesh,
-    pb: PbSpline,
-    samples: &Samples,
-    pts: Option<&Scattered>,
-    opts: &FitOptions,
-    backend: &Backend,
-    errs: &mut [f64],
-    first_round: usize,
-    progress: &mut dyn FnMut(&IterationStats),
-    tol: &Tolerance,
-) -> Result<Coarsened, TsplineError> {
-    // the bilinear pre-filter is a heuristic: the smallest tolerance (the refit's check decides)
-    let proxy_tol = opts.max_error;
-    let reach = (opts.degree.k() + 1) as f64;
-    let mut best = mesh;
-    let mut best_pb = KeptPb::new(pb);
-    let mut failed: HashSet<CellId> = HashSet::new();
-    let mut rounds = Vec::new();
-    // what a try overwrote in `errs`, to put back when it fails (a raster's |Δz| per cell can
-    // be 10⁸ values: a local try saves only the cells it re-checks)
-    let mut undo = Undo::default();
-    let mut held = HeldBack::default();
-    for _ in 0..MAX_ROUNDS {
-        let t0 = Instant::now();
-        let cand: Vec<CellId> = {
-            use rayon::prelude::*;
-            let all = held.tried(&best, candidates(&best, &failed));
-            // a looser filter tries more merges but keeps fewer (Kilauea 5 m, degree 3: 31418
-            // control points at 1·E, 32706 at 2·E, 33107 unfiltered, against 33132 without the pass)
-            let surface = best_pb.get(&best);
-            let keep: Vec<bool> = all.par_iter().map(|&c| bilinear_proxy(surface, samples, best.cells[c as usize].rect) <= proxy_tol).collect();
-            let (ok, no): (Vec<_>, Vec<_>) = all.into_iter().zip(keep).partition(|(_, k)| *k);
-            failed.extend(no.into_iter().map(|(c, _)| c));
-            ok.into_iter().map(|(c, _)| c).collect()
-        };
-        if cand.is_empty() {
-            break;
+/// Greedy coarsening of a fit that reached the tolerance (module doc): its data, options and
+/// tolerance, and the state of its rounds.
+pub(crate) struct Coarsening<'a> {
+    pub samples: &'a Samples,
+    pub pts: Option<&'a Scattered>,
+    pub opts: &'a FitOptions,
+    pub backend: &'a Backend<'a>,
+    pub tol: &'a Tolerance,
+}
+
+/// The rounds' state: the last kept mesh and its PB-spline, the candidates never tried again,
+/// those held back, and what a try overwrote in the errors (a raster's |Δz| per cell can be
+/// 10⁸ values: a try saves only what it must put back).
+struct Rounds {
+    best: TMesh,
+    best_pb: KeptPb,
+    failed: HashSet<CellId>,
+    held: HeldBack,
+    undo: Undo,
+}
+
+impl Coarsening<'_> {
+    /// Coarsens `mesh` (`pb` its PB-spline with the fitted z, `errs` its |Δz| per raster cell,
+    /// kept up to date); `first_round` numbers the statistics rows after the loop's iterations.
+    pub(crate) fn run(&self, mesh: TMesh, pb: PbSpline, errs: &mut [f64], first_round: usize, progress: &mut dyn FnMut(&IterationStats)) -> Result<Coarsened, TsplineError> {
+        let mut st = Rounds { best: mesh, best_pb: KeptPb::new(pb), failed: HashSet::new(), held: HeldBack::default(), undo: Undo::default() };
+        let mut rounds = Vec::new();
+        for _ in 0..MAX_ROUNDS {
+            let t0 = Instant::now();
+            let cand = self.candidates(&mut st);
+            if cand.is_empty() {
+                break;
+            }
+            let (mut m, mut merged) = self.merge(&mut st, &cand)?;
+            let merged_any = !merged.is_empty();
+            let kept = self.refit_until_within(&mut st, &mut m, &mut merged, errs)?;
+            st.held.changed(merged.iter().map(|&c| m.cells[c as usize].rect));
+            let Some((pb_m, err)) = kept else {
+                if merged_any {
+                    continue; // some were split back and are not tried again: the next round differs
+                }
+                break; // nothing the rules allow: the next round would be the same
+            };
+            let row = IterationStats {
+                iteration: first_round + rounds.len(),
+                control_points: pb_m.point_ids.len(),
+                cells: m.leaf_count(),
+                refined_cells: 0,
+                merged_cells: merged.len(),
+                error: err,
+                seconds: t0.elapsed().as_secs_f64(),
+                seconds_build: 0.0,
+                seconds_optimise: 0.0,
+                seconds_check: 0.0,
+            };
+            progress(&row);
+            rounds.push(row);
+            st.best = m;
+            st.best_pb = KeptPb::new(pb_m);
         }
-        let mut m = best.clone();
-        for &c in &cand {
+        let pb = st.best_pb.into_whole(&st.best);
+        Ok(Coarsened { mesh: st.best, pb, rounds })
+    }
+
+    /// This round's candidates: those not held back whose bilinear proxy passes (the others
+    /// are never tried again). The proxy is a heuristic, so the smallest tolerance (the refit's
+    /// check decides); a looser one tries more merges but keeps fewer (Kilauea 5 m, degree 3:
+    /// 31418 control points at 1·E, 32706 at 2·E, 33107 unfiltered, against 33132 without it).
+    fn candidates(&self, st: &mut Rounds) -> Vec<CellId> {
+        use rayon::prelude::*;
+        let all = st.held.tried(&st.best, candidates(&st.best, &st.failed));
+        let surface = st.best_pb.get(&st.best);
+        let keep: Vec<bool> = all.par_iter().map(|&c| bilinear_proxy(surface, self.samples, st.best.cells[c as usize].rect) <= self.opts.max_error).collect();
+        let (ok, no): (Vec<_>, Vec<_>) = all.into_iter().zip(keep).partition(|(_, k)| *k);
+        st.failed.extend(no.into_iter().map(|(c, _)| c));
+        ok.into_iter().map(|(c, _)| c).collect()
+    }
+
+    /// The kept mesh with the candidates merged and repaired, and the merges the repair left
+    /// (those it split back are held back).
+    fn merge(&self, st: &mut Rounds, cand: &[CellId]) -> Result<(TMesh, Vec<CellId>), TsplineError> {
+        let mut m = st.best.clone();
+        for &c in cand {
             m.coarsen(c)?;
         }
-        m.repair_with(1.0, opts.split, &mut geom_of(best_pb.get(&best)));
+        m.repair_with(1.0, self.opts.split, &mut geom_of(st.best_pb.get(&st.best)));
         m.shrink_to_fit();
-        let mut merged: Vec<CellId> = cand.iter().copied().filter(|&c| m.cells[c as usize].is_leaf()).collect();
-        held.add(cand.iter().copied().filter(|&c| !m.cells[c as usize].is_leaf()));
-        let merged_any = !merged.is_empty();
-        let kept = loop {
-            if merged.is_empty() {
-                break None;
-            }
+        let merged = cand.iter().copied().filter(|&c| m.cells[c as usize].is_leaf()).collect();
+        st.held.add(cand.iter().copied().filter(|&c| !m.cells[c as usize].is_leaf()));
+        Ok((m, merged))
+    }
+
+    /// Refits `m` until no cell is over the tolerance, splitting back the merges near the cells
+    /// over it (never tried again): the PB-spline and statistics of the passing try, or None
+    /// when no merge is left.
+    fn refit_until_within(&self, st: &mut Rounds, m: &mut TMesh, merged: &mut Vec<CellId>, errs: &mut [f64]) -> Result<Option<(PbSpline, ErrorStats)>, TsplineError> {
+        while !merged.is_empty() {
             // every try starts from the kept heights (a failed try's solve moved them)
-            for (p, q) in m.points.iter_mut().zip(&best.points) {
+            for (p, q) in m.points.iter_mut().zip(&st.best.points) {
                 p.z = q.z;
             }
             let rects: Vec<Rect> = merged.iter().map(|&c| m.cells[c as usize].rect).collect();
-            let (pb_m, err, over) = refit(&mut m, &best, &mut best_pb, &rects, samples, pts, backend, errs, &mut undo, tol)?;
+            let (pb_m, err, over) = self.refit(st, m, &rects, errs)?;
             if err.over_tolerance == 0 {
-                break Some((pb_m, err));
+                return Ok(Some((pb_m, err)));
             }
-            undo.restore(errs);
-            // split back the merges that can reach a cell over the tolerance
-            let over_rects: Vec<Rect> = over.iter().map(|&c| m.cells[c as usize].rect).collect();
-            let mut bad: Vec<CellId> = merged
-                .iter()
-                .copied()
-                .filter(|&c| {
-                    let r = m.cells[c as usize].rect;
-                    over_rects.iter().any(|&o| distance(r, o) <= reach * r.width().max(r.height()))
-                })
-                .collect();
-            if bad.is_empty() {
-                bad = merged.clone(); // coupled further than the supports: give the round up
-            }
-            let mut geom = geom_of(best_pb.get(&best));
-            for &c in &bad {
-                if m.cells[c as usize].is_leaf() {
-                    let dir = m.cells[c as usize].split_as;
-                    m.split_dir(c, dir, &mut geom);
-                }
-                failed.insert(c);
-            }
-            m.repair_with(1.0, opts.split, &mut geom);
-            m.shrink_to_fit();
-            merged.retain(|&c| m.cells[c as usize].is_leaf());
-        };
-        held.changed(merged.iter().map(|&c| m.cells[c as usize].rect));
-        let Some((pb_m, err)) = kept else {
-            if merged_any {
-                continue; // some were split back and are not tried again: the next round differs
-            }
-            break; // nothing the rules allow: the next round would be the same
-        };
-        let st = IterationStats {
-            iteration: first_round + rounds.len(),
-            control_points: pb_m.point_ids.len(),
-            cells: m.leaf_count(),
-            refined_cells: 0,
-            merged_cells: merged.len(),
-            error: err,
-            seconds: t0.elapsed().as_secs_f64(),
-            seconds_build: 0.0,
-            seconds_optimise: 0.0,
-            seconds_check: 0.0,
-        };
-        progress(&st);
-        rounds.push(st);
-        best = m;
-        best_pb = KeptPb::new(pb_m);
+            st.undo.restore(errs);
+            self.split_back(st, m, merged, &over);
+        }
+        Ok(None)
     }
-    let pb = best_pb.into_whole(&best);
-    Ok(Coarsened { mesh: best, pb, rounds })
+
+    /// Splits back the merges that can reach a leaf of `over` (within the supports of the
+    /// merged cell's corner points), or all of them when none can (coupled further than the
+    /// supports: the round gives up), and repairs.
+    fn split_back(&self, st: &mut Rounds, m: &mut TMesh, merged: &mut Vec<CellId>, over: &[CellId]) {
+        let reach = (self.opts.degree.k() + 1) as f64;
+        let over_rects: Vec<Rect> = over.iter().map(|&c| m.cells[c as usize].rect).collect();
+        let near = |c: CellId| {
+            let r = m.cells[c as usize].rect;
+            over_rects.iter().any(|&o| distance(r, o) <= reach * r.width().max(r.height()))
+        };
+        let mut bad: Vec<CellId> = merged.iter().copied().filter(|&c| near(c)).collect();
+        if bad.is_empty() {
+            bad = merged.clone();
+        }
+        let mut geom = geom_of(st.best_pb.get(&st.best));
+        for &c in &bad {
+            if m.cells[c as usize].is_leaf() {
+                let dir = m.cells[c as usize].split_as;
+                m.split_dir(c, dir, &mut geom);
+            }
+            st.failed.insert(c);
+        }
+        m.repair_with(1.0, self.opts.split, &mut geom);
+        m.shrink_to_fit();
+        merged.retain(|&c| m.cells[c as usize].is_leaf());
+    }
 }
 
 /// Candidates whose merge the repair split back, held back from the next rounds until a kept
@@ -324,63 +345,54 @@ impl Undo {
     }
 }
 
-/// Refit after merges: knots re-inferred where a changed cell meets a support; on a raster the
-/// least squares is local when the change is small (the loop's `local_update`) and the errors
-/// are re-checked where the surface can have changed; scattered data (indirect reduction) are
-/// refitted and checked globally, as in the loop. Writes z into `m`; returns the PB-spline, the
-/// statistics and the leaves holding cells (points) over the tolerance; what the check
-/// overwrote in `errs` goes to `undo`. `old` is the PB-spline of `best`; a try on a large
-/// raster releases it to its knots ([`KeptPb`]).
-#[allow(clippy::too_many_arguments)]
-fn refit(
-    m: &mut TMesh,
-    best: &TMesh,
-    old: &mut KeptPb,
-    changed: &[Rect],
-    samples: &Samples,
-    pts: Option<&Scattered>,
-    backend: &Backend,
-    errs: &mut [f64],
-    undo: &mut Undo,
-    tol: &Tolerance,
-) -> Result<(PbSpline, ErrorStats, Vec<CellId>), TsplineError> {
-    fit::release_free_memory(samples.z.len());
-    let old_pb = old.get(best);
-    let pb = match backend {
-        Backend::Cpu => fit::build_pb_incremental(m, old_pb, changed),
-        _ => fit::build_pb(m, backend)?,
-    };
-    let local = match pts {
-        None => fit::local_update(old_pb, &pb, m.points.len(), samples.width, samples.height),
-        Some(_) => None,
-    };
-    if pts.is_none() && samples.z.len() >= fit::TRIM_CELLS {
-        // on a large raster: the solve's factor and the kept PB-spline are not alive together
-        old.release();
+impl Coarsening<'_> {
+    /// Refit after merges: knots re-inferred where a changed cell meets a support; on a raster
+    /// the least squares is local when the change is small (the loop's `local_update`) and the
+    /// errors are re-checked where the surface can have changed; scattered data (indirect
+    /// reduction) are refitted and checked globally, as in the loop. Writes z into `m`; returns
+    /// the PB-spline, the statistics and the leaves holding cells (points) over the tolerance;
+    /// what the check overwrote in `errs` goes to the rounds' undo. A try on a large raster
+    /// releases the kept PB-spline to its knots ([`KeptPb`]).
+    fn refit(&self, st: &mut Rounds, m: &mut TMesh, changed: &[Rect], errs: &mut [f64]) -> Result<(PbSpline, ErrorStats, Vec<CellId>), TsplineError> {
+        let (samples, pts, backend, tol) = (self.samples, self.pts, self.backend, self.tol);
         fit::release_free_memory(samples.z.len());
-    }
-    // a local update exists only for raster data (pts is None then)
-    let (free, region) = local.as_ref().map_or((None, None), |(f, r)| (Some(&f[..]), Some(r)));
-    let (z, mut pb) = fit::fit_lsq_released(fit::LsqProblem { mesh: &*m, samples, pts, free, region, asm: None }, pb)?;
-    fit::set_z(m, &mut pb, &z);
-    let region = local.map(|(_, r)| r);
-    if pts.is_none() {
-        // a try on a raster: the verdict first, from a block-sized buffer; `errs` is written
-        // (the same values) only when the try passes
-        undo.nothing();
-        let (count, over) = match &region {
-            Some(r) => fit::over_tolerance_region(m, &pb, samples, r, tol),
-            None => fit::over_tolerance(m, &pb, samples, backend, tol)?,
+        let old_pb = st.best_pb.get(&st.best);
+        let pb = match backend {
+            Backend::Cpu => fit::build_pb_incremental(m, old_pb, changed),
+            _ => fit::build_pb(m, backend)?,
         };
-        if count > 0 {
-            return Ok((pb, ErrorStats { over_tolerance: count, ..ErrorStats::default() }, over));
+        let local = match pts {
+            None => fit::local_update(old_pb, &pb, m.points.len(), samples.width, samples.height),
+            Some(_) => None,
+        };
+        if pts.is_none() && samples.z.len() >= fit::TRIM_CELLS {
+            // on a large raster: the solve's factor and the kept PB-spline are not alive together
+            st.best_pb.release();
+            fit::release_free_memory(samples.z.len());
         }
-        let (err, over) = fit::check(m, &pb, samples, None, region.as_ref(), backend, errs, tol)?;
-        return Ok((pb, err, over));
+        // a local update exists only for raster data (pts is None then)
+        let (free, region) = local.as_ref().map_or((None, None), |(f, r)| (Some(&f[..]), Some(r)));
+        let (z, mut pb) = fit::fit_lsq_released(fit::LsqProblem { mesh: &*m, samples, pts, free, region, asm: None }, pb)?;
+        fit::set_z(m, &mut pb, &z);
+        let region = local.map(|(_, r)| r);
+        if pts.is_none() {
+            // a try on a raster: the verdict first, from a block-sized buffer; `errs` is written
+            // (the same values) only when the try passes
+            st.undo.nothing();
+            let (count, over) = match &region {
+                Some(r) => fit::over_tolerance_region(m, &pb, samples, r, tol),
+                None => fit::over_tolerance(m, &pb, samples, backend, tol)?,
+            };
+            if count > 0 {
+                return Ok((pb, ErrorStats { over_tolerance: count, ..ErrorStats::default() }, over));
+            }
+            let (err, over) = fit::check(m, &pb, samples, None, region.as_ref(), backend, errs, tol)?;
+            return Ok((pb, err, over));
+        }
+        st.undo.save_all(errs);
+        let (err, over) = fit::check(m, &pb, samples, pts, None, backend, errs, tol)?;
+        Ok((pb, err, over))
     }
-    undo.save_all(errs);
-    let (err, over) = fit::check(m, &pb, samples, pts, None, backend, errs, tol)?;
-    Ok((pb, err, over))
 }
 
 #[cfg(test)]
