@@ -117,32 +117,31 @@ impl Sums {
         Sums { vals: vec![0.0; nnz], rhs: vec![0.0; n], support: vec![0.0; n] }
     }
 
-    /// Adds `rest` in order: each entry is ((self + rest[0]) + rest[1]) + ..., the bits of
-    /// adding one part after another, in one pass over blocks of entries in parallel (the
-    /// three passes one after another were ~10 ms of one thread per assembly on the BAG at
-    /// 0.1 m, the other idle).
-    fn add_in_order(&mut self, rest: &[Sums]) {
-        const BLOCK: usize = 1 << 14;
-        let add = |dst: &mut [f64], part: &(dyn Fn(&Sums) -> &[f64] + Sync)| {
-            dst.par_chunks_mut(BLOCK).enumerate().for_each(|(b, d)| {
-                for r in rest {
-                    d.iter_mut().zip(&part(r)[b * BLOCK..]).for_each(|(x, y)| *x += y);
-                }
-            })
-        };
-        add(&mut self.vals, &|r| &r.vals);
-        add(&mut self.rhs, &|r| &r.rhs);
-        add(&mut self.support, &|r| &r.support);
-    }
-
     /// Partial sums merged in order, `vals` expanded to the pattern's layout.
     fn merged(parts: Vec<Sums>, upper: &Upper, pattern: &SymCsr) -> Sums {
         let mut it = parts.into_iter();
         let mut first = it.next().expect("at least one part");
-        first.add_in_order(&it.collect::<Vec<_>>());
+        let rest: Vec<Sums> = it.collect();
+        add_in_order(&mut first.vals, rest.iter().map(|r| &r.vals[..]));
+        add_in_order(&mut first.rhs, rest.iter().map(|r| &r.rhs[..]));
+        add_in_order(&mut first.support, rest.iter().map(|r| &r.support[..]));
         first.vals = upper.expand(pattern, &first.vals);
         first
     }
+}
+
+/// Adds `parts` to `dst` in order: each entry is ((dst + parts[0]) + parts[1]) + ..., the bits
+/// of adding one part after another, in one pass over blocks of entries in parallel (three
+/// passes one after another were ~10 ms of one thread per assembly on the BAG at 0.1 m, the
+/// other idle).
+fn add_in_order<'p>(dst: &mut [f64], parts: impl Iterator<Item = &'p [f64]>) {
+    const BLOCK: usize = 1 << 14;
+    let parts: Vec<&[f64]> = parts.collect();
+    dst.par_chunks_mut(BLOCK).enumerate().for_each(|(b, d)| {
+        for p in &parts {
+            d.iter_mut().zip(&p[b * BLOCK..]).for_each(|(x, y)| *x += y);
+        }
+    });
 }
 
 /// What is being assembled: the pattern, the basis, which points are free (None: all) and the
