@@ -94,10 +94,9 @@ impl Upper {
         }
         blocks.into_par_iter().for_each(|(i0, i1, block)| {
             for i in i0..i1 {
-                let (k0, k1) = (a.start[i], a.start[i + 1]);
-                let d = k0 + a.cols[k0..k1].partition_point(|&j| (j as usize) < i);
-                let off = a.start[i0];
-                block[d - off..k1 - off].copy_from_slice(&upper[d - self.lower[i]..k1 - self.lower[i]]);
+                let (cols, diag) = self.row_from_diagonal(a, i);
+                let end = a.start[i + 1] - a.start[i0];
+                block[end - cols.len()..end].copy_from_slice(&upper[diag..diag + cols.len()]);
             }
         });
         full
