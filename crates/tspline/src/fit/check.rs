@@ -59,6 +59,13 @@ pub(crate) fn check(
     Ok(summarize(mesh, pb, samples.width, errs, tol))
 }
 
+/// [`check`] of a local try on a raster whose verdict kept its region's errors (`kept`,
+/// [`over_tolerance_region`]): they are written into `errs`, not evaluated again.
+pub(crate) fn check_kept(mesh: &TMesh, pb: &PbSpline, samples: &Samples, region: &Region, kept: &RegionErrors, errs: &mut [f64], tol: &Tolerance) -> (ErrorStats, Vec<CellId>) {
+    kept.write(region, samples.width, errs);
+    summarize(mesh, pb, samples.width, errs, tol)
+}
+
 /// The loop's tolerance (T − δ) and the final acceptance check's (T − δ/2), δ the margin of
 /// `crate::tolerance` (docs/decisions.md#the-guarantee-holds-for-what-eval-computes): the loop
 /// and its coarsening keep δ free, the check of the written mesh may use half of it for the

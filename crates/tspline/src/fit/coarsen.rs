@@ -379,14 +379,20 @@ impl Coarsening<'_> {
             // a try on a raster: the verdict first, from a block-sized buffer; `errs` is written
             // (the same values) only when the try passes
             st.undo.nothing();
-            let (count, over) = match &region {
+            let (count, over, kept) = match &region {
                 Some(r) => fit::over_tolerance_region(m, &pb, samples, r, tol),
-                None => fit::over_tolerance(m, &pb, samples, backend, tol)?,
+                None => {
+                    let (count, over) = fit::over_tolerance(m, &pb, samples, backend, tol)?;
+                    (count, over, fit::RegionErrors::default())
+                }
             };
             if count > 0 {
                 return Ok((pb, ErrorStats { over_tolerance: count, ..ErrorStats::default() }, over));
             }
-            let (err, over) = fit::check(m, &pb, samples, None, region.as_ref(), backend, errs, tol)?;
+            let (err, over) = match &region {
+                Some(r) if kept.kept() => fit::check_kept(m, &pb, samples, r, &kept, errs, tol),
+                _ => fit::check(m, &pb, samples, None, region.as_ref(), backend, errs, tol)?,
+            };
             return Ok((pb, err, over));
         }
         st.undo.save_all(errs);

@@ -443,6 +443,35 @@ mod tests {
         Samples { width: w, height: h, z: pb.eval_grid(&g, true).into() }
     }
 
+    /// A passing local try's kept verdict writes into `errs` exactly what the region evaluation
+    /// writes (bit for bit, cells outside the region untouched), and the verdict counts the
+    /// region's cells over the tolerance as a count over those errors does. Data: the surface
+    /// of a refined mesh plus a ripple, on a raster so wide that a verdict block is 16 rows:
+    /// five blocks, the middle one without a region cell.
+    #[test]
+    fn kept_verdict_errors_are_the_region_errors() {
+        let mesh = crate::testing::refined_mesh(Degree::Cubic);
+        let pb = PbSpline::build(&mesh);
+        let (w, h) = (4096, 80);
+        let mut s = sample(&pb, w, h);
+        let z: Vec<f64> = (0..w * h).map(|q| s.z.get(q) + if q % 7 == 0 { f64::NAN } else { 0.3 * ((q % 13) as f64 - 6.0) }).collect();
+        s.z = z.into();
+        let mut region = Region::new(w, h);
+        region.add_rect(5.5, 40.0, 3.0, 30.2);
+        region.add_rect(60.0, 95.0, 50.0, 79.0);
+        let tol = Tolerance::uniform(1.0);
+        let (count, _, kept) = over_tolerance_region(&mesh, &pb, &s, &region, &tol);
+        assert!(kept.kept());
+        let mut evaluated = vec![-7.0; w * h];
+        eval_errors_region(&pb, &s, &region, &mut evaluated);
+        let mut written = vec![-7.0; w * h];
+        kept.write(&region, w, &mut written);
+        assert!(evaluated.iter().zip(&written).all(|(a, b)| a.to_bits() == b.to_bits()));
+        let over = evaluated.iter().filter(|&&e| e > 1.0).count();
+        assert!(over > 0 && count == over, "{count} vs {over}");
+        assert_eq!(written.iter().filter(|&&e| e != -7.0).count(), region.len());
+    }
+
     /// The radix selection agrees with sorting an f32 copy, across signs, zeros, infinities,
     /// ties and values that round to the same f32.
     #[test]
