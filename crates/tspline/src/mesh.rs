@@ -581,21 +581,14 @@ impl TMesh {
             let mut touched = vec![false; self.cells.len()];
             let mut next = Vec::new();
             for (c, answer) in todo.into_iter().zip(answers) {
-                let Some((need, nbrs)) = answer else { continue };
+                let Some((dir, nbrs)) = answer else { continue };
                 if !self.cells[c as usize].is_leaf() {
                     continue;
                 }
-                let r = self.cells[c as usize].rect;
-                let (need, nbrs) = if touched[c as usize] {
-                    let (need, nbrs) = self.need_and_neighbours(c);
-                    (need, Some(nbrs))
-                } else {
-                    (need, nbrs)
-                };
-                let Some(dir) = repair_split(rule, &r, need, min_size) else {
+                let (dir, nbrs) = if touched[c as usize] { self.split_and_neighbours(c, rule, min_size) } else { (dir, nbrs) };
+                let Some(dir) = dir else {
                     continue;
                 };
-                let nbrs = nbrs.unwrap_or_else(|| self.neighbours(c).into_iter().map(|(_, n)| n).collect());
                 for &n in &nbrs {
                     if let Some(t) = touched.get_mut(n as usize) {
                         *t = true;
@@ -611,12 +604,11 @@ impl TMesh {
         splits
     }
 
-    /// A repair round's answers for `todo`, from the mesh as the round finds it, in parallel:
-    /// each leaf's need and its neighbours (None for a cell the round skips: not a leaf, or one
-    /// the rules never split). The first round (`first`: every leaf) takes the needs from one
-    /// pass over the side index and queries the neighbours only of the leaves that will split;
-    /// a later one asks each leaf with one R-tree query (these ran one after the other on the
-    /// fit's thread: ~0.15 s of the BAG at 0.1 m).
+    /// A repair round's answers for `todo`, from the mesh as the round finds it, in parallel
+    /// ([`RoundAnswer`]). The first round (`first`: every leaf) takes the needs from one pass
+    /// over the side index and queries the neighbours only of the leaves that split; a later
+    /// one asks each leaf with one R-tree query (these ran one after the other on the fit's
+    /// thread: ~0.15 s of the BAG at 0.1 m).
     fn round_answers(&self, todo: &[CellId], rule: SplitRule, min_size: f64, first: bool) -> Vec<RoundAnswer> {
         use rayon::prelude::*;
         let flags = first.then(|| self.leaves_needing_repair());
@@ -628,25 +620,23 @@ impl TMesh {
                     return None;
                 }
                 Some(match &flags {
-                    Some(f) => {
-                        let need = f[c as usize];
-                        (need, repair_split(rule, &r, need, min_size).map(|_| self.neighbours(c).into_iter().map(|(_, n)| n).collect()))
-                    }
-                    None => {
-                        let (need, nbrs) = self.need_and_neighbours(c);
-                        (need, Some(nbrs))
-                    }
+                    Some(f) => match repair_split(rule, &r, f[c as usize], min_size) {
+                        Some(dir) => (Some(dir), self.neighbours(c).into_iter().map(|(_, n)| n).collect()),
+                        None => (None, Vec::new()),
+                    },
+                    None => self.split_and_neighbours(c, rule, min_size),
                 })
             })
             .collect()
     }
 
-    /// [`TMesh::repair_need`] of a leaf and its neighbours' ids, from one R-tree query.
-    fn need_and_neighbours(&self, cell: CellId) -> (RepairNeed, Vec<CellId>) {
+    /// The split the repair makes of a leaf under `rule`, if any, and the leaf's neighbours'
+    /// ids, from one R-tree query.
+    fn split_and_neighbours(&self, cell: CellId, rule: SplitRule, min_size: f64) -> (Option<SplitDir>, Vec<CellId>) {
         let r = self.cells[cell as usize].rect;
         let nbrs = self.neighbours(cell);
         let need = repair_need(&r, nbrs.iter().map(|&(side, n)| (side, self.cells[n as usize].rect)));
-        (need, nbrs.into_iter().map(|(_, n)| n).collect())
+        (repair_split(rule, &r, need, min_size), nbrs.into_iter().map(|(_, n)| n).collect())
     }
 
     /// Merging (spec §3.9, T28): the union of two meshes' leaf cells (C0 seam). Points at equal
@@ -722,9 +712,11 @@ impl RepairNeed {
     }
 }
 
-/// A repair round's answer for one leaf ([`TMesh::round_answers`]): its need and, where
-/// queried, its neighbours; None for a cell the round skips.
-type RoundAnswer = Option<(RepairNeed, Option<Vec<CellId>>)>;
+/// A repair round's answer for one cell ([`TMesh::round_answers`]): the split the rules ask
+/// of the leaf, if any, and its neighbours (queried only where it splits: the round marks them
+/// touched and visits them next); None for a cell the round skips (not a leaf, or one the rules
+/// never split).
+type RoundAnswer = Option<(Option<SplitDir>, Vec<CellId>)>;
 
 /// Whether the repair never splits the leaf `r`: under [`SplitRule::Quad`], a cell smaller
 /// than `2·min_size` (its children would undercut the sample spacing, spec §2.2).
