@@ -331,6 +331,7 @@ mod tests {
 
     use crate::fit::{eval_errors, fit, Backend, FitOptions, Samples};
     use crate::mesh::Degree;
+    use crate::testing::lcg;
 
     thread_local! {
         /// The system size from which [`super::local_update`] uses the large system's rules.
@@ -347,8 +348,7 @@ mod tests {
         let z: Vec<f64> = (0..w * h)
             .map(|q| {
                 let (x, y) = ((q % w) as f64, (q / w) as f64);
-                seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-                let noise = ((seed >> 33) as f64 / (1u64 << 31) as f64 - 0.5) * 0.2;
+                let noise = (lcg(&mut seed) - 0.5) * 0.2;
                 3.0 * (x * 0.11 + y * 0.05).sin() + 1.5 * (y * 0.13).cos() * (x * 0.02).sin() + 0.03 * x + noise
             })
             .collect();
