@@ -5,7 +5,8 @@
 # (read in place from ../shared, never copied into the project). New corpus entries go to a
 # scratch directory; a crash stops with exit 1 and leaves its reproducer in
 # fuzz/artifacts/TARGET/ — commit it under fuzz/regressions/TARGET/ with the fix (the crates'
-# tests read that folder).
+# tests read that folder, e.g. normalize's `fuzz_regressions_do_not_panic`; the runs here seed
+# from it too).
 set -euo pipefail
 cd "$(dirname "$0")"
 SECONDS_PER_TARGET="${1:-60}"; shift || true
@@ -38,7 +39,7 @@ status=0
 for t in "${TARGETS[@]}"; do
   mkdir -p "$scratch/$t/new" "$scratch/$t/seeds" "artifacts/$t"
   seeds_for "$t" | while read -r f; do ln -sf "$(cd "$(dirname "$f")" && pwd)/$(basename "$f")" "$scratch/$t/seeds/$(echo "$f" | tr '/' '_')"; done
-  dirs=("$scratch/$t/new" "$scratch/$t/seeds"); [ -d "corpus/$t" ] && dirs+=("corpus/$t")
+  dirs=("$scratch/$t/new" "$scratch/$t/seeds"); [ -d "corpus/$t" ] && dirs+=("corpus/$t"); [ -d "regressions/$t" ] && dirs+=("regressions/$t")
   echo "fuzz: $t for ${SECONDS_PER_TARGET} s ($(ls "$scratch/$t/seeds" | wc -l) fixture seeds)"
   if ! "$CARGO_TARGET_DIR/$TRIPLE/release/$t" -max_total_time="$SECONDS_PER_TARGET" -max_len=65536 -rss_limit_mb=2048 \
        -timeout=10 -print_final_stats=1 -artifact_prefix="artifacts/$t/" "${dirs[@]}" 2> "$scratch/$t.log"; then
