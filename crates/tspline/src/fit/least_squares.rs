@@ -159,15 +159,22 @@ impl Region {
         if i0 > i1 || j0 > j1 {
             return;
         }
+        let (i0, i1) = (i0 as usize, i1 as usize);
         for j in j0 as usize..=j1 as usize {
-            for i in i0 as usize..=i1 as usize {
-                let q = j * self.w + i;
-                let (wd, b) = (q / 64, 1u64 << (q % 64));
-                if self.bits[wd] & b == 0 {
-                    self.bits[wd] |= b;
-                    self.count += 1;
-                }
-            }
+            self.add_run(j * self.w + i0, j * self.w + i1 + 1);
+        }
+    }
+    /// Adds the cells q0..q1 (one row's run) a word at a time: a local update adds the
+    /// supports of 10⁴ free points, ~10³ cells each, on the fit's one thread.
+    fn add_run(&mut self, q0: usize, q1: usize) {
+        let mut q = q0;
+        while q < q1 {
+            let (wd, lo) = (q / 64, q % 64);
+            let hi = (q1 - wd * 64).min(64);
+            let mask = if hi - lo == 64 { u64::MAX } else { ((1u64 << (hi - lo)) - 1) << lo };
+            self.count += (mask & !self.bits[wd]).count_ones() as usize;
+            self.bits[wd] |= mask;
+            q = wd * 64 + hi;
         }
     }
     #[inline]

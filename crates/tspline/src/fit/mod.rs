@@ -444,6 +444,35 @@ mod tests {
         Samples { width: w, height: h, z: pb.eval_grid(&g, true).into() }
     }
 
+    /// A region is the set of cells its rectangles cover: membership and count against a set
+    /// built cell by cell, for rectangles that start, end and span 64-bit words anywhere
+    /// (rows of 150 cells: runs cross word boundaries), overlap, and stick out of the raster.
+    #[test]
+    fn region_holds_the_cells_of_its_rectangles() {
+        let (w, h) = (150, 40);
+        let mut r = Region::new(w, h);
+        let mut truth = std::collections::HashSet::new();
+        let mut seed = 3u64;
+        for _ in 0..60 {
+            let s0 = lcg(&mut seed) * 170.0 - 10.0;
+            let t0 = lcg(&mut seed) * 50.0 - 5.0;
+            let (s1, t1) = (s0 + lcg(&mut seed) * 90.0, t0 + lcg(&mut seed) * 12.0);
+            r.add_rect(s0, s1, t0, t1);
+            for j in 0..h {
+                for i in 0..w {
+                    if (i as f64) >= s0 && (i as f64) <= s1 && (j as f64) >= t0 && (j as f64) <= t1 {
+                        truth.insert(j * w + i);
+                    }
+                }
+            }
+            assert_eq!(r.len(), truth.len());
+        }
+        assert!((0..w * h).all(|q| r.contains(q) == truth.contains(&q)));
+        let mut listed = Vec::new();
+        r.for_rows(0, h, |q| listed.push(q));
+        assert_eq!(listed.len(), truth.len());
+    }
+
     /// A passing local try's kept verdict writes into `errs` exactly what the region evaluation
     /// writes (bit for bit, cells outside the region untouched), and the verdict counts the
     /// region's cells over the tolerance as a count over those errors does. Data: the surface
