@@ -32,7 +32,8 @@ pub fn read_sketch(bytes: &[u8], name: &str) -> Result<Soup, ObjError> {
                 }
                 global.entry([c[0].to_bits(), c[1].to_bits(), c[2].to_bits()]).or_insert(seen.v as u32);
             }
-            Some("f" | "l" | "p") => {
+            // the lines tobj resolves indices of (it skips `p` lines, so they are not checked)
+            Some("f" | "l") => {
                 for reference in it {
                     check_reference(reference, &seen, &totals).map_err(|why| ObjError(format!("{name}:{}: face vertex {reference:?}: {why}", ln + 1)))?;
                 }
@@ -180,7 +181,7 @@ mod tests {
 
     #[test]
     fn relative_and_absolute_indices_still_read() {
-        for face in ["f 1 2 3 4", "f -4 -3 -2 -1", "f 1//1 2//1 3//-1 4//1"] {
+        for face in ["f 1 2 3 4", "f -4 -3 -2 -1", "f 1//1 2//1 3//-1 4//1", "p 0\nf 1 2 3 4"] {
             let soup = read_sketch(format!("{SQUARE}{face}\n").as_bytes(), "room.obj").unwrap();
             assert_eq!(soup.polygons.len(), 1, "{face}");
             assert_eq!(soup.polygons[0].rings[0].len(), 4, "{face}");
