@@ -1,0 +1,3 @@
+//! Traps (issue 41): traps_raster.
+
+mod common;
