@@ -77,6 +77,37 @@ pub fn find_column(fields: &[&str], role: Role, dialect: Dialect) -> Option<usiz
     fields.iter().position(|f| role_of(f, dialect) == Some(role))
 }
 
+/// The columns of x, y and z a terrain header names: `Ok(None)` when one of them is not named;
+/// two columns for one role are refused (`lon,lat,x,y,z`: which x?), except that a
+/// `value`/`val` column gives way to a z named as such (`X,Y,Z,val`: the val is an attribute).
+pub fn terrain_xyz(fields: &[&str]) -> Result<Option<[usize; 3]>, String> {
+    let mut out = [0; 3];
+    for (k, role) in [X, Y, Z].into_iter().enumerate() {
+        let mut found: Vec<usize> = (0..fields.len()).filter(|&i| role_of(fields[i], Dialect::Terrain) == Some(role)).collect();
+        if found.len() > 1 && role == Z {
+            let weak = |i: &usize| matches!(fields[*i].trim().trim_matches('"').to_ascii_lowercase().as_str(), "value" | "val");
+            if found.iter().any(|i| !weak(i)) {
+                found.retain(|i| !weak(i));
+            }
+        }
+        match found.as_slice() {
+            [] => return Ok(None),
+            [i] => out[k] = *i,
+            many => {
+                let names: Vec<&str> = many.iter().map(|&i| fields[i]).collect();
+                let axis = ["x", "y", "z"][k];
+                return Err(format!("the header names {} columns for {axis} ({}): keep one", many.len(), names.join(", ")));
+            }
+        }
+    }
+    Ok(Some(out))
+}
+
+/// Whether a header name says longitude or latitude (the points are then in degrees).
+pub fn is_geographic_name(field: &str) -> bool {
+    matches!(field.trim().trim_matches('"').to_ascii_lowercase().as_str(), "lon" | "long" | "longitude" | "lat" | "latitude")
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -95,5 +126,16 @@ mod tests {
         assert_eq!(find_column(&header, X, Dialect::Terrain), Some(1));
         assert_eq!(find_column(&header, Y, Dialect::LoopStructural), Some(3));
         assert_eq!(find_column(&header, Value, Dialect::LoopStructural), None);
+    }
+
+    #[test]
+    fn terrain_roles_are_unambiguous() {
+        assert_eq!(terrain_xyz(&["id", "Easting", "Northing", "Depth"]), Ok(Some([1, 2, 3])));
+        assert_eq!(terrain_xyz(&["", "X", "Y", "Z", "val"]), Ok(Some([1, 2, 3])));
+        assert_eq!(terrain_xyz(&["lat", "lon", "value"]), Ok(Some([1, 0, 2])));
+        assert_eq!(terrain_xyz(&["a", "b", "c"]), Ok(None));
+        assert_eq!(terrain_xyz(&["lon", "lat", "x", "y", "z"]).unwrap_err(), "the header names 2 columns for x (lon, x): keep one");
+        assert!(terrain_xyz(&["x", "y", "z", "depth"]).unwrap_err().contains("2 columns for z"));
+        assert!(is_geographic_name(" \"Longitude\"") && !is_geographic_name("x"));
     }
 }

@@ -7,7 +7,9 @@
 //! - [`loop_structural`]: samples of a scalar field for implicit modelling, `x y z [value]
 //!   [nx ny nz]` with empty CSV fields meaning "absent" ([`loop_structural::parse_xyz`]).
 //!
-//! Both share one field splitter ([`fields`]), one table of column names ([`columns`]), one
+//! The terrain dialect detects the field separator and the decimal mark ([`text`]: `x;y;z` over
+//! `341000,5;5724000,25;12,5` is read with decimal commas) and refuses a text it could read two
+//! ways. Both share one field splitter ([`fields`]), one table of column names ([`columns`]), one
 //! number rule ([`number`]), one LAS/LAZ reader ([`las::LasPoints`], header claims checked
 //! before decoding) and one error type ([`PointsError`], `name:line: message`). No GDAL: a
 //! LAS file's GeoTIFF EPSG code is handed out as a number for the caller to resolve.
@@ -39,6 +41,7 @@ pub mod las;
 pub mod loop_structural;
 pub mod number;
 pub mod terrain;
+pub mod text;
 
 use std::path::Path;
 

@@ -1,14 +1,21 @@
 //! The terrain dialect: soundings and lidar returns as x y z, in batches.
 //!
 //! XYZ/CSV rules (one point per line):
-//! - fields separated by whitespace, commas or semicolons (mixed is fine);
-//! - blank lines and lines starting with `#`, `%` or `>` (GMT segment headers) are skipped;
-//! - the FIRST content line may be a header: when it is not numeric it names the columns, and
-//!   the columns called x/y/z (or lon/lat, easting/northing, elevation/depth/value…, see
+//! - the field separator (`,` `;` tab, blanks) and the decimal mark (`.` or `,`) are detected
+//!   as [`crate::text`] says, or given ([`XyzBatches::with_format`]): `x;y;z` over
+//!   `341000,5;5724000,25;12,5` reads 341000.5, 5724000.25, 12.5; a text that could be read two
+//!   ways is refused, never guessed;
+//! - blank lines and lines starting with `#`, `%` or `>` (GMT segment headers) are skipped; a
+//!   UTF-8 BOM and CRLF line ends are read as nothing;
+//! - the FIRST content line may be a header: when a field is not a number it names the columns,
+//!   and the columns called x/y/z (or lon/lat, easting/northing, elevation/depth/value…, see
 //!   [`crate::columns`]) are used; without a header the first three fields are x, y, z and
-//!   extra fields are ignored;
-//! - any later line that does not give three finite numbers is an error naming the line
-//!   (NaN and ±inf included: a sounding without a depth is a data error, not a hole).
+//!   extra fields are ignored. Values are taken as they are: a `depth` column positive down
+//!   stays positive down;
+//! - every data line has as many fields as the header (or, without one, as the first row): a
+//!   row of 5 numbers under `x y z` is an error naming its line, as is any line that does not
+//!   give three finite numbers (NaN and ±inf included: a sounding without a depth is a data
+//!   error, not a hole).
 //!
 //! LAS/LAZ through [`crate::las::LasPoints`], with its errors worded for this dialect.
 
@@ -17,25 +24,42 @@ use std::io::BufRead;
 use input_limits::lines::LineError;
 use input_limits::quote;
 
-use crate::columns::{find_column, Dialect, Role};
-use crate::fields::{split_csv, split_folded};
+use crate::columns::{is_geographic_name, terrain_xyz};
 use crate::las::{LasError, LasPoints};
-use crate::number::{is_number, parse_finite, NumberError};
+use crate::text::{could_be_decimal_commas, detect_separator, looks_numeric, split_fields, Decimals, FieldError, Separator, TextFormat};
 use crate::{PointsError, BATCH_POINTS};
 
-/// The line-by-line state of a terrain XYZ/CSV reader: which columns hold x, y, z once a header
-/// named them, and how data lines are split then.
+/// How the data lines of a text are read, fixed by its first content line.
+#[derive(Debug, Clone)]
+struct Layout {
+    sep: Separator,
+    /// Whether the separator was detected (not given).
+    detected: bool,
+    /// The fields of x, y, z.
+    columns: [usize; 3],
+    /// The number of fields every data line has.
+    fields: usize,
+    /// The header's line and names, if there is one.
+    header: Option<(usize, Vec<String>)>,
+    /// The line the field count comes from.
+    counted_at: usize,
+}
+
+/// The line-by-line state of a terrain XYZ/CSV reader.
 #[derive(Debug, Default)]
 struct XyzLines {
     line_no: usize,
     buf: String,
-    seen_content: bool,
-    /// `Some(csv)` after a header that named the columns: data lines are then split as the
-    /// header was (empty CSV fields count).
-    named: Option<(bool, [usize; 3])>,
+    given: TextFormat,
+    layout: Option<Layout>,
+    decimals: Decimals,
 }
 
 impl XyzLines {
+    fn new(given: TextFormat) -> XyzLines {
+        XyzLines { given, decimals: Decimals::new(given.decimal), ..XyzLines::default() }
+    }
+
     /// The next point, `None` at the end of the text.
     fn next_point<R: BufRead>(&mut self, reader: &mut R, name: &str) -> Result<Option<[f64; 3]>, PointsError> {
         loop {
@@ -45,10 +69,7 @@ impl XyzLines {
             }
             self.line_no += 1;
             let line = std::mem::take(&mut self.buf);
-            let point = match self.named {
-                Some((csv, columns)) => self.named_line(&line, csv, columns, name),
-                None => self.plain_line(&line, name),
-            };
+            let point = self.line(&line, name);
             self.buf = line;
             if let Some(p) = point? {
                 return Ok(Some(p));
@@ -56,46 +77,77 @@ impl XyzLines {
         }
     }
 
-    /// A line before any header named the columns: the first content line may be that header.
-    fn plain_line(&mut self, raw: &str, name: &str) -> Result<Option<[f64; 3]>, PointsError> {
-        let line = raw.trim_start_matches('\u{feff}').trim();
-        if line.is_empty() || line.starts_with('#') || line.starts_with('%') || line.starts_with('>') {
+    /// One line: a comment, the header, or a point.
+    fn line(&mut self, raw: &str, name: &str) -> Result<Option<[f64; 3]>, PointsError> {
+        let mut line = raw.trim_end_matches(['\n', '\r']);
+        if self.line_no == 1 {
+            line = line.trim_start_matches('\u{feff}');
+        }
+        let content = line.trim();
+        if content.is_empty() || content.starts_with('#') || content.starts_with('%') || content.starts_with('>') {
             return Ok(None);
         }
-        let fields: Vec<&str> = split_folded(line).collect();
-        let first_content = !self.seen_content;
-        self.seen_content = true;
-        if first_content && fields.iter().any(|f| !is_number(f) && !f.is_empty()) {
-            self.header(line, name)?;
-            return Ok(None);
+        let line_no = self.line_no;
+        let err = |m: String| PointsError::line(name, line_no, m);
+        let layout = match &self.layout {
+            Some(l) => l.clone(),
+            None => {
+                let (sep, detected) = match self.given.separator {
+                    Some(s) => (s, false),
+                    None => (detect_separator(content).map_err(err)?, true),
+                };
+                let fields = split_fields(if sep == Separator::Whitespace { content } else { line }, sep)
+                    .ok_or_else(|| err(format!("a double quote is not closed in {:?}", quote(content))))?;
+                if fields.iter().any(|f| !f.is_empty() && !looks_numeric(f)) {
+                    self.layout = Some(self.header(&fields, sep, detected, content, name)?);
+                    return Ok(None);
+                }
+                if detected && sep == Separator::Comma && self.given.decimal.is_none() && could_be_decimal_commas(&fields) {
+                    return Err(err(format!(
+                        "{:?} may be {} whole numbers or {} numbers with decimal commas; give --sep , to read commas as separators, or write the file with ';' between fields",
+                        quote(content),
+                        fields.len(),
+                        fields.len() / 2
+                    )));
+                }
+                let layout = Layout { sep, detected, columns: [0, 1, 2], fields: fields.len(), header: None, counted_at: line_no };
+                self.layout = Some(layout.clone());
+                layout
+            }
+        };
+        let fields = split_fields(if layout.sep == Separator::Whitespace { content } else { line }, layout.sep)
+            .ok_or_else(|| err(format!("a double quote is not closed in {:?}", quote(content))))?;
+        if fields.len() != layout.fields {
+            return Err(err(count_message(&fields, &layout)));
         }
-        xyz_fields(&fields, [0, 1, 2], name, self.line_no).map(Some)
+        xyz_fields(&fields, layout.columns, layout.sep, &mut self.decimals, name, line_no).map(Some)
     }
 
-    /// A header: maps named columns (the CSV index column, "" or "id", is just skipped); a
-    /// header without recognisable names means the first three columns.
-    fn header(&mut self, line: &str, name: &str) -> Result<(), PointsError> {
-        let raw: Vec<&str> = line.split(|c: char| c == ',' || c == ';' || (c.is_whitespace() && !line.contains(','))).collect();
-        let column = |role| find_column(&raw, role, Dialect::Terrain);
-        if let (Some(x), Some(y), Some(z)) = (column(Role::X), column(Role::Y), column(Role::Z)) {
-            self.named = Some((line.contains(','), [x, y, z]));
-            return Ok(());
-        }
-        if raw.iter().all(|f| !is_number(f.trim())) {
-            return Ok(());
-        }
-        Err(PointsError::line(name, self.line_no, format!("expected three numbers x y z, found {:?}", quote(line))))
+    /// A header: maps named columns (other columns, an index column "" or "id" among them, are
+    /// skipped); a header without recognisable names means the first three columns.
+    fn header(&self, fields: &[&str], sep: Separator, detected: bool, line: &str, name: &str) -> Result<Layout, PointsError> {
+        let err = |m: String| PointsError::line(name, self.line_no, m);
+        let columns = match terrain_xyz(fields).map_err(err)? {
+            Some(c) => c,
+            None if fields.len() >= 3 && fields.iter().all(|f| !looks_numeric(f)) => [0, 1, 2],
+            None => return Err(err(format!("expected three numbers x y z, found {:?}", quote(line)))),
+        };
+        let names = fields.iter().map(|f| f.to_string()).collect();
+        Ok(Layout { sep, detected, columns, fields: fields.len(), header: Some((self.line_no, names)), counted_at: self.line_no })
     }
+}
 
-    /// A data line after a header that named the columns.
-    fn named_line(&self, raw: &str, csv: bool, columns: [usize; 3], name: &str) -> Result<Option<[f64; 3]>, PointsError> {
-        let line = raw.trim();
-        if line.is_empty() || line.starts_with('#') {
-            return Ok(None);
-        }
-        let fields: Vec<&str> = if csv { split_csv(line) } else { split_folded(line).collect() };
-        xyz_fields(&fields, columns, name, self.line_no).map(Some)
+/// Why a row's field count is wrong, with what the text was read as.
+fn count_message(fields: &[&str], layout: &Layout) -> String {
+    let how = format!("fields separated by {}{}", layout.sep.describe(), if layout.detected { " (detected; --sep gives another)" } else { "" });
+    let mut m = match &layout.header {
+        Some((line, names)) => format!("{} fields, but the header (line {line}) has {} ({}); {how}", fields.len(), layout.fields, names.join(", ")),
+        None => format!("{} fields, but line {} has {}; {how}", fields.len(), layout.counted_at, layout.fields),
+    };
+    if layout.sep == Separator::Comma && fields.len() > layout.fields && !fields.iter().any(|f| f.contains('.')) {
+        m.push_str("; decimal commas cannot be told from separators in a comma-separated file: use ';' between fields or quote the numbers");
     }
+    m
 }
 
 /// One line through the bounded reader (`/dev/zero` has no newline): errors name the line.
@@ -107,17 +159,18 @@ fn read_line<R: BufRead>(reader: &mut R, buf: &mut String, name: &str, line_no: 
 }
 
 /// The point in `columns` of a data line's fields.
-fn xyz_fields(fields: &[&str], columns: [usize; 3], name: &str, line: usize) -> Result<[f64; 3], PointsError> {
+fn xyz_fields(fields: &[&str], columns: [usize; 3], sep: Separator, decimals: &mut Decimals, name: &str, line: usize) -> Result<[f64; 3], PointsError> {
     let mut p = [0.0; 3];
     for (k, &c) in columns.iter().enumerate() {
         let axis = ["x", "y", "z"][k];
         let f = fields.get(c).copied().filter(|s| !s.is_empty()).ok_or_else(|| {
             PointsError::line(name, line, format!("missing {axis} (column {}): a point needs x, y and z", c + 1))
         })?;
-        p[k] = parse_finite(f).map_err(|e| {
+        p[k] = decimals.parse(f, sep, line).map_err(|e| {
             let message = match e {
-                NumberError::NotANumber => format!("{axis} = {:?} is not a number", quote(f)),
-                NumberError::NotFinite => format!("{axis} = {} is not a finite number", quote(f)),
+                FieldError::NotANumber => format!("{axis} = {:?} is not a number", quote(f)),
+                FieldError::NotFinite => format!("{axis} = {} is not a finite number", quote(f)),
+                FieldError::Decimal(why) => format!("{axis} = {:?} {why}", quote(f)),
             };
             PointsError::line(name, line, message)
         })?;
@@ -136,9 +189,52 @@ pub struct XyzBatches<R> {
 }
 
 impl<R: BufRead> XyzBatches<R> {
-    /// Reads `reader`; `name` is used in error messages.
+    /// Reads `reader`, detecting its separator and decimal mark; `name` is used in error
+    /// messages.
     pub fn new(reader: R, name: &str) -> XyzBatches<R> {
-        XyzBatches { reader, lines: XyzLines::default(), name: name.to_string(), yielded: 0, done: false }
+        XyzBatches::with_text_format(reader, name, TextFormat::default())
+    }
+
+    /// Reads `reader` with the separator and decimal mark of `format` where it gives them.
+    pub fn with_text_format(reader: R, name: &str, format: TextFormat) -> XyzBatches<R> {
+        XyzBatches { reader, lines: XyzLines::new(format), name: name.to_string(), yielded: 0, done: false }
+    }
+
+    /// Reads `reader` with the separator (`,` `;` `tab` `space`) and decimal mark (`.` `,`)
+    /// named as by `--sep` and `--decimal` (`None`: detected); an unknown name is an error
+    /// naming the choices ([`TextFormat::from_names`]).
+    pub fn with_format(reader: R, name: &str, sep: Option<&str>, decimal: Option<&str>) -> Result<XyzBatches<R>, String> {
+        Ok(XyzBatches::with_text_format(reader, name, TextFormat::from_names(sep, decimal)?))
+    }
+
+    /// What the text was read as, once its first content line is read: the separator (and
+    /// whether it was detected), the decimal mark once a number had one, and the columns
+    /// taken for x, y, z, e.g. `';' separated (detected), decimal comma, x y z = columns
+    /// Easting, Northing, depth (values as given: a depth stays positive down)`.
+    pub fn describe(&self) -> Option<String> {
+        let l = self.lines.layout.as_ref()?;
+        let mut s = format!("{} separated{}", l.sep.describe(), if l.detected { " (detected)" } else { "" });
+        if let Some(m) = self.lines.decimals.mark() {
+            s.push_str(&format!(", {}", m.describe()));
+        }
+        match &l.header {
+            Some((_, names)) => {
+                let cols: Vec<&str> = l.columns.iter().map(|&c| names[c].as_str()).collect();
+                s.push_str(&format!(", x y z = columns {}", cols.join(", ")));
+                if cols[2].eq_ignore_ascii_case("depth") {
+                    s.push_str(" (values as given: a depth stays positive down)");
+                }
+            }
+            None => s.push_str(", no header: x y z = the first three fields"),
+        }
+        Some(s)
+    }
+
+    /// Whether the header names the x and y columns as longitude and latitude (degrees).
+    pub fn geographic_columns(&self) -> bool {
+        self.lines.layout.as_ref().and_then(|l| l.header.as_ref().map(|(_, n)| (l, n))).is_some_and(|(l, n)| {
+            is_geographic_name(&n[l.columns[0]]) && is_geographic_name(&n[l.columns[1]])
+        })
     }
 
     fn fill(&mut self) -> Result<Vec<[f64; 3]>, PointsError> {
@@ -282,6 +378,76 @@ mod tests {
         assert_eq!(e, "t.xyz:1: expected three numbers x y z, found \"x 1 z\"");
         let e = parse("# nothing\n").unwrap_err().to_string();
         assert_eq!(e, "t.xyz: no points (empty file or only comments)");
+    }
+
+    #[test]
+    fn decimal_commas_where_semicolons_tabs_or_blanks_separate() {
+        let want = vec![[341000.5, 5724000.25, 12.5], [341001.0, 5724001.0, -3.75]];
+        assert_eq!(parse("x;y;z\n341000,5;5724000,25;12,5\n341001;5724001;-3,75\n").unwrap(), want);
+        assert_eq!(parse("341000,5\t5724000,25\t12,5\n341001\t5724001\t-3,75\n").unwrap(), want);
+        assert_eq!(parse("341000,5 5724000,25 12,5\n341001 5724001 -3,75\n").unwrap(), want);
+        // quoted decimal commas in a comma-separated file
+        assert_eq!(parse("x,y,z\n\"341000,5\",\"5724000,25\",\"12,5\"\n").unwrap(), want[..1]);
+        // given: comma separator, decimal point
+        let given = |s: &str, sep, dec| -> Result<Vec<[f64; 3]>, PointsError> {
+            let mut points = Vec::new();
+            for batch in XyzBatches::with_format(s.as_bytes(), "t.xyz", sep, dec).unwrap() {
+                points.extend(batch?);
+            }
+            Ok(points)
+        };
+        assert_eq!(given("1,2,3,4,5,6\n", Some(","), None).unwrap(), vec![[1.0, 2.0, 3.0]]);
+        assert_eq!(given("1;2;3\n", Some("space"), None).unwrap_err().to_string(), "t.xyz:1: expected three numbers x y z, found \"1;2;3\"");
+        assert_eq!(given("1;2;3,5\n", None, Some(".")).unwrap_err().to_string(), "t.xyz:1: z = \"3,5\" has a decimal comma, but the decimal mark given is '.'");
+    }
+
+    #[test]
+    fn texts_read_two_ways_are_refused() {
+        // the file with commas for separators: 6 fields under a 3-column header
+        let e = parse("x,y,z\n341000,5,5724000,25,12,5\n").unwrap_err().to_string();
+        assert!(e.starts_with("t.xyz:2: 6 fields, but the header (line 1) has 3 (x, y, z); fields separated by ','"), "{e}");
+        assert!(e.contains("decimal commas"), "{e}");
+        // headerless: 6 whole numbers or 3 with decimal commas?
+        let e = parse("341000,5,5724000,25,12,5\n").unwrap_err().to_string();
+        assert!(e.starts_with("t.xyz:1: \"341000,5,5724000,25,12,5\" may be 6 whole numbers or 3 numbers with decimal commas"), "{e}");
+        // both marks in one text, or in one number
+        let e = parse("x;y;z\n1,5;2;3\n1.5;2;3\n").unwrap_err().to_string();
+        assert_eq!(e, "t.xyz:3: x = \"1.5\" has a decimal point, but line 2 has a decimal comma (\"1,5\"); give --decimal");
+        let e = parse("x;y;z\n\"1.234,5\";2;3\n").unwrap_err().to_string();
+        assert!(e.starts_with("t.xyz:2: x = \"1.234,5\" has both ',' and '.'"), "{e}");
+        let e = parse("x,y,z\n\"1,234\",2,3\n").unwrap_err().to_string();
+        assert!(e.contains("decimal comma or a thousands separator"), "{e}");
+        let e = parse("1,2 3,4,5\n").unwrap_err().to_string();
+        assert!(e.starts_with("t.xyz:1: cannot tell the field separator"), "{e}");
+        // two columns for one axis
+        let e = parse("lon,lat,x,y,z\n1,2,3,4,5\n").unwrap_err().to_string();
+        assert_eq!(e, "t.xyz:1: the header names 2 columns for x (lon, x): keep one");
+    }
+
+    #[test]
+    fn every_row_has_the_header_s_field_count() {
+        let e = parse("x y z\n1 2 3\n1 2 3 4 5\n").unwrap_err().to_string();
+        assert_eq!(e, "t.xyz:3: 5 fields, but the header (line 1) has 3 (x, y, z); fields separated by blanks (detected; --sep gives another)");
+        let e = parse("1 2 3\n\n4 5 6 7\n").unwrap_err().to_string();
+        assert_eq!(e, "t.xyz:3: 4 fields, but line 1 has 3; fields separated by blanks (detected; --sep gives another)");
+        let e = parse("x;y;z\n1;2\n").unwrap_err().to_string();
+        assert!(e.starts_with("t.xyz:2: 2 fields, but the header"), "{e}");
+        // a tab-separated header with an empty column keeps its place
+        assert_eq!(parse("\tx\ty\tz\n0\t1\t2\t3\n").unwrap(), vec![[1.0, 2.0, 3.0]]);
+    }
+
+    #[test]
+    fn crlf_bom_and_what_was_read() {
+        let text = "\u{feff}Easting;Northing;Depth\r\n1,5;2;3\r\n4;5;6,25\r\n";
+        assert_eq!(parse(text).unwrap(), vec![[1.5, 2.0, 3.0], [4.0, 5.0, 6.25]]);
+        let mut b = XyzBatches::new(text.as_bytes(), "t");
+        b.next().unwrap().unwrap();
+        assert_eq!(b.describe().unwrap(), "';' separated (detected), decimal comma, x y z = columns Easting, Northing, Depth (values as given: a depth stays positive down)");
+        assert!(!b.geographic_columns());
+        let mut b = XyzBatches::new("lat\tlon\tz\n52\t7\t1\n".as_bytes(), "t");
+        assert_eq!(b.next().unwrap().unwrap(), vec![[7.0, 52.0, 1.0]]);
+        assert!(b.geographic_columns());
+        assert_eq!(b.describe().unwrap(), "tabs separated (detected), x y z = columns lon, lat, z");
     }
 
     #[test]
