@@ -270,7 +270,91 @@ pub fn open_dataset(path: &Path, options: gdal::DatasetOptions<'_>) -> Result<Da
     if !is_gdal_virtual_path(path) {
         input_limits::netcdf::check_file(path).map_err(|e| open_err(e.to_string()))?;
     }
-    Dataset::open_ex(path, options).map_err(|e| open_err(gdal_msg(&e)))
+    if !is_gdal_virtual_path(path) {
+        if let Some(what) = not_a_raster(path) {
+            return Err(open_err(what));
+        }
+    }
+    Dataset::open_ex(path, options).map_err(|e| open_err(what_it_is(path).unwrap_or_else(|| gdal_msg(&e))))
+}
+
+/// A directory or an empty file: said before GDAL tries (its answer is "GDALOpenEx failed").
+fn not_a_raster(path: &Path) -> Option<String> {
+    let meta = std::fs::metadata(path).ok()?;
+    if meta.is_dir() {
+        return Some("is a directory, not a raster file (give one raster: GeoTIFF, netCDF, ASCII grid, ...)".into());
+    }
+    (meta.is_file() && meta.len() == 0).then(|| "is an empty file (0 bytes), not a raster".into())
+}
+
+/// Kinds of file geofit reads that are not rasters, told by their first bytes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FileKind {
+    TMesh,
+    Las,
+    CityGml,
+    Popa3d,
+    CityJson,
+    OtherXml,
+    PointText,
+}
+
+impl FileKind {
+    /// What it is, with the command that takes it.
+    pub fn describe(self) -> &'static str {
+        match self {
+            FileKind::TMesh => "a T-mesh (`geofit eval` makes a raster of it)",
+            FileKind::Las => "a LAS/LAZ point cloud (`geofit rasterize --cell S` makes a raster of it)",
+            FileKind::CityGml => "a CityGML document (`geofit info`, `validate`, `heal`, `export` take it)",
+            FileKind::Popa3d => "a popa3d model (`geofit adjust` takes it)",
+            FileKind::CityJson => "a CityJSON document",
+            FileKind::OtherXml => "an XML document",
+            FileKind::PointText => "point text, x y z (`geofit rasterize --cell S` makes a raster of it)",
+        }
+    }
+}
+
+/// The kind of a file by its first 4 KiB, when it is one of the non-raster kinds geofit knows.
+pub fn sniff_kind(path: &Path) -> Option<FileKind> {
+    use std::io::Read;
+    let mut head = Vec::with_capacity(4096);
+    std::fs::File::open(path).ok()?.take(4096).read_to_end(&mut head).ok()?;
+    let text = String::from_utf8_lossy(&head);
+    let t = text.trim_start_matches('\u{feff}').trim_start();
+    let xml = t.starts_with('<');
+    Some(if head.starts_with(b"\x89TMB\r\n\x1a\n") || xml && t.contains("<tmesh") {
+        FileKind::TMesh
+    } else if head.starts_with(b"LASF") {
+        FileKind::Las
+    } else if xml && t.contains("CityModel") {
+        FileKind::CityGml
+    } else if xml && t.contains("popa3d") {
+        FileKind::Popa3d
+    } else if t.starts_with('{') && t.contains("CityJSON") {
+        FileKind::CityJson
+    } else if xml {
+        FileKind::OtherXml
+    } else if looks_like_point_text(t) {
+        FileKind::PointText
+    } else {
+        return None;
+    })
+}
+
+/// What a file GDAL cannot open as a raster is, when it is one of the other kinds geofit reads,
+/// with the command that takes it (issue 41: wrong file kinds name the fix).
+pub fn what_it_is(path: &Path) -> Option<String> {
+    sniff_kind(path).map(|k| format!("is {}, not a raster GDAL reads", k.describe()))
+}
+
+/// The first lines (after an optional header) are rows of three or more numbers.
+fn looks_like_point_text(t: &str) -> bool {
+    let rows: Vec<&str> = t.lines().filter(|l| !l.trim().is_empty()).take(4).collect();
+    let numeric = |l: &&str| {
+        let f: Vec<&str> = l.split(|c: char| c == ',' || c == ';' || c.is_whitespace()).filter(|f| !f.is_empty()).collect();
+        f.len() >= 3 && f.iter().all(|v| v.parse::<f64>().is_ok())
+    };
+    rows.len() >= 2 && rows.iter().skip(1).all(numeric)
 }
 
 pub fn is_gdal_virtual_path(path: &Path) -> bool {
@@ -354,6 +438,7 @@ pub fn read_raster_window_typed(path: &Path, band: usize, window: Option<[usize;
     let rb = ds.rasterband(band).map_err(|e| content_err(gdal_msg(&e)))?;
     let band_type = rb.band_type();
     let nodata = rb.no_data_value();
+    let z_unit = Some(rb.unit().trim().to_string()).filter(|u| !u.is_empty());
     let buf = rb
         .read_as::<f64>((xoff as isize, yoff as isize), (width, height), (width, height), None)
         .map_err(|e| content_err(format!("cannot read band {band}: {}", gdal_msg(&e))))?;
@@ -397,7 +482,7 @@ pub fn read_raster_window_typed(path: &Path, band: usize, window: Option<[usize;
             metadata.insert(item.key, item.value);
         }
     }
-    Ok((Raster { width, height, geotransform, crs, data, nodata, metadata }, SampleType::holding(band_type)))
+    Ok((Raster { width, height, geotransform, crs, data, nodata, metadata, z_unit }, SampleType::holding(band_type)))
 }
 
 /// The uncertainty layer that goes with the elevation in band 1 (issue 19): the band whose
@@ -416,6 +501,31 @@ pub fn read_uncertainty(path: &Path) -> Result<(Raster, usize), RasterError> {
     };
     drop(ds);
     Ok((read_raster_band(path, band)?, band))
+}
+
+/// One band of a raster file as GDAL describes it (for choosing the band to read).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct BandInfo {
+    /// GDAL's band description ("elevation", "uncertainty", often empty).
+    pub description: String,
+    /// GDAL's colour interpretation ("Red", "Alpha", "Gray", "Undefined", ...).
+    pub color: String,
+}
+
+/// The bands of a raster file (1-based in GDAL's numbering: element 0 is band 1).
+pub fn bands(path: &Path) -> Result<Vec<BandInfo>, RasterError> {
+    let open_err = |message: String| RasterError::Open { path: path.to_path_buf(), message };
+    if !is_gdal_virtual_path(path) && !path.exists() {
+        return Err(open_err("no such file".into()));
+    }
+    let ds = open_dataset(path, Default::default())?;
+    Ok((1..=ds.raster_count())
+        .filter_map(|b| ds.rasterband(b).ok())
+        .map(|rb| BandInfo {
+            description: rb.description().unwrap_or_default().trim().to_string(),
+            color: rb.color_interpretation().name(),
+        })
+        .collect())
 }
 
 /// A finite nodata marker that no valid cell uses: the raster's own marker when possible,
@@ -458,6 +568,10 @@ fn to_mem_dataset_as<T: gdal::raster::GdalType + Copy>(r: &Raster, nodata: f64, 
     {
         let mut band = ds.rasterband(1).map_err(|e| gdal_msg(&e))?;
         band.set_no_data_value(Some(nodata)).map_err(|e| gdal_msg(&e))?;
+        if let Some(unit) = r.z_unit.as_deref().and_then(|u| std::ffi::CString::new(u).ok()) {
+            // SAFETY: a live band handle and a NUL-terminated string GDAL copies.
+            unsafe { gdal_sys::GDALSetRasterUnitType(band.c_rasterband(), unit.as_ptr()) };
+        }
         let data: Vec<T> = r.data.iter().map(|d| cast(if d.is_nan() { nodata } else { *d })).collect();
         let mut buf = gdal::raster::Buffer::new((r.width, r.height), data);
         band.write((0, 0), (r.width, r.height), &mut buf).map_err(|e| gdal_msg(&e))?;

@@ -40,6 +40,10 @@ pub struct Raster {
     /// Dataset metadata of the default domain (key → value), e.g. the warp field stored by
     /// `geofit warp`. Written back to formats that keep metadata (GeoTIFF, netCDF).
     pub metadata: BTreeMap<String, String>,
+    /// The band's unit type as the file declares it (GDAL's `GetUnitType`: "m", "km",
+    /// "US survey foot", ...); `None` when it declares none. Read by `units::resolve_z_unit`,
+    /// written back to formats that keep it.
+    pub z_unit: Option<String>,
 }
 
 /// What [`Raster::sample`] does when a bilinear corner with non-zero weight has no value
@@ -67,6 +71,7 @@ impl Raster {
             data: vec![f64::NAN; n],
             nodata: None,
             metadata: BTreeMap::new(),
+            z_unit: None,
         }
     }
 
@@ -90,7 +95,7 @@ impl Raster {
             )));
         }
         check_geotransform(&geotransform)?;
-        let mut r = Raster { width, height, geotransform, crs, data, nodata: None, metadata: BTreeMap::new() };
+        let mut r = Raster { width, height, geotransform, crs, data, nodata: None, metadata: BTreeMap::new(), z_unit: None };
         for v in r.data.iter_mut() {
             if !v.is_finite() {
                 *v = f64::NAN;
