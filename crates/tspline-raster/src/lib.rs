@@ -31,7 +31,7 @@ pub mod screening;
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
     /// The parameter layout needs rows and columns along the axes.
-    #[error("rotated rasters are not supported (geotransform {0:?})")]
+    #[error("a rotated or sheared raster (geotransform {0:?}) is not supported: make it north-up first (gdalwarp in.tif out.tif)")]
     Rotated([f64; 6]),
     /// An output grid over the limit ([`layout::MAX_GRID_CELLS`]), named by its size.
     #[error("the output grid {width}×{height} is too large")]

@@ -91,6 +91,10 @@ pub struct CellPosition {
 #[derive(Debug)]
 pub struct Screening {
     pub found: Vec<Blunder>,
+    /// For each of `found`, the local linear prediction nearest its value: the one the test
+    /// compares with the threshold (a blunder is off even the nearest), so the deviation shown
+    /// is the one that made it a blunder (`Blunder::predicted` is the median of them).
+    pub nearest: Vec<f64>,
     pub rejected: bool,
     width: usize,
     geotransform: [f64; 6],
@@ -125,12 +129,13 @@ pub struct BeyondPrecision {
 pub fn screen_blunders(r: &mut Raster, k: f64, reject: bool, tol: &RasterTolerance) -> Result<Screening, ScreenError> {
     tspline::fit::check_value_range(&r.data)?;
     let found = blunders::detect(&r.data, r.width, r.height, &|q| k * tol.at(q));
+    let nearest = found.iter().map(|b| nearest_prediction(r, b.index).unwrap_or(b.predicted)).collect();
     if reject {
         for b in &found {
             r.data[b.index] = f64::NAN;
         }
     }
-    let screening = Screening { found, rejected: reject, width: r.width, geotransform: r.geotransform };
+    let screening = Screening { found, nearest, rejected: reject, width: r.width, geotransform: r.geotransform };
     let beyond = blunders::beyond_precision(&r.data, &|q| tol.at(q));
     match beyond.first() {
         None => Ok(screening),
@@ -142,6 +147,43 @@ pub fn screen_blunders(r: &mut Raster, k: f64, reject: bool, tol: &RasterToleran
             screening,
         }))),
     }
+}
+
+/// The local linear prediction of cell `q` nearest its value, as `tspline::blunders` forms them:
+/// the mean of each pair of opposite neighbours (left/right, down/up, both diagonals), or where
+/// one side is missing the linear extrapolation 2·z₁ − z₂ from the other.
+pub fn nearest_prediction(r: &Raster, q: usize) -> Option<f64> {
+    let (w, h) = (r.width as isize, r.height as isize);
+    let (i, j) = ((q % r.width) as isize, (q / r.width) as isize);
+    let at = |di: isize, dj: isize| {
+        let (a, b) = (i + di, j + dj);
+        if a < 0 || b < 0 || a >= w || b >= h {
+            f64::NAN
+        } else {
+            r.data[(b * w + a) as usize]
+        }
+    };
+    let v = r.data[q];
+    let mut best: Option<f64> = None;
+    let mut offer = |p: f64| {
+        if best.is_none_or(|b| (v - p).abs() < (v - b).abs()) {
+            best = Some(p);
+        }
+    };
+    for (di, dj) in [(1, 0), (0, 1), (1, 1), (1, -1)] {
+        let (a, b) = (at(di, dj), at(-di, -dj));
+        if !a.is_nan() && !b.is_nan() {
+            offer(0.5 * (a + b));
+            continue;
+        }
+        for s in [1, -1] {
+            let (z1, z2) = (at(s * di, s * dj), at(2 * s * di, 2 * s * dj));
+            if !z1.is_nan() && !z2.is_nan() {
+                offer(2.0 * z1 - z2);
+            }
+        }
+    }
+    best
 }
 
 /// Why a raster cannot be fitted as it is.
@@ -176,6 +218,22 @@ mod tests {
         let mut r = Raster::new_empty(3, 1, [0.0, 1.0, 0.0, 1.0, 0.0, -1.0], None);
         r.data = vec![1.0; 3];
         assert_eq!(no_floor.uncovered(&r), vec![1]);
+    }
+
+    /// Issue 41: the deviation printed is the one the test used (from the nearest prediction),
+    /// so it is over the threshold for every cell found, where the median's need not be.
+    #[test]
+    fn the_reported_deviation_is_over_the_threshold() {
+        let mut r = Raster::new_empty(7, 7, [0.0, 1.0, 0.0, 7.0, 0.0, -1.0], None);
+        for q in 0..49 {
+            // a ridge along row 3: the row's own neighbours predict it, the columns do not
+            r.data[q] = if q / 7 == 3 { 4.0 } else { 0.0 };
+        }
+        r.data[3 * 7 + 3] = 30.0;
+        let s = screen_blunders(&mut r, 2.0, false, &RasterTolerance::uniform(1.0)).unwrap();
+        let i = s.found.iter().position(|b| b.index == 24).expect("the spike is found");
+        assert_eq!(s.nearest[i], 4.0);
+        assert!((s.found[i].value - s.nearest[i]).abs() > 2.0);
     }
 
     #[test]
