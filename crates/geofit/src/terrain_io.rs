@@ -116,32 +116,85 @@ pub fn read_raster_arg(arg: &str) -> Result<(Raster, String), CliError> {
 
 /// [`read_raster_arg`] with the float type that holds the raster's values (kept on output).
 pub fn read_raster_arg_typed(arg: &str) -> Result<(Raster, String, SampleType), CliError> {
+    read_raster_arg_band(arg, Band::Only)
+}
+
+/// Which band of a raster input a command reads (docs/decisions.md#raster-units-bands-and-no-data).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Band {
+    /// The only band; a file with several is refused (exit 2) naming the count and `-b N`.
+    Only,
+    /// `-b N` (1-based, as GDAL counts).
+    Given(usize),
+    /// Band 1 whatever the count (`--like`: the grid and its no-data cells).
+    First,
+    /// Band 1 when band 2 is the uncertainty layer the command reads (or names itself so).
+    ElevationOfSurvey,
+}
+
+/// The band `choice` picks in the file at `path`: a multi-band file without `-b` is refused
+/// (a 4-band Terrain-RGB PNG is not its red band), unless band 1 is a survey's elevation (a
+/// BAG: bands "elevation" and "uncertainty").
+pub fn choose_band(path: &std::path::Path, name: &str, choice: Band) -> Result<usize, CliError> {
+    let bands = raster_io::bands(path).map_err(raster_err)?;
+    let n = bands.len();
+    let survey = bands.first().is_some_and(|b| b.description.eq_ignore_ascii_case("elevation"))
+        || bands.iter().any(|b| b.description.eq_ignore_ascii_case("uncertainty"));
+    match choice {
+        Band::Given(b) if b == 0 || b > n => Err(CliError::usage(format!("-b {b}: {name} has {n} band(s) (1 to {n})"))),
+        Band::Given(b) => Ok(b),
+        Band::First => Ok(1),
+        _ if n <= 1 || survey || (choice == Band::ElevationOfSurvey && n == 2) => Ok(1),
+        _ => {
+            let what: Vec<String> = bands.iter().map(|b| if b.description.is_empty() { b.color.clone() } else { b.description.clone() }).collect();
+            Err(CliError::usage(format!("{name} has {n} bands ({}): choose the heights with -b N (GDAL's band number)", what.join(", "))))
+        }
+    }
+}
+
+/// [`read_raster_arg_typed`] of the band `choice` picks.
+pub fn read_raster_arg_band(arg: &str, choice: Band) -> Result<(Raster, String, SampleType), CliError> {
     let input = Input::from_arg(arg);
     let name = input.display_name();
     match input.path() {
         Some(p) => {
-            let (r, t) = raster_io::read_raster_band_typed(p, 1).map_err(raster_err)?;
+            let band = choose_band(p, &name, choice)?;
+            let (r, t) = raster_io::read_raster_band_typed(p, band).map_err(raster_err)?;
             Ok((r, name, t))
         }
         None => {
-            let (r, t) = raster_from_stdin_bytes_typed(&input.read_all()?)?;
+            let (r, t) = raster_from_stdin_bytes_typed(&input.read_all()?, choice)?;
             Ok((r, name, t))
         }
     }
 }
 
+/// The unit of `r`'s heights (`--z-unit` first, then what the file declares); `None` when
+/// nothing declares one. An unknown unit is refused in one line naming it and `--z-unit`.
+pub fn z_unit_of(r: &Raster, name: &str, given: Option<&str>) -> Result<Option<raster_io::units::ZUnit>, CliError> {
+    raster_io::units::resolve_z_unit(r.z_unit.as_deref(), r.crs.as_deref(), given).map_err(|m| match given {
+        Some(_) => CliError::usage(m),
+        None => CliError::unreadable(format!("{name}: {m}")),
+    })
+}
+
 /// A raster from bytes read on stdin: GDAL opens paths, so they are spooled to a temporary file
 /// (errors name `<stdin>`, not the spool file).
 pub fn raster_from_stdin_bytes(bytes: &[u8]) -> Result<Raster, CliError> {
-    raster_from_stdin_bytes_typed(bytes).map(|(r, _)| r)
+    raster_from_stdin_bytes_typed(bytes, Band::First).map(|(r, _)| r)
 }
 
 /// [`raster_from_stdin_bytes`] with the raster's float type.
-fn raster_from_stdin_bytes_typed(bytes: &[u8]) -> Result<(Raster, SampleType), CliError> {
+fn raster_from_stdin_bytes_typed(bytes: &[u8], choice: Band) -> Result<(Raster, SampleType), CliError> {
     let dir = tempfile::tempdir().map_err(|e| CliError::internal(format!("temporary directory: {e}")))?;
     let p = dir.path().join("stdin.raster");
     std::fs::write(&p, bytes).map_err(|e| CliError::internal(format!("temporary file: {e}")))?;
-    raster_io::read_raster_band_typed(&p, 1).map_err(|e| CliError::unreadable(e.to_string().replace(&p.display().to_string(), "<stdin>")))
+    let spool = p.display().to_string();
+    let band = choose_band(&p, "<stdin>", choice).map_err(|mut e| {
+        e.message = e.message.replace(&spool, "<stdin>");
+        e
+    })?;
+    raster_io::read_raster_band_typed(&p, band).map_err(|e| CliError::unreadable(e.to_string().replace(&spool, "<stdin>")))
 }
 
 /// Writes a raster to `-o` as `opts` says (stdout: the format's bytes, COG by default).
@@ -210,10 +263,34 @@ pub fn select_device(device: Device, config: &Config) -> Result<Option<OclEvalua
 pub fn read_tmesh_arg(arg: &str) -> Result<TMeshFile, CliError> {
     let input = Input::from_arg(arg);
     let bytes = input.read_all()?;
-    tspline::format::read(&bytes).map_err(|e| CliError::unreadable(format!("{}: {e}", input.display_name())))
+    let name = input.display_name();
+    if !tspline::format::is_tmesh_document(&bytes) {
+        if let Some(what) = input.path().and_then(not_a_tmesh) {
+            return Err(CliError::unreadable(format!("{name}: {what}")));
+        }
+    }
+    tspline::format::read(&bytes).map_err(|e| CliError::unreadable(format!("{name}: {e}")))
+}
+
+/// What a file given as a T-mesh is instead, when it is a kind geofit reads elsewhere (a raster:
+/// `fit` makes a T-mesh of it; points: `rasterize`; CityGML), with the command that takes it.
+fn not_a_tmesh(path: &std::path::Path) -> Option<String> {
+    if std::fs::metadata(path).is_ok_and(|m| m.len() == 0) {
+        return None;
+    }
+    use raster_io::gdal_io::FileKind;
+    match raster_io::gdal_io::sniff_kind(path) {
+        Some(FileKind::TMesh | FileKind::OtherXml) => return None,
+        Some(k) => return Some(format!("is {}, not a T-mesh", k.describe())),
+        None => {}
+    }
+    raster_io::bands(path).ok().filter(|b| !b.is_empty()).map(|_| {
+        "is a raster, not a T-mesh: `geofit fit RASTER --max-error E -o MESH.tmesh` makes the T-mesh this command takes".to_string()
+    })
 }
 
 /// `r` in the fit's parameter layout (`tspline_raster::layout`), errors naming the input.
 pub fn raster_layout(r: Raster, name: &str) -> Result<tspline_raster::layout::Layout, CliError> {
-    tspline_raster::layout::samples_from_raster(r).map_err(|e| CliError::findings(format!("{name}: {e}")))
+    // a rotated grid is input the fit cannot take (exit 3), not a finding of the fit
+    tspline_raster::layout::samples_from_raster(r).map_err(|e| CliError::unreadable(format!("{name}: {e}")))
 }

@@ -13,7 +13,7 @@ use raster_picture::{aux_xml, bar_chart, sidecar_paths, world_file, Canvas};
 use raster_proc::diff::{class_map_rgba, compare_with_map, DiffOptions, DiffReport, DEFAULT_CLASS_BOUNDS};
 use raster_proc::diff_figures::{error_map, histogram_chart};
 
-use crate::terrain_io::{gdal_notices, proc_err, read_raster_arg};
+use crate::terrain_io::{gdal_notices, proc_err, read_raster_arg, z_unit_of};
 use crate::config::{Config, Output};
 use crate::report::{print_report_with_units, with_z_unit, write_json_report_with_units, ReportKind, Z_UNIT};
 use crate::error::{CliError, CmdResult, Exit};
@@ -65,9 +65,11 @@ pub struct Args {
     /// Write the class histogram as a PNG bar chart with axes.
     #[arg(long)]
     pub hist: Option<String>,
-    /// Unit of the heights, for legends and the report's units.
-    #[arg(long, default_value = "m")]
-    pub z_unit: String,
+    /// Unit of the heights (m, km, cm, ft, us-ft, ...), for legends and the report's units;
+    /// default: the unit the rasters declare (B is converted into A's when they differ), else m.
+    /// --tolerance and --classes are in this unit.
+    #[arg(long, value_name = "UNIT")]
+    pub z_unit: Option<String>,
     /// Print the report as JSON on stdout instead of text.
     #[arg(long)]
     pub json: bool,
@@ -121,6 +123,26 @@ fn load_a(arg: &str) -> Result<(Raster, String), CliError> {
     read_raster_arg(arg)
 }
 
+/// The unit both rasters' heights are compared in: --z-unit, else what they declare (one that
+/// declares none is taken to share the other's: an `eval` output of a mesh fitted on it), else m.
+/// B's heights are converted into A's unit when the two declare different units.
+fn common_unit(a: &Raster, name_a: &str, b: &mut Raster, name_b: &str, given: Option<&str>, config: &Config) -> Result<String, CliError> {
+    let ua = z_unit_of(a, name_a, given)?;
+    let ub = z_unit_of(b, name_b, given)?;
+    if let (Some(ua), Some(ub)) = (ua, ub) {
+        if ua.unit != ub.unit {
+            let f = ub.unit.metres / ua.unit.metres;
+            b.data.iter_mut().for_each(|v| *v *= f);
+            config.notice(&format!("{name_b}: heights in {}, converted to {name_a}'s {}", ub.unit.name, ua.unit.name));
+        }
+    }
+    Ok(match (given, ua.or(ub)) {
+        (Some(g), _) => g.to_string(),
+        (None, Some(u)) => u.unit.name.to_string(),
+        (None, None) => "m".to_string(),
+    })
+}
+
 fn print_text(w: &mut dyn Write, r: &DiffReport) -> std::io::Result<()> {
     writeln!(w, "cells compared  {} (only in A {}, only in B {}){}", r.cells_compared, r.only_in_a, r.only_in_b, if r.resampled { ", B resampled onto A's grid" } else { "" })?;
     writeln!(
@@ -158,9 +180,10 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         return Err(CliError::usage("only one of A and B can be stdin"));
     }
     let (a, name_a) = load_a(&args.a)?;
-    let (b, name_b) = read_raster_arg(&args.b)?;
+    let (mut b, name_b) = read_raster_arg(&args.b)?;
+    let z_unit = common_unit(&a, &name_a, &mut b, &name_b, args.z_unit.as_deref(), config)?;
     let (report, classes) = compare_with_map(&a, &b, &opts).map_err(|e| proc_err(&format!("{name_a} vs {name_b}"), e))?;
-    let units = with_z_unit(REPORT.units, &args.z_unit);
+    let units = with_z_unit(REPORT.units, &z_unit);
     let exit = if args.check && report.over_tolerance > 0 { Exit::Findings } else { Exit::Ok };
     // --check failing is a failed step: its pictures are not written (make) unless
     // --keep-partial; the statistics still are.
@@ -171,12 +194,12 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
             write_map(p, &a, &map, (0, 0))?;
         } else {
             let title = format!("{} vs {}", base_name(&args.a), base_name(&args.b));
-            let framed = error_map(&report, &classes, &opts, &args.z_unit, &title);
+            let framed = error_map(&report, &classes, &opts, &z_unit, &title);
             write_map(p, &a, &framed.canvas, (framed.map_x, framed.map_y))?;
         }
     }
     if let Some(p) = args.hist.as_deref().filter(|p| keep(p)) {
-        Output::from_arg(Some(p)).write_bytes(&png_bytes(&bar_chart(&histogram_chart(&report, &args.z_unit)))?)?;
+        Output::from_arg(Some(p)).write_bytes(&png_bytes(&bar_chart(&histogram_chart(&report, &z_unit)))?)?;
     }
     if let Some(p) = &args.report {
         write_json_report_with_units(p, &REPORT, &units, &report)?;

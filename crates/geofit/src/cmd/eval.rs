@@ -6,10 +6,11 @@ use clap::Args as ClapArgs;
 use raster_io::{Raster, WriteOptions};
 use tspline::format::TMeshFile;
 use tspline::PbSpline;
-use tspline_raster::layout::{EvalGrid, Params};
+use tspline::format::DataMask;
+use tspline_raster::layout::{EvalGrid, Footprint, Params};
 
 use crate::terrain_io::{read_tmesh_arg, select_device, tspline_err, Device};
-use crate::terrain_io::{read_raster_arg, read_raster_arg_typed, write_raster_arg, RasterOutArgs};
+use crate::terrain_io::{gdal_notices, read_raster_arg_band, write_raster_arg, Band, RasterOutArgs};
 use crate::config::Config;
 use crate::error::{CliError, CmdResult, Exit};
 
@@ -18,13 +19,16 @@ Example:
   $ geofit fit bathy.tif -o bathy.tmesh --max-error 0.5
   $ geofit eval bathy.tmesh -o surface.tif            # the fitted raster's grid, masked by its data
   $ geofit eval bathy.tmesh -o full.tif --no-mask     # also the holes and survey gaps
-  $ geofit eval bathy.tmesh -o on-b.tif --like other.tif --mask other.tif
+  $ geofit eval bathy.tmesh -o on-b.tif --like other.tif          # other.tif's grid and no-data cells
+  $ geofit eval bathy.tmesh -o filled.tif --like other.tif --fill   # also other.tif's no-data cells
   $ geofit diff bathy.tif surface.tif --tolerance 0.5
 
 Without --like the grid is the one the mesh was fitted on (stored in the .tmesh with its data
 mask), cells without data stay nodata unless --no-mask; without a stored mask the grid covers the
-mesh domain at the parameter spacing. --like takes size, geotransform and CRS from a raster;
---mask keeps only cells valid in a raster of the output's size. Outside the mesh domain: nodata.";
+mesh domain at the parameter spacing. --like takes size, geotransform, CRS and the no-data cells
+from a raster (band 1): its no-data cells stay no data, with its nodata marker, unless --fill
+(or --no-mask). --mask keeps only cells valid in a raster of the output's size. Outside the mesh
+domain: nodata. Heights are in the unit of the raster the mesh was fitted on.";
 
 #[derive(ClapArgs, Debug)]
 #[command(about = "Evaluate a T-mesh surface on a raster grid (GeoTIFF, netCDF, ASCII grid)", after_help = EXAMPLE)]
@@ -40,9 +44,12 @@ pub struct Args {
     /// Keep only cells that have a value in this raster (same size as the output).
     #[arg(long)]
     pub mask: Option<String>,
-    /// Do not apply the data mask stored in the T-mesh.
+    /// Do not apply the data mask stored in the T-mesh (with --like: as --fill).
     #[arg(long)]
     pub no_mask: bool,
+    /// With --like: evaluate its no-data cells too (by default they stay no data).
+    #[arg(long, requires = "like")]
+    pub fill: bool,
     /// Where the evaluation runs.
     #[arg(long, value_enum, default_value_t = Device::Auto)]
     pub device: Device,
@@ -74,10 +81,17 @@ fn output_grid(args: &Args, file: &TMeshFile, write_opts: &mut WriteOptions) -> 
     };
     let crs = if g.crs.is_empty() { None } else { Some(g.crs.clone()) };
     if let Some(like) = &args.like {
-        let (r, name, like_type) = read_raster_arg_typed(like)?;
+        let (r, name, like_type) = read_raster_arg_band(like, Band::First)?;
         // The output's band type follows --like (a Float32 grid gets a Float32 surface).
         *write_opts = args.raster_out.checked(args.output.as_deref(), Some(like_type))?;
-        return EvalGrid::like(&r, crs, to_param).map_err(|e| CliError::findings(format!("{name}: {e}")));
+        let mut grid = EvalGrid::like(&r, crs, to_param).map_err(|e| CliError::unreadable(format!("{name}: {e}")))?;
+        // No-data cells of --like stay no data, with its marker (no phantom shoals), unless --fill.
+        grid.raster.nodata = r.nodata;
+        if !(args.fill || args.no_mask) {
+            let mask = DataMask { width: r.width, height: r.height, bits: r.valid_mask() };
+            grid.mask = Some(Footprint { mask, rows_from_bottom: false });
+        }
+        return Ok(grid);
     }
     if let Some(src) = field.as_ref().and_then(|f| f.source.as_ref()) {
         return EvalGrid::of_warp_source(src, crs, to_param).map_err(|e| CliError::unreadable(format!("{}: <warp> source grid: {e}", args.mesh)));
@@ -95,7 +109,7 @@ fn output_grid(args: &Args, file: &TMeshFile, write_opts: &mut WriteOptions) -> 
 /// --mask: a raster of the output's size whose cells without a value stay empty.
 fn extra_mask(args: &Args, out: &Raster) -> Result<Option<Raster>, CliError> {
     let Some(m) = &args.mask else { return Ok(None) };
-    let (r, name) = read_raster_arg(m)?;
+    let (r, name, _) = read_raster_arg_band(m, Band::First)?;
     if r.width != out.width || r.height != out.height {
         return Err(CliError::usage(format!("--mask {name} is {}×{}, the output grid is {}×{}", r.width, r.height, out.width, out.height)));
     }
@@ -146,6 +160,7 @@ fn evaluate(args: &Args, config: &Config, file: &TMeshFile, params: &Params) -> 
 }
 
 pub fn run(args: Args, config: &Config) -> CmdResult {
+    gdal_notices(config);
     let mut write_opts = args.raster_out.checked(args.output.as_deref(), None)?;
     let file = read_tmesh_arg(&args.mesh)?;
     let grid = output_grid(&args, &file, &mut write_opts)?;

@@ -44,13 +44,14 @@ pub struct Args {
     /// Output GeoTIFF (.tif; it keeps the field in its metadata; `-` or missing = stdout).
     #[arg(short, long)]
     pub output: Option<String>,
-    /// Landmark spacing (default 20 cells).
+    /// Landmark spacing, in the CRS's units (metres for UTM; default 20 cells). Refused on a
+    /// raster in degrees (geographic CRS): the default applies there.
     #[arg(long)]
     pub spacing: Option<f64>,
-    /// Strip width of the x-warp (default 2.5 × spacing).
+    /// Strip width of the x-warp, in the CRS's units (default 2.5 × spacing).
     #[arg(long)]
     pub block: Option<f64>,
-    /// Full window width of the y-warp (default 2.5 × spacing).
+    /// Full window width of the y-warp, in the CRS's units (default 2.5 × spacing).
     #[arg(long)]
     pub window: Option<f64>,
     /// Skip the principal-axis rotation.
@@ -120,6 +121,14 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     };
     needs_tiff(&args.raster_out.checked(args.output.as_deref(), Some(raster_io::SampleType::Float32))?)?;
     let (raster, name, sample_type) = read_raster_arg_typed(&args.input)?;
+    let given = [("--spacing", args.spacing), ("--block", args.block), ("--window", args.window)];
+    if let Some((flag, _)) = given.iter().find(|(_, v)| v.is_some()) {
+        if raster_io::units::horizontal_unit(raster.crs.as_deref()) == raster_io::units::Horizontal::Degrees {
+            return Err(CliError::usage(format!(
+                "{flag}: {name} is in degrees (geographic CRS), and {flag} is a length in the CRS's units: leave it out (the default is 20 cells) or reproject the raster (gdalwarp -t_srs)"
+            )));
+        }
+    }
     let write_opts = args.raster_out.checked(args.output.as_deref(), Some(sample_type))?;
     let params = WarpParams {
         rotate: !args.no_rotate,

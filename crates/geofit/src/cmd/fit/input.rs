@@ -13,7 +13,7 @@ use tspline_raster::screening::{self, RasterTolerance, ScreenError, Screening};
 use super::{Args, WarpMode};
 use crate::config::{Config, Output};
 use crate::error::CliError;
-use crate::terrain_io::{raster_layout, read_raster_arg, tspline_err};
+use crate::terrain_io::{choose_band, raster_layout, read_raster_arg_band, tspline_err, Band};
 
 /// Blunders are reported at this K when `--reject-outliers` does not give one.
 const REPORT_OUTLIERS_K: f64 = 10.0;
@@ -43,6 +43,7 @@ pub(super) struct Prepared {
     pub valid: usize,
     pub domain: Option<Domain>,
     pub outliers: OutlierReport,
+    pub units: super::zunit::FitUnits,
 }
 
 pub(super) fn check_tolerance_args(args: &Args) -> Result<(), CliError> {
@@ -97,12 +98,19 @@ fn read_input(args: &Args) -> Result<(Raster, String, Option<Domain>), CliError>
     if window.is_some() && (args.indirect || args.max_error_from_uncertainty.is_some() || args.input == "-") {
         return Err(CliError::usage("--srcwin / --tile fit a window of a raster file with the direct fit (not stdin, --indirect or --max-error-from-uncertainty)"));
     }
+    let choice = match args.band {
+        Some(b) => Band::Given(b),
+        None if args.max_error_from_uncertainty.is_some() => Band::ElevationOfSurvey,
+        None => Band::Only,
+    };
     let (raster, name) = match window {
         Some((win, _)) => {
-            let (r, _) = raster_io::read_raster_window_typed(std::path::Path::new(&args.input), 1, Some(win)).map_err(crate::terrain_io::raster_err)?;
+            let path = std::path::Path::new(&args.input);
+            let band = choose_band(path, &args.input, choice)?;
+            let (r, _) = raster_io::read_raster_window_typed(path, band, Some(win)).map_err(crate::terrain_io::raster_err)?;
             (r, format!("{} (window {} {} {} {})", args.input, win[0], win[1], win[2], win[3]))
         }
-        None => read_raster_arg(&args.input)?,
+        None => read_raster_arg_band(&args.input, choice).map(|(r, name, _)| (r, name))?,
     };
     let domain = window.map(|(_, cell)| Domain::anchored(raster.width, raster.height, cell, raster.geotransform[5] < 0.0));
     Ok((raster, name, domain))
@@ -161,9 +169,9 @@ fn report_blunders(s: &Screening, name: &str, k: f64, csv: Option<&str>) -> Resu
     if let Some(path) = csv {
         Output::from_arg(Some(path)).write_with(|w| {
             let mut text = String::from("row,col,x,y,value,predicted,deviation,rejected\n");
-            for b in &s.found {
+            for (b, n) in s.found.iter().zip(&s.nearest) {
                 let p = s.position(b.index);
-                text.push_str(&format!("{},{},{},{},{},{},{},{reject}\n", p.row, p.col, p.x, p.y, b.value, b.predicted, b.deviation()));
+                text.push_str(&format!("{},{},{},{},{},{n},{},{reject}\n", p.row, p.col, p.x, p.y, b.value, (b.value - n).abs()));
             }
             w.write_all(text.as_bytes()).map_err(CliError::io_out)
         })?;
@@ -174,10 +182,11 @@ fn report_blunders(s: &Screening, name: &str, k: f64, csv: Option<&str>) -> Resu
     let list: Vec<String> = s
         .found
         .iter()
+        .zip(&s.nearest)
         .take(LISTED_OUTLIERS)
-        .map(|b| {
+        .map(|(b, n)| {
             let p = s.position(b.index);
-            format!("row {}, col {} (x {}, y {}): {} where the neighbourhood predicts {:.6}", p.row, p.col, p.x, p.y, b.value, b.predicted)
+            format!("row {}, col {} (x {}, y {}): {} where the nearest local prediction is {n:.6}", p.row, p.col, p.x, p.y, b.value)
         })
         .collect();
     let more = if s.found.len() > LISTED_OUTLIERS { format!("; {} more", s.found.len() - LISTED_OUTLIERS) } else { String::new() };
@@ -225,11 +234,14 @@ pub(super) fn prepare(args: &Args, config: &Config) -> Result<Prepared, CliError
         Some(_) => Some(read_uncertainty(&args.input, &raster, &name)?),
         None => None,
     };
-    let tol = RasterTolerance { floor: args.max_error, k: args.max_error_from_uncertainty, uncertainty: uncertainty.as_ref().map(|u| &u.data[..]) };
+    // --max-error in the heights' unit (a band in km: 10 m is 0.01)
+    let units = super::zunit::resolve(&raster, &name, args, config)?;
+    let floor = args.max_error.map(|e| units.to_data(e));
+    let tol = RasterTolerance { floor, k: args.max_error_from_uncertainty, uncertainty: uncertainty.as_ref().map(|u| &u.data[..]) };
     check_coverage(&tol, &raster, &name)?;
     let outliers = screen(&mut raster, &name, args, &tol)?;
     let e_min = tol.min_over(&raster);
-    let e_text = tol.describe();
+    let e_text = units.describe(tol.describe(), args.max_error);
     let (raster, field, original) = warp(raster, &name, args, config)?;
     // the samples take the raster's values (rows flipped in place, f32 when they are f32)
     let layout = raster_layout(raster, &name)?;
@@ -237,7 +249,7 @@ pub(super) fn prepare(args: &Args, config: &Config) -> Result<Prepared, CliError
         (Some(u), Some(k)) => {
             let us = raster_layout(u, &name)?.samples;
             let u32s: Vec<f32> = us.z.iter().map(|v| v as f32).collect();
-            Some(CellTolerance { k, floor: args.max_error.unwrap_or(0.0), uncertainty: std::sync::Arc::new(u32s) })
+            Some(CellTolerance { k, floor: floor.unwrap_or(0.0), uncertainty: std::sync::Arc::new(u32s) })
         }
         _ => None,
     };
@@ -258,5 +270,5 @@ pub(super) fn prepare(args: &Args, config: &Config) -> Result<Prepared, CliError
             "warning: {name} holds integer values (precision 1); a tolerance of {e_min} is below the data's own precision and forces interpolation of every cell"
         ));
     }
-    Ok(Prepared { name, samples, georef, field, points, cell_tolerance, e_min, e_text, valid, domain, outliers })
+    Ok(Prepared { name, samples, georef, field, points, cell_tolerance, e_min, e_text, valid, domain, outliers, units })
 }

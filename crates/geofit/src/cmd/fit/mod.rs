@@ -5,6 +5,7 @@
 
 mod input;
 mod output;
+mod zunit;
 
 use clap::{Args as ClapArgs, ValueEnum};
 
@@ -34,6 +35,18 @@ with exit 1 and the error reached when --max-points, --max-iterations or the min
 (one raster cell) stops it first. The output stores the data mask (and the CRS) for `geofit eval`.
 The final check evaluates the mesh as written, as `geofit eval` does, so `geofit diff --check`
 at the same tolerance passes on its output.
+
+  $ geofit fit gmt_grid.nc -o g.tmesh --max-error 10      # its band says Unit Type: km
+  geofit: gmt_grid.nc: heights in km (the band's unit type): --max-error 10 m is 0.01 km
+  $ geofit fit dem_ft.tif -o d.tmesh --max-error 0.5 --z-unit us-ft   # the file declares none
+  $ geofit fit rgb.png -b 1 -o r.tmesh --max-error 1        # a multi-band raster needs -b N
+
+Units: --max-error is in metres (--error-unit ft, cm, ... for another unit) and is converted into
+the unit of the heights before the fit: the band's unit type (m, km, cm, ft, US survey foot, ...),
+else the vertical unit of a compound CRS; --z-unit overrides both. Without either the heights
+are taken as metres, except in a CRS whose x/y are in feet. A unit geofit does not know is
+refused (exit 3) naming it; --z-unit says what it is. The report states both (z_unit,
+max_error_given) and its heights are in z_unit.
 
   $ geofit fit survey.bag -o s.tmesh --max-error-from-uncertainty 1 --max-error 0.05
   $ geofit fit dem.tif -o d.tmesh --max-error 0.5 --reject-outliers 10 --outliers-csv spikes.csv
@@ -79,10 +92,23 @@ pub struct Args {
     /// the name ends in `.tmb` (lossless; `eval`, `surface`, `export` and `info` read both).
     #[arg(short, long)]
     pub output: Option<String>,
-    /// Maximum |Δz| allowed at every valid raster cell (raster units). With
-    /// --max-error-from-uncertainty: the floor of the per-cell tolerance.
+    /// Maximum |Δz| allowed at every valid raster cell, in metres (--error-unit), converted
+    /// into the unit of the heights (km, ft, cm, ...). With --max-error-from-uncertainty: the
+    /// floor of the per-cell tolerance.
     #[arg(long, allow_negative_numbers = true, required_unless_present = "max_error_from_uncertainty")]
     pub max_error: Option<f64>,
+    /// The unit --max-error is given in (m, km, cm, mm, ft, us-ft, ...).
+    #[arg(long, value_name = "UNIT")]
+    pub error_unit: Option<String>,
+    /// The unit of the raster's heights, when the file declares none or declares it wrongly
+    /// (m, km, cm, mm, ft, us-ft, ...); default: the band's unit type, else the CRS's vertical
+    /// unit, else the heights are taken as metres.
+    #[arg(long, value_name = "UNIT")]
+    pub z_unit: Option<String>,
+    /// The band that holds the heights (GDAL's numbering, from 1); needed when the raster has
+    /// several bands (a BAG's elevation, with its uncertainty band, needs none).
+    #[arg(short = 'b', long = "band", value_name = "N")]
+    pub band: Option<usize>,
     /// Per-cell tolerance from the survey's uncertainty layer (the band named "uncertainty", as in
     /// a BAG, else band 2): every valid cell within max(--max-error, K × its uncertainty).
     #[arg(long, value_name = "K", allow_negative_numbers = true)]
@@ -96,7 +122,8 @@ pub struct Args {
     /// (at K = 10) and fitted.
     #[arg(long, value_name = "K", allow_negative_numbers = true)]
     pub reject_outliers: Option<f64>,
-    /// Write the blunders found (row, col, x, y, value, predicted, deviation, rejected) as CSV.
+    /// Write the blunders found (row, col, x, y, value, predicted, deviation, rejected) as CSV;
+    /// predicted is the local prediction nearest the value (the one the test compares).
     #[arg(long, value_name = "FILE")]
     pub outliers_csv: Option<String>,
     /// Polynomial degree (1 or 3).

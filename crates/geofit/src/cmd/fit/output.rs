@@ -9,7 +9,7 @@ use super::input::{OutlierReport, Prepared};
 use super::Args;
 use crate::config::{Config, Input, Output};
 use crate::error::{CliError, CmdResult, Exit};
-use crate::report::{write_json_report, ReportKind, Z_UNIT};
+use crate::report::{with_z_unit, write_json_report_with_units, ReportKind, Z_UNIT};
 
 /// `--report`: what the fit did and how far it got.
 const REPORT: ReportKind = ReportKind {
@@ -43,7 +43,15 @@ struct Report<'a> {
     /// Only when not the default 4-splits (the reports of default fits stay as they were).
     #[serde(skip_serializing_if = "is_quad")]
     split: tspline::mesh::SplitRule,
-    /// The tolerance; with a per-cell tolerance, its smallest value.
+    /// The unit of the heights and of every height in this report, where the input declares one
+    /// (or --z-unit gives it); absent: none declared, the heights are taken as they are (metres).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    z_unit: Option<&'static str>,
+    /// --max-error as given, in its own unit (--error-unit, metres by default), where a z unit
+    /// is known; `max_error` is the same tolerance in `z_unit`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    max_error_given: Option<f64>,
+    /// The tolerance (in the heights' unit); with a per-cell tolerance, its smallest value.
     max_error: f64,
     max_error_from_uncertainty: Option<f64>,
     outliers: OutlierReport,
@@ -155,6 +163,8 @@ pub(super) fn write(args: &Args, config: &Config, p: Prepared, result: FitResult
                 super::SplitArg::Quad => tspline::mesh::SplitRule::Quad,
                 super::SplitArg::Aniso => tspline::mesh::SplitRule::Anisotropic,
             },
+            z_unit: p.units.data_name(),
+            max_error_given: args.max_error.filter(|_| p.units.data.is_some()),
             max_error: p.e_min,
             max_error_from_uncertainty: args.max_error_from_uncertainty,
             outliers: p.outliers,
@@ -169,7 +179,11 @@ pub(super) fn write(args: &Args, config: &Config, p: Prepared, result: FitResult
             seconds: done.t_start.elapsed().as_secs_f64(),
             peak_rss_mib: crate::process_stats::peak_rss_mib(),
         };
-        write_json_report(path, &REPORT, &rep)?;
+        let mut units = with_z_unit(REPORT.units, p.units.data_name().unwrap_or(Z_UNIT));
+        if rep.max_error_given.is_some() {
+            units.push(("max_error_given", p.units.error.name));
+        }
+        write_json_report_with_units(path, &REPORT, &units, &rep)?;
     }
     Ok(done.exit)
 }

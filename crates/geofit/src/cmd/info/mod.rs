@@ -136,7 +136,7 @@ fn summarize(input: &Input) -> Result<Summary, CliError> {
     // Binary rasters and LAS/LAZ are opened by path (GDAL, las): decide before reading.
     let by_ext = input.path().and_then(kind_by_extension);
     match (by_ext, input.path()) {
-        (Some(Kind::Raster), Some(p)) => return Ok(raster_info(&read_raster_path(p)?, &name).into()),
+        (Some(Kind::Raster), Some(p)) => return Ok(raster_info(&read_raster_path(p)?, &name, band_count(p)).into()),
         (Some(Kind::Points), Some(p)) => {
             let cloud = raster_io::read_points(p, None).map_err(|e| CliError::unreadable(e.to_string()))?;
             return Ok(points_info(&cloud, &name).into());
@@ -159,7 +159,7 @@ fn summarize(input: &Input) -> Result<Summary, CliError> {
     if by_ext.is_none() && !src.is_empty() && !looks_like_xml(&src) {
         // No telling extension and not XML: a raster GDAL opens, else XYZ text.
         if let Some(r) = raster_from_bytes(&src, input.path())? {
-            return Ok(raster_info(&r, &name).into());
+            return Ok(raster_info(&r, &name, input.path().map_or(1, band_count)).into());
         }
         return match raster_io::points::read_xyz(&src[..], &name) {
             Ok(cloud) => Ok(points_info(&cloud, &name).into()),
@@ -200,6 +200,11 @@ fn summarize(input: &Input) -> Result<Summary, CliError> {
 /// Reads a raster by path; errors name the file.
 fn read_raster_path(p: &std::path::Path) -> Result<raster_io::Raster, CliError> {
     raster_io::read_raster(p).map_err(|e| CliError::unreadable(e.to_string()))
+}
+
+/// How many bands a raster file has (1 where GDAL cannot say).
+fn band_count(p: &std::path::Path) -> usize {
+    raster_io::bands(p).map_or(1, |b| b.len().max(1))
 }
 
 /// A raster GDAL opens from this input (the path, or stdin's bytes spooled), or None.

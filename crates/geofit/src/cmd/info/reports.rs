@@ -170,9 +170,14 @@ pub struct RasterInfo {
     pub valid_count: usize,
     /// [min, max] of the valid cells; null when there are none.
     pub range: Option<[f64; 2]>,
+    /// The unit of the heights as band 1 declares it (GDAL's unit type: "m", "km", "US survey
+    /// foot", ...); null when it declares none.
+    pub z_unit: Option<String>,
+    /// How many bands the file has (the report is of band 1).
+    pub bands: usize,
 }
 
-pub(super) fn raster_info(r: &raster_io::Raster, name: &str) -> Info {
+pub(super) fn raster_info(r: &raster_io::Raster, name: &str, bands: usize) -> Info {
     let info = RasterInfo {
         file: name.to_string(),
         kind: "raster",
@@ -184,6 +189,8 @@ pub(super) fn raster_info(r: &raster_io::Raster, name: &str) -> Info {
         nodata_count: r.nodata_count(),
         valid_count: r.valid_count(),
         range: r.min_max().map(|(a, b)| [a, b]),
+        z_unit: r.z_unit.clone(),
+        bands,
     };
     Info::Raster(info)
 }
@@ -191,15 +198,25 @@ pub(super) fn raster_info(r: &raster_io::Raster, name: &str) -> Info {
 fn write_raster_text(w: &mut dyn Write, info: &RasterInfo) -> std::io::Result<()> {
     let gt = &info.geotransform;
     writeln!(w, "file:         {}", info.file)?;
-    writeln!(w, "kind:         raster, {}×{} cells", info.width, info.height)?;
+    let bands = if info.bands > 1 { format!(", {} bands (this is band 1)", info.bands) } else { String::new() };
+    writeln!(w, "kind:         raster, {}×{} cells{bands}", info.width, info.height)?;
     writeln!(w, "geotransform: {} {} {} {} {} {}", gt[0], gt[1], gt[2], gt[3], gt[4], gt[5])?;
     writeln!(w, "crs:          {}", info.crs.as_deref().map(short_crs).unwrap_or("none"))?;
     writeln!(w, "nodata:       {} cells (marker {})", info.nodata_count, info.nodata.map(|v| v.to_string()).unwrap_or_else(|| "none".into()))?;
     writeln!(w, "valid:        {} cells", info.valid_count)?;
     match info.range {
-        Some([a, b]) => writeln!(w, "range:        {a} .. {b}"),
-        None => writeln!(w, "range:        none (no valid cell)"),
+        Some([a, b]) => writeln!(w, "range:        {a} .. {b}")?,
+        None => writeln!(w, "range:        none (no valid cell)")?,
     }
+    let unit = match &info.z_unit {
+        Some(u) => match raster_io::units::parse_length_unit(u) {
+            Some(l) if l.name == u.as_str() => u.clone(),
+            Some(l) => format!("{u} ({})", l.name),
+            None => format!("{u} (not a unit of length geofit knows: fit and diff need --z-unit)"),
+        },
+        None => "none declared (taken as metres)".into(),
+    };
+    writeln!(w, "z unit:       {unit}")
 }
 
 /// `info` of a point file.
