@@ -54,6 +54,7 @@
 
 pub mod crs;
 pub mod error;
+pub mod frame;
 mod lines;
 pub mod model;
 mod reader;

@@ -10,7 +10,8 @@
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
-use citygml_io::{ObjectStream, ReadError};
+use citygml_io::crs::VerticalDatum;
+use citygml_io::{CityObject, ObjectStream, ReadError};
 use serde::Serialize;
 
 use crate::xsd::{sniff_version, wrapper_for, Schema, XsdErrorKind, XsdFinding};
@@ -41,6 +42,10 @@ pub struct GeometryReport {
     pub features: usize,
     pub valid: Option<bool>,
     pub findings: Vec<Finding>,
+    /// The metric frame the tolerances applied in, when it is not the file's CRS (a geographic
+    /// CRS's coordinates are checked in a UTM zone; finding positions are in that frame).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub frame: Option<String>,
 }
 
 /// What `geofit validate` reports on one document.
@@ -48,6 +53,9 @@ pub struct GeometryReport {
 pub struct Report {
     pub file: String,
     pub version: Option<String>,
+    /// The height system of the document's CRS, when it names one (a compound CRS, an AdV URN).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub heights: Option<VerticalDatum>,
     pub valid: bool,
     pub xsd: XsdReport,
     pub geometry: GeometryReport,
@@ -121,17 +129,39 @@ pub struct Progress {
     pub bytes_read: usize,
 }
 
+/// Moves each object read, before it is checked, into the frame the tolerances are metres in;
+/// gets the document's srsName as far as it is known. Its error (one line) makes the document
+/// unreadable, located at the object. `describe` says what it did, for the report.
+pub trait ObjectFrame {
+    fn apply(&mut self, document_srs: Option<&str>, obj: &mut CityObject) -> Result<(), String>;
+    fn describe(&self) -> Option<String>;
+}
+
 /// Validates one document held in memory (or memory-mapped). The XSD check runs on its own
 /// thread while the geometry is read and checked; `progress` is called after each batch of
 /// checked features. `name` is used in the report and in error messages.
 pub fn validate_document(bytes: &[u8], name: &str, checks: &Checks, progress: &dyn Fn(Progress)) -> Result<Report, DocumentError> {
+    validate_document_in(bytes, name, checks, None, progress)
+}
+
+/// [`validate_document`] with each object moved by `frame` first (geofit: a geographic CRS's
+/// degrees into metres, docs/decisions.md#geographic-crss-and-vertical-datums-of-buildings-issue-41).
+pub fn validate_document_in(
+    bytes: &[u8],
+    name: &str,
+    checks: &Checks,
+    frame: Option<&mut dyn ObjectFrame>,
+    progress: &dyn Fn(Progress),
+) -> Result<Report, DocumentError> {
     let version = sniff_version(bytes);
     let (xsd, geometry) = std::thread::scope(|s| {
         let xsd_job = s.spawn(|| xsd_report(bytes, name, &checks.xsd, version));
         let geometry = if checks.geometry {
-            check_geometry(bytes, &checks.options, progress)
+            check_geometry(bytes, &checks.options, frame, progress)
         } else {
-            Ok(GeometryReport { checked: false, options: checks.options, features: 0, valid: None, findings: vec![] })
+            let srs = ObjectStream::new(bytes).ok().and_then(|s| s.srs_name());
+            let report = GeometryReport { checked: false, options: checks.options, features: 0, valid: None, findings: vec![], frame: None };
+            Ok((report, srs))
         };
         (xsd_job.join(), geometry)
     });
@@ -140,7 +170,7 @@ pub fn validate_document(bytes: &[u8], name: &str, checks: &Checks, progress: &d
         // the schema directory was found but the wrapper could not be loaded
         return Err(DocumentError::Schema(why.clone()));
     }
-    let geometry = geometry.map_err(|e| {
+    let (geometry, srs) = geometry.map_err(|e| {
         // Unreadable as CityGML: what libxml2 said about well-formedness, when it said something.
         match xsd.errors.iter().find(|f| f.kind == XsdErrorKind::NotWellFormed) {
             Some(f) => DocumentError::Unreadable(format!("{name}:{}:{}: not well-formed XML: {}", f.line, f.column, f.message)),
@@ -148,7 +178,8 @@ pub fn validate_document(bytes: &[u8], name: &str, checks: &Checks, progress: &d
         }
     })?;
     let valid = xsd.valid != Some(false) && geometry.valid != Some(false);
-    Ok(Report { file: name.to_string(), version: version.map(str::to_string), valid, xsd, geometry })
+    let heights = srs.as_deref().and_then(citygml_io::crs::vertical_part);
+    Ok(Report { file: name.to_string(), version: version.map(str::to_string), heights, valid, xsd, geometry })
 }
 
 fn xsd_report(bytes: &[u8], name: &str, schemas: &Result<SchemaSet, String>, version: Option<&str>) -> XsdReport {
@@ -169,14 +200,30 @@ fn xsd_report(bytes: &[u8], name: &str, schemas: &Result<SchemaSet, String>, ver
     }
 }
 
-/// Objects are read one by one and checked in parallel batches: memory stays bounded.
-fn check_geometry(bytes: &[u8], opts: &Options, progress: &dyn Fn(Progress)) -> Result<GeometryReport, ReadError> {
+/// Objects are read one by one and checked in parallel batches: memory stays bounded. Also
+/// returns the document's srsName.
+fn check_geometry(
+    bytes: &[u8],
+    opts: &Options,
+    mut frame: Option<&mut dyn ObjectFrame>,
+    progress: &dyn Fn(Progress),
+) -> Result<(GeometryReport, Option<String>), ReadError> {
     let mut stream = ObjectStream::new(bytes)?;
     let mut findings = Vec::new();
     let mut batch = Vec::new();
     let mut features = 0usize;
     while let Some(obj) = stream.next() {
-        batch.push(obj?);
+        let mut obj = obj?;
+        if let Some(f) = frame.as_deref_mut() {
+            let srs = stream.srs_name();
+            f.apply(srs.as_deref(), &mut obj).map_err(|message| ReadError {
+                line: obj.span.line,
+                column: obj.span.column,
+                byte: obj.span.bytes.start,
+                message,
+            })?;
+        }
+        batch.push(obj);
         if batch.len() == 256 {
             features += batch.len();
             findings.extend(validate_objects(&batch, opts));
@@ -188,7 +235,9 @@ fn check_geometry(bytes: &[u8], opts: &Options, progress: &dyn Fn(Progress)) -> 
     findings.extend(validate_objects(&batch, opts));
     add_unresolved_xlinks(&mut findings, stream.unresolved_xlinks());
     sort_findings(&mut findings);
-    Ok(GeometryReport { checked: true, options: *opts, features, valid: Some(findings.is_empty()), findings })
+    let described = frame.as_deref().and_then(|f| f.describe());
+    let report = GeometryReport { checked: true, options: *opts, features, valid: Some(findings.is_empty()), findings, frame: described };
+    Ok((report, stream.srs_name()))
 }
 
 /// Counts over many reports, for the summary of a many-file run.

@@ -31,7 +31,14 @@ document. Every node keeps the polygon gml:id, ring and vertex index it came fro
 
 Buildings that cannot be converted (open shell, MultiSurface-only geometry that does not close,
 rings with < 3 distinct points, faces far from planar, nodes without 3 independent planes) are
-listed on stderr with rule and gml:id; the others are still converted and the exit code is 1.";
+listed on stderr with rule and gml:id; the others are still converted and the exit code is 1.
+
+Units: coordinates and every tolerance are metres of a projected CRS. A file in a geographic CRS
+(EPSG:4979, 4326, 4258, CRS84 ...: degrees) is refused in one line (exit 2) naming the CRS and
+the UTM zone to reproject to, e.g.
+  $ geofit citygml2popa3d wgs84.gml
+  geofit: wgs84.gml: CRS urn:ogc:def:crs:EPSG::4979 is geographic (EPSG:4979, degrees, latitude,
+  longitude): ... reproject the file to a projected CRS first, e.g. EPSG:32632 ...";
 
 #[derive(ClapArgs, Debug)]
 #[command(after_help = AFTER_HELP, mut_arg("input", |a| a.help("CityGML file (1.0, 2.0 or 3.0), `-` for stdin")), mut_arg("output", |a| a.help("Output popa3d document (stdout when missing or `-`)")))]
@@ -135,6 +142,14 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     let name = input.display_name();
     let bytes = input.read_all()?;
     let city = citygml_io::parse(&bytes).map_err(|e| CliError::unreadable(format!("{name}: {e}")))?;
+    // docs/decisions.md#geographic-crss-and-vertical-datums-of-buildings-issue-41
+    if let Some(g) = citygml_io::frame::geographic_document(&city, None) {
+        return Err(CliError::usage(format!(
+            "{name}: {}: --snap, --plane-distance and the adjustment are metres; reproject the file to a projected CRS first, e.g. {} (citygml-tools reproject)",
+            g.what(),
+            g.suggestion()
+        )));
+    }
     let units = select_buildings(&city, &args.ids).map_err(|e| CliError::usage(format!("{name}: {e}")))?;
     if units.is_empty() {
         return Err(CliError::findings(format!("{name}: no Building or BuildingPart with geometry")));

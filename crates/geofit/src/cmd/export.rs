@@ -44,7 +44,14 @@ Coordinates: --origin auto (default) subtracts the bounding-box centre (x, y) an
 rounded to whole units; `none` keeps world coordinates; `x,y,z` gives it. The origin is recorded:
 glTF root node `extras.origin` (f64; world = local + origin), OBJ header `# origin: x y z`.
 glTF is Y-up: vertex data stay Z-up and the root node's matrix turns them. --t-srs reprojects x
-and y with PROJ from the file's CRS (or --s-srs); heights are kept.
+and y with PROJ from the file's CRS (or --s-srs); heights are kept (metres), and a height system
+the source CRS names goes along into the recorded CRS (`EPSG:4647+7837` for NRW's DHHN2016), so
+`geofit tile tileset` knows it.
+Units: mesh coordinates are metres. A file in a geographic CRS (EPSG:4979, 4326, CRS84...:
+degrees, axis order as the CRS declares: latitude first for EPSG codes) needs a projected
+--t-srs, else it is refused naming its UTM zone; a geographic --t-srs is refused too:
+  $ geofit export wgs84.gml -o b.glb                 # exit 2: ... e.g. --t-srs EPSG:32632
+  $ geofit export wgs84.gml --t-srs EPSG:32632 -o b.glb
 
 T-mesh input (a geofit .tmesh, root element <tmesh>) is tessellated exactly as `geofit surface`
 does it (same bytes): the surface with vertex colours by height or by |dz| against --reference,
@@ -173,7 +180,12 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     // `--t-srs foo` as a Bessel longlat).
     for (opt, crs) in [("--t-srs", args.t_srs.as_deref()), ("--s-srs", args.s_srs.as_deref().map(proj_crs).as_deref())] {
         if let Some(c) = crs {
-            raster_io::crs::Crs::parse(c).map_err(|e| CliError::usage(format!("{opt}: {e}")))?;
+            let parsed = raster_io::crs::Crs::parse(c).map_err(|e| CliError::usage(format!("{opt}: {e}")))?;
+            if opt == "--t-srs" && parsed.geographic {
+                return Err(CliError::usage(format!(
+                    "--t-srs {c} is geographic (degrees): mesh coordinates must be metres (heights are); use a projected CRS, e.g. its UTM zone EPSG:326zz (north) / 327zz (south)"
+                )));
+            }
         }
     }
 
@@ -190,6 +202,26 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     progress.finish(&format!("{} top-level objects", model.objects.len()));
 
     let source_crs = args.s_srs.clone().or_else(|| model.srs_name.clone());
+    // docs/decisions.md#geographic-crss-and-vertical-datums-of-buildings-issue-41
+    let geographic = citygml_io::frame::geographic_document(&model, args.s_srs.as_deref());
+    if let Some(g) = &geographic {
+        if args.t_srs.is_none() {
+            return Err(CliError::usage(format!(
+                "{name}: {}: mesh coordinates would be degrees beside metre heights; give a projected target, e.g. --t-srs {}",
+                g.what(),
+                g.suggestion()
+            )));
+        }
+        if !g.plausible() {
+            let (a, b) = g.lon_lat.map(|(lon, lat)| (lat, lon)).unwrap_or_default();
+            return Err(CliError::unreadable(format!(
+                "{name}: {} but its first point ({a}, {b}) has a latitude beyond ±90°: the coordinates are in the other axis order; declare it (urn:ogc:def:crs:OGC:1.3:CRS84h) or swap the axes",
+                g.what()
+            )));
+        }
+    }
+    // the source's axis order → PROJ's longitude, latitude (new_known_crs normalises to it)
+    let swap = geographic.as_ref().is_some_and(|g| citygml_io::crs::axis_order(&g.srs) == citygml_io::crs::AxisOrder::LatLon);
     let transform = match &args.t_srs {
         None => None,
         Some(t) => {
@@ -205,14 +237,23 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     };
 
     let reproject = |x: f64, y: f64| match &transform {
+        Some(t) if swap => t.convert((y, x)).map_err(|e| e.to_string()),
         Some(t) => t.convert((x, y)).map_err(|e| e.to_string()),
         None => Ok((x, y)),
     };
     let progress = config.progress("export: triangulate", model.objects.len() as u64);
     let options = SceneOptions { lod: args.lod, planar: args.planar };
     let built = build_scene(&model, &name, &options, transform.is_some().then_some(&reproject as Reproject), &|n| progress.set(n as u64, ""));
+    // a height system of the source goes along with a 2D target (`EPSG:4647+7837`)
+    let target_crs = args.t_srs.as_ref().map(|t| {
+        let vertical = source_crs.as_deref().and_then(citygml_io::crs::vertical_part).and_then(|v| v.epsg);
+        match vertical {
+            Some(v) if citygml_io::crs::vertical_part(t).is_none() => format!("{t}+{v}"),
+            _ => t.clone(),
+        }
+    });
     let mut scene = Scene {
-        crs: args.t_srs.clone().or(source_crs),
+        crs: target_crs.or(source_crs),
         generator: Some(format!("geofit {}", env!("CARGO_PKG_VERSION"))),
         ..built.scene
     };

@@ -4,7 +4,7 @@ use std::cell::RefCell;
 use std::io::Write;
 use std::time::Instant;
 
-use citygml_validate::document::{validate_document, Checks, Progress, Report, Summary};
+use citygml_validate::document::{validate_document_in, Checks, Progress, Report, Summary};
 use serde::Serialize;
 
 use super::{document_error, REPORT};
@@ -24,7 +24,8 @@ struct SummaryLine<'a> {
 /// Reads and checks one file of a many-file run.
 fn check_source(input: &Input, checks: &Checks) -> Result<Report, CliError> {
     let bytes = input.map_or_read()?;
-    validate_document(&bytes, &input.display_name(), checks, &|p: Progress| bytes.release_before(p.bytes_read))
+    let mut frame = super::frame::GeographicFrame::default();
+    validate_document_in(&bytes, &input.display_name(), checks, Some(&mut frame), &|p: Progress| bytes.release_before(p.bytes_read))
         .map_err(document_error)
 }
 

@@ -3,13 +3,14 @@
 //! This file: options, schemas and one file; `many.rs` the many-file run; `text.rs` the text
 //! report.
 
+mod frame;
 mod many;
 mod text;
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use citygml_validate::document::{validate_document, Checks, DocumentError, Progress, SchemaSet};
+use citygml_validate::document::{validate_document_in, Checks, DocumentError, Progress, SchemaSet};
 use citygml_validate::Options;
 use clap::Args as ClapArgs;
 
@@ -191,11 +192,12 @@ fn run_one(args: &Args, options: Options, config: &Config) -> CmdResult {
             bytes.release_before(p.bytes_read);
             progress.set(p.bytes_read as u64, &format!("{} features checked", p.features));
         };
-        let report = validate_document(&bytes, &name, &checks, &on_batch).map_err(document_error)?;
+        let mut frame = frame::GeographicFrame::default();
+        let report = validate_document_in(&bytes, &name, &checks, Some(&mut frame), &on_batch).map_err(document_error)?;
         progress.finish(&format!("{} features checked", report.geometry.features));
         report
     } else {
-        validate_document(&bytes, &name, &checks, &|_| {}).map_err(document_error)?
+        validate_document_in(&bytes, &name, &checks, None, &|_| {}).map_err(document_error)?
     };
     print_report(args.json, &REPORT, &report, |w| text::write(w, &report))?;
     Ok(if report.valid { Exit::Ok } else { Exit::Findings })

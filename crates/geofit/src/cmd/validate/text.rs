@@ -10,6 +10,12 @@ use citygml_validate::xsd::XsdErrorKind;
 pub(super) fn write(w: &mut dyn Write, r: &Report) -> std::io::Result<()> {
     let f = &r.file;
     writeln!(w, "{f}: CityGML {}", r.version.as_deref().unwrap_or("(version unknown)"))?;
+    if let Some(v) = &r.heights {
+        writeln!(w, "{f}: heights: {v}")?;
+    }
+    if let Some(frame) = &r.geometry.frame {
+        writeln!(w, "{f}: frame: {frame}")?;
+    }
     let schema_name = r.xsd.schema.as_deref().map(|s| Path::new(s).file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default());
     if r.xsd.checked {
         let sn = schema_name.unwrap_or_default();
