@@ -119,7 +119,7 @@ pub fn read_raster_arg_typed(arg: &str) -> Result<(Raster, String, SampleType), 
     read_raster_arg_band(arg, Band::Only)
 }
 
-/// Which band of a raster input a command reads (docs/decisions.md#raster-units-bands-and-no-data).
+/// Which band of a raster input a command reads (docs/decisions.md#raster-units-bands-and-no-data-issue-41).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Band {
     /// The only band; a file with several is refused (exit 2) naming the count and `-b N`.

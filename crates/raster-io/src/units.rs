@@ -1,4 +1,4 @@
-//! Units of a raster's heights and of its CRS (issue 41, docs/decisions.md#raster-units-bands-and-no-data):
+//! Units of a raster's heights and of its CRS (issue 41, docs/decisions.md#raster-units-bands-and-no-data-issue-41):
 //! a band's unit type (GDAL's `GetUnitType`: "m", "metre", "km", "ft", "US survey foot", ...),
 //! a compound CRS's vertical unit and the CRS's horizontal unit are read as a [`LengthUnit`] or
 //! refused by name. Nothing is guessed: an unknown string is an error naming it.

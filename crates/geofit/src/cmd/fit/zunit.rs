@@ -1,4 +1,4 @@
-//! The unit of the fitted heights (issue 41, docs/decisions.md#raster-units-bands-and-no-data):
+//! The unit of the fitted heights (issue 41, docs/decisions.md#raster-units-bands-and-no-data-issue-41):
 //! `--max-error` is in metres unless `--error-unit` says otherwise, and is converted into the
 //! unit the raster's heights are in (`--z-unit`, else the band's unit type, else a compound CRS's
 //! vertical unit) before the fit; the report and the stage line state both.
