@@ -129,7 +129,11 @@ impl XyzLines {
         let err = |m: String| PointsError::line(name, self.line_no, m);
         let columns = match terrain_xyz(fields).map_err(err)? {
             Some(c) => c,
-            None if fields.len() >= 3 && fields.iter().all(|f| !looks_numeric(f)) => [0, 1, 2],
+            None if fields.len() < 3 => {
+                let how = if detected { "" } else { " (as given)" };
+                return Err(err(format!("{:?} is {} field(s) split by {}{how}: a point needs x, y and z", quote(line), fields.len(), sep.describe())));
+            }
+            None if fields.iter().all(|f| !looks_numeric(f)) => [0, 1, 2],
             None => return Err(err(format!("expected three numbers x y z, found {:?}", quote(line)))),
         };
         let names = fields.iter().map(|f| f.to_string()).collect();
@@ -397,7 +401,7 @@ mod tests {
             Ok(points)
         };
         assert_eq!(given("1,2,3,4,5,6\n", Some(","), None).unwrap(), vec![[1.0, 2.0, 3.0]]);
-        assert_eq!(given("1;2;3\n", Some("space"), None).unwrap_err().to_string(), "t.xyz:1: expected three numbers x y z, found \"1;2;3\"");
+        assert_eq!(given("1;2;3\n", Some("space"), None).unwrap_err().to_string(), "t.xyz:1: \"1;2;3\" is 1 field(s) split by blanks (as given): a point needs x, y and z");
         assert_eq!(given("1;2;3,5\n", None, Some(".")).unwrap_err().to_string(), "t.xyz:1: z = \"3,5\" has a decimal comma, but the decimal mark given is '.'");
     }
 

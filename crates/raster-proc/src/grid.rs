@@ -130,7 +130,8 @@ pub enum Degrees {
 impl GridSpec {
     /// A cell size that is almost certainly metres on points in degrees: geographic coordinates
     /// (`geographic`: the declared CRS's kind, `None` = no CRS, then guessed from the bounds:
-    /// every x in −180…360, y in −90…90), a cell of 1 or more, and a grid of fewer than 10 cells
+    /// every x in −180…360, y in −90…90), a cell of 1 or more (any size where the CRS or a
+    /// lon/lat header says degrees), and a grid of fewer than 10 cells
     /// across with 10 or more points per cell (7000 lon/lat soundings at `--cell 25` made a 1×2
     /// grid). docs/decisions.md#raster-outputs-by-driver
     ///
@@ -147,11 +148,55 @@ impl GridSpec {
         let (x0, y0, x1, y1) = bounds;
         let degrees = geographic.unwrap_or(x0 >= -180.0 && x1 <= 360.0 && y0 >= -90.0 && y1 <= 90.0);
         let (w, h) = (self.width as f64, self.height as f64);
-        if !(degrees && cell >= 1.0 && w.max(h) < 10.0 && points as f64 >= 10.0 * w * h) {
+        // declared degrees: any cell size (0.5 meant as metres on 0.01° of soundings is 1×1)
+        let metre_sized = cell >= 1.0 || geographic == Some(true);
+        if !(degrees && metre_sized && w.max(h) < 10.0 && points as f64 >= 10.0 * w * h) {
             return None;
         }
         Some(if geographic == Some(true) { Degrees::Declared } else { Degrees::Guessed })
     }
+}
+
+impl Degrees {
+    /// The one-line refusal of `--cell` on points in degrees: what says they are degrees (a
+    /// declared CRS, or else a lon/lat header when `lonlat_header`), the grid it would make,
+    /// and the fix, with the UTM zone of the points' centre as `--t-srs` (and `--s-srs
+    /// EPSG:4326` where no CRS was declared).
+    #[allow(clippy::too_many_arguments)]
+    pub fn refusal(self, input: &str, cell: f64, bounds: (f64, f64, f64, f64), grid: &GridSpec, points: usize, crs_declared: bool, lonlat_header: bool) -> String {
+        let (x0, y0, x1, y1) = bounds;
+        let what = match self {
+            Degrees::Declared if !crs_declared && lonlat_header => "the header names longitude/latitude columns (degrees)",
+            Degrees::Declared => "the points are in a geographic CRS (degrees)",
+            Degrees::Guessed => "the points declare no CRS and lie within longitude/latitude bounds",
+        };
+        let epsg = utm_epsg((x0 + x1) / 2.0, (y0 + y1) / 2.0);
+        format!(
+            "--cell {cell} on {input}: {what} (x {x0}…{x1}, y {y0}…{y1}), and a cell of {cell} makes a grid of only {w}×{h} \
+             cells for {points} points. --cell is in the points' units: in degrees, ≈ {deg:.6} is {cell} m at the equator; \
+             to grid in metres, reproject with {s}--t-srs EPSG:{epsg} (UTM zone {z}{ns}, where they lie){hint}",
+            w = grid.width as f64,
+            h = grid.height as f64,
+            deg = cell / 111_320.0,
+            s = if crs_declared { "" } else { "--s-srs EPSG:4326 " },
+            z = epsg % 100,
+            ns = if epsg < 32700 { 'N' } else { 'S' },
+            hint = if self == Degrees::Guessed { "; if they are not degrees, declare their CRS with --s-srs" } else { "" },
+        )
+    }
+}
+
+/// The WGS 84 / UTM zone (EPSG code) of a longitude and latitude in degrees (longitudes
+/// 180…360 read as −180…0): what to suggest as `--t-srs` for soundings in degrees.
+///
+/// ```
+/// assert_eq!(raster_proc::grid::utm_epsg(7.1, 51.4), 32632); // Bochum, zone 32N
+/// assert_eq!(raster_proc::grid::utm_epsg(326.1, -8.7), 32725); // 33.9° W, zone 25S
+/// ```
+pub fn utm_epsg(lon: f64, lat: f64) -> u32 {
+    let lon = if lon >= 180.0 { lon - 360.0 } else { lon };
+    let zone = (((lon + 180.0) / 6.0).floor() as i64).clamp(0, 59) as u32 + 1;
+    if lat >= 0.0 { 32600 + zone } else { 32700 + zone }
 }
 
 #[cfg(test)]
@@ -168,6 +213,16 @@ mod tests {
         assert!(px.round() as usize == 12 && py.round() as usize == 0);
         assert!(GridSpec::covering((0.0, 0.0, 1.0, 1.0), 0.0).is_err());
         assert!(GridSpec::covering((0.0, 0.0, 1e9, 1e9), 1e-3).is_err());
+    }
+
+    #[test]
+    fn metre_cells_on_declared_degrees_are_refused_at_any_size() {
+        let bounds = (7.0, 52.0, 7.01, 52.01);
+        let g = GridSpec::covering(bounds, 0.5).unwrap();
+        assert_eq!(g.cell_in_metres_on_degrees(bounds, 100, Some(true), 0.5), Some(Degrees::Declared));
+        assert_eq!(g.cell_in_metres_on_degrees(bounds, 100, None, 0.5), None, "a guess needs a cell of 1 or more");
+        let m = Degrees::Declared.refusal("s.csv", 0.5, bounds, &g, 100, false, true);
+        assert!(m.contains("header names longitude/latitude") && m.contains("--s-srs EPSG:4326 --t-srs EPSG:32632 (UTM zone 32N"), "{m}");
     }
 
     #[test]

@@ -4,6 +4,8 @@
 //! - [`splat`]: Gauss splatting of scattered values into a grid (spec §2.3.4, A5).
 //! - [`tin`]: TIN-linear rasterization (spade Delaunay, barycentric).
 //! - [`dilate`]: dilation fill of unknown cells (spec §2.3.5, Alg. 2, A6).
+//! - [`point_input`]: point files for rasterization (text separator and decimal mark given or
+//!   detected, what the text was read as).
 //! - [`pca`]: principal-axis rotation (spec §2.3.1, A3).
 //! - [`warp`]: landmark warp field, forward/inverse mapping, raster warping (spec §2.3.2–2.3.3, A4).
 //! - [`diff`]: raster-vs-raster error statistics, histograms and error-class maps (spec §4.2, A17).
@@ -41,6 +43,7 @@ pub mod diff_figures;
 pub mod dilate;
 pub mod grid;
 pub mod pca;
+pub mod point_input;
 pub mod splat;
 pub mod tin;
 pub mod warp;

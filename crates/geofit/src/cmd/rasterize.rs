@@ -8,15 +8,16 @@ use std::path::Path;
 
 use raster_io::crs::{Crs, GridCrs, GridCrsError};
 use raster_io::Raster;
-use raster_io::point_batches::{BoundsXy, PointBatches};
-use raster_proc::grid::{Degrees, GridSpec};
+use raster_io::point_batches::BoundsXy;
+use raster_proc::grid::GridSpec;
+use raster_proc::point_input::{open_file, read_file, read_text, TextFacts};
 use raster_proc::splat::{splat_points, SplatAccumulator, SplatKernel};
 use raster_proc::tin::{tin_points, TinOptions, TinStats};
 use raster_proc::ProcError;
 
 use crate::config::{Config, Input};
 use crate::report::{write_json_report, ReportKind};
-use crate::terrain_io::{gdal_notices, points_err, proc_err, read_cloud, write_raster_arg, RasterOutArgs};
+use crate::terrain_io::{gdal_notices, points_err, proc_err, write_raster_arg, RasterOutArgs};
 use crate::error::{CliError, CmdResult, Exit};
 
 const EXAMPLE: &str = "\
@@ -39,8 +40,18 @@ Methods:
                  beyond the available memory or GEOFIT_MAX_POINTS
 
 The grid's cell edges lie on multiples of --cell and cover every point, unless --bounds gives
-the outer edges exactly. Text input: whitespace, comma or semicolon separated x y z, optional
-header line; a bad line is an error naming its line number. Exit 3 for unreadable input.";
+the outer edges exactly. Text: x y z per line, or a header naming the columns (x/easting/lon,
+y/northing/lat, z/elevation/depth/value; values as they are: a depth stays positive down).
+The separator (, ; tab blanks) comes from the first line, the decimal mark from the first
+number with one, unless --sep/--decimal give them; where ; tab or blanks separate, a comma is
+a decimal comma:
+  $ printf 'Rechtswert;Hochwert;Tiefe\r\n341000,5;5724000,25;12,5\r\n...' > lot.csv
+  $ geofit rasterize lot.csv --cell 1 -o lot.tif --s-srs EPSG:25832
+  geofit: read 5200 points from lot.csv (';' separated (detected), decimal comma, ...)
+Exit 3 naming the line: a row whose field count differs from the header's (or first row's), a
+NaN or inf value, thousands separators (1.234,5), whole numbers split by commas that may be
+decimal commas (--sep , reads them as fields). Exit 2: a cell meant as metres on points in
+degrees (a geographic --s-srs or lon/lat columns; the UTM zone for --t-srs is named).";
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum, Serialize)]
 #[serde(rename_all = "kebab-case")]
@@ -88,6 +99,12 @@ pub struct Args {
     /// Reproject the points into this CRS before gridding (--cell is then in its units).
     #[arg(long, value_name = "CRS")]
     pub t_srs: Option<String>,
+    /// Field separator of XYZ/CSV text (detected from the first line when not given).
+    #[arg(long, value_name = "SEP", value_parser = [",", ";", "tab", "space", "whitespace"])]
+    pub sep: Option<String>,
+    /// Decimal mark of XYZ/CSV text (detected from the first number that has one when not given).
+    #[arg(long, value_name = "MARK", value_parser = [".", ","])]
+    pub decimal: Option<String>,
     #[command(flatten)]
     pub raster_out: RasterOutArgs,
 }
@@ -127,26 +144,13 @@ fn reproject(plan: &GridCrs, points: &mut [[f64; 3]]) -> Result<(), CliError> {
 }
 
 /// Refuses a cell size that is almost certainly metres on points in degrees
-/// (`GridSpec::cell_in_metres_on_degrees`); a projected `--s-srs` lifts it.
-fn check_cell_units(args: &Args, seen: &BoundsXy, crs: Option<&Crs>, grid: &GridSpec) -> Result<(), CliError> {
-    let Some(bounds @ (x0, y0, x1, y1)) = seen.get() else { return Ok(()) };
-    let Some(degrees) = grid.cell_in_metres_on_degrees(bounds, seen.count, crs.map(|c| c.geographic), args.cell) else { return Ok(()) };
-    let what = match degrees {
-        Degrees::Declared => "the points are in a geographic CRS (degrees)",
-        Degrees::Guessed => "the points declare no CRS and lie within longitude/latitude bounds",
-    };
-    Err(CliError::usage(format!(
-        "--cell {c} on {input}: {what} (x {x0}…{x1}, y {y0}…{y1}), and a cell of {c} makes a grid of only {w}×{h} \
-         cells for {points} points. --cell is in the points' units: in degrees, ≈ {deg:.6} is {c} m at the equator; \
-         to grid in metres, reproject with --s-srs EPSG:4326 --t-srs <a projected CRS, e.g. a UTM zone>{hint}",
-        c = args.cell,
-        input = args.input,
-        w = grid.width as f64,
-        h = grid.height as f64,
-        points = seen.count,
-        deg = args.cell / 111_320.0,
-        hint = if crs.is_none() { "; if they are not degrees, declare their CRS with --s-srs" } else { "" },
-    )))
+/// (`GridSpec::cell_in_metres_on_degrees`; a lon/lat header counts as a geographic CRS); a
+/// projected `--s-srs` lifts it.
+fn check_cell_units(args: &Args, seen: &BoundsXy, crs: Option<&Crs>, lonlat_header: bool, grid: &GridSpec) -> Result<(), CliError> {
+    let Some(bounds) = seen.get() else { return Ok(()) };
+    let geographic = crs.map(|c| c.geographic).or(lonlat_header.then_some(true));
+    let Some(degrees) = grid.cell_in_metres_on_degrees(bounds, seen.count, geographic, args.cell) else { return Ok(()) };
+    Err(CliError::usage(degrees.refusal(&args.input, args.cell, bounds, grid, seen.count, crs.is_some(), lonlat_header)))
 }
 
 pub fn run(args: Args, config: &Config) -> CmdResult {
@@ -165,6 +169,9 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         if !p.exists() {
             return Err(CliError::unreadable(format!("{}: no such file", p.display())));
         }
+        if raster_io::PointFormat::from_path(p) == raster_io::PointFormat::Las && (args.sep.is_some() || args.decimal.is_some()) {
+            return Err(CliError::usage("--sep and --decimal are for XYZ/CSV text, not LAS/LAZ"));
+        }
     }
     let kernel = match args.method {
         Method::Gauss => Some(SplatKernel::Gauss { sigma: args.sigma, radius: args.radius }),
@@ -179,10 +186,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         _ => None,
     };
     let (seen, raster, tin_stats) = match streamed {
-        Some((kernel, path)) => {
-            let (seen, raster) = splat_streamed(&args, &path, kernel, config)?;
-            (seen, raster, None)
-        }
+        Some((kernel, path)) => splat_streamed(&args, &path, kernel, config)?,
         None => rasterize_held(&args, kernel, config)?,
     };
     let with_value = raster.valid_count();
@@ -219,40 +223,44 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
 /// Gauss splatting of a point file in two passes over it (bounds and count, then the splat),
 /// holding one batch of points and the 16-byte-a-cell accumulators, never the cloud
 /// (docs/decisions.md#streaming-points).
-fn splat_streamed(args: &Args, path: &Path, kernel: SplatKernel, config: &Config) -> Result<(BoundsXy, Raster), CliError> {
-    let open = || PointBatches::open(path, args.class).map_err(points_err);
-    let first_pass = open()?;
+fn splat_streamed(args: &Args, path: &Path, kernel: SplatKernel, config: &Config) -> Result<(BoundsXy, Raster, Option<TinStats>), CliError> {
+    let open = || open_file(path, args.class, args.sep.as_deref(), args.decimal.as_deref()).map_err(points_err);
+    let mut first_pass = open()?;
     let file_crs = first_pass.crs().map(str::to_string);
     let plan = crs_plan(args, file_crs.as_deref())?;
-    let reprojected = |batches: PointBatches| {
-        batches.map(|b| {
-            let mut b = b.map_err(points_err)?;
-            reproject(&plan, &mut b)?;
-            Ok::<_, CliError>(b)
-        })
-    };
     let mut seen = BoundsXy::default();
-    for b in reprojected(first_pass) {
-        seen.extend(&b?);
+    for b in first_pass.by_ref() {
+        let mut b = b.map_err(points_err)?;
+        reproject(&plan, &mut b)?;
+        seen.extend(&b);
     }
-    let grid = plan_grid(args, &seen, plan.grid.as_ref(), config)?;
+    let grid = plan_grid(args, &seen, plan.grid.as_ref(), &TextFacts::of(&first_pass), config)?;
     let mut acc = SplatAccumulator::new(grid.width, grid.height, kernel).map_err(|e| proc_err(&args.input, e))?;
-    for b in reprojected(open()?) {
-        acc.add_points(&grid, &b?);
+    for b in open()? {
+        let mut b = b.map_err(points_err)?;
+        reproject(&plan, &mut b)?;
+        acc.add_points(&grid, &b);
     }
     let crs = plan.grid.map(|c| c.wkt).or(file_crs);
-    Ok((seen, acc.into_raster(&grid, crs).map_err(|e| proc_err(&args.input, e))?))
+    Ok((seen, acc.into_raster(&grid, crs).map_err(|e| proc_err(&args.input, e))?, None))
 }
 
 /// TIN, and Gauss on stdin (which cannot be read twice): the whole cloud in memory, within the
 /// point budget.
 fn rasterize_held(args: &Args, kernel: Option<SplatKernel>, config: &Config) -> Result<(BoundsXy, Raster, Option<TinStats>), CliError> {
-    let mut cloud = read_cloud(&args.input, args.class)?;
+    let (sep, decimal) = (args.sep.as_deref(), args.decimal.as_deref());
+    let input = Input::from_arg(&args.input);
+    let (mut cloud, facts) = match input.path() {
+        Some(p) => read_file(p, args.class, sep, decimal),
+        None if args.class.is_some() => return Err(CliError::usage("--class needs a LAS/LAZ file, not stdin")),
+        None => read_text(input.open()?, "<stdin>", sep, decimal),
+    }
+    .map_err(points_err)?;
     let plan = crs_plan(args, cloud.crs.as_deref())?;
     reproject(&plan, &mut cloud.points)?;
     let mut seen = BoundsXy::default();
     seen.extend(&cloud.points);
-    let grid = plan_grid(args, &seen, plan.grid.as_ref(), config)?;
+    let grid = plan_grid(args, &seen, plan.grid.as_ref(), &facts, config)?;
     let crs = plan.grid.map(|c| c.wkt).or_else(|| cloud.crs.clone());
     let fail = |e| proc_err(&args.input, e);
     Ok(match kernel {
@@ -265,13 +273,14 @@ fn rasterize_held(args: &Args, kernel: Option<SplatKernel>, config: &Config) -> 
 }
 
 /// The grid: `--bounds` exactly, else the cells on multiples of `--cell` covering the points;
-/// says how many points were read first.
-fn plan_grid(args: &Args, seen: &BoundsXy, crs: Option<&Crs>, config: &Config) -> Result<GridSpec, CliError> {
+/// says how many points were read first, and how a text was read.
+fn plan_grid(args: &Args, seen: &BoundsXy, crs: Option<&Crs>, facts: &TextFacts, config: &Config) -> Result<GridSpec, CliError> {
     config.notice(&format!(
-        "read {} points from {}{}",
+        "read {} points from {}{}{}",
         seen.count,
         args.input,
-        args.class.map(|c| format!(" (class {c})")).unwrap_or_default()
+        args.class.map(|c| format!(" (class {c})")).unwrap_or_default(),
+        facts.read_as.as_ref().map(|f| format!(" ({f})")).unwrap_or_default()
     ));
     let bounds = seen.get().ok_or_else(|| CliError::unreadable(format!("{}: no points", args.input)))?;
     let grid = match &args.bounds {
@@ -284,7 +293,7 @@ fn plan_grid(args: &Args, seen: &BoundsXy, crs: Option<&Crs>, config: &Config) -
         other => proc_err(&args.input, other),
     })?;
     if args.bounds.is_none() {
-        check_cell_units(args, seen, crs, &grid)?;
+        check_cell_units(args, seen, crs, facts.geographic, &grid)?;
     }
     Ok(grid)
 }
