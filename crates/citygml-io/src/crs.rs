@@ -110,6 +110,15 @@ pub fn axis_order(srs_name: &str) -> AxisOrder {
     }
 }
 
+/// PROJ prints its own errors on stderr (`proj_create: crs not found`) besides the one line geofit
+/// prints; a command that asks PROJ about the user's CRSs calls this first, before any PROJ
+/// context exists, so they stay silent (`PROJ_DEBUG` set by the user is kept).
+pub fn quiet_proj() {
+    if std::env::var_os("PROJ_DEBUG").is_none() {
+        std::env::set_var("PROJ_DEBUG", "0");
+    }
+}
+
 /// The WGS 84 UTM zone of a position (EPSG:326zz north, 327zz south): the metric frame a
 /// geographic file is checked in, and the `--t-srs` geofit suggests for it.
 ///

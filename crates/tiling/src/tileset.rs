@@ -6,8 +6,12 @@
 //! sits in the tile frame as (E − E₀, N − N₀, h − h₀). Each tile's `transform` maps that frame to
 //! ECEF (EPSG:4978) as the affine map tangent to CRS → geographic → ECEF at the origin: columns
 //! ∂ECEF/∂E and ∂ECEF/∂N by central differences (±1 m) through PROJ, ∂ECEF/∂h the ellipsoid
-//! normal. Off the origin the map is first-order (≈ d²/2R: 2 cm at 500 m). Heights are taken as
-//! ellipsoidal plus `height_offset` (e.g. the geoid undulation for normal heights). Each tile's
+//! normal. Off the origin the map is first-order (≈ d²/2R: 2 cm at 500 m). Heights become
+//! ellipsoidal as [`Heights`] says: a CRS with a vertical part (NRW's DHHN2016 normal heights, a
+//! compound CRS) gets the geoid undulation of its grid at each tile origin through PROJ, or the
+//! user's `--height-offset` / `--heights-as-is`; without a grid and without a choice the tileset
+//! is refused (docs/decisions.md#geographic-crss-and-vertical-datums-of-buildings-issue-41).
+//! What was done is recorded in `asset.extras.heights` and each tile's `extras`. Each tile's
 //! bounding box is the box of its vertices in the tile frame; the root's is the ECEF axis-aligned
 //! box around the children's boxes.
 
@@ -140,6 +144,71 @@ fn geodetic_to_ecef(lon_deg: f64, lat_deg: f64, h: f64) -> [f64; 3] {
     [(n + h) * lat.cos() * lon.cos(), (n + h) * lat.cos() * lon.sin(), (n * (1.0 - e2) + h) * lat.sin()]
 }
 
+/// How the glb heights become ellipsoidal heights (h = H + offset).
+#[derive(Debug, Clone, PartialEq)]
+pub enum Heights {
+    /// The geoid grid PROJ has for the CRS's height system; refused where there is none. A CRS
+    /// without a vertical part keeps its heights (taken as ellipsoidal).
+    Auto,
+    /// `--geoid GRID`: this grid's undulation N at each tile origin (h = H + N).
+    Geoid(String),
+    /// `--height-offset M`: h = H + M everywhere.
+    Offset(f64),
+    /// `--heights-as-is`: h = H, whatever the CRS says.
+    AsIs,
+}
+
+/// The geoid undulation of `grid` at a position in degrees, by a PROJ pipeline (vgridshift adds
+/// the grid value to a zero height: h = H + N). Fails when PROJ cannot open the grid.
+pub fn geoid_undulation(grid: &str, lon: f64, lat: f64) -> Result<f64, String> {
+    let def = format!(
+        "+proj=pipeline +step +proj=unitconvert +xy_in=deg +xy_out=rad +step +proj=vgridshift +grids={grid} +multiplier=1 +step +proj=axisswap +order=3,2,1"
+    );
+    let p = proj::Proj::new(&def).map_err(|e| format!("PROJ cannot open the geoid grid '{grid}': {e}"))?;
+    let (n, _) = p.convert((lon, lat)).map_err(|e| format!("geoid grid '{grid}' has no value at ({lon}, {lat}): {e}"))?;
+    if !n.is_finite() || n.abs() > 200.0 {
+        return Err(format!("geoid grid '{grid}' gives {n} m at ({lon}, {lat}): not a geoid undulation"));
+    }
+    Ok(n)
+}
+
+/// The offset (m) that makes the heights of `crs` ellipsoidal at the tile origin (longitude,
+/// latitude), and what was done, for the tileset's `extras`.
+fn height_offset(heights: &Heights, crs_names: &[&str], uri: &str, lon: f64, lat: f64) -> Result<(f64, Value), TilingError> {
+    let vertical = crs_names.iter().find_map(|c| citygml_io::crs::vertical_part(c));
+    let named = vertical.as_ref().map(|v| v.to_string());
+    match heights {
+        Heights::Offset(m) => Ok((*m, json!({"method": "offset", "offset_m": m, "vertical": named}))),
+        Heights::AsIs => Ok((0.0, json!({"method": "as-is", "vertical": named}))),
+        Heights::Geoid(grid) => {
+            let n = geoid_undulation(grid, lon, lat).map_err(|e| TilingError::Usage(format!("--geoid: {e}")))?;
+            Ok((n, json!({"method": "geoid", "grid": grid, "undulation_m": n, "vertical": named})))
+        }
+        Heights::Auto => {
+            let Some(v) = vertical else {
+                return Ok((0.0, json!({"method": "as-is", "vertical": null, "why": "the CRS names no height system: heights taken as ellipsoidal"})));
+            };
+            let choose = "give --geoid GRID (a PROJ geoid grid file), --height-offset M (h = H + M, e.g. the geoid undulation) or --heights-as-is";
+            if v.unit_m != 1.0 {
+                return Err(TilingError::Usage(format!("{uri}: heights are {v}, not metres: convert them first, or {choose}")));
+            }
+            let mut tried = Vec::new();
+            for grid in &v.grids {
+                match geoid_undulation(grid, lon, lat) {
+                    Ok(n) => return Ok((n, json!({"method": "geoid", "grid": grid, "undulation_m": n, "vertical": v.to_string()}))),
+                    Err(_) => tried.push(*grid),
+                }
+            }
+            let looked = if tried.is_empty() {
+                "no public geoid grid is known to geofit for it".to_string()
+            } else {
+                format!("no geoid grid for it is installed ({} not found by PROJ)", tried.join(", "))
+            };
+            Err(TilingError::Usage(format!("{uri}: heights are {v} (CRS {}), not ellipsoidal; {looked}: {choose}", crs_names[crs_names.len() - 1])))
+        }
+    }
+}
+
 /// The tile-frame → ECEF affine map at `origin` (column-major 4×4).
 pub fn enu_like_transform(crs: &str, origin: [f64; 3], height_offset: f64) -> Result<M4, TilingError> {
     let p = proj::Proj::new_known_crs(crs, "EPSG:4326", None)
@@ -167,20 +236,35 @@ pub struct ContentTile {
     pub extent: GlbExtent,
 }
 
+/// Longitude, latitude (degrees) of a point of `crs` (PROJ's spelling).
+fn lon_lat(crs: &str, e: f64, n: f64) -> Result<(f64, f64), TilingError> {
+    let p = proj::Proj::new_known_crs(crs, "EPSG:4326", None)
+        .map_err(|err| TilingError::Usage(format!("PROJ cannot transform from CRS '{crs}' to geographic coordinates ({err}): give the CRS the glb are in, e.g. --crs EPSG:25832")))?;
+    p.convert((e, n)).map_err(|err| TilingError::Usage(format!("'{crs}': ({e}, {n}) has no geographic position: {err}")))
+}
+
 /// The tileset: a root with one leaf per content tile (refine ADD: every building is in exactly
 /// one tile), geometric error 0 at the leaves and the root box diagonal at the root.
-pub fn tileset(tiles: &[ContentTile], crs_override: Option<&str>, height_offset: f64, generator: &str) -> Result<Value, TilingError> {
+pub fn tileset(tiles: &[ContentTile], crs_override: Option<&str>, heights: &Heights, generator: &str) -> Result<Value, TilingError> {
     if tiles.is_empty() {
         return Err(TilingError::Usage("no glb content to put in a tileset".into()));
     }
     let (mut lo, mut hi) = ([f64::MAX; 3], [f64::MIN; 3]);
     let mut children = Vec::new();
+    let mut record: Option<Value> = None;
     for t in tiles {
         // the glb records the source's srsName (an AdV URN for German data): PROJ's spelling of it
-        let crs = crs_override.map(str::to_string).or_else(|| t.extent.crs.as_deref().map(citygml_io::crs::proj_crs)).ok_or_else(|| {
+        let crs = crs_override.or(t.extent.crs.as_deref()).map(citygml_io::crs::proj_crs).ok_or_else(|| {
             TilingError::Usage(format!("{}: the glb records no CRS; give one (e.g. EPSG:25832)", t.uri))
         })?;
-        let m = enu_like_transform(&crs, t.extent.origin, height_offset)?;
+        // the height system: --crs's when it names one, else the one the glb records
+        let names: Vec<&str> = crs_override.into_iter().chain(t.extent.crs.as_deref()).collect();
+        let (lon, lat) = lon_lat(&crs, t.extent.origin[0], t.extent.origin[1])?;
+        let (offset, how) = height_offset(heights, &names, &t.uri, lon, lat)?;
+        if record.is_none() {
+            record = Some(how);
+        }
+        let m = enu_like_transform(&crs, t.extent.origin, offset)?;
         let (a, b) = (t.extent.min, t.extent.max);
         let centre = [0, 1, 2].map(|k| (a[k] + b[k]) / 2.0);
         let half = [0, 1, 2].map(|k| (b[k] - a[k]) / 2.0);
@@ -197,14 +281,14 @@ pub fn tileset(tiles: &[ContentTile], crs_override: Option<&str>, height_offset:
             "transform": m,
             "geometricError": 0.0,
             "content": {"uri": t.uri},
-            "extras": {"tile": id, "origin": t.extent.origin, "crs": crs},
+            "extras": {"tile": id, "origin": t.extent.origin, "crs": crs, "height_offset_m": offset},
         }));
     }
     let centre = [0, 1, 2].map(|k| (lo[k] + hi[k]) / 2.0);
     let half = [0, 1, 2].map(|k| (hi[k] - lo[k]) / 2.0);
     let diagonal = 2.0 * half.iter().map(|h| h * h).sum::<f64>().sqrt();
     Ok(json!({
-        "asset": {"version": "1.1", "generator": generator},
+        "asset": {"version": "1.1", "generator": generator, "extras": {"heights": record}},
         "geometricError": diagonal,
         "root": {
             "boundingVolume": {"box": [centre[0], centre[1], centre[2], half[0], 0.0, 0.0, 0.0, half[1], 0.0, 0.0, 0.0, half[2]]},

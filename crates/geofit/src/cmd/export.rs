@@ -157,6 +157,7 @@ fn parse_origin(s: &str) -> Result<Option<[f64; 3]>, CliError> {
 }
 
 pub fn run(args: Args, config: &Config) -> CmdResult {
+    citygml_io::crs::quiet_proj();
     let input = Input::from_arg(&args.input);
     let name = input.display_name();
     let output = Output::from_arg(args.output.as_deref());

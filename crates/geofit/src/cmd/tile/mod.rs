@@ -29,7 +29,7 @@ Example (what workflows/Snakefile runs; make -j, a Slurm array or GNU parallel r
   geofit heal tiles/x1296_y22916.gml -o healed/x1296_y22916.gml --report healed/x1296_y22916.heal.json
   geofit export healed/x1296_y22916.gml -o glb/x1296_y22916.glb
   geofit tile report healed/*.heal.json reports/*.validate.json -o report.json
-  geofit tile tileset glb/*.glb -o tileset.json
+  geofit tile tileset glb/*.glb --height-offset 46.5 -o tileset.json   # NRW: DHHN2016 heights
   geofit tile plan dem.vrt --tile-size 1024 --halo 2 -o plan.jsonl
   geofit fit dem.vrt --plan plan.jsonl --tile c3_r1 --max-error 0.5 -o fit/c3_r1.tmb
   geofit tile stitch dem.vrt --plan plan.jsonl --tile c3_r1 --meshes fit/{id}.tmb -o st/c3_r1.tmb
@@ -46,6 +46,14 @@ clipped to the raster; only the size and geotransform are read. `fit --plan --ti
 core window; `stitch` makes it C0 with its neighbours' fits along every seam (reading its halo:
 plan with --halo 2 or more) and re-checks --max-error on every valid cell; `seams` reports the
 gap and the normal-angle jump per seam (exit 1 when a gap exceeds --max-gap-relative).
+
+Tileset heights: 3D Tiles wants ellipsoidal heights (m). A CRS that names a height system (NRW's
+urn:adv:crs:ETRS89_UTM32*DE_DHHN2016_NH*GCG2016, a compound CRS such as EPSG:25832+5773) gets the
+undulation N of its PROJ geoid grid at each tile origin (h = H + N; EGM96, EGM2008, NAP, GEOID18
+... where the grid is installed); without the grid it is refused (exit 2) unless --geoid GRID,
+--height-offset M (h = H + M) or --heights-as-is states the choice. The tileset records it in
+asset.extras.heights and each tile's extras.height_offset_m. A CRS without a height system keeps
+its heights.
 
 Exit codes: 0 written; 1 stitch stopped before the tolerance held / a seam gap over the bound;
 2 bad options or a tile not in the plan; 3 unreadable input; 4 I/O.";

@@ -16,15 +16,24 @@ pub struct TilesetArgs {
     /// CRS of the glb coordinates for PROJ (default: the CRS each glb records).
     #[arg(long)]
     pub crs: Option<String>,
-    /// Added to heights to make them ellipsoidal (e.g. the geoid undulation, m).
-    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
-    pub height_offset: f64,
+    /// Heights become ellipsoidal as h = H + M (M in metres, e.g. the geoid undulation: ~46.5 m
+    /// in NRW). Needed for a CRS with a height system whose geoid grid is not installed.
+    #[arg(long, value_name = "M", allow_hyphen_values = true, conflicts_with_all = ["heights_as_is", "geoid"])]
+    pub height_offset: Option<f64>,
+    /// Take the heights as ellipsoidal, whatever height system the CRS names.
+    #[arg(long, conflicts_with = "geoid")]
+    pub heights_as_is: bool,
+    /// A PROJ geoid grid (file name in PROJ's search path, or a path): h = H + N(grid) at each
+    /// tile origin.
+    #[arg(long, value_name = "GRID")]
+    pub geoid: Option<String>,
     /// tileset.json path (content URIs are relative to its directory).
     #[arg(short, long)]
     pub output: String,
 }
 
 pub(super) fn run(a: TilesetArgs, config: &Config) -> CmdResult {
+    citygml_io::crs::quiet_proj();
     let output = Output::from_arg(Some(&a.output));
     output.check_target()?;
     let out_dir = match Path::new(&a.output).parent() {
@@ -44,7 +53,14 @@ pub(super) fn run(a: TilesetArgs, config: &Config) -> CmdResult {
         tiles.push(tiling::tileset::ContentTile { uri, extent });
     }
     let generator = format!("geofit {}", env!("CARGO_PKG_VERSION"));
-    let t = tiling::tileset::tileset(&tiles, a.crs.as_deref(), a.height_offset, &generator).map_err(tiling_error)?;
+    let heights = match (a.height_offset, a.heights_as_is, &a.geoid) {
+        (Some(m), ..) if !m.is_finite() => return Err(CliError::usage(format!("--height-offset must be a finite number of metres, got {m}"))),
+        (Some(m), ..) => tiling::tileset::Heights::Offset(m),
+        (None, true, _) => tiling::tileset::Heights::AsIs,
+        (None, false, Some(g)) => tiling::tileset::Heights::Geoid(g.clone()),
+        (None, false, None) => tiling::tileset::Heights::Auto,
+    };
+    let t = tiling::tileset::tileset(&tiles, a.crs.as_deref(), &heights, &generator).map_err(tiling_error)?;
     let text = serde_json::to_string_pretty(&t).map_err(|e| CliError::internal(format!("tileset: {e}")))? + "\n";
     output.write_bytes(text.as_bytes())?;
     if !config.quiet {

@@ -169,6 +169,7 @@ fn document_error(e: DocumentError) -> CliError {
 
 pub fn run(args: Args, config: &Config) -> CmdResult {
     let started = Instant::now();
+    citygml_io::crs::quiet_proj();
     let options = check_opts(&args)?;
     if !file_batch::is_batch(&args.inputs) {
         return run_one(&args, options, config);
