@@ -3,12 +3,11 @@
 
 use clap::{Args as ClapArgs, ValueEnum};
 use serde::Serialize;
-
 use std::path::Path;
 
 use raster_io::crs::{Crs, GridCrs, GridCrsError};
-use raster_io::Raster;
 use raster_io::point_batches::BoundsXy;
+use raster_io::{PointFormat, Raster};
 use raster_proc::grid::GridSpec;
 use raster_proc::point_input::{open_file, read_file, read_text, TextFacts};
 use raster_proc::splat::{splat_points, SplatAccumulator, SplatKernel};
@@ -43,15 +42,17 @@ The grid's cell edges lie on multiples of --cell and cover every point, unless -
 the outer edges exactly. Text: x y z per line, or a header naming the columns (x/easting/lon,
 y/northing/lat, z/elevation/depth/value; values as they are: a depth stays positive down).
 The separator (, ; tab blanks) comes from the first line, the decimal mark from the first
-number with one, unless --sep/--decimal give them; where ; tab or blanks separate, a comma is
-a decimal comma:
-  $ printf 'Rechtswert;Hochwert;Tiefe\r\n341000,5;5724000,25;12,5\r\n...' > lot.csv
-  $ geofit rasterize lot.csv --cell 1 -o lot.tif --s-srs EPSG:25832
-  geofit: read 5200 points from lot.csv (';' separated (detected), decimal comma, ...)
-Exit 3 naming the line: a row whose field count differs from the header's (or first row's), a
-NaN or inf value, thousands separators (1.234,5), whole numbers split by commas that may be
+number with one (or --sep, --decimal); where ; tab or blanks separate, a comma is decimal:
+  $ printf 'Rechtswert;Hochwert;Tiefe\\r\\n341000,5;5724000,25;12,5\\r\\n' > lot.csv
+  $ printf '341010,5;5724000,25;13\\r\\n341000,5;5724010,25;12,75\\r\\n' >> lot.csv
+  $ geofit rasterize lot.csv --cell 1 -o lot.tif --s-srs EPSG:25832 --method tin
+  geofit: read 3 points from lot.csv (';' separated (detected), decimal comma, x y z = columns
+  Rechtswert, Hochwert, Tiefe)
+  geofit: 11 x 11 cells of 1, 55 with a value (TIN, 3 vertices)
+Exit 3 naming the line: a row whose field count differs from the header's (or first row's),
+a NaN or inf value, thousands separators (1.234,5), whole numbers split by commas that may be
 decimal commas (--sep , reads them as fields). Exit 2: a cell meant as metres on points in
-degrees (a geographic --s-srs or lon/lat columns; the UTM zone for --t-srs is named).";
+degrees (geographic --s-srs or lon/lat columns), naming the UTM zone for --t-srs.";
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum, Serialize)]
 #[serde(rename_all = "kebab-case")]
@@ -169,7 +170,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         if !p.exists() {
             return Err(CliError::unreadable(format!("{}: no such file", p.display())));
         }
-        if raster_io::PointFormat::from_path(p) == raster_io::PointFormat::Las && (args.sep.is_some() || args.decimal.is_some()) {
+        if PointFormat::from_path(p) == PointFormat::Las && (args.sep.is_some() || args.decimal.is_some()) {
             return Err(CliError::usage("--sep and --decimal are for XYZ/CSV text, not LAS/LAZ"));
         }
     }
