@@ -122,19 +122,19 @@ pub fn read_raster_arg_typed(arg: &str) -> Result<(Raster, String, SampleType), 
 /// Which band of a raster input a command reads (docs/decisions.md#raster-units-bands-and-no-data-issue-41).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Band {
-    /// The only band; a file with several is refused (exit 2) naming the count and `-b N`.
+    /// The heights' band: the only one, band 1 of two (elevation and uncertainty); a file with
+    /// more is refused (exit 2) naming the count and `-b N`.
     Only,
     /// `-b N` (1-based, as GDAL counts).
     Given(usize),
     /// Band 1 whatever the count (`--like`: the grid and its no-data cells).
     First,
-    /// Band 1 when band 2 is the uncertainty layer the command reads (or names itself so).
-    ElevationOfSurvey,
 }
 
-/// The band `choice` picks in the file at `path`: a multi-band file without `-b` is refused
-/// (a 4-band Terrain-RGB PNG is not its red band), unless band 1 is a survey's elevation (a
-/// BAG: bands "elevation" and "uncertainty").
+/// The band `choice` picks in the file at `path`: a file of three or more bands without `-b`
+/// is refused (a 4-band Terrain-RGB PNG is not its red band), unless band 1 is a survey's
+/// elevation (a BAG: bands "elevation" and "uncertainty"). Two bands are elevation and
+/// uncertainty, as `--max-error-from-uncertainty` reads them (or grey and alpha): band 1.
 pub fn choose_band(path: &std::path::Path, name: &str, choice: Band) -> Result<usize, CliError> {
     let bands = raster_io::bands(path).map_err(raster_err)?;
     let n = bands.len();
@@ -144,7 +144,7 @@ pub fn choose_band(path: &std::path::Path, name: &str, choice: Band) -> Result<u
         Band::Given(b) if b == 0 || b > n => Err(CliError::usage(format!("-b {b}: {name} has {n} band(s) (1 to {n})"))),
         Band::Given(b) => Ok(b),
         Band::First => Ok(1),
-        _ if n <= 1 || survey || (choice == Band::ElevationOfSurvey && n == 2) => Ok(1),
+        _ if n <= 2 || survey => Ok(1),
         _ => {
             let what: Vec<String> = bands.iter().map(|b| if b.description.is_empty() { b.color.clone() } else { b.description.clone() }).collect();
             Err(CliError::usage(format!("{name} has {n} bands ({}): choose the heights with -b N (GDAL's band number)", what.join(", "))))

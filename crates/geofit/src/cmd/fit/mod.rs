@@ -106,7 +106,7 @@ pub struct Args {
     #[arg(long, value_name = "UNIT")]
     pub z_unit: Option<String>,
     /// The band that holds the heights (GDAL's numbering, from 1); needed when the raster has
-    /// several bands (a BAG's elevation, with its uncertainty band, needs none).
+    /// three or more (of two, band 1 is the elevation and band 2 its uncertainty, as in a BAG).
     #[arg(short = 'b', long = "band", value_name = "N")]
     pub band: Option<usize>,
     /// Per-cell tolerance from the survey's uncertainty layer (the band named "uncertainty", as in
