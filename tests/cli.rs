@@ -131,11 +131,11 @@ fn closed_stdout_is_a_write_failure_and_empty_input_is_named() {
     // stdout on /dev/null is not closed: still a success
     let o = std::process::Command::new(bin).args(["info", gml.to_str().unwrap()]).stdout(std::process::Stdio::null()).output().unwrap();
     assert_eq!(o.status.code(), Some(0));
-    for input in [&b""[..], b"\n  \n"] {
+    for (input, says) in [(&b""[..], "<stdin>: no input (the previous stage wrote nothing)"), (b"\n  \n", "<stdin>: the input is empty")] {
         let o = common::run(&["info", "-"], Some(input));
         let e = String::from_utf8_lossy(&o.stderr);
         assert_eq!(common::code(&o), 3, "{e}");
-        assert!(e.contains("<stdin>: the input is empty") && !e.contains("no points"), "{e}");
+        assert!(e.contains(says) && !e.contains("no points"), "{e}");
     }
 }
 

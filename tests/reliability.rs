@@ -8,7 +8,7 @@
 //!   of 4·10⁹ entries, `/dev/zero` and an endless point stream end with exit 3 and a message;
 //! - inputs read whole stop at a byte budget (`info /dev/zero`, an endless stdin, a big file);
 //! - errors quote at most ~200 bytes of the input;
-//! - `info` with stdout closed fails, `info -` on empty stdin says the input is empty;
+//! - `info` with stdout closed fails, `info -` on empty stdin says there is no input;
 //! - temporaries of dead processes are removed by the next run in the directory;
 //! - `validate` with XSD refuses an element with 100,000 attributes in time;
 //! - `info` and `validate --no-xsd` of a 1 GiB CityGML tile stay under 200 MiB; `rasterize`
@@ -228,8 +228,8 @@ fn point_headers_are_checked_against_the_file_size() {
     assert!(v.to_string().contains('3'), "{v}");
 }
 
-/// `/dev/zero` has no newline: the text reader gave it all the memory there was. A line
-/// longer than 1 MiB now ends the read (exit 3); an endless stream of valid points stops at the
+/// `/dev/zero` has no newline: the text reader gave it all the memory there was. The device is
+/// now refused by name, and a line longer than 1 MiB (NUL bytes on stdin) ends the read (exit 3); an endless stream of valid points stops at the
 /// point budget (here lowered with GEOFIT_MAX_POINTS). The old raster stays.
 #[test]
 fn endless_inputs_end_with_a_message() {
@@ -238,7 +238,9 @@ fn endless_inputs_end_with_a_message() {
     let old = old_output(&out);
     let t = Instant::now();
     let o = common::run(&["-q", "rasterize", "/dev/zero", "--cell", "1", "-o", s(&out)], None);
-    fails(&o, 3, &["/dev/zero:1:", "longer than 1 MiB"]);
+    fails(&o, 3, &["/dev/zero", "not a data file"]);
+    let o = common::run(&["-q", "rasterize", "-", "--cell", "1", "-o", s(&out)], Some(&vec![0u8; 3 << 20]));
+    fails(&o, 3, &["<stdin>:1:", "longer than 1 MiB"]);
     assert!(t.elapsed() < Duration::from_secs(20));
     let points: String = (0..5000).map(|i| format!("{} {} 1\n", i % 70, i / 70)).collect();
     let mut cmd = common::geofit();
@@ -256,7 +258,8 @@ fn endless_inputs_end_with_a_message() {
 }
 
 /// Commands that read an input whole (CityGML, popa3d, OBJ) grew without limit on a device or
-/// an endless stdin (`info /dev/zero`). They now stop at the byte budget (available memory, or
+/// an endless stdin (`info /dev/zero`). A memory device is now refused by name at once, and an
+/// endless stdin stops at the byte budget (available memory, or
 /// GEOFIT_MAX_INPUT_BYTES as here); a regular file over the budget is refused by its size before
 /// it is read. The old output stays.
 #[test]
@@ -281,7 +284,9 @@ fn inputs_read_whole_stop_at_the_byte_budget() {
     };
     let t = Instant::now();
     let o = run_with(&["info", "/dev/zero"], None);
-    fails(&o, 3, &["/dev/zero", "more than 1000000 bytes set by GEOFIT_MAX_INPUT_BYTES"]);
+    fails(&o, 3, &["/dev/zero", "not a data file"]);
+    let o = run_with(&["info", "-"], Some(vec![0u8; 3_000_000]));
+    fails(&o, 3, &["<stdin>", "more than 1000000 bytes set by GEOFIT_MAX_INPUT_BYTES"]);
     assert!(t.elapsed() < Duration::from_secs(20));
     let endless_xml = b"<!-- a comment that never ends ".iter().copied().chain(std::iter::repeat(b'x').take(3_000_000)).collect();
     let o = run_with(&["-q", "heal", "-", "-o", s(&out)], Some(endless_xml));
@@ -316,11 +321,11 @@ fn errors_quote_at_most_200_bytes_of_the_input() {
     // T-mesh XML: a degree that is not a number
     let t = d.join("m.tmesh");
     std::fs::write(&t, format!("<?xml version=\"1.0\"?>\n<tmesh xmlns=\"{}\" degree=\"{huge}\"/>\n", tspline_namespace())).unwrap();
-    let (out, tif) = (d.join("out.gml"), d.join("out.tif"));
-    let (old, old_tif) = (old_output(&out), old_output(&tif));
+    let (out, tif, popa) = (d.join("out.gml"), d.join("out.tif"), d.join("out.popa3d"));
+    let (old, old_tif, old_popa) = (old_output(&out), old_output(&tif), old_output(&popa));
     let cases: [(&[&str], &str); 5] = [
         (&["info", s(&t)], "m.tmesh"),
-        (&["adjust", s(&p), "-o", s(&out)], "m.popa3d"),
+        (&["adjust", s(&p), "-o", s(&popa)], "m.popa3d"),
         (&["-q", "rasterize", s(&x), "--cell", "1", "-o", s(&tif)], "p.xyz:2"),
         (&["info", s(&g)], "c.gml"),
         (&["-q", "heal", s(&g), "-o", s(&out)], "c.gml"),
@@ -336,6 +341,7 @@ fn errors_quote_at_most_200_bytes_of_the_input() {
     }
     assert_eq!(std::fs::read(&out).unwrap(), old);
     assert_eq!(std::fs::read(&tif).unwrap(), old_tif);
+    assert_eq!(std::fs::read(&popa).unwrap(), old_popa);
 }
 
 /// The T-mesh XML namespace, read from the format's source so the test follows it.
@@ -362,7 +368,7 @@ fn info_reports_a_closed_stdout_and_an_empty_input() {
         .unwrap();
     fails(&o, 4, &["stdout is closed"]);
     let o = common::run(&["info", "-"], Some(b""));
-    let e = fails(&o, 3, &["<stdin>: the input is empty"]);
+    let e = fails(&o, 3, &["<stdin>: no input (the previous stage wrote nothing)"]);
     assert!(!e.contains("no points"), "{e}");
 }
 

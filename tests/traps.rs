@@ -1,3 +1,204 @@
-//! Traps (issue 41): traps.
+//! Traps (issue 41): output paths, file kinds and pipes. Each case builds what a user really
+//! sends and checks one of two things: the answer equals an independent computation, or the
+//! exit is 2/3 with one stderr line, no file at `-o`, and every input byte-identical after.
+//! The other trap suites: `traps_points` (point text), `traps_raster` (units, bands, no-data),
+//! `traps_buildings` (geographic CRSs, vertical datums).
 
 mod common;
+
+use std::path::{Path, PathBuf};
+
+use common::{code, run};
+
+/// A 5 × 4 ESRI ASCII grid, metres: a small raster every raster command reads.
+const GRID: &str = "ncols 5\nnrows 4\nxllcorner 1000\nyllcorner 2000\ncellsize 10\nNODATA_value -9999\n\
+1 2 3 4 5\n2 3 4 5 6\n3 4 5 6 7\n4 5 6 7 8\n";
+
+const GML: &str = "citygml/v2/FZK-Haus-LoD2-KIT-IAI-KHH-B36-V1.gml";
+
+fn write(dir: &Path, name: &str, bytes: &[u8]) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, bytes).unwrap();
+    p
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// A refusal: `exit`, exactly one stderr line containing every `words`, nothing at `out`
+/// (when given), and every file in `untouched` with the bytes it had.
+#[track_caller]
+fn refused(args: &[&str], stdin: Option<&[u8]>, exit: i32, words: &[&str], out: Option<&Path>, untouched: &[&Path]) {
+    let before: Vec<Vec<u8>> = untouched.iter().map(|p| std::fs::read(p).unwrap()).collect();
+    let o = run(args, stdin);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(code(&o), exit, "{args:?}: stderr {err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "{args:?}: one line, got {err}");
+    for w in words {
+        assert!(err.contains(w), "{args:?}: '{w}' missing from: {err}");
+    }
+    if let Some(out) = out {
+        assert!(!out.exists() || untouched.contains(&out), "{args:?}: {} was written", out.display());
+    }
+    for (p, b) in untouched.iter().zip(before) {
+        assert_eq!(std::fs::read(p).unwrap(), b, "{args:?}: {} changed", p.display());
+    }
+}
+
+#[test]
+fn an_output_naming_its_input_is_refused_and_the_input_kept() {
+    let dir = common::tempdir();
+    let grid = write(dir.path(), "g2.asc", GRID.as_bytes());
+    refused(&["fit", s(&grid), "--max-error", "5", "-o", s(&grid)], None, 2, &["names the input", "g2.asc"], None, &[&grid]);
+    // a hard link and a symlink to the input are the same file under another name
+    let hard = dir.path().join("hard.tmesh");
+    std::fs::hard_link(&grid, &hard).unwrap();
+    refused(&["fit", s(&grid), "--max-error", "5", "-o", s(&hard)], None, 2, &["same file"], None, &[&grid, &hard]);
+    let link = dir.path().join("link.tmesh");
+    std::os::unix::fs::symlink(&grid, &link).unwrap();
+    refused(&["fit", s(&grid), "--max-error", "5", "-o", s(&link)], None, 2, &["same file"], None, &[&grid]);
+    assert!(std::fs::symlink_metadata(&link).unwrap().file_type().is_symlink(), "the symlink itself stays");
+    // another output option naming the input
+    refused(&["fit", s(&grid), "--max-error", "5", "--report", s(&grid)], None, 2, &["--report"], None, &[&grid]);
+    // two outputs naming one file
+    let out = dir.path().join("out.tmesh");
+    refused(&["fit", s(&grid), "--max-error", "5", "-o", s(&out), "--report", s(&out)], None, 2, &["name one file"], Some(&out), &[&grid]);
+}
+
+#[test]
+fn a_template_named_as_output_is_refused() {
+    let Some(gml) = common::fixture(GML) else { return };
+    let dir = common::tempdir();
+    let copy = write(dir.path(), "house.gml", &std::fs::read(&gml).unwrap());
+    let popa = dir.path().join("house.popa3d");
+    let o = run(&["citygml2popa3d", s(&copy), "-o", s(&popa)], None);
+    assert_eq!(code(&o), 0, "{}", String::from_utf8_lossy(&o.stderr));
+    refused(&["popa3d2citygml", s(&popa), "--template", s(&copy), "-o", s(&copy)], None, 2, &["(template)", "names the input"], None, &[&copy, &popa]);
+}
+
+#[test]
+fn an_output_extension_of_another_format_is_refused() {
+    let dir = common::tempdir();
+    let grid = write(dir.path(), "g.asc", GRID.as_bytes());
+    for ext in ["tif", "glb", "asc"] {
+        let out = dir.path().join(format!("x.{ext}"));
+        refused(&["fit", s(&grid), "--max-error", "5", "-o", s(&out)], None, 2, &["T-mesh", ".tmesh", ".tmb"], Some(&out), &[&grid]);
+    }
+    let Some(gml) = common::fixture(GML) else { return };
+    let glb = dir.path().join("h.glb");
+    refused(&["heal", s(&gml), "-o", s(&glb)], None, 2, &["CityGML", ".gml"], Some(&glb), &[&gml]);
+    let p = dir.path().join("p.gml");
+    refused(&["citygml2popa3d", s(&gml), "-o", s(&p)], None, 2, &["popa3d", ".popa3d"], Some(&p), &[&gml]);
+}
+
+#[test]
+fn the_right_extension_or_none_still_writes() {
+    let dir = common::tempdir();
+    let grid = write(dir.path(), "g.asc", GRID.as_bytes());
+    for name in ["ok.tmesh", "ok.TMB", "noext"] {
+        let out = dir.path().join(name);
+        let o = run(&["fit", s(&grid), "--max-error", "5", "-o", s(&out)], None);
+        assert_eq!(code(&o), 0, "{name}: {}", String::from_utf8_lossy(&o.stderr));
+        assert!(out.exists(), "{name} written");
+    }
+    // /dev/null is no input's replacement, and stays a device
+    let o = run(&["fit", s(&grid), "--max-error", "5", "-o", "/dev/null"], None);
+    assert_eq!(code(&o), 0, "{}", String::from_utf8_lossy(&o.stderr));
+}
+
+#[test]
+fn a_file_of_another_kind_names_the_command_that_reads_it() {
+    let Some(gml) = common::fixture(GML) else { return };
+    let dir = common::tempdir();
+    let grid = write(dir.path(), "grid.asc", GRID.as_bytes());
+    let out = dir.path().join("out.tif");
+    // a raster given to eval, which reads T-meshes
+    refused(&["eval", s(&grid), "-o", s(&out)], None, 3, &["ESRI ASCII grid raster", "T-mesh", "fit"], Some(&out), &[&grid]);
+    // CityGML given to rasterize, which reads points
+    refused(&["rasterize", s(&gml), "--cell", "1", "-o", s(&out)], None, 3, &["CityGML", "point text", "validate"], Some(&out), &[&gml]);
+    // CityGML given to fit
+    let tm = dir.path().join("x.tmesh");
+    refused(&["fit", s(&gml), "--max-error", "1", "-o", s(&tm)], None, 3, &["CityGML", "raster"], Some(&tm), &[&gml]);
+    // a popa3d model given to validate
+    let popa = dir.path().join("h.popa3d");
+    assert_eq!(code(&run(&["citygml2popa3d", s(&gml), "-o", s(&popa)], None)), 0);
+    refused(&["validate", s(&popa)], None, 3, &["popa3d model", "adjust"], None, &[&popa]);
+}
+
+#[test]
+fn directories_empty_files_and_devices_are_named() {
+    let dir = common::tempdir();
+    let out = dir.path().join("x.tmesh");
+    let sub = dir.path().join("survey");
+    std::fs::create_dir(&sub).unwrap();
+    refused(&["fit", s(&sub), "--max-error", "1", "-o", s(&out)], None, 3, &["is a directory"], Some(&out), &[]);
+    let empty = write(dir.path(), "empty.tif", b"");
+    refused(&["fit", s(&empty), "--max-error", "1", "-o", s(&out)], None, 3, &["empty (0 bytes)", "earlier step"], Some(&out), &[&empty]);
+    // README: `geofit info /dev/zero` ends with exit 3, at once, not after gigabytes
+    let started = std::time::Instant::now();
+    refused(&["info", "/dev/zero"], None, 3, &["/dev/zero", "not a data file"], None, &[]);
+    assert!(started.elapsed().as_secs() < 10, "info /dev/zero took {:?}", started.elapsed());
+}
+
+#[test]
+fn cityjson_gzip_and_glb_inputs_say_what_to_do() {
+    let dir = common::tempdir();
+    let out = dir.path().join("h.gml");
+    let cj = write(dir.path(), "x.city.json", br#"{"type": "CityJSON", "version": "2.0", "CityObjects": {}, "vertices": []}"#);
+    for command in ["heal", "validate", "citygml2popa3d", "info"] {
+        let mut args = vec![command, s(&cj)];
+        if command == "heal" {
+            args.extend(["-o", s(&out)]);
+        }
+        refused(&args, None, 3, &["CityJSON", "citygml-tools"], Some(&out), &[&cj]);
+    }
+    let Some(gml) = common::fixture(GML) else { return };
+    let gz = dir.path().join("house.gml.gz");
+    let o = std::process::Command::new("sh").arg("-c").arg(format!("gzip -c '{}' > '{}'", gml.display(), gz.display())).status().unwrap();
+    assert!(o.success());
+    refused(&["heal", s(&gz), "-o", s(&out)], None, 3, &["gzip", "gunzip -c"], Some(&out), &[&gz]);
+    let glb = write(dir.path(), "m.glb", b"glTF\x02\0\0\0\x0c\0\0\0");
+    refused(&["validate", s(&glb)], None, 3, &["glTF", "does not read it"], None, &[&glb]);
+}
+
+#[test]
+fn an_empty_stdin_says_the_previous_stage_wrote_nothing() {
+    for args in [&["adjust", "-"][..], &["heal", "-"], &["validate", "-"], &["eval", "-"], &["fit", "-", "--max-error", "1"]] {
+        refused(args, Some(b""), 3, &["no input (the previous stage wrote nothing)"], None, &[]);
+    }
+    // a failed first stage: the pipe's status is the first failure, and the next stage says why
+    let Some(_) = common::fixture(GML) else { return };
+    let dir = common::tempdir();
+    let o = common::bash_with_geofit(dir.path())
+        .args(["-c", "set -o pipefail; geofit citygml2popa3d missing.gml | geofit adjust - -o a.popa3d"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(3), "{err}");
+    assert!(err.contains("missing.gml") && err.contains("the previous stage wrote nothing"), "{err}");
+    assert!(!dir.path().join("a.popa3d").exists());
+}
+
+#[test]
+fn crlf_and_bom_citygml_reads_as_the_original() {
+    let Some(gml) = common::fixture(GML) else { return };
+    let dir = common::tempdir();
+    let text = std::fs::read_to_string(&gml).unwrap();
+    let windows = format!("\u{feff}{}", text.replace("\r\n", "\n").replace('\n', "\r\n"));
+    let crlf = write(dir.path(), "house-crlf.gml", windows.as_bytes());
+    let info = |p: &Path| {
+        let o = run(&["info", s(p), "--json"], None);
+        assert_eq!(code(&o), 0, "{}", String::from_utf8_lossy(&o.stderr));
+        let mut v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        v.as_object_mut().unwrap().remove("file");
+        v
+    };
+    assert_eq!(info(&crlf), info(&gml), "the same counts, envelope and CRS");
+    let findings = |p: &Path| {
+        let o = run(&["validate", s(p), "--json", "--no-xsd"], None);
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        (code(&o), v["findings"].as_array().map(|f| f.iter().map(|x| x["code"].clone()).collect::<Vec<_>>()))
+    };
+    assert_eq!(findings(&crlf), findings(&gml), "the same validation codes");
+}

@@ -42,7 +42,13 @@ impl Input {
     /// Opens the input for buffered streaming reads.
     pub fn open(&self) -> Result<Box<dyn BufRead>, CliError> {
         match self {
-            Input::Stdin => Ok(Box::new(BufReader::with_capacity(1 << 16, io::stdin()))),
+            Input::Stdin => {
+                let mut r = BufReader::with_capacity(1 << 16, io::stdin());
+                if r.fill_buf().map_err(|e| CliError::unreadable(format!("<stdin>: {e}")))?.is_empty() {
+                    return Err(no_input());
+                }
+                Ok(Box::new(r))
+            }
             Input::Path(p) => {
                 let f = File::open(p).map_err(|e| CliError::unreadable(format!("{}: {e}", p.display())))?;
                 Ok(Box::new(BufReader::with_capacity(1 << 16, f)))
@@ -87,6 +93,15 @@ impl Input {
         if !budget.allows(buf.len() as u64) {
             return Err(too_big());
         }
+        if buf.is_empty() && matches!(self, Input::Stdin) {
+            return Err(no_input());
+        }
         Ok(buf)
     }
+}
+
+/// An empty stdin: in a pipe (`citygml2popa3d IN | adjust -`) the stage before failed or wrote
+/// nothing, and saying so beats the reader's "1:1: not a popa3d document".
+fn no_input() -> CliError {
+    CliError::unreadable("<stdin>: no input (the previous stage wrote nothing)")
 }

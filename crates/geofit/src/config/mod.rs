@@ -1,11 +1,12 @@
 //! The one place every subcommand gets its stdin/stdout/file handling, progress and
 //! report output from (the xsv `Config` idea), so all commands behave alike: inputs
 //! (`input.rs`), atomic outputs (`output.rs`), progress (`progress.rs`), many-file runs
-//! (`batch.rs`), and stderr lines that never panic (here).
+//! (`batch.rs`), the checks of a command line's paths before the work (`paths.rs`), and stderr lines that never panic (here).
 
 mod batch;
 mod input;
 mod output;
+mod paths;
 mod progress;
 
 use std::io::{self, Write};

@@ -107,8 +107,10 @@ impl Output {
 const OUTPUT_OPTIONS: &[(&str, &str)] =
     &[("output", "-o"), ("report", "--report"), ("png", "--png"), ("hist", "--hist"), ("outliers_csv", "--outliers-csv"), ("vtk", "--vtk")];
 
-/// Checks every file output of the parsed command line before any work starts, so a typo in
-/// an output directory is a usage error (exit 2) at once, not a failure after a long fit.
+/// Checks every path of the parsed command line before any work starts, so a typo in an output
+/// directory is a usage error (exit 2) at once, not a failure after a long fit, an output that
+/// names an input or has another format's extension is refused (exit 2), and an input of a kind
+/// the command does not read is named (exit 3; see `paths`).
 pub fn check_output_args(matches: &clap::ArgMatches) -> Result<(), CliError> {
     let mut m = matches;
     while let Some((_, sub)) = m.subcommand() {
@@ -120,7 +122,9 @@ pub fn check_output_args(matches: &clap::ArgMatches) -> Result<(), CliError> {
             Output::from_arg(Some(path)).check_target_of(flag)?;
         }
     }
-    Ok(())
+    super::paths::check_outputs_are_not_inputs(matches, OUTPUT_OPTIONS)?;
+    super::paths::check_output_extension(matches)?;
+    super::paths::check_input_kinds(matches)
 }
 
 /// `--report -` puts the JSON report on stdout: refused before the work when the data goes
