@@ -202,3 +202,54 @@ fn crlf_and_bom_citygml_reads_as_the_original() {
     };
     assert_eq!(findings(&crlf), findings(&gml), "the same validation codes");
 }
+
+#[test]
+fn each_kind_given_to_the_wrong_command_names_the_right_one() {
+    let Some(gml) = common::fixture(GML) else { return };
+    let dir = common::tempdir();
+    let grid = write(dir.path(), "g.asc", GRID.as_bytes());
+    let tmesh = dir.path().join("g.tmesh");
+    assert_eq!(code(&run(&["fit", s(&grid), "--max-error", "5", "-o", s(&tmesh)], None)), 0);
+    let popa = dir.path().join("h.popa3d");
+    assert_eq!(code(&run(&["citygml2popa3d", s(&gml), "-o", s(&popa)], None)), 0);
+    // a popa3d model saved under a CityGML name, a LAS header, a raster under a points name
+    let popa_as_gml = write(dir.path(), "model.gml", &std::fs::read(&popa).unwrap());
+    let las = write(dir.path(), "cloud.las", b"LASF\0\0\0\0\x01\x02");
+    let grid_as_xyz = write(dir.path(), "grid.xyz", GRID.as_bytes());
+    let (tif, gml_out, popa_out, tm_out) = (dir.path().join("o.tif"), dir.path().join("o.gml"), dir.path().join("o.popa3d"), dir.path().join("o.tmesh"));
+    let glb = dir.path().join("o.glb");
+    let cases: &[(&[&str], &[&str], &Path)] = &[
+        (&["heal", s(&popa_as_gml), "-o", s(&gml_out)], &["popa3d model", "adjust, observe, popa3d2citygml"], &popa_as_gml),
+        (&["adjust", s(&gml), "-o", s(&popa_out)], &["CityGML", "citygml2popa3d"], &gml),
+        (&["fit", s(&tmesh), "--max-error", "1", "-o", s(&tm_out)], &["T-mesh", "eval, surface"], &tmesh),
+        (&["fit", s(&las), "--max-error", "1", "-o", s(&tm_out)], &["LAS/LAZ", "rasterize"], &las),
+        (&["rasterize", s(&grid_as_xyz), "--cell", "1", "-o", s(&tif)], &["ESRI ASCII grid", "fit"], &grid_as_xyz),
+        (&["surface", s(&grid), "-o", s(&glb)], &["raster", "T-mesh"], &grid),
+        (&["obj2popa3d", s(&gml), "-o", s(&popa_out)], &["CityGML", "OBJ"], &gml),
+        (&["popa3d2citygml", s(&popa), "--template", s(&tmesh), "-o", s(&gml_out)], &["T-mesh", "CityGML"], &tmesh),
+    ];
+    for (args, words, input) in cases {
+        refused(args, None, 3, words, None, &[input]);
+    }
+    for out in [&tif, &gml_out, &popa_out, &tm_out, &glb] {
+        assert!(!out.exists(), "{} written", out.display());
+    }
+}
+
+#[test]
+fn windows_mtllib_paths_and_crlf_in_an_obj_sketch_change_nothing() {
+    let sketch = common::repo_root().join("fixtures/popa3d/rooms.obj");
+    let dir = common::tempdir();
+    let text = std::fs::read_to_string(&sketch).unwrap();
+    let windows = format!("mtllib C:\\Users\\survey\\rooms.mtl\r\n{}", text.replace('\n', "\r\n"));
+    let win = write(dir.path(), "rooms.obj", windows.as_bytes());
+    let model = |p: &Path| {
+        let out = dir.path().join("m.popa3d");
+        let o = run(&["-q", "obj2popa3d", s(p), "-o", s(&out)], None);
+        assert_eq!(code(&o), 0, "{}", String::from_utf8_lossy(&o.stderr));
+        let text = std::fs::read_to_string(&out).unwrap();
+        // the <source file="..."> line names the input; every other line must agree
+        text.lines().filter(|l| !l.contains("<source ")).map(str::to_string).collect::<Vec<_>>()
+    };
+    assert_eq!(model(&win), model(&sketch));
+}
