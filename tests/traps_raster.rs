@@ -284,6 +284,35 @@ fn a_four_band_png_needs_a_band() {
     assert!(worst <= 0.5 + 1e-9, "band 1: max |dz| {worst}");
 }
 
+/// `--terrain-rgb` decodes Mapbox Terrain-RGB heights (h = -10000 + (R·65536 + G·256 + B)·0.1 m):
+/// the fit is within --max-error of the heights this test encoded, not of the red band.
+#[test]
+fn terrain_rgb_is_decoded() {
+    if !have_gdal() || !common::tool("gdalbuildvrt") {
+        return;
+    }
+    let d = common::tempdir();
+    let (w, h) = (40, 32);
+    let code: Vec<u32> = (0..w * h).map(|q| ((surface_m(q % w, q / w) + 10000.0) * 10.0).round() as u32).collect();
+    let truth: Vec<f64> = code.iter().map(|&v| -10000.0 + v as f64 * 0.1).collect();
+    let mut paths = Vec::new();
+    for (name, f) in [("r", 0u32), ("g", 1), ("b", 2), ("a", 3)] {
+        let v: Vec<f64> = code.iter().map(|&c| [c >> 16, (c >> 8) & 255, c & 255, 255][f as usize] as f64).collect();
+        let p = d.path().join(format!("{name}.asc"));
+        write_asc(&p, w, h, 1.0, &v, None);
+        paths.push(p);
+    }
+    let vrt = d.path().join("rgba.vrt");
+    let mut a = vec!["-q", "-separate", s(&vrt)];
+    a.extend(paths.iter().map(|p| s(p)));
+    gdal("gdalbuildvrt", &a);
+    let png = d.path().join("tile.png");
+    gdal("gdal_translate", &["-q", "-ot", "Byte", "-a_nodata", "none", "-of", "PNG", s(&vrt), s(&png)]);
+    let (worst, rep, _) = fit_error_m(d.path(), &png, &["--terrain-rgb", "--max-error", "0.3"], &truth, 1.0);
+    assert!(worst <= 0.3 + 1e-6, "max |dz| {worst} m over 0.3 m");
+    assert_eq!(rep["z_unit"], "m");
+}
+
 /// `eval --like` keeps the like-raster's no-data cells as no data, with its nodata marker (every
 /// one got a value: phantom shoals); --fill evaluates them.
 #[test]

@@ -503,6 +503,28 @@ pub fn read_uncertainty(path: &Path) -> Result<(Raster, usize), RasterError> {
     Ok((read_raster_band(path, band)?, band))
 }
 
+/// Heights of a Mapbox Terrain-RGB raster (PNG or WebP tiles of elevation): bands 1-3 hold
+/// red, green and blue, and h = -10000 + (R·256² + G·256 + B) · 0.1 metres. A cell is no data
+/// where a band has none, or where band 4 (alpha) is 0.
+pub fn read_terrain_rgb(path: &Path) -> Result<Raster, RasterError> {
+    let content_err = |message: String| RasterError::Content { path: path.to_path_buf(), message };
+    let n = bands(path)?.len();
+    if n < 3 {
+        return Err(content_err(format!("Terrain-RGB needs 3 bands (red, green, blue), the file has {n}")));
+    }
+    let mut r = read_raster_band(path, 1)?;
+    let g = read_raster_band(path, 2)?;
+    let b = read_raster_band(path, 3)?;
+    let alpha = if n >= 4 { Some(read_raster_band(path, 4)?) } else { None };
+    for (q, v) in r.data.iter_mut().enumerate() {
+        let transparent = alpha.as_ref().is_some_and(|a| a.data[q] == 0.0 || a.data[q].is_nan());
+        *v = if transparent { f64::NAN } else { -10000.0 + (*v * 65536.0 + g.data[q] * 256.0 + b.data[q]) * 0.1 };
+    }
+    r.nodata = None;
+    r.z_unit = Some("m".into());
+    Ok(r)
+}
+
 /// One band of a raster file as GDAL describes it (for choosing the band to read).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct BandInfo {

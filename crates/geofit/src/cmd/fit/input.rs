@@ -99,7 +99,14 @@ fn read_input(args: &Args) -> Result<(Raster, String, Option<Domain>), CliError>
         return Err(CliError::usage("--srcwin / --tile fit a window of a raster file with the direct fit (not stdin, --indirect or --max-error-from-uncertainty)"));
     }
     let choice = args.band.map_or(Band::Only, Band::Given);
+    if args.terrain_rgb && (window.is_some() || args.input == "-") {
+        return Err(CliError::usage("--terrain-rgb reads a whole raster file (not stdin, --srcwin or --tile)"));
+    }
     let (raster, name) = match window {
+        _ if args.terrain_rgb => {
+            let r = raster_io::read_terrain_rgb(std::path::Path::new(&args.input)).map_err(crate::terrain_io::raster_err)?;
+            (r, args.input.clone())
+        }
         Some((win, _)) => {
             let path = std::path::Path::new(&args.input);
             let band = choose_band(path, &args.input, choice)?;

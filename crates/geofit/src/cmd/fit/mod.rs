@@ -39,7 +39,8 @@ at the same tolerance passes on its output.
   $ geofit fit gmt_grid.nc -o g.tmesh --max-error 10      # its band says Unit Type: km
   geofit: gmt_grid.nc: heights in km (the band's unit type): --max-error 10 m is 0.01 km
   $ geofit fit dem_ft.tif -o d.tmesh --max-error 0.5 --z-unit us-ft   # the file declares none
-  $ geofit fit rgb.png -b 1 -o r.tmesh --max-error 1        # a multi-band raster needs -b N
+  $ geofit fit dem.png -b 1 -o r.tmesh --max-error 1        # 3 or more bands need -b N
+  $ geofit fit tile.png --terrain-rgb -o t.tmesh --max-error 1   # Mapbox Terrain-RGB heights
 
 Units: --max-error is in metres (--error-unit ft, cm, ... for another unit) and is converted into
 the unit of the heights before the fit: the band's unit type (m, km, cm, ft, US survey foot, ...),
@@ -109,6 +110,10 @@ pub struct Args {
     /// three or more (of two, band 1 is the elevation and band 2 its uncertainty, as in a BAG).
     #[arg(short = 'b', long = "band", value_name = "N")]
     pub band: Option<usize>,
+    /// The input is a Mapbox Terrain-RGB raster: heights decoded from red, green and blue
+    /// (h = -10000 + (R·65536 + G·256 + B) · 0.1 m), transparent cells are no data.
+    #[arg(long, conflicts_with = "band")]
+    pub terrain_rgb: bool,
     /// Per-cell tolerance from the survey's uncertainty layer (the band named "uncertainty", as in
     /// a BAG, else band 2): every valid cell within max(--max-error, K × its uncertainty).
     #[arg(long, value_name = "K", allow_negative_numbers = true)]

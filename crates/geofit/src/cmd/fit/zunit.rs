@@ -59,7 +59,8 @@ pub(super) fn resolve(r: &Raster, name: &str, args: &Args, config: &Config) -> R
     };
     let data = z_unit_of(r, name, args.z_unit.as_deref())?;
     let units = FitUnits { data, error };
-    if let Some(z) = data {
+    // stated where the numbers change: heights in another unit than --max-error's
+    if let Some(z) = data.filter(|_| units.factor() != 1.0) {
         let from = match z.source {
             ZUnitSource::Given => "--z-unit",
             ZUnitSource::Band => "the band's unit type",
@@ -70,7 +71,7 @@ pub(super) fn resolve(r: &Raster, name: &str, args: &Args, config: &Config) -> R
             None => String::new(),
         };
         config.notice(&format!("{name}: heights in {} ({from}){tolerance}", z.unit.name));
-    } else if args.error_unit.is_some() && error.metres != 1.0 {
+    } else if data.is_none() && error.metres != 1.0 {
         return Err(CliError::usage(format!(
             "--error-unit {}: {name} declares no unit for its heights, so --max-error cannot be converted; give --z-unit UNIT",
             error.name
