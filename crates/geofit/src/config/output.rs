@@ -136,11 +136,17 @@ pub fn check_report_target(report: Option<&str>, output: Option<&str>) -> Result
     Ok(())
 }
 
-/// Writes `path` atomically: temp file in the same directory, fsync, rename.
+/// Writes `path` atomically: temp file in the same directory, fsync, rename. A target that
+/// exists and is not a regular file (`/dev/null`, `/dev/stdout`, a FIFO) is written straight
+/// into: renaming over it would replace the device node itself, for every process on the host
+/// when run as root (docs/decisions.md#devices-as-outputs-are-written-not-replaced).
 pub fn write_atomic<F>(path: &Path, f: F) -> Result<(), CliError>
 where
     F: FnOnce(&mut dyn Write) -> Result<(), CliError>,
 {
+    if std::fs::metadata(path).is_ok_and(|m| !m.is_file() && !m.is_dir()) {
+        return write_into_device(path, f);
+    }
     let dir = match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
         _ => PathBuf::from("."),
@@ -172,6 +178,19 @@ where
     tmp.persist(path)
         .map_err(|e| CliError::output(format!("cannot write {}: {}", path.display(), e.error)))?;
     Ok(())
+}
+
+/// Writes into an existing device or FIFO as it is (opened for writing, never created,
+/// truncated or renamed).
+fn write_into_device<F>(path: &Path, f: F) -> Result<(), CliError>
+where
+    F: FnOnce(&mut dyn Write) -> Result<(), CliError>,
+{
+    let named = |e: io::Error| CliError::output(format!("cannot write {}: {e}", path.display()));
+    let file = std::fs::OpenOptions::new().write(true).open(path).map_err(named)?;
+    let mut w = io::BufWriter::with_capacity(1 << 16, file);
+    f(&mut w)?;
+    w.flush().map_err(named)
 }
 
 /// The process id in the name of a geofit temporary file or directory:
