@@ -4,7 +4,10 @@
 //! whitespace separated, as in LoopStructural's CSVs; names in [`crate::columns`]) or, without
 //! a header, from the column count: 3 = `x y z`, 4 = `x y z v`, 6 = `x y z nx ny nz`,
 //! 7 = `x y z v nx ny nz`. Empty CSV fields mean "absent" (a row with a normal but no value
-//! only orients φ). Lines starting with `#` or `//` are comments.
+//! only orients φ). Lines starting with `#` or `//` are comments. Every data line has the
+//! header's (or the first row's) field count, and six or more whole numbers split by commas
+//! on a headerless first row are refused (they may be half as many with decimal commas,
+//! docs/decisions.md#point-text-separators-and-decimal-commas-issue-41).
 //!
 //! Not the terrain dialect on purpose: there a `value` column is z, empty fields are folded
 //! away and rows have no normals; reading one as the other would change what files mean.
@@ -15,6 +18,7 @@ use crate::columns::{find_column, Dialect, Role};
 use crate::fields::split_by_first_separator;
 use crate::las::{LasError, LasPoints};
 use crate::number::{is_number, parse_finite, NumberError};
+use crate::text::could_be_decimal_commas;
 use crate::PointsError;
 
 /// One input sample: a position, optionally the value φ must take there and a unit normal (the
@@ -44,21 +48,38 @@ pub fn parse_xyz(text: &[u8], source: &str) -> Result<Vec<DataPoint>, PointsErro
     let text = std::str::from_utf8(text)
         .map_err(|e| PointsError::line(source, 0, format!("not UTF-8 text ({e}); LAS/LAZ files need the .las/.laz extension")))?;
     let mut columns: Option<Columns> = None;
+    // the field count every data line has: the header's or the first row's, and its line
+    let mut count: Option<(usize, usize, &str)> = None;
     let mut out = Vec::new();
     for (i, raw) in text.lines().enumerate() {
         let line = i + 1;
-        let l = raw.trim();
+        let l = if i == 0 { raw.trim_start_matches('\u{feff}') } else { raw }.trim();
         if l.is_empty() || l.starts_with('#') || l.starts_with("//") {
             continue;
         }
         let fields = split_by_first_separator(l);
+        if let Some((n, at, what)) = count {
+            if fields.len() != n {
+                let message = format!("{} fields, but {what} (line {at}) has {n}", fields.len());
+                return Err(PointsError::line(source, line, message));
+            }
+        }
         let c = match columns {
             Some(c) => c,
             None if is_header(&fields) => {
                 columns = Some(header_columns(&fields, source, line)?);
+                count = Some((fields.len(), line, "the header"));
                 continue;
             }
-            None => *columns.insert(count_columns(fields.len(), source, line)?),
+            None => {
+                if l.contains(',') && could_be_decimal_commas(&fields) {
+                    let n = fields.len();
+                    let message = format!("{:?} may be {n} whole numbers or {} numbers with decimal commas; write the file with ';' or blanks between fields", quote(l), n / 2);
+                    return Err(PointsError::line(source, line, message));
+                }
+                count = Some((fields.len(), line, "the first row"));
+                *columns.insert(count_columns(fields.len(), source, line)?)
+            }
         };
         out.push(data_point(&fields, c, source, line)?);
     }
@@ -238,5 +259,17 @@ mod tests {
         assert!(is_las(b"LASF\x00") && !is_las(b"1 2 3"));
         let e = read_las(b"LASF".to_vec(), "p.las").unwrap_err().to_string();
         assert!(e.starts_with("p.las:0: LAS/LAZ: "), "{e}");
+    }
+
+    #[test]
+    fn field_counts_hold_and_decimal_commas_are_not_taken_for_fields() {
+        let e = parse_xyz(b"x y z\n1 2 3\n1 2 3 4 5\n", "s.xyz").unwrap_err().to_string();
+        assert_eq!(e, "s.xyz:3: 5 fields, but the header (line 1) has 3");
+        let e = parse_xyz(b"1 2 3 4\n1 2 3\n", "s.xyz").unwrap_err().to_string();
+        assert_eq!(e, "s.xyz:2: 3 fields, but the first row (line 1) has 4");
+        let e = parse_xyz(b"341000,5,5724000,25,12,5\n", "s.csv").unwrap_err().to_string();
+        assert!(e.starts_with("s.csv:1: \"341000,5,5724000,25,12,5\" may be 6 whole numbers or 3"), "{e}");
+        let p = parse_xyz("\u{feff}x,y,z\r\n1,2,3\r\n".as_bytes(), "s.csv").unwrap();
+        assert_eq!(p[0].pos, [1.0, 2.0, 3.0]);
     }
 }
