@@ -386,7 +386,8 @@ fn dead_pid() -> u32 {
 
 /// Temporaries left by a killed run (`.geofit-PID-….tmp` files of the atomic writer,
 /// `.geofit-raster-PID-N.tmp` staging directories) are removed by the next run writing into
-/// the directory when their process is gone; a running process's temporary stays.
+/// the directory when their process is gone and nothing wrote them for an hour; a running
+/// process's temporary stays, and so does a fresh one of a PID this host cannot see.
 #[test]
 fn stale_temporaries_of_dead_processes_are_removed() {
     if !Path::new("/proc/self").exists() {
@@ -406,14 +407,24 @@ fn stale_temporaries_of_dead_processes_are_removed() {
     std::fs::write(stale_dir.join("r.tif"), "half a raster").unwrap();
     std::fs::write(&running, "being written").unwrap();
     std::fs::write(&other, "mine").unwrap();
+    // a fresh temporary of a process this host cannot see (another container's PID namespace on
+    // the same volume) is being written: it stays; the killed run's are two hours old
+    let elsewhere = d.join(format!(".geofit-{dead}-Qq7Ww6.tmp"));
+    std::fs::write(&elsewhere, "another container's output").unwrap();
+    let two_hours_ago = std::time::SystemTime::now() - Duration::from_secs(7200);
+    let age = |p: &Path| std::fs::File::open(p).unwrap().set_modified(two_hours_ago).unwrap();
+    age(&stale_file);
+    age(&stale_dir.join("r.tif"));
+    age(&stale_dir);
     let pts = d.join("p.xyz");
     std::fs::write(&pts, "0 0 1\n1 0 2\n0 1 3\n1 1 4\n").unwrap();
     let o = common::run(&["-q", "rasterize", s(&pts), "--cell", "0.5", "-o", s(&d.join("r.tif"))], None);
     assert_eq!(common::code(&o), 0, "{}", stderr(&o));
     assert!(!stale_file.exists() && !stale_dir.exists(), "stale temporaries left");
-    assert!(running.exists() && other.exists());
+    assert!(running.exists() && other.exists() && elsewhere.exists());
     // the atomic writer (a text output) cleans too, and its own temporary is gone after the run
     std::fs::write(&stale_file, "half a file").unwrap();
+    age(&stale_file);
     let o = common::run(&["-q", "citygml2popa3d", "-", "-o", s(&d.join("m.popa3d"))], Some(city(&box_building(0)).as_bytes()));
     assert_eq!(common::code(&o), 0, "{}", stderr(&o));
     assert!(!stale_file.exists());
@@ -422,7 +433,7 @@ fn stale_temporaries_of_dead_processes_are_removed() {
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
         .filter(|n| n.ends_with(".tmp"))
         .collect();
-    assert_eq!(left.len(), 2, "{left:?}");
+    assert_eq!(left.len(), 3, "{left:?}");
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -206,11 +206,17 @@ pub fn temp_owner(name: &str) -> Option<u32> {
     pid.parse().ok()
 }
 
-/// Removes the geofit temporaries in `dir` whose process is gone (no `/proc/PID`): what a
-/// `kill -9`, a power cut or `ulimit -f` left behind (docs/decisions.md#stale-temporaries).
-/// A temporary of a running process — any process with that id — is left alone, as is
-/// everything where `/proc` is not mounted. Errors are ignored: cleaning is a courtesy, and
-/// the write that follows reports a directory it cannot use.
+/// How long a temporary of a process this host cannot see must have gone unwritten before it
+/// is taken for stale: a run in another PID namespace (another container on the same volume,
+/// another node of a shared file system) writes its temporary now.
+const STALE_AFTER: std::time::Duration = std::time::Duration::from_secs(3600);
+
+/// Removes the geofit temporaries in `dir` whose process is gone (no `/proc/PID`) and that
+/// nothing wrote for [`STALE_AFTER`]: what a `kill -9`, a power cut or `ulimit -f` left behind
+/// (docs/decisions.md#stale-temporaries). A temporary of a running process — any process with
+/// that id — is left alone, and so is a fresh one of a process this host cannot see (its PID
+/// is another namespace's), as is everything where `/proc` is not mounted. Errors are
+/// ignored: cleaning is a courtesy, and the write that follows reports a directory it cannot use.
 pub fn clean_stale_temps(dir: &Path) {
     if !Path::new("/proc/self").exists() {
         return;
@@ -223,10 +229,26 @@ pub fn clean_stale_temps(dir: &Path) {
             continue;
         }
         let p = e.path();
+        if written_within(&p, STALE_AFTER) {
+            continue;
+        }
         let _ = match e.file_type() {
             Ok(t) if t.is_dir() => std::fs::remove_dir_all(&p),
             Ok(_) => std::fs::remove_file(&p),
             Err(_) => continue,
         };
+    }
+}
+
+/// Whether `path` (or, for a directory, anything directly in it) was modified within `age`.
+/// An unreadable time counts as recent: nothing is removed on a guess.
+fn written_within(path: &Path, age: std::time::Duration) -> bool {
+    let recent = |p: &Path| std::fs::metadata(p).and_then(|m| m.modified()).map_or(true, |t| t.elapsed().map_or(true, |e| e < age));
+    if recent(path) {
+        return true;
+    }
+    match std::fs::read_dir(path) {
+        Ok(entries) => entries.flatten().any(|e| recent(&e.path())),
+        Err(_) => false,
     }
 }
