@@ -256,3 +256,28 @@ fn windows_mtllib_paths_and_crlf_in_an_obj_sketch_change_nothing() {
     };
     assert_eq!(model(&win), model(&sketch));
 }
+
+/// An output replacing a file keeps that file's mode (a 0600 file stays private), and a new one
+/// follows the umask (0600 under 077), where every output used to be 0644.
+#[test]
+fn outputs_keep_the_replaced_mode_and_follow_the_umask() {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = common::tempdir();
+    let grid = write(dir.path(), "g.asc", GRID.as_bytes());
+    let private = write(dir.path(), "private.tmesh", b"old");
+    std::fs::set_permissions(&private, std::fs::Permissions::from_mode(0o600)).unwrap();
+    let mode = |p: &Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o777;
+    let o = run(&["-q", "fit", s(&grid), "--max-error", "5", "-o", s(&private)], None);
+    assert_eq!(code(&o), 0, "{}", String::from_utf8_lossy(&o.stderr));
+    assert_ne!(std::fs::read(&private).unwrap(), b"old");
+    assert_eq!(mode(&private), 0o600, "the replaced file's mode");
+    for (umask, want) in [("077", 0o600), ("022", 0o644), ("002", 0o664)] {
+        let out = dir.path().join(format!("new-{umask}.tmesh"));
+        let o = common::bash_with_geofit(dir.path())
+            .args(["-c", &format!("umask {umask}; geofit -q fit '{}' --max-error 5 -o '{}'", s(&grid), s(&out))])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        assert_eq!(mode(&out), want, "umask {umask}");
+    }
+}

@@ -169,15 +169,27 @@ where
         w.flush().map_err(|e| named(CliError::io_out(e)))?;
     }
     tmp.as_file().sync_all().map_err(|e| named(CliError::io_out(e)))?;
-    // tempfile creates 0600 files; an output is an ordinary file others may read.
+    // tempfile creates 0600 files: the output gets the mode of the file it replaces, or that of
+    // a new file under the process's umask (0644 under the usual 022, 0600 under 077).
     #[cfg(unix)]
     {
         use std::os::unix::fs::PermissionsExt;
-        std::fs::set_permissions(tmp.path(), std::fs::Permissions::from_mode(0o644)).map_err(CliError::io_out)?;
+        let mode = std::fs::metadata(path).map(|m| m.permissions().mode() & 0o7777).unwrap_or_else(|_| 0o666 & !umask());
+        std::fs::set_permissions(tmp.path(), std::fs::Permissions::from_mode(mode)).map_err(CliError::io_out)?;
     }
     tmp.persist(path)
         .map_err(|e| CliError::output(format!("cannot write {}: {}", path.display(), e.error)))?;
     Ok(())
+}
+
+/// The process's file-creation mask, read without changing it (`/proc/self/status`, Linux
+/// 4.7+); 022 where it cannot be read.
+#[cfg(unix)]
+fn umask() -> u32 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| s.lines().find_map(|l| l.strip_prefix("Umask:").and_then(|v| u32::from_str_radix(v.trim(), 8).ok())))
+        .unwrap_or(0o022)
 }
 
 /// Writes into an existing device or FIFO as it is (opened for writing, never created,
