@@ -70,8 +70,20 @@ impl GeographicFrame {
     }
 }
 
+impl GeographicFrame {
+    /// Whether any geometry of `obj` (or its children) is in a geographic CRS: the others are
+    /// left exactly as read.
+    fn any_geographic(&mut self, document_srs: Option<&str>, obj: &CityObject) -> bool {
+        obj.geometries.iter().any(|g| g.srs_name.as_deref().or(document_srs).is_some_and(|s| self.kind(s).is_some()))
+            || obj.children.iter().any(|c| self.any_geographic(document_srs, c))
+    }
+}
+
 impl ObjectFrame for GeographicFrame {
     fn apply(&mut self, document_srs: Option<&str>, obj: &mut CityObject) -> Result<(), String> {
+        if !self.any_geographic(document_srs, obj) {
+            return Ok(());
+        }
         map_points(obj, document_srs, &mut |srs, p| self.point(srs, p))
     }
 
