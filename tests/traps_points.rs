@@ -352,7 +352,8 @@ fn lon_lat_soundings_with_metre_cells() {
     assert!(cells(&out).iter().all(|c| (c.2 - 4.25).abs() < F32));
 }
 
-/// Headers that name a column twice for one axis (`lon,lat,x,y,z`: degrees or metres?), a
+/// Headers that name a column twice for one axis (`lon,lat,x,y,z`: degrees or metres?) or
+/// name some axes but not all (the first three columns were taken: ID, Easting, Northing), a
 /// separator that cannot be told, `--sep`/`--decimal` on a LAS file and an unknown `--sep`.
 #[test]
 fn ambiguous_headers_and_options_are_refused() {
@@ -360,6 +361,11 @@ fn ambiguous_headers_and_options_are_refused() {
     let out = d.path().join("o.tif");
     let p = write(d.path(), "two.csv", b"lon,lat,x,y,z\n7,51,341000,5724000,3\n");
     refused(&["-q", "rasterize", s(&p), "--cell", "1", "-o", s(&out)], 3, &["two.csv:1:", "2 columns for x (lon, x)"], &p, &out);
+    // a header that names x and y but no z (ID first: the first three columns would be wrong)
+    let p = write(d.path(), "partial.csv", b"ID,Easting,Northing,Sounding\n1,341000,5724000,3\n");
+    refused(&["-q", "rasterize", s(&p), "--cell", "1", "-o", s(&out)], 3, &["partial.csv:1:", "the header names no z column"], &p, &out);
+    let p = write(d.path(), "unnamed.txt", b"Punkt Spalte2 Spalte3 Spalte4\n1 341000 5724000 3\n");
+    refused(&["-q", "rasterize", s(&p), "--cell", "1", "-o", s(&out)], 3, &["unnamed.txt:1:", "cannot tell which of the header's 4 columns"], &p, &out);
     let p = write(d.path(), "mixed.xyz", b"1,2 3,4,5\n");
     refused(&["-q", "rasterize", s(&p), "--cell", "1", "-o", s(&out)], 3, &["mixed.xyz:1:", "cannot tell the field separator", "--sep"], &p, &out);
     let p = write(d.path(), "semi.csv", b"x;y;z\n0;0;1\n");

@@ -37,12 +37,14 @@ const COLUMN_NAMES: &[(&str, Option<Role>, Option<Role>)] = &[
     ("long", Some(X), None),
     ("longitude", Some(X), None),
     ("e", Some(X), None),
+    ("rechtswert", Some(X), None),
     ("y", Some(Y), Some(Y)),
     ("northing", Some(Y), Some(Y)),
     ("north", Some(Y), Some(Y)),
     ("lat", Some(Y), None),
     ("latitude", Some(Y), None),
     ("n", Some(Y), None),
+    ("hochwert", Some(Y), None),
     ("z", Some(Z), Some(Z)),
     ("elevation", Some(Z), Some(Z)),
     ("depth", Some(Z), Some(Z)),
@@ -51,6 +53,9 @@ const COLUMN_NAMES: &[(&str, Option<Role>, Option<Role>)] = &[
     ("h", Some(Z), None),
     ("alt", Some(Z), None),
     ("altitude", Some(Z), None),
+    ("hoehe", Some(Z), None),
+    ("höhe", Some(Z), None),
+    ("tiefe", Some(Z), None),
     ("value", Some(Z), Some(Value)),
     ("val", Some(Z), Some(Value)),
     ("v", None, Some(Value)),
@@ -64,7 +69,7 @@ const COLUMN_NAMES: &[(&str, Option<Role>, Option<Role>)] = &[
 /// The role of a header field in `dialect` (surrounding blanks and double quotes ignored, any
 /// case).
 pub fn role_of(field: &str, dialect: Dialect) -> Option<Role> {
-    let name = field.trim().trim_matches('"').to_ascii_lowercase();
+    let name = field.trim().trim_matches('"').to_lowercase();
     let (_, terrain, loop_structural) = COLUMN_NAMES.iter().find(|(n, ..)| *n == name)?;
     match dialect {
         Dialect::Terrain => *terrain,
@@ -77,25 +82,35 @@ pub fn find_column(fields: &[&str], role: Role, dialect: Dialect) -> Option<usiz
     fields.iter().position(|f| role_of(f, dialect) == Some(role))
 }
 
-/// The columns of x, y and z a terrain header names: `Ok(None)` when one of them is not named;
-/// two columns for one role are refused (`lon,lat,x,y,z`: which x?), except that a
-/// `value`/`val` column gives way to a z named as such (`X,Y,Z,val`: the val is an attribute).
+/// A header name without a unit in brackets (`Depth (m)`, `Easting [m]`).
+fn without_unit(field: &str) -> &str {
+    field.split(['(', '[']).next().unwrap_or(field).trim()
+}
+
+/// The columns of x, y and z a terrain header names (a unit in brackets after a name is
+/// ignored): `Ok(None)` when it names none of them; a header naming some but not all, or two
+/// columns for one role (`lon,lat,x,y,z`: which x?), is refused, except that a `value`/`val`
+/// column gives way to a z named as such (`X,Y,Z,val`: the val is an attribute).
 pub fn terrain_xyz(fields: &[&str]) -> Result<Option<[usize; 3]>, String> {
     let mut out = [0; 3];
-    for (k, role) in [X, Y, Z].into_iter().enumerate() {
-        let mut found: Vec<usize> = (0..fields.len()).filter(|&i| role_of(fields[i], Dialect::Terrain) == Some(role)).collect();
-        if found.len() > 1 && role == Z {
-            let weak = |i: &usize| matches!(fields[*i].trim().trim_matches('"').to_ascii_lowercase().as_str(), "value" | "val");
+    let role = |i: usize| role_of(without_unit(fields[i]), Dialect::Terrain);
+    if !(0..fields.len()).any(|i| matches!(role(i), Some(X | Y | Z))) {
+        return Ok(None);
+    }
+    for (k, r) in [X, Y, Z].into_iter().enumerate() {
+        let axis = ["x", "y", "z"][k];
+        let mut found: Vec<usize> = (0..fields.len()).filter(|&i| role(i) == Some(r)).collect();
+        if found.len() > 1 && r == Z {
+            let weak = |i: &usize| matches!(without_unit(fields[*i]).trim_matches('"').to_ascii_lowercase().as_str(), "value" | "val");
             if found.iter().any(|i| !weak(i)) {
                 found.retain(|i| !weak(i));
             }
         }
         match found.as_slice() {
-            [] => return Ok(None),
+            [] => return Err(format!("the header names no {axis} column (found: {}); name the columns x, y, z", fields.join(", "))),
             [i] => out[k] = *i,
             many => {
                 let names: Vec<&str> = many.iter().map(|&i| fields[i]).collect();
-                let axis = ["x", "y", "z"][k];
                 return Err(format!("the header names {} columns for {axis} ({}): keep one", many.len(), names.join(", ")));
             }
         }
@@ -137,5 +152,10 @@ mod tests {
         assert_eq!(terrain_xyz(&["lon", "lat", "x", "y", "z"]).unwrap_err(), "the header names 2 columns for x (lon, x): keep one");
         assert!(terrain_xyz(&["x", "y", "z", "depth"]).unwrap_err().contains("2 columns for z"));
         assert!(is_geographic_name(" \"Longitude\"") && !is_geographic_name("x"));
+        // units in brackets, German names, and headers that name only some axes
+        assert_eq!(terrain_xyz(&["ID", "Easting [m]", "Northing [m]", "Depth (m)"]), Ok(Some([1, 2, 3])));
+        assert_eq!(terrain_xyz(&["Punkt", "Rechtswert", "Hochwert", "Höhe"]), Ok(Some([1, 2, 3])));
+        let e = terrain_xyz(&["ID", "Easting", "Northing", "Sounding"]).unwrap_err();
+        assert_eq!(e, "the header names no z column (found: ID, Easting, Northing, Sounding); name the columns x, y, z");
     }
 }

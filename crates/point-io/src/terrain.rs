@@ -8,10 +8,11 @@
 //! - blank lines and lines starting with `#`, `%` or `>` (GMT segment headers) are skipped; a
 //!   UTF-8 BOM and CRLF line ends are read as nothing;
 //! - the FIRST content line may be a header: when a field is not a number it names the columns,
-//!   and the columns called x/y/z (or lon/lat, easting/northing, elevation/depth/value…, see
-//!   [`crate::columns`]) are used; without a header the first three fields are x, y, z and
-//!   extra fields are ignored. Values are taken as they are: a `depth` column positive down
-//!   stays positive down;
+//!   and the columns called x/y/z (or lon/lat, easting/northing, elevation/depth/value…, a unit
+//!   in brackets ignored, see [`crate::columns`]) are used; a header naming some of them but not
+//!   all, or none with more than three columns, is refused (which column is z?); three unknown
+//!   names mean x y z. Without a header the first three fields are x, y, z and extra fields are
+//!   ignored. Values are taken as they are: a `depth` column positive down stays positive down;
 //! - every data line has as many fields as the header (or, without one, as the first row): a
 //!   row of 5 numbers under `x y z` is an error naming its line, as is any line that does not
 //!   give three finite numbers (NaN and ±inf included: a sounding without a depth is a data
@@ -127,14 +128,22 @@ impl XyzLines {
     /// skipped); a header without recognisable names means the first three columns.
     fn header(&self, fields: &[&str], sep: Separator, detected: bool, line: &str, name: &str) -> Result<Layout, PointsError> {
         let err = |m: String| PointsError::line(name, self.line_no, m);
-        let columns = match terrain_xyz(fields).map_err(err)? {
+        let named = terrain_xyz(fields);
+        let numeric = fields.iter().any(|f| looks_numeric(f));
+        if numeric && !matches!(named, Ok(Some(_))) {
+            return Err(err(format!("expected three numbers x y z, found {:?}", quote(line))));
+        }
+        let columns = match named.map_err(err)? {
             Some(c) => c,
             None if fields.len() < 3 => {
                 let how = if detected { "" } else { " (as given)" };
                 return Err(err(format!("{:?} is {} field(s) split by {}{how}: a point needs x, y and z", quote(line), fields.len(), sep.describe())));
             }
-            None if fields.iter().all(|f| !looks_numeric(f)) => [0, 1, 2],
-            None => return Err(err(format!("expected three numbers x y z, found {:?}", quote(line)))),
+            None if fields.len() == 3 => [0, 1, 2],
+            None => {
+                let found = fields.join(", ");
+                return Err(err(format!("cannot tell which of the header's {} columns are x, y, z (found: {found}); name them x, y, z", fields.len())));
+            }
         };
         let names = fields.iter().map(|f| f.to_string()).collect();
         Ok(Layout { sep, detected, columns, fields: fields.len(), header: Some((self.line_no, names)), counted_at: self.line_no })
@@ -225,7 +234,7 @@ impl<R: BufRead> XyzBatches<R> {
             Some((_, names)) => {
                 let cols: Vec<&str> = l.columns.iter().map(|&c| names[c].as_str()).collect();
                 s.push_str(&format!(", x y z = columns {}", cols.join(", ")));
-                if cols[2].eq_ignore_ascii_case("depth") {
+                if ["depth", "tiefe"].iter().any(|d| cols[2].to_lowercase().starts_with(d)) {
                     s.push_str(" (values as given: a depth stays positive down)");
                 }
             }
@@ -426,6 +435,15 @@ mod tests {
         // two columns for one axis
         let e = parse("lon,lat,x,y,z\n1,2,3,4,5\n").unwrap_err().to_string();
         assert_eq!(e, "t.xyz:1: the header names 2 columns for x (lon, x): keep one");
+    }
+
+    #[test]
+    fn headers_that_do_not_say_which_columns_are_refused() {
+        let e = parse("ID,Easting,Northing,Sounding\n1,2,3,4\n").unwrap_err().to_string();
+        assert_eq!(e, "t.xyz:1: the header names no z column (found: ID, Easting, Northing, Sounding); name the columns x, y, z");
+        let e = parse("Punkt Spalte2 Spalte3 Spalte4\n1 2 3 4\n").unwrap_err().to_string();
+        assert!(e.starts_with("t.xyz:1: cannot tell which of the header's 4 columns are x, y, z"), "{e}");
+        assert_eq!(parse("ID;Easting [m];Northing [m];Depth (m)\n1;2;3;4,5\n").unwrap(), vec![[2.0, 3.0, 4.5]]);
     }
 
     #[test]

@@ -47,7 +47,7 @@ number with one (or --sep, --decimal); where ; tab or blanks separate, a comma i
   $ printf '341010,5;5724000,25;13\\r\\n341000,5;5724010,25;12,75\\r\\n' >> lot.csv
   $ geofit rasterize lot.csv --cell 1 -o lot.tif --s-srs EPSG:25832 --method tin
   geofit: read 3 points from lot.csv (';' separated (detected), decimal comma, x y z = columns
-  Rechtswert, Hochwert, Tiefe)
+  Rechtswert, Hochwert, Tiefe (values as given: a depth stays positive down))
   geofit: 11 x 11 cells of 1, 55 with a value (TIN, 3 vertices)
 Exit 3 naming the line: a row whose field count differs from the header's (or first row's),
 a NaN or inf value, thousands separators (1.234,5), whole numbers split by commas that may be
