@@ -59,10 +59,10 @@ fn surface_tif(dir: &Path, name: &str, unit: Option<&str>, metres_per_unit: f64,
     let (w, h) = (60, 50);
     let mut v: Vec<f64> = (0..w * h).map(|q| surface_m(q % w, q / w) / metres_per_unit).collect();
     if holes {
-        for q in 0..w * h {
+        for (q, z) in v.iter_mut().enumerate() {
             let (c, r) = (q % w, q / w);
             if (20..30).contains(&c) && (10..22).contains(&r) || c + r < 8 {
-                v[q] = f64::NAN;
+                *z = f64::NAN;
             }
         }
     }
