@@ -44,7 +44,7 @@ Example:
   xlinks:      9 resolved, 0 unresolved
   $ geofit info --json - < city.gml | jq .polygons
   $ geofit info --json bathy.tmesh | jq '.degree, .cells, .control_points'
-  $ geofit info --json gmt_Kilauea.utm.nc | jq '.width, .height, .geotransform, .nodata_count'
+  $ geofit info --json gmt_Kilauea.utm.nc | jq '.width, .height, .geotransform, .nodata_count, .z_unit, .bands'
   $ geofit info soundings.xyz
 
 Counts are of definitions: a polygon referenced by xlink:href (the faces of an NRW lod2Solid)
