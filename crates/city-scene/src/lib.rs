@@ -36,6 +36,8 @@
 //! assert!((built.scene.area() - 12.0).abs() < 1e-9);
 //! ```
 
+pub mod crs;
+
 use std::collections::HashSet;
 
 use citygml_io::{CityModel, CityObject, Polygon, SurfaceType};

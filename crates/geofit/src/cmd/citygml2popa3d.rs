@@ -37,7 +37,7 @@ Units: coordinates and every tolerance are metres of a projected CRS. A file in 
 (EPSG:4979, 4326, 4258, CRS84 ...: degrees) is refused in one line (exit 2) naming the CRS and
 the UTM zone to reproject to, e.g.
   $ geofit citygml2popa3d wgs84.gml
-  geofit: wgs84.gml: CRS urn:ogc:def:crs:EPSG::4979 is geographic (EPSG:4979, degrees, latitude,
+  geofit: wgs84.gml: CRS EPSG:4979 is geographic (EPSG:4979, degrees, latitude,
   longitude): ... reproject the file to a projected CRS first, e.g. EPSG:32632 ...";
 
 #[derive(ClapArgs, Debug)]

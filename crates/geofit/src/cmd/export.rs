@@ -184,7 +184,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
             let parsed = raster_io::crs::Crs::parse(c).map_err(|e| CliError::usage(format!("{opt}: {e}")))?;
             if opt == "--t-srs" && parsed.geographic {
                 return Err(CliError::usage(format!(
-                    "--t-srs {c} is geographic (degrees): mesh coordinates must be metres (heights are); use a projected CRS, e.g. its UTM zone EPSG:326zz (north) / 327zz (south)"
+                    "--t-srs {c} is geographic (degrees): mesh coordinates must be metres (heights are); use a projected CRS, e.g. the UTM zone EPSG:326zz / 327zz"
                 )));
             }
         }
@@ -204,25 +204,11 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
 
     let source_crs = args.s_srs.clone().or_else(|| model.srs_name.clone());
     // docs/decisions.md#geographic-crss-and-vertical-datums-of-buildings-issue-41
-    let geographic = citygml_io::frame::geographic_document(&model, args.s_srs.as_deref());
-    if let Some(g) = &geographic {
-        if args.t_srs.is_none() {
-            return Err(CliError::usage(format!(
-                "{name}: {}: mesh coordinates would be degrees beside metre heights; give a projected target, e.g. --t-srs {}",
-                g.what(),
-                g.suggestion()
-            )));
-        }
-        if !g.plausible() {
-            let (a, b) = g.lon_lat.map(|(lon, lat)| (lat, lon)).unwrap_or_default();
-            return Err(CliError::unreadable(format!(
-                "{name}: {} but its first point ({a}, {b}) has a latitude beyond ±90°: the coordinates are in the other axis order; declare it (urn:ogc:def:crs:OGC:1.3:CRS84h) or swap the axes",
-                g.what()
-            )));
-        }
-    }
-    // the source's axis order → PROJ's longitude, latitude (new_known_crs normalises to it)
-    let swap = geographic.as_ref().is_some_and(|g| citygml_io::crs::axis_order(&g.srs) == citygml_io::crs::AxisOrder::LatLon);
+    let plan = city_scene::crs::export_crs(&model, &name, args.s_srs.as_deref(), args.t_srs.as_deref()).map_err(|e| match e {
+        city_scene::crs::ExportCrsError::Usage(m) => CliError::usage(m),
+        city_scene::crs::ExportCrsError::Unreadable(m) => CliError::unreadable(m),
+    })?;
+    let swap = plan.swap_axes;
     let transform = match &args.t_srs {
         None => None,
         Some(t) => {
@@ -245,16 +231,8 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     let progress = config.progress("export: triangulate", model.objects.len() as u64);
     let options = SceneOptions { lod: args.lod, planar: args.planar };
     let built = build_scene(&model, &name, &options, transform.is_some().then_some(&reproject as Reproject), &|n| progress.set(n as u64, ""));
-    // a height system of the source goes along with a 2D target (`EPSG:4647+7837`)
-    let target_crs = args.t_srs.as_ref().map(|t| {
-        let vertical = source_crs.as_deref().and_then(citygml_io::crs::vertical_part).and_then(|v| v.epsg);
-        match vertical {
-            Some(v) if citygml_io::crs::vertical_part(t).is_none() => format!("{t}+{v}"),
-            _ => t.clone(),
-        }
-    });
     let mut scene = Scene {
-        crs: target_crs.or(source_crs),
+        crs: plan.recorded,
         generator: Some(format!("geofit {}", env!("CARGO_PKG_VERSION"))),
         ..built.scene
     };

@@ -53,6 +53,17 @@ CompositeSolid/MultiSolid) get all levels; the solids of a CompositeSolid must n
 independent. Shells may touch along lines unless the contact closes a loop (404). MultiSurface /
 CompositeSurface get ring and polygon checks. Vertices closer than --snap-tol are merged per shell.
 
+Units: tolerances are metres. A file in a geographic CRS (EPSG:4979, 4326, 4258, CRS84...:
+degrees) is checked in the UTM zone of its first point, through PROJ, with the axis order its
+CRS declares (latitude first for EPSG codes, longitude first for CRS84); a latitude beyond ±90°
+is refused (exit 3, the file is in the other order). The report says so (text `frame:` line,
+JSON geometry.frame) and finding positions are then UTM metres:
+  $ geofit validate wgs84.gml
+  wgs84.gml: frame: EPSG:4979 (EPSG:4979, degrees, latitude, longitude)
+      checked in UTM zone 32N (EPSG:32632 axes, GRS80), metres; heights as written
+A CRS with a height system (compound CRS, AdV URN) is named: text `heights:` line, JSON
+`heights` (name, epsg, kind), e.g. NRW: DHHN2016 height (EPSG:7837, normal heights).
+
 Schemas: --schemas DIR, else $GEOFIT_SCHEMAS, else ../shared/xsd beside the checkout (searched
 from the working directory upwards and from the source tree geofit was built from). DIR holds
 citygml-1.0.xsd, citygml-2.0.xsd, citygml-3.0.xsd wrappers (see ../shared/xsd/README.md); the
