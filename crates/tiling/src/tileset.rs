@@ -328,6 +328,35 @@ mod tests {
     }
 
     #[test]
+    fn heights_follow_the_choice_or_are_refused() {
+        let nrw = ["urn:adv:crs:ETRS89_UTM32*DE_DHHN2016_NH*GCG2016"];
+        let (o, how) = height_offset(&Heights::Offset(46.5), &nrw, "t.glb", 6.46, 51.69).unwrap();
+        assert_eq!((o, how["method"].as_str()), (46.5, Some("offset")));
+        assert!(how["vertical"].as_str().unwrap().starts_with("DHHN2016 height"));
+        assert_eq!(height_offset(&Heights::AsIs, &nrw, "t.glb", 6.46, 51.69).unwrap().0, 0.0);
+        // no height system named: kept
+        let (o, how) = height_offset(&Heights::Auto, &["EPSG:25832"], "t.glb", 6.46, 51.69).unwrap();
+        assert_eq!((o, how["method"].as_str()), (0.0, Some("as-is")));
+        // DHHN2016 without its grid (not in PROJ-data): refused, naming the choices
+        if let Err(e) = height_offset(&Heights::Auto, &nrw, "t.glb", 6.46, 51.69) {
+            let m = e.to_string();
+            assert!(m.contains("DHHN2016") && m.contains("--height-offset") && m.contains("--heights-as-is"), "{m}");
+        }
+        // feet are not metres
+        assert!(height_offset(&Heights::Auto, &["EPSG:2230+6360"], "t.glb", -117.0, 33.0).is_err());
+    }
+
+    #[test]
+    fn egm96_undulation_where_the_grid_is_installed() {
+        // EGM96 at 51.69° N, 6.46° E is about +44.5 m (h = H + N); Debian's proj-data ships it
+        match geoid_undulation("egm96_15.gtx", 6.46, 51.69) {
+            Ok(n) => assert!((n - 44.47).abs() < 0.1, "{n}"),
+            Err(e) => eprintln!("SKIP: {e}"),
+        }
+        assert!(geoid_undulation("no_such_grid.tif", 6.46, 51.69).is_err());
+    }
+
+    #[test]
     fn matrices_compose_column_major() {
         let mut t = IDENTITY;
         (t[12], t[13], t[14]) = (1.0, 2.0, 3.0);
