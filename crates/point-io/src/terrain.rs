@@ -31,7 +31,7 @@ use crate::text::{could_be_decimal_commas, detect_separator, looks_numeric, spli
 use crate::{PointsError, BATCH_POINTS};
 
 /// How the data lines of a text are read, fixed by its first content line.
-#[derive(Debug, Clone)]
+#[derive(Debug)]
 struct Layout {
     sep: Separator,
     /// Whether the separator was detected (not given).
@@ -90,36 +90,32 @@ impl XyzLines {
         }
         let line_no = self.line_no;
         let err = |m: String| PointsError::line(name, line_no, m);
-        let layout = match &self.layout {
-            Some(l) => l.clone(),
-            None => {
-                let (sep, detected) = match self.given.separator {
-                    Some(s) => (s, false),
-                    None => (detect_separator(content).map_err(err)?, true),
-                };
-                let fields = split_fields(if sep == Separator::Whitespace { content } else { line }, sep)
-                    .ok_or_else(|| err(format!("a double quote is not closed in {:?}", quote(content))))?;
-                if fields.iter().any(|f| !f.is_empty() && !looks_numeric(f)) {
-                    self.layout = Some(self.header(&fields, sep, detected, content, name)?);
-                    return Ok(None);
-                }
-                if detected && sep == Separator::Comma && self.given.decimal.is_none() && could_be_decimal_commas(&fields) {
-                    return Err(err(format!(
-                        "{:?} may be {} whole numbers or {} numbers with decimal commas; give --sep , to read commas as separators, or write the file with ';' between fields",
-                        quote(content),
-                        fields.len(),
-                        fields.len() / 2
-                    )));
-                }
-                let layout = Layout { sep, detected, columns: [0, 1, 2], fields: fields.len(), header: None, counted_at: line_no };
-                self.layout = Some(layout.clone());
-                layout
+        if self.layout.is_none() {
+            let (sep, detected) = match self.given.separator {
+                Some(s) => (s, false),
+                None => (detect_separator(content).map_err(err)?, true),
+            };
+            let fields = split_fields(if sep == Separator::Whitespace { content } else { line }, sep)
+                .ok_or_else(|| err(format!("a double quote is not closed in {:?}", quote(content))))?;
+            if fields.iter().any(|f| !f.is_empty() && !looks_numeric(f)) {
+                self.layout = Some(self.header(&fields, sep, detected, content, name)?);
+                return Ok(None);
             }
-        };
+            if detected && sep == Separator::Comma && self.given.decimal.is_none() && could_be_decimal_commas(&fields) {
+                return Err(err(format!(
+                    "{:?} may be {} whole numbers or {} numbers with decimal commas; give --sep , to read commas as separators, or write the file with ';' between fields",
+                    quote(content),
+                    fields.len(),
+                    fields.len() / 2
+                )));
+            }
+            self.layout = Some(Layout { sep, detected, columns: [0, 1, 2], fields: fields.len(), header: None, counted_at: line_no });
+        }
+        let Some(layout) = self.layout.as_ref() else { return Ok(None) };
         let fields = split_fields(if layout.sep == Separator::Whitespace { content } else { line }, layout.sep)
             .ok_or_else(|| err(format!("a double quote is not closed in {:?}", quote(content))))?;
         if fields.len() != layout.fields {
-            return Err(err(count_message(&fields, &layout)));
+            return Err(err(count_message(&fields, layout)));
         }
         xyz_fields(&fields, layout.columns, layout.sep, &mut self.decimals, name, line_no).map(Some)
     }
