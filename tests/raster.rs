@@ -543,11 +543,12 @@ fn claimed_sizes_are_checked_before_allocating() {
     let o = common::run(&["-q", "fit", &s(&small), "--max-error", "0.5", "-o", &s(&mesh)], None);
     assert_eq!(common::code(&o), 0, "{}", stderr(&o));
     let out = s(&d.join("out.tif"));
+    let tmesh = s(&d.join("out.tmesh"));
     for big in [&asc, &vrt] {
         let b = s(big);
         let cmds: [Vec<&str>; 5] = [
             vec!["info", &b],
-            vec!["fit", &b, "--max-error", "1", "-o", &out],
+            vec!["fit", &b, "--max-error", "1", "-o", &tmesh],
             vec!["warp", &b, "-o", &out],
             vec!["diff", &b, &b],
             vec!["eval", mesh.to_str().unwrap(), "--like", &b, "-o", &out],
