@@ -102,12 +102,23 @@ fn the_right_extension_or_none_still_writes() {
         assert_eq!(code(&o), 0, "{name}: {}", String::from_utf8_lossy(&o.stderr));
         assert!(out.exists(), "{name} written");
     }
-    // /dev/null is no input's replacement, and stays a device (as root, the rename of the
-    // atomic writer replaced the node with a regular file)
-    let o = run(&["fit", s(&grid), "--max-error", "5", "-o", "/dev/null", "--report", "/dev/null"], None);
-    assert_eq!(code(&o), 0, "{}", String::from_utf8_lossy(&o.stderr));
+    // a device is no input's replacement, and stays a device: as root, the rename of the
+    // atomic writers replaced the node with a regular file. Root makes its own null device
+    // here, so a regression cannot take the host's /dev/null with it.
+    let own_null = dir.path().join("null");
+    let made = std::process::Command::new("mknod").args(["-m", "666", s(&own_null), "c", "1", "3"]).status().is_ok_and(|st| st.success());
+    let null = if made { own_null } else { PathBuf::from("/dev/null") };
+    let pts = write(dir.path(), "p.xyz", b"0 0 1\n1 0 2\n0 1 3\n1 1 4\n");
+    let runs: [&[&str]; 2] = [
+        &["fit", s(&grid), "--max-error", "5", "-o", s(&null), "--report", s(&null)],
+        &["rasterize", s(&pts), "--cell", "0.5", "-of", "GTiff", "-o", s(&null)],
+    ];
     use std::os::unix::fs::FileTypeExt;
-    assert!(std::fs::metadata("/dev/null").unwrap().file_type().is_char_device(), "/dev/null is still a device");
+    for args in runs {
+        let o = run(args, None);
+        assert_eq!(code(&o), 0, "{args:?}: {}", String::from_utf8_lossy(&o.stderr));
+        assert!(std::fs::metadata(&null).unwrap().file_type().is_char_device(), "{args:?}: {} is still a device", null.display());
+    }
 }
 
 #[test]

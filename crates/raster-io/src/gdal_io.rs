@@ -704,11 +704,25 @@ impl StagedRaster {
                 .and_then(|f| f.sync_all())
                 .map_err(|e| format!("cannot write {}: {e}", p.display()))?;
         }
+        let target = self.dir.join(&self.file_name);
+        if std::fs::metadata(&target).is_ok_and(|m| !m.is_file() && !m.is_dir()) {
+            return self.copy_into_device(&target);
+        }
         for p in entries {
             let name = p.file_name().map(|s| s.to_os_string()).unwrap_or_default();
             std::fs::rename(&p, self.dir.join(&name)).map_err(|e| format!("cannot move {}: {e}", p.display()))?;
         }
         Ok(())
+    }
+
+    /// A target that is a device or FIFO (`-o /dev/null -of GTiff`) gets the main file's bytes
+    /// written into it: renaming over it would replace the device node, for every process on
+    /// the host when run as root. Side files have no place beside a device and are dropped.
+    fn copy_into_device(&self, target: &Path) -> Result<(), String> {
+        let main = self.tmp_dir.join(&self.file_name);
+        let mut from = std::fs::File::open(&main).map_err(|e| format!("cannot read {}: {e}", main.display()))?;
+        let mut to = std::fs::OpenOptions::new().write(true).open(target).map_err(|e| format!("cannot write {}: {e}", target.display()))?;
+        std::io::copy(&mut from, &mut to).map(|_| ()).map_err(|e| format!("cannot write {}: {e}", target.display()))
     }
 }
 

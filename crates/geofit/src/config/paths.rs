@@ -63,7 +63,7 @@ pub fn check_outputs_are_not_inputs(matches: &clap::ArgMatches, outputs: &[(&str
 fn check_outputs_are_distinct(command: &str, m: &clap::ArgMatches, outputs: &[(&str, &str)]) -> Result<(), CliError> {
     let mut seen: Vec<(std::path::PathBuf, &str, &str)> = Vec::new();
     for (id, flag) in outputs {
-        for out in string_values(m, id).into_iter().filter(|v| *v != "-" && !v.starts_with("/dev/")) {
+        for out in string_values(m, id).into_iter().filter(|v| *v != "-" && !is_device(Path::new(v))) {
             let path = Path::new(out);
             let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
             let Some(key) = dir.canonicalize().ok().zip(path.file_name()).map(|(d, n)| d.join(n)) else { continue };
@@ -74,6 +74,11 @@ fn check_outputs_are_distinct(command: &str, m: &clap::ArgMatches, outputs: &[(&
         }
     }
     Ok(())
+}
+
+/// An existing target that is neither a regular file nor a directory (`/dev/null`, a FIFO).
+fn is_device(path: &Path) -> bool {
+    std::fs::metadata(path).is_ok_and(|m| !m.is_file() && !m.is_dir())
 }
 
 /// Whether two paths are one file (device and inode, symlinks followed). Paths that do not
