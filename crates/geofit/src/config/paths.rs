@@ -207,7 +207,10 @@ fn accepts(takes: Takes, kind: &FileKind, path: &Path) -> bool {
     use FileKind as K;
     match kind {
         K::Unknown => true,
-        K::Empty | K::Device(_) | K::CityJson | K::Gltf | K::Zip | K::Gzip => false,
+        K::Device(_) | K::CityJson | K::Gltf | K::Zip | K::Gzip => false,
+        // The XML and text readers locate these themselves (`empty.gml:1:1: empty file`);
+        // GDAL and the point reader do not.
+        K::Empty => !matches!(takes, Takes::Raster | Takes::Points),
         K::Directory => match takes {
             Takes::CityGml | Takes::Summarisable => true,
             // An Arc/Info binary grid is a directory GDAL opens.
@@ -225,8 +228,10 @@ fn accepts(takes: Takes, kind: &FileKind, path: &Path) -> bool {
         // GDAL reads XYZ grids; an OBJ-looking text of numbers only is point text too.
         K::PointText => matches!(takes, Takes::Points | Takes::Raster | Takes::Summarisable | Takes::Obj),
         K::Obj => takes == Takes::Obj,
-        // Unknown binary formats may still be GDAL rasters (ERDAS .img, ENVI).
-        K::Binary | K::Json => takes == Takes::Raster,
+        // Unknown binary formats may still be GDAL rasters (ERDAS .img, ENVI); the XML readers
+        // say "1:1: not an XML document".
+        K::Binary => takes != Takes::Points,
+        K::Json => takes == Takes::Raster,
     }
 }
 
