@@ -371,16 +371,20 @@ fn bad_input_and_usage_errors() {
         let o = common::run(&args, None);
         assert_eq!(common::code(&o), 2, "{args:?}: {}", String::from_utf8_lossy(&o.stderr));
     }
-    // A LoD the file does not have: listed finding, exit 1, still a valid (empty) file.
+    // A LoD the file does not have: listed finding, exit 1 and no mesh (issue 41: a non-zero
+    // exit writes no output); --keep-partial still gives a valid (empty) file.
     let o = common::run(&["export", g, "--format", "glb", "--lod", "3"], None);
     assert_eq!(common::code(&o), 1);
     assert!(String::from_utf8_lossy(&o.stderr).contains("no polygons of LoD 3"));
+    assert!(o.stdout.is_empty(), "no mesh on exit 1");
+    let o = common::run(&["export", g, "--format", "glb", "--lod", "3", "--keep-partial"], None);
+    assert_eq!(common::code(&o), 1);
     assert_eq!(&o.stdout[0..4], b"glTF");
 }
 
 /// Every CityGML fixture exports to a glb that the Khronos validator accepts with 0 errors; only
-/// `qie/i101_1.gml` (a ring of 2 distinct points) has a skipped polygon: exit 1, listed, still
-/// written.
+/// `qie/i101_1.gml` (a ring of 2 distinct points) has a skipped polygon: exit 1, listed, and
+/// written only with --keep-partial.
 #[test]
 fn every_fixture_exports_to_a_valid_glb() {
     let Some(root) = common::fixture("citygml") else { return };
@@ -396,6 +400,9 @@ fn every_fixture_exports_to_a_valid_glb() {
         assert_eq!(common::code(&o), expected, "{}: {err}", f.display());
         if expected == 1 {
             assert!(err.contains("skipped: exterior ring has 2 distinct points"), "{err}");
+            assert!(!out.exists(), "{}: a mesh written with exit 1", f.display());
+            let o = common::run(&["export", "-q", "--keep-partial", f.to_str().unwrap(), "-o", out.to_str().unwrap()], None);
+            assert_eq!(common::code(&o), 1);
         }
         if validate {
             assert_valid_gltf(&out);

@@ -38,7 +38,7 @@ their edges (closed shells stay closed), and the polygon's orientation (`orienta
 flips it). Real data are not exactly planar (NRW tiles: up to 4 cm), so the mesh area is then
 slightly larger than the polygons' projected (Newell) area; --planar moves each polygon's
 vertices onto its plane instead (exact area, small gaps between neighbours). A polygon that cannot be triangulated (collinear, too few points)
-is skipped and listed: exit 1, the rest is still written.
+is skipped and listed: exit 1, and the mesh is written only with --keep-partial (the report is).
 
 Coordinates: --origin auto (default) subtracts the bounding-box centre (x, y) and bottom (z),
 rounded to whole units; `none` keeps world coordinates; `x,y,z` gives it. The origin is recorded:
@@ -250,7 +250,10 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         });
     }
 
-    write_scene(&scene, &output, format, args.gltf_bin, "export")?;
+    let exit = if findings.is_empty() { Exit::Ok } else { Exit::Findings };
+    if config.keeps_output(exit, args.output.as_deref()) {
+        write_scene(&scene, &output, format, args.gltf_bin, "export")?;
+    }
 
     if let Some(path) = &args.report {
         let report = ExportReport {
@@ -270,7 +273,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     for f in &findings {
         crate::say!("{f}");
     }
-    Ok(if findings.is_empty() { Exit::Ok } else { Exit::Findings })
+    Ok(exit)
 }
 
 #[cfg(test)]
