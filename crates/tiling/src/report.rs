@@ -80,10 +80,15 @@ pub struct TileLine {
     pub kept: Option<usize>,
 }
 
+/// The units of the merged report's measures; the other numbers are counts.
+const UNITS: &[(&str, &str)] = &[("heal.area_before_m2", "m²"), ("heal.area_after_m2", "m²"), ("heal.max_move_m", "m")];
+
 /// The merged report.
 #[derive(Debug, Serialize, PartialEq)]
 pub struct MergedReport {
     pub schema: &'static str,
+    /// The unit of each measure (key → unit), as every geofit report states them.
+    pub units: BTreeMap<&'static str, &'static str>,
     pub tiles: usize,
     pub validate: ValidateSum,
     pub heal: HealSum,
@@ -151,7 +156,7 @@ pub fn merge(mut reports: Vec<TileReport>) -> Result<MergedReport, TilingError> 
             )));
         }
     }
-    Ok(MergedReport { schema: "geofit-tile-report/1", tiles: lines.len(), validate: v, heal: h, per_tile: lines.into_values().collect() })
+    Ok(MergedReport { schema: "geofit-tile-report/1", units: UNITS.iter().copied().collect(), tiles: lines.len(), validate: v, heal: h, per_tile: lines.into_values().collect() })
 }
 
 #[cfg(test)]
@@ -176,6 +181,7 @@ mod tests {
         assert_eq!(m.heal.findings_before["203"], 4);
         assert_eq!(m.validate.findings_by_code["104"], 1);
         assert_eq!(m.heal.area_before_m2, 3.0);
+        assert_eq!(m.units["heal.area_before_m2"], "m²", "the units are stated");
         assert!(merge(vec![TileReport::parse("x.json", "{}").unwrap()]).is_err());
     }
 }

@@ -1,0 +1,3 @@
+//! Issue 40: crashes.
+
+mod common;

@@ -1,0 +1,3 @@
+//! Issue 40: limits.
+
+mod common;
