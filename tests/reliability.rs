@@ -628,3 +628,41 @@ fn a_netcdf_header_claiming_billions_of_values_is_refused_before_gdal_reads_it()
     }
     assert_eq!(std::fs::read(&out).unwrap(), old);
 }
+
+/// A command with several outputs replaces all of them or none (issue 40): the disk of one
+/// output fills while it is written, and the outputs written before it keep their old bytes
+/// (they wait as temporaries until every output is complete). Root only: each case mounts a
+/// 64 KiB tmpfs in a private mount namespace (`unshare -m`), nothing of the host is touched.
+#[test]
+fn a_full_disk_between_outputs_leaves_every_old_output() {
+    let root = std::process::Command::new("id").arg("-u").output().map(|o| o.stdout == b"0\n").unwrap_or(false);
+    if !root || !std::process::Command::new("unshare").args(["-m", "true"]).status().is_ok_and(|s| s.success()) {
+        eprintln!("SKIP: needs root and unshare -m (a private tmpfs)");
+        return;
+    }
+    let dir = common::tempdir();
+    let d = dir.path();
+    let grid = d.join("g.asc");
+    let rows: String = (0..40).map(|r| (0..40).map(|c| format!("{}", ((r * 7 + c * 13) % 17) as f64 * 0.9)).collect::<Vec<_>>().join(" ") + "\n").collect();
+    std::fs::write(&grid, format!("ncols 40\nnrows 40\nxllcorner 0\nyllcorner 0\ncellsize 1\n{rows}")).unwrap();
+    let bin = env!("CARGO_BIN_EXE_geofit");
+    // the full disk holds the mesh (written first) and then the report (written last)
+    for full in ["mesh", "report"] {
+        let (small, big) = (d.join(format!("small-{full}")), d.join(format!("big-{full}")));
+        std::fs::create_dir_all(&small).unwrap();
+        std::fs::create_dir_all(&big).unwrap();
+        let (mesh, report) = if full == "mesh" { (small.join("m.tmesh"), big.join("r.json")) } else { (big.join("m.tmesh"), small.join("r.json")) };
+        let script = format!(
+            "mount -t tmpfs -o size=64k none '{small}' || exit 99; echo 'old mesh' > '{mesh}'; echo 'old report' > '{report}'; \
+             head -c 1000000 /dev/zero > '{small}/filler' 2>/dev/null; \
+             '{bin}' -q fit '{grid}' --max-error 0.01 --degree 1 -o '{mesh}' --report '{report}'; echo \"exit $?\"; cat '{mesh}' '{report}'",
+            small = small.display(), mesh = mesh.display(), report = report.display(), bin = bin, grid = grid.display()
+        );
+        let o = std::process::Command::new("unshare").args(["-m", "bash", "-c", &script]).output().unwrap();
+        let out = String::from_utf8_lossy(&o.stdout);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(out.contains("exit 4"), "{full}: the fit must fail writing: {out} {err}");
+        assert!(out.contains("old mesh") && out.contains("old report"), "{full}: an old output was replaced: {out} {err}");
+        assert!(err.contains("No space left"), "{err}");
+    }
+}

@@ -173,6 +173,11 @@ fn main() -> ExitCode {
         Command::Validate(a) => cmd::validate::run(a, &config),
         Command::Warp(a) => cmd::warp::run(a, &config),
     };
+    // Every file output is renamed into place here, together, or not at all.
+    let result = result.and_then(|exit| config::commit_outputs().map(|()| exit));
+    if result.is_err() {
+        config::discard_outputs();
+    }
     match result {
         Ok(exit) => exit.into(),
         Err(e) => {

@@ -16,7 +16,7 @@ use crate::error::Exit;
 pub use batch::{batch_inputs, run_batch, worse_exit, write_batch_error, write_json_line, CITYGML_EXTENSIONS};
 pub use input::Input;
 pub(crate) use output::write_atomic;
-pub use output::{check_output_args, check_report_target, clean_stale_temps, Output};
+pub use output::{check_output_args, check_report_target, clean_stale_temps, commit_outputs, discard_outputs, Output};
 
 /// Options shared by every subcommand.
 #[derive(Debug, Clone, Default)]

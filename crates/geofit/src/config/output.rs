@@ -136,7 +136,8 @@ pub fn check_report_target(report: Option<&str>, output: Option<&str>) -> Result
     Ok(())
 }
 
-/// Writes `path` atomically: temp file in the same directory, fsync, rename. A target that
+/// Writes `path` atomically: temp file in the same directory, fsync, and a rename when the
+/// command has succeeded ([`commit_outputs`], together with its other outputs). A target that
 /// exists and is not a regular file (`/dev/null`, `/dev/stdout`, a FIFO) is written straight
 /// into: renaming over it would replace the device node itself, for every process on the host
 /// when run as root (docs/decisions.md#devices-as-outputs-are-written-not-replaced).
@@ -177,9 +178,29 @@ where
         let mode = std::fs::metadata(path).map(|m| m.permissions().mode() & 0o7777).unwrap_or_else(|_| 0o666 & !umask());
         std::fs::set_permissions(tmp.path(), std::fs::Permissions::from_mode(mode)).map_err(CliError::io_out)?;
     }
-    tmp.persist(path)
-        .map_err(|e| CliError::output(format!("cannot write {}: {}", path.display(), e.error)))?;
+    PENDING.lock().unwrap_or_else(|e| e.into_inner()).push((tmp.into_temp_path(), path.to_path_buf()));
     Ok(())
+}
+
+/// Outputs written whole to their temporaries, waiting to be renamed into place together.
+static PENDING: std::sync::Mutex<Vec<(tempfile::TempPath, PathBuf)>> = std::sync::Mutex::new(Vec::new());
+
+/// Renames every output the command wrote into place, in the order they were written: called
+/// once the command has succeeded (or ended with findings it reports), so a command with
+/// several outputs (`fit -o m.tmesh --report r.json --outliers-csv o.csv`) replaces all of them
+/// or none; a disk that fills while the third is written leaves the first two as they were
+/// (docs/decisions.md#outputs-are-committed-together).
+pub fn commit_outputs() -> Result<(), CliError> {
+    let pending = std::mem::take(&mut *PENDING.lock().unwrap_or_else(|e| e.into_inner()));
+    for (tmp, path) in pending {
+        tmp.persist(&path).map_err(|e| CliError::output(format!("cannot write {}: {}", path.display(), e.error)))?;
+    }
+    Ok(())
+}
+
+/// Removes the temporaries of a command that failed: none of its outputs replaces anything.
+pub fn discard_outputs() {
+    PENDING.lock().unwrap_or_else(|e| e.into_inner()).clear();
 }
 
 /// The process's file-creation mask, read without changing it (`/proc/self/status`, Linux
