@@ -79,6 +79,9 @@ impl Preconditioner {
     }
 }
 
+/// Diagonal shifts [`Ic0::new`] tries before it falls back to the diagonal of A.
+pub const IC0_SHIFTS: usize = 30;
+
 /// Incomplete Cholesky IC(0) factor: L with the pattern of A's lower triangle, A ≈ L·Lᵀ.
 /// A non-positive pivot (A is not an M-matrix) restarts with a diagonal shift (Manteuffel).
 pub struct Ic0 {
@@ -102,14 +105,25 @@ impl Ic0 {
             }
             ptr[r + 1] = idx.len();
         }
+        // At most IC0_SHIFTS tries (a shift of 1e-3 up to 1e26): a matrix with a non-finite
+        // entry never factors, and an unbounded `alpha *= 10` ran forever on one
+        // (docs/decisions.md#crashes-and-hangs-of-issue-40). Beyond that, the diagonal.
         let mut alpha = 0.0;
-        loop {
-            let mut val = base.clone();
-            if factor_in_place(&ptr, &idx, &mut val, alpha) {
-                return Ic0 { ptr, idx, val };
+        if base.iter().all(|v| v.is_finite()) {
+            for _ in 0..IC0_SHIFTS {
+                let mut val = base.clone();
+                if factor_in_place(&ptr, &idx, &mut val, alpha) {
+                    return Ic0 { ptr, idx, val };
+                }
+                alpha = if alpha == 0.0 { 1e-3 } else { alpha * 10.0 };
             }
-            alpha = if alpha == 0.0 { 1e-3 } else { alpha * 10.0 };
         }
+        let mut val = vec![0.0; base.len()];
+        for i in 0..n {
+            let d = base[ptr[i + 1] - 1];
+            val[ptr[i + 1] - 1] = if d > 0.0 && d.is_finite() { d.sqrt() } else { 1.0 };
+        }
+        Ic0 { ptr, idx, val }
     }
 
     /// z = (L·Lᵀ)⁻¹ r.
@@ -179,7 +193,16 @@ fn factor_in_place(ptr: &[usize], idx: &[u32], val: &mut [f64], alpha: f64) -> b
 pub fn pcg(a: &SymCsr, b: &[f64], x: &mut [f64], pre: &Preconditioner, opts: &PcgOptions, mut check: Option<Checkpoint<'_>>) -> Result<CgStats, NotConverged> {
     let n = b.len();
     let dot = |u: &[f64], v: &[f64]| det_dot(u, v, opts.dot_chunk);
+    // Non-finite input is refused before the first iteration: no answer can come of it
+    // (docs/decisions.md#crashes-and-hangs-of-issue-40).
+    let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
+    if !(finite(&a.vals) && finite(b) && finite(x)) {
+        return Err(NotConverged { method: "cg", n, iterations: 0, residual: f64::NAN, tol: opts.accept.max(opts.tol) });
+    }
     let bn = dot(b, b).sqrt();
+    if !bn.is_finite() {
+        return Err(NotConverged { method: "cg", n, iterations: 0, residual: f64::NAN, tol: opts.accept.max(opts.tol) });
+    }
     if bn == 0.0 {
         x.iter_mut().for_each(|v| *v = 0.0);
         return Ok(CgStats::default());

@@ -212,3 +212,44 @@ fn symbolic_built_ahead_gives_the_same_bits() {
     assert!(reused);
     assert!(own.iter().zip(&ahead).all(|(x, y)| x.to_bits() == y.to_bits()));
 }
+
+/// Issue 40: a NaN, infinite or 1e300-squared entry made the IC(0) shift loop run forever. Now
+/// the IC(0) is built in bounded time, and every solver refuses the non-finite system at once.
+#[test]
+fn non_finite_systems_are_refused_in_bounded_time() {
+    let t0 = std::time::Instant::now();
+    for bad in [f64::NAN, f64::INFINITY, 1e300 * 1e300, -1e300 * 1e300] {
+        let mut a = laplace_2d(10, 0.0);
+        let k = a.find(5, 5).unwrap();
+        a.vals[k] = bad;
+        let b = vec![1.0; a.n()];
+        let mut x = vec![0.0; a.n()];
+        let pre = Preconditioner::ic0(&a);
+        let e = pcg(&a, &b, &mut x, &pre, &PcgOptions::new(1e-10, 1000), None).unwrap_err();
+        assert_eq!(e.iterations, 0, "{bad}");
+        assert!(solve_spd(&a, &b, &vec![0.0; a.n()], &tspline_like(a.n())).is_err(), "{bad}");
+    }
+    // a non-finite right-hand side or start value
+    let a = laplace_2d(10, 0.1);
+    let mut b = vec![1.0; a.n()];
+    b[3] = f64::NAN;
+    assert!(pcg(&a, &b, &mut vec![0.0; a.n()], &Preconditioner::jacobi(&a), &PcgOptions::new(1e-10, 100), None).is_err());
+    let b = vec![1e300; a.n()];
+    assert!(pcg(&a, &b, &mut vec![0.0; a.n()], &Preconditioner::jacobi(&a), &PcgOptions::new(1e-10, 100), None).is_err());
+    assert!(t0.elapsed().as_secs() < 10, "{:?}", t0.elapsed());
+}
+
+/// A strongly indefinite (but finite) matrix that no shift up to 1e26 repairs still gives an
+/// IC(0) (the diagonal one) after a bounded number of tries.
+#[test]
+fn ic0_of_a_hopeless_matrix_is_bounded() {
+    let mut a = laplace_2d(4, 0.0);
+    for i in 0..a.n() {
+        let k = a.find(i, i as u32).unwrap();
+        a.vals[k] = -1e30;
+    }
+    let pre = Preconditioner::ic0(&a);
+    let mut z = vec![0.0; a.n()];
+    pre.apply(&vec![1.0; a.n()], &mut z);
+    assert!(z.iter().all(|v| v.is_finite()));
+}
