@@ -113,6 +113,19 @@ fn the_right_extension_or_none_still_writes() {
         &["fit", s(&grid), "--max-error", "5", "-o", s(&null), "--report", s(&null)],
         &["rasterize", s(&pts), "--cell", "0.5", "-of", "GTiff", "-o", s(&null)],
     ];
+    // /dev/stdout is the stream, whatever stdout leads to (a file here): the link stays. Run
+    // in a private mount namespace with its own /dev where root can make one.
+    let to_file = dir.path().join("stdout.tmesh");
+    let fit = format!("geofit -q fit '{}' --max-error 5 -o /dev/stdout > '{}'", s(&grid), s(&to_file));
+    let private = format!("mount -t tmpfs none /dev && ln -s /proc/self/fd/1 /dev/stdout && mknod -m 666 /dev/null c 1 3 && {fit} && test -L /dev/stdout");
+    let in_namespace = made && std::process::Command::new("unshare").args(["-m", "true"]).status().is_ok_and(|st| st.success());
+    let o = if in_namespace {
+        common::bash_with_geofit(dir.path()).args(["-c", &format!("unshare -m bash -c \"{private}\"")]).output().unwrap()
+    } else {
+        common::bash_with_geofit(dir.path()).args(["-c", &format!("{fit} && test -L /dev/stdout")]).output().unwrap()
+    };
+    assert!(o.status.success(), "/dev/stdout kept as a link: {}", String::from_utf8_lossy(&o.stderr));
+    assert!(std::fs::read_to_string(&to_file).unwrap().contains("<tmesh"), "the mesh reached stdout's file");
     use std::os::unix::fs::FileTypeExt;
     for args in runs {
         let o = run(args, None);

@@ -37,7 +37,9 @@ pub enum Output {
 impl Output {
     pub fn from_arg(arg: Option<&str>) -> Output {
         match arg {
-            None | Some("-") => Output::Stdout,
+            // the same stream under its device names: renaming a temporary over /dev/stdout
+            // would replace the link itself (issue 40)
+            None | Some("-" | "/dev/stdout" | "/dev/fd/1" | "/proc/self/fd/1") => Output::Stdout,
             Some(p) => Output::Path(PathBuf::from(p)),
         }
     }
@@ -145,7 +147,7 @@ pub fn write_atomic<F>(path: &Path, f: F) -> Result<(), CliError>
 where
     F: FnOnce(&mut dyn Write) -> Result<(), CliError>,
 {
-    if std::fs::metadata(path).is_ok_and(|m| !m.is_file() && !m.is_dir()) {
+    if std::fs::metadata(path).is_ok_and(|m| !m.is_file() && !m.is_dir()) || is_system_path(path) {
         return write_into_device(path, f);
     }
     let dir = match path.parent() {
@@ -213,14 +215,22 @@ fn umask() -> u32 {
         .unwrap_or(0o022)
 }
 
-/// Writes into an existing device or FIFO as it is (opened for writing, never created,
-/// truncated or renamed).
+/// A link under `/dev` or `/proc` (`/dev/stderr`, `/proc/self/fd/3`): a stream the process
+/// was handed, which may lead to a regular file; the link itself must not be replaced. Files
+/// in directories there (`/dev/shm/x.tmesh`) are ordinary outputs.
+fn is_system_path(path: &Path) -> bool {
+    (path.starts_with("/dev") || path.starts_with("/proc")) && std::fs::symlink_metadata(path).is_ok_and(|m| m.file_type().is_symlink())
+}
+
+/// Writes into an existing device, FIFO or stream as it is (opened for writing, never created,
+/// truncated or renamed; a regular file behind `/dev/stderr` is appended to).
 fn write_into_device<F>(path: &Path, f: F) -> Result<(), CliError>
 where
     F: FnOnce(&mut dyn Write) -> Result<(), CliError>,
 {
     let named = |e: io::Error| CliError::output(format!("cannot write {}: {e}", path.display()));
-    let file = std::fs::OpenOptions::new().write(true).open(path).map_err(named)?;
+    let append = std::fs::metadata(path).is_ok_and(|m| m.is_file());
+    let file = std::fs::OpenOptions::new().write(true).append(append).open(path).map_err(named)?;
     let mut w = io::BufWriter::with_capacity(1 << 16, file);
     f(&mut w)?;
     w.flush().map_err(named)
