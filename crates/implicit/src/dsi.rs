@@ -91,6 +91,16 @@ pub fn auto_roughness(sigma: Option<f64>, cell: f64) -> f64 {
     }
 }
 
+/// The largest weight ϖ accepted. Weights are squared in the normal system: 10³⁰⁰ overflowed
+/// it to infinity and the solve never returned; beyond 10¹⁰ (10²⁰ against a roughness of
+/// about 1) the system is numerically singular anyway
+/// (docs/decisions.md#crashes-and-hangs-of-issue-40).
+pub const MAX_WEIGHT: f64 = 1e10;
+/// The largest CG iteration cap a model may hold.
+pub const MAX_ITER: usize = 100_000_000;
+/// The largest active-set round cap a model may hold.
+pub const MAX_ROUNDS: usize = 10_000;
+
 /// Solver and constraint parameters stored with a model.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Params {
@@ -105,6 +115,40 @@ pub struct Params {
     pub max_iter: usize,
     /// Cap on active-set rounds of the inequality constraints.
     pub rounds: usize,
+}
+
+impl Params {
+    /// What is wrong with these parameters (a weight that is not a number in 0..=[`MAX_WEIGHT`],
+    /// a non-finite step, gradient or tolerance, a cap beyond [`MAX_ITER`] / [`MAX_ROUNDS`]).
+    pub fn check(&self) -> Result<(), String> {
+        let w = &self.weights;
+        for (v, name) in [(w.value, "value weight"), (w.normal, "normal weight"), (w.rough, "roughness weight")] {
+            if !(0.0..=MAX_WEIGHT).contains(&v) {
+                return Err(format!("{name} {} is not a number from 0 to {MAX_WEIGHT:e}", short(v)));
+            }
+        }
+        for (v, name) in [(self.step, "normal step"), (self.grad, "gradient"), (self.tol, "CG tolerance")] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(format!("{name} {} is not a finite non-negative number", short(v)));
+            }
+        }
+        if self.max_iter > MAX_ITER {
+            return Err(format!("CG iteration cap {} is above {MAX_ITER}", self.max_iter));
+        }
+        if self.rounds > MAX_ROUNDS {
+            return Err(format!("active-set round cap {} is above {MAX_ROUNDS}", self.rounds));
+        }
+        Ok(())
+    }
+}
+
+/// A number for a message: `1e300`, not its 301 digits.
+fn short(v: f64) -> String {
+    if v.is_finite() && v.abs() >= 1e6 {
+        format!("{v:e}")
+    } else {
+        format!("{v}")
+    }
 }
 
 /// One input constraint (positions in the model's local frame).
@@ -478,6 +522,11 @@ pub fn solve_rows(
         let b: Vec<f64> = b_base.iter().zip(&b_float).map(|(a, b)| a + b).collect();
         // seed §3: the base and float systems are merged into one system for CG.
         let a = SymCsr::sum(&[&a_rough, &a_base, &a_float], shift);
+        if !(a.vals.iter().chain(&b).all(|v| v.is_finite())) {
+            return Err(Error::BadInput(
+                "the DSI system has a non-finite entry: a weight, position or value beyond what 64-bit floats hold".into(),
+            ));
+        }
         let last = settled || round + 1 >= p.rounds.max(1);
         // Not the last round: stop at the loose tolerance unless the active set is already
         // unchanged there, in which case the same CG run goes on to `p.tol` and we are done.

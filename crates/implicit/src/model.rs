@@ -283,6 +283,7 @@ pub fn build(
         max_iter: opt.max_iter,
         rounds: opt.rounds,
     };
+    params.check().map_err(Error::BadInput)?;
     let faults: Vec<Fault> = faults
         .iter()
         .map(|f| Fault { name: f.name.clone(), tris: f.tris.iter().map(|t| t.map(local)).collect() })
@@ -606,6 +607,12 @@ impl Model {
             max_iter,
             rounds,
         };
+        // Parameters and constraints feed the solver of `implicit update`: a NaN or 1e300
+        // weight made it run forever (docs/decisions.md#crashes-and-hangs-of-issue-40).
+        params.check().map_err(Error::Model)?;
+        if !(cell.is_finite() && cell > 0.0) {
+            return Err(Error::Model(format!("cell size {cell} is not a positive finite number")));
+        }
         let nv = r.count(28)?;
         let mut verts = Vec::with_capacity(nv);
         let mut dof_vertex = Vec::with_capacity(nv);
@@ -630,6 +637,9 @@ impl Model {
             let value = r.f64()?;
             let normal = [r.f64()?, r.f64()?, r.f64()?];
             let side = r.f64()?;
+            if !pos.iter().chain(&normal).chain([&value, &side]).all(|x| x.is_finite()) {
+                return Err(Error::Model(format!("constraint {} has a non-finite position, value, normal or side", constraints.len())));
+            }
             constraints.push(Constraint {
                 pos,
                 value: (flags & 1 != 0).then_some(value),

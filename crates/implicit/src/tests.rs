@@ -123,3 +123,33 @@ fn ic0_pcg_solves_a_small_spd_system() {
         assert!((p - q).abs() < 1e-9);
     }
 }
+
+/// Issue 40: a `.gfim` whose stored value weight is NaN or 1e300 made `implicit update` run
+/// forever. Such a model is refused when read, naming the field; the solver itself refuses a
+/// non-finite system.
+#[test]
+fn models_with_non_finite_or_huge_parameters_are_refused() {
+    let points = generate::sphere(200, [0.0; 3], 1.0, 0.0, 0.0, 1);
+    let opt = BuildOptions { coarse: 4, ..Default::default() };
+    let (m, _) = build(&points, &[], &[], &opt, &mut |_| {}).unwrap();
+    let bytes = m.to_bytes();
+    assert!(crate::model::Model::from_bytes(&bytes).is_ok());
+    // ϖ_value is the first f64 after magic (16), version (4), origin (24) and cell (8)
+    let at = 16 + 4 + 24 + 8;
+    for (v, why) in [(f64::NAN, "value weight NaN"), (1e300, "value weight 1e300"), (-1.0, "value weight -1")] {
+        let mut b = bytes.clone();
+        b[at..at + 8].copy_from_slice(&v.to_le_bytes());
+        let e = crate::model::Model::from_bytes(&b).unwrap_err().to_string();
+        assert!(e.contains(why), "{e}");
+    }
+    // the CG iteration cap (after 6 f64 parameters)
+    let mut b = bytes.clone();
+    b[at + 48..at + 56].copy_from_slice(&u64::MAX.to_le_bytes());
+    assert!(crate::model::Model::from_bytes(&b).unwrap_err().to_string().contains("iteration cap"));
+    // builds refuse a weight beyond MAX_WEIGHT before any solve
+    let mut opt = opt;
+    opt.weights.normal = 1e308;
+    let t0 = std::time::Instant::now();
+    assert!(build(&points, &[], &[], &opt, &mut |_| {}).unwrap_err().to_string().contains("normal weight"));
+    assert!(t0.elapsed().as_secs() < 20);
+}
