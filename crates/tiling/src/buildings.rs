@@ -104,9 +104,58 @@ pub fn sites_of(bytes: &[u8], name: &str, source: usize) -> Result<(Vec<Building
             continue;
         };
         let e = &o.envelope;
-        sites.push(BuildingSite { id: o.id.clone(), source, centroid, bounds: [e.min[0], e.min[1], e.max[0], e.max[1]] });
+        let bounds = [e.min[0], e.min[1], e.max[0], e.max[1]];
+        if let Some(why) = misplaced(centroid, bounds) {
+            let id = o.id.as_deref().unwrap_or("(no gml:id)");
+            return Err(TilingError::unreadable(name, format!("building {id}: {why}")));
+        }
+        sites.push(BuildingSite { id: o.id.clone(), source, centroid, bounds });
     }
     Ok((sites, without_coordinates))
+}
+
+/// The widest xy extent a building may have (metres): the largest buildings are a few km long.
+/// A wider one holds a misplaced vertex, most often one at 0 0 0 (docs/decisions.md#crashes-and-hangs-of-issue-40).
+pub const MAX_BUILDING_SPAN: f64 = 20_000.0;
+/// The largest |coordinate| a plan takes (metres; the earth's circumference is 4·10⁷).
+pub const MAX_COORDINATE: f64 = 1e9;
+
+/// What is wrong with a building's footprint centroid and xy bounds, if anything: a
+/// non-finite or far-off coordinate, or an extent no building has.
+fn misplaced(centroid: [f64; 2], b: [f64; 4]) -> Option<String> {
+    let far = |v: f64| !(v.abs() <= MAX_COORDINATE);
+    if b.iter().chain(&centroid).any(|&v| far(v)) {
+        return Some(format!(
+            "a coordinate beyond ±{MAX_COORDINATE:e} (x {} … {}, y {} … {}); fix the vertex",
+            short(b[0]),
+            short(b[2]),
+            short(b[1]),
+            short(b[3])
+        ));
+    }
+    let (w, h) = (b[2] - b[0], b[3] - b[1]);
+    if w > MAX_BUILDING_SPAN || h > MAX_BUILDING_SPAN {
+        let zero = if b[0] <= 0.0 && b[1] <= 0.0 { " (a vertex at 0 0 0?)" } else { "" };
+        return Some(format!(
+            "its coordinates span {} × {} m (x {} … {}, y {} … {}), wider than any building ({MAX_BUILDING_SPAN} m): a misplaced vertex{zero}; fix it",
+            short(w),
+            short(h),
+            short(b[0]),
+            short(b[2]),
+            short(b[1]),
+            short(b[3])
+        ));
+    }
+    None
+}
+
+/// A coordinate for a message: `1e308`, not its 309 digits.
+fn short(v: f64) -> String {
+    if v.is_finite() && v.abs() >= 1e9 {
+        format!("{v:e}")
+    } else {
+        format!("{}", (v * 1000.0).round() / 1000.0)
+    }
 }
 
 /// A buildings plan and what the plan could not place.
@@ -170,14 +219,23 @@ fn tiles_for(sites: &[BuildingSite], sources: &[String], step: f64) -> Vec<Tile>
         e.0 += 1;
         e.1.insert(s.source);
     }
-    // halo: buildings of other tiles whose xy bounds reach into a core
+    // halo: buildings of other tiles whose xy bounds reach into a core. Only the owned cells
+    // inside a building's box are visited (rows, then columns, by range): walking every cell of
+    // the box never ended for a box of 10³⁰⁸ m (docs/decisions.md#crashes-and-hangs-of-issue-40).
+    let mut rows: BTreeMap<i64, BTreeSet<i64>> = BTreeMap::new();
+    for &(ix, iy) in owned.keys() {
+        rows.entry(iy).or_default().insert(ix);
+    }
     let mut halo: BTreeMap<(i64, i64), (Vec<String>, [f64; 4])> = BTreeMap::new();
     for s in sites {
         let home = cell(s.centroid, step);
         let (lo, hi) = (cell([s.bounds[0], s.bounds[1]], step), cell([s.bounds[2], s.bounds[3]], step));
-        for iy in lo.1..=hi.1 {
-            for ix in lo.0..=hi.0 {
-                if (ix, iy) == home || !owned.contains_key(&(ix, iy)) {
+        if lo.0 > hi.0 || lo.1 > hi.1 {
+            continue;
+        }
+        for (&iy, xs) in rows.range(lo.1..=hi.1) {
+            for &ix in xs.range(lo.0..=hi.0) {
+                if (ix, iy) == home {
                     continue;
                 }
                 let h = halo.entry((ix, iy)).or_insert_with(|| (Vec::new(), cell_bounds((ix, iy), step)));
@@ -260,5 +318,31 @@ mod tests {
         assert_eq!(right.halo_buildings, vec!["b9_5".to_string()]);
         assert_eq!(right.halo.bounds, [7.0, 0.0, 20.0, 10.0]);
         assert_eq!(right.neighbours, vec!["x0_y0".to_string()]);
+    }
+
+    /// Issue 40: a building box of 10³⁰⁸ m (or from 0 0 0 to UTM) was walked cell by cell;
+    /// now only the owned cells inside it are visited.
+    #[test]
+    fn a_huge_building_box_takes_no_time() {
+        let t0 = std::time::Instant::now();
+        let mut sites = vec![site(9.0, 5.0, 2.0), site(15.0, 5.0, 1.0), site(350_000.0, 5_600_000.0, 5.0)];
+        sites[2].bounds[0] = 0.0;
+        sites[2].bounds[1] = 0.0;
+        sites.push(BuildingSite { id: Some("far".into()), source: 0, centroid: [20.0, 20.0], bounds: [-1e308, -1e308, 1e308, 1e308] });
+        let tiles = tiles_for(&sites, &["s.gml".into()], 1.0);
+        assert_eq!(tiles.len(), 4);
+        assert!(t0.elapsed().as_secs() < 5, "{:?}", t0.elapsed());
+        let right = tiles.iter().find(|t| t.id == "x15_y5").unwrap();
+        assert_eq!(right.halo_buildings, vec!["b350000_5600000".to_string(), "far".to_string()]);
+    }
+
+    #[test]
+    fn misplaced_vertices_are_named() {
+        assert_eq!(misplaced([5.0, 5.0], [0.0, 0.0, 10.0, 10.0]), None);
+        let e = misplaced([350_000.0, 5_600_000.0], [0.0, 0.0, 350_010.0, 5_600_010.0]).unwrap();
+        assert!(e.contains("span 350010 × 5600010 m") && e.contains("0 0 0?"), "{e}");
+        let e = misplaced([5.0, 5.0], [0.0, 0.0, 1e308, 10.0]).unwrap();
+        assert!(e.contains("x 0 … 1e308"), "{e}");
+        assert!(misplaced([f64::NAN, 5.0], [0.0, 0.0, 1.0, 1.0]).is_some());
     }
 }
