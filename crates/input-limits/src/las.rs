@@ -32,6 +32,12 @@ pub enum LasClaim {
     Chunks { chunks: u64, data: u64, max: u64 },
     #[error("the header claims an extended VLR at byte {offset} of {length} bytes, but the file has {len} bytes")]
     Evlr { offset: u64, length: u64, len: u64 },
+    #[error("the LASzip VLR gives item {index} ({kind}) a size of {size} bytes, but that item has {expected}")]
+    ItemSize { index: usize, kind: &'static str, size: u64, expected: String },
+    #[error("the LASzip VLR's items add up to {items} bytes a point, but the header's records are {record} bytes")]
+    ItemSum { items: u64, record: u64 },
+    #[error("LAZ chunk {chunk} at byte {at} claims layers of {layers} bytes, but only {have} bytes of compressed points follow")]
+    Layers { chunk: u64, at: u64, layers: u64, have: u64 },
     #[error("{0}")]
     Io(#[from] io::Error),
 }
@@ -46,6 +52,8 @@ pub struct Claims {
     pub points: u64,
     /// (start of the first EVLR, number of EVLRs), LAS 1.4 only.
     pub evlr: Option<(u64, u32)>,
+    pub header_size: u64,
+    pub vlrs: u64,
 }
 
 fn u16_at(h: &[u8], i: usize) -> u64 {
@@ -82,6 +90,8 @@ pub fn claims(h: &[u8]) -> Option<Claims> {
         // as the `las` crate reads it: the legacy count when it is set, else the 1.4 count
         points: if legacy > 0 { legacy } else { large },
         evlr,
+        header_size,
+        vlrs: u32_at(h, 100),
     })
 }
 
@@ -103,7 +113,11 @@ pub fn check<R: Read + Seek>(r: &mut R, len: u64) -> Result<(), LasClaim> {
             return Err(LasClaim::Points { points: c.points, record: c.record_len, need, have });
         }
     } else {
-        check_chunk_table(r, len, &c)?;
+        let items = check_laszip_items(r, len, &c)?;
+        let table = check_chunk_table(r, len, &c)?;
+        if let Some(items) = items.filter(|i| i.first().is_some_and(|i| i.0 == 10)) {
+            check_layers(r, len, &c, &items, table)?;
+        }
     }
     if let Some((start, n)) = c.evlr {
         // the `las` crate reads an EVLR when both fields are set (raw::Header::evlr)
@@ -123,12 +137,125 @@ pub fn check<R: Read + Seek>(r: &mut R, len: u64) -> Result<(), LasClaim> {
     Ok(())
 }
 
+/// The name and fixed size of a LASzip item type (`None`: a size the VLR gives, extra bytes);
+/// unknown types are left to `laz`, which refuses them.
+fn item_kind(t: u64) -> Option<(&'static str, Option<u64>)> {
+    Some(match t {
+        0 => ("BYTE", None),
+        6 => ("POINT10", Some(20)),
+        7 => ("GPSTIME11", Some(8)),
+        8 => ("RGB12", Some(6)),
+        9 => ("WAVEPACKET13", Some(29)),
+        10 => ("POINT14", Some(30)),
+        11 => ("RGB14", Some(6)),
+        12 => ("RGBNIR14", Some(8)),
+        13 => ("WAVEPACKET14", Some(29)),
+        14 => ("BYTE14", None),
+        _ => return None,
+    })
+}
+
+/// The items (type, size) of the LASzip VLR, checked: every item has its type's size (a
+/// POINT10 of 1 byte made `laz` panic splitting the record, docs/decisions.md#crashes-and-hangs-of-issue-40)
+/// and together they make the header's record length. `None` without a LASzip VLR (`las`
+/// refuses the file then).
+fn check_laszip_items<R: Read + Seek>(r: &mut R, len: u64, c: &Claims) -> Result<Option<Vec<(u64, u64)>>, LasClaim> {
+    let mut at = c.header_size;
+    for _ in 0..c.vlrs {
+        if at.saturating_add(54) > len.min(c.offset_to_points) {
+            return Ok(None);
+        }
+        let mut v = [0u8; 54];
+        r.seek(SeekFrom::Start(at))?;
+        r.read_exact(&mut v)?;
+        let length = u16_at(&v, 20);
+        let body = at + 54;
+        at = body + length;
+        if &v[2..17] != b"laszip encoded\0" || u16_at(&v, 18) != 22204 {
+            continue;
+        }
+        if length < 34 || at > len {
+            return Ok(None); // laz refuses the short record
+        }
+        let mut d = vec![0u8; length as usize];
+        r.seek(SeekFrom::Start(body))?;
+        r.read_exact(&mut d)?;
+        let n = u16_at(&d, 32) as usize;
+        if 34 + 6 * n > d.len() {
+            return Ok(None);
+        }
+        let mut items = Vec::with_capacity(n);
+        for i in 0..n {
+            let (t, size) = (u16_at(&d, 34 + 6 * i), u16_at(&d, 36 + 6 * i));
+            let Some((kind, fixed)) = item_kind(t) else { return Ok(None) };
+            match fixed {
+                Some(f) if f != size => {
+                    return Err(LasClaim::ItemSize { index: i, kind, size, expected: f.to_string() });
+                }
+                None if size == 0 => return Err(LasClaim::ItemSize { index: i, kind, size, expected: "at least 1".into() }),
+                _ => {}
+            }
+            items.push((t, size));
+        }
+        let sum: u64 = items.iter().map(|i| i.1).sum();
+        if sum != c.record_len {
+            return Err(LasClaim::ItemSum { items: sum, record: c.record_len });
+        }
+        return Ok(Some(items));
+    }
+    Ok(None)
+}
+
+/// Layers an item of a LAS 1.4 (layered) chunk has: one per field group of POINT14, one per
+/// extra byte, two for RGB + NIR, one otherwise.
+fn layers_of(item: (u64, u64)) -> u64 {
+    match item.0 {
+        10 => 9,
+        12 => 2,
+        14 => item.1,
+        _ => 1,
+    }
+}
+
+/// Walks the chunks of a layered (LAS 1.4) LAZ as `laz` reads them: the first point raw, a
+/// point count, the layer sizes, the layers. `laz` allocates each layer's claimed size before
+/// reading it: sizes of 0xFFFFFFFF took 4.2 GB from a 14.7 KB file. Every chunk's layers must
+/// fit before the chunk table (or the end of the file). `table`: the chunk table's offset and
+/// chunk count, when the file has one (a count is not trusted: the bytes bound the walk).
+fn check_layers<R: Read + Seek>(r: &mut R, len: u64, c: &Claims, items: &[(u64, u64)], table: Option<(u64, u64)>) -> Result<(), LasClaim> {
+    // without a table the chunks end at the first EVLR, or at the end of the file
+    let end = match (table, c.evlr) {
+        (Some((offset, _)), _) => offset,
+        (None, Some((start, n))) if start > c.offset_to_points && n > 0 => start.min(len),
+        (None, _) => len,
+    };
+    let nlayers: u64 = items.iter().map(|&i| layers_of(i)).sum();
+    let head = c.record_len + 4 + 4 * nlayers;
+    let mut at = c.offset_to_points + 8;
+    let mut chunk = 0;
+    let mut sizes = vec![0u8; 4 * nlayers as usize];
+    // every chunk takes at least `head` bytes: the walk ends within (end - start) / head steps
+    while at.saturating_add(head) <= end {
+        r.seek(SeekFrom::Start(at + c.record_len + 4))?;
+        r.read_exact(&mut sizes)?;
+        let layers: u64 = (0..nlayers as usize).map(|k| u32_at(&sizes, 4 * k)).sum();
+        let have = end - (at + head);
+        if layers > have {
+            return Err(LasClaim::Layers { chunk, at, layers, have });
+        }
+        at += head + layers;
+        chunk += 1;
+    }
+    Ok(())
+}
+
 /// The LAZ chunk table as `laz` finds it (`ChunkTable::read_offset`): an i64 offset at the start
-/// of the point data, or, when the writer could not update it, in the last 8 bytes.
-fn check_chunk_table<R: Read + Seek>(r: &mut R, len: u64, c: &Claims) -> Result<(), LasClaim> {
+/// of the point data, or, when the writer could not update it, in the last 8 bytes. Returns
+/// the table's (offset, chunk count) where there is one.
+fn check_chunk_table<R: Read + Seek>(r: &mut R, len: u64, c: &Claims) -> Result<Option<(u64, u64)>, LasClaim> {
     let start = c.offset_to_points;
     if start.saturating_add(8) > len {
-        return Ok(()); // the laz crate fails reading the offset: a plain read error
+        return Ok(None); // the laz crate fails reading the offset: a plain read error
     }
     let mut b = [0u8; 8];
     r.seek(SeekFrom::Start(start))?;
@@ -139,7 +266,7 @@ fn check_chunk_table<R: Read + Seek>(r: &mut R, len: u64, c: &Claims) -> Result<
         r.read_exact(&mut b)?;
         offset = i64::from_le_bytes(b);
         if offset <= start as i64 {
-            return Ok(()); // no chunk table: laz reads without one
+            return Ok(None); // no chunk table: laz reads without one
         }
     }
     let offset = offset as u64;
@@ -155,7 +282,7 @@ fn check_chunk_table<R: Read + Seek>(r: &mut R, len: u64, c: &Claims) -> Result<
     if chunks > max {
         return Err(LasClaim::Chunks { chunks, data, max });
     }
-    Ok(())
+    Ok(Some((offset, chunks)))
 }
 
 #[cfg(test)]

@@ -190,4 +190,65 @@ pub(crate) mod tests {
         let cut = bytes[..bytes.len() - 10].to_vec();
         assert!(matches!(LasPoints::from_bytes(cut, None), Err(LasError::Claim(_))));
     }
+
+    /// A LAZ file (LAS `version`, point `format`) of `n` points on a slope, by the `las` crate.
+    pub(crate) fn laz_bytes(version: (u8, u8), format: u8, n: usize) -> Vec<u8> {
+        let mut builder = las::Builder::from(version);
+        builder.point_format = las::point::Format::new(format).unwrap();
+        builder.point_format.is_compressed = true;
+        let header = builder.into_header().unwrap();
+        let mut writer = las::Writer::new(Cursor::new(Vec::new()), header).unwrap();
+        for i in 0..n {
+            let (x, y) = ((i % 50) as f64, (i / 50) as f64);
+            let gps_time = (format >= 6).then_some(i as f64);
+            writer.write_point(las::Point { x, y, z: 0.1 * x + 0.2 * y, gps_time, ..Default::default() }).unwrap();
+        }
+        writer.into_inner().unwrap().into_inner()
+    }
+
+    /// Byte offset of the first item of the LASzip VLR's item list.
+    pub(crate) fn laszip_items_at(b: &[u8]) -> usize {
+        let mut at = u16::from_le_bytes([b[94], b[95]]) as usize;
+        loop {
+            let len = u16::from_le_bytes([b[at + 20], b[at + 21]]) as usize;
+            if &b[at + 2..at + 16] == b"laszip encoded" {
+                return at + 54 + 34;
+            }
+            at += 54 + len;
+        }
+    }
+
+    /// Issue 40: one byte of the LASzip VLR (POINT10's item size set to 1) made `laz` panic
+    /// (`byteslice.rs: mid > len`); now the header check refuses it.
+    #[test]
+    fn a_laszip_item_of_the_wrong_size_is_refused() {
+        let good = laz_bytes((1, 2), 0, 500);
+        let mut las = LasPoints::from_bytes(good.clone(), None).unwrap();
+        assert_eq!(all(&mut las).unwrap().len(), 500);
+        let at = laszip_items_at(&good);
+        assert_eq!(u16::from_le_bytes([good[at], good[at + 1]]), 6, "POINT10 first");
+        for size in [1u16, 0, 21, 0xFFFF] {
+            let mut bad = good.clone();
+            bad[at + 2..at + 4].copy_from_slice(&size.to_le_bytes());
+            let e = LasPoints::from_bytes(bad, None).err().expect("refused").to_string();
+            assert!(e.contains(&format!("item 0 (POINT10) a size of {size} bytes")), "{e}");
+        }
+    }
+
+    /// Issue 40: a LAS 1.4 LAZ whose first chunk's layer sizes are 0xFFFFFFFF took 4.2 GB before
+    /// failing; now its layers are checked against the bytes that follow.
+    #[test]
+    fn layer_sizes_beyond_the_file_are_refused() {
+        let good = laz_bytes((1, 4), 6, 3000);
+        let mut las = LasPoints::from_bytes(good.clone(), None).unwrap();
+        assert_eq!(all(&mut las).unwrap().len(), 3000);
+        let offset = u32::from_le_bytes(good[96..100].try_into().unwrap()) as usize;
+        let sizes = offset + 8 + 30 + 4; // chunk offset, raw first point, point count
+        for layer in [0, 3, 8] {
+            let mut bad = good.clone();
+            bad[sizes + 4 * layer..sizes + 4 * layer + 4].fill(0xFF);
+            let e = LasPoints::from_bytes(bad, None).err().expect("refused").to_string();
+            assert!(e.starts_with("LAZ chunk 0 at byte") && e.contains("claims layers of"), "{e}");
+        }
+    }
 }
