@@ -305,3 +305,30 @@ fn outputs_keep_the_replaced_mode_and_follow_the_umask() {
         assert_eq!(mode(&out), want, "umask {umask}");
     }
 }
+
+/// Points in a CRS of US survey feet: `--cell 10` could be feet or metres, so it needs
+/// `--cell-unit`; `m` converts (10 m = 32.8083 US ft, checked in gdalinfo's pixel size) and
+/// `crs` keeps the CRS's feet.
+#[test]
+fn a_cell_on_points_in_feet_states_its_unit() {
+    if !common::tool("gdalinfo") {
+        return;
+    }
+    let dir = common::tempdir();
+    let pts = write(dir.path(), "ft.xyz", b"x y z\n2000000 1000000 10\n2000300 1000000 11\n2000000 1000300 12\n2000300 1000300 13\n");
+    let tif = dir.path().join("ft.tif");
+    let base = ["-q", "rasterize", s(&pts), "--s-srs", "EPSG:2240", "--cell", "10", "--method", "tin", "-o", s(&tif)];
+    refused(&base, None, 2, &["US survey foot", "--cell-unit crs", "--cell-unit m"], Some(&tif), &[&pts]);
+    let pixel = |unit: &str| {
+        let o = run(&[&base[..], &["--cell-unit", unit]].concat(), None);
+        assert_eq!(code(&o), 0, "{}", String::from_utf8_lossy(&o.stderr));
+        let info = std::process::Command::new("gdalinfo").args(["-json", s(&tif)]).output().unwrap();
+        let v: serde_json::Value = serde_json::from_slice(&info.stdout).unwrap();
+        v["geoTransform"][1].as_f64().unwrap()
+    };
+    assert!((pixel("m") - 10.0 / 0.3048006096012192).abs() < 1e-6);
+    assert_eq!(pixel("crs"), 10.0);
+    // in a CRS of metres --cell is metres, as ever
+    let utm = ["rasterize", s(&pts), "--s-srs", "EPSG:25832", "--cell", "10", "--method", "tin", "-o", s(&tif)];
+    assert_eq!(code(&run(&utm, None)), 0);
+}

@@ -149,6 +149,38 @@ fn known_by_size(metres: f64) -> Option<LengthUnit> {
         .find(|u| (u.metres - metres).abs() <= 1e-9 * u.metres)
 }
 
+/// A horizontal length a user gave (`rasterize --cell`) in the unit of the grid's CRS (WKT).
+/// The length is in metres unless `unit` says otherwise (`crs` for the CRS's own unit); a CRS
+/// whose x/y are in another linear unit than the metre (US survey feet, feet) needs `unit`,
+/// since either reading is common there: refused, naming both (docs/decisions.md#cell-sizes-in-a-crs-of-feet-issue-41).
+/// Geographic and unknown CRSs keep the length as given (their own checks apply).
+///
+/// ```
+/// use raster_io::units::length_in_crs_units;
+/// let ft_us = r#"PROJCS["x",GEOGCS["NAD83",DATUM["North_American_Datum_1983",SPHEROID["GRS 1980",6378137,298.257222101]],PRIMEM["Greenwich",0],UNIT["degree",0.0174532925199433]],PROJECTION["Transverse_Mercator"],UNIT["US survey foot",0.304800609601219]]"#;
+/// assert!(length_in_crs_units("--cell", 10.0, None, Some(ft_us)).is_err());
+/// assert_eq!(length_in_crs_units("--cell", 10.0, Some("crs"), Some(ft_us)).unwrap(), 10.0);
+/// let ft = length_in_crs_units("--cell", 10.0, Some("m"), Some(ft_us)).unwrap();
+/// assert!((ft - 32.808333).abs() < 1e-5);
+/// assert_eq!(length_in_crs_units("--cell", 2.0, None, None).unwrap(), 2.0);
+/// ```
+pub fn length_in_crs_units(option: &str, length: f64, unit: Option<&str>, crs_wkt: Option<&str>) -> Result<f64, String> {
+    let given = match unit {
+        None | Some("crs") => None,
+        Some(u) => Some(parse_length_unit(u).ok_or_else(|| format!("{option}-unit {u}: not a unit geofit knows ({KNOWN_UNITS}, or crs)"))?),
+    };
+    match (horizontal_unit(crs_wkt), given) {
+        (Horizontal::Linear { metres, .. }, Some(u)) => Ok(length * u.metres / metres),
+        (Horizontal::Linear { name, metres }, None) if unit.is_none() && (metres - 1.0).abs() > 1e-12 => Err(format!(
+            "{option} {length}: the grid's CRS has x/y in {name}; say which unit {option} is in: \
+             {option}-unit crs ({length} {name}) or {option}-unit m ({:.6} {name})",
+            length / metres
+        )),
+        (_, Some(u)) if (u.metres - 1.0).abs() > 1e-12 => Err(format!("{option}-unit {}: the grid's CRS is not in a linear unit to convert into", u.name)),
+        _ => Ok(length),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

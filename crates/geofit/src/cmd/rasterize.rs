@@ -31,12 +31,10 @@ Methods:
                  exp(-d²/2σ²), σ = --sigma (cells); cells no point reaches get nodata.
                  A file is read twice in batches: memory is 16 bytes a cell, whatever the
                  number of points (stdin is held whole)
-  gauss-literal  the thesis as printed: nearest cell only, weight exp(-d/2) (holes where a cell
-                 holds no point)
-  tin            linear interpolation in the Delaunay triangulation (like gdal_grid -a
-                 linear:radius=0); nodata outside the hull and, with --max-edge, in triangles
-                 with a longer edge. Holds every point: ~220 bytes each, refused (exit 3)
-                 beyond the available memory or GEOFIT_MAX_POINTS
+  gauss-literal  the thesis as printed: nearest cell only, weight exp(-d/2) (holes)
+  tin            linear interpolation in the Delaunay triangulation (gdal_grid -a linear);
+                 nodata outside the hull and, with --max-edge, in triangles with a longer
+                 edge. Holds every point (~220 bytes each; exit 3 beyond the memory)
 
 The grid's cell edges lie on multiples of --cell and cover every point, unless --bounds gives
 the outer edges exactly. Text: x y z per line, or a header naming the columns (x/easting/lon,
@@ -51,8 +49,8 @@ number with one (or --sep, --decimal); where ; tab or blanks separate, a comma i
   geofit: 11 x 11 cells of 1, 55 with a value (TIN, 3 vertices)
 Exit 3 naming the line: a row whose field count differs from the header's (or first row's),
 a NaN or inf value, thousands separators (1.234,5), whole numbers split by commas that may be
-decimal commas (--sep , reads them as fields). Exit 2: a cell meant as metres on points in
-degrees (geographic --s-srs or lon/lat columns), naming the UTM zone for --t-srs.";
+decimal commas (--sep , reads them as fields). Exit 2: metres on points in degrees (naming the
+UTM zone for --t-srs); a grid CRS in feet without --cell-unit (m converts, crs keeps feet).";
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum, Serialize)]
 #[serde(rename_all = "kebab-case")]
@@ -62,7 +60,7 @@ pub enum Method {
     Tin,
 }
 
-#[derive(ClapArgs, Debug)]
+#[derive(ClapArgs, Debug, Clone)]
 #[command(about = "Grid scattered points (XYZ/CSV, LAS/LAZ) into a raster: Gauss splat or TIN-linear", after_help = EXAMPLE)]
 pub struct Args {
     /// Point file: .las/.laz, or XYZ/CSV text (`-` = stdin, text only).
@@ -70,9 +68,12 @@ pub struct Args {
     /// Output raster (.tif, .asc, .nc, ...; `-` or missing = GeoTIFF on stdout).
     #[arg(short, long)]
     pub output: Option<String>,
-    /// Cell size in the points' units (degrees for lon/lat points; --t-srs grids in metres).
+    /// Cell size in the grid CRS's unit (metres in UTM; in a CRS of feet --cell-unit is needed).
     #[arg(long)]
     pub cell: f64,
+    /// Unit of --cell where the grid's CRS is not in metres: m, ft, us-ft, ... or crs (its own).
+    #[arg(long, value_name = "UNIT")]
+    pub cell_unit: Option<String>,
     #[arg(long, value_enum, default_value_t = Method::Gauss)]
     pub method: Method,
     /// Keep only LAS points of this ASPRS class (2 = ground).
@@ -130,8 +131,7 @@ struct RasterizeReport {
     merged_duplicates: Option<usize>,
 }
 
-/// The grid's CRS and reprojection ([`GridCrs`]); a bad CRS string is a usage error, as in
-/// gdalsrsinfo.
+/// The grid's CRS and reprojection ([`GridCrs`]); a bad CRS string is a usage error.
 fn crs_plan(args: &Args, file_crs: Option<&str>) -> Result<GridCrs, CliError> {
     GridCrs::plan(args.s_srs.as_deref(), file_crs, args.t_srs.as_deref()).map_err(|e| match e {
         GridCrsError::NoSource => CliError::usage(format!("{} {e}", args.input)),
@@ -144,9 +144,7 @@ fn reproject(plan: &GridCrs, points: &mut [[f64; 3]]) -> Result<(), CliError> {
     plan.apply(points).map_err(|e| CliError::usage(e.to_string()))
 }
 
-/// Refuses a cell size that is almost certainly metres on points in degrees
-/// (`GridSpec::cell_in_metres_on_degrees`; a lon/lat header counts as a geographic CRS); a
-/// projected `--s-srs` lifts it.
+/// Refuses metres on points in degrees (`GridSpec::cell_in_metres_on_degrees`).
 fn check_cell_units(args: &Args, seen: &BoundsXy, crs: Option<&Crs>, lonlat_header: bool, grid: &GridSpec) -> Result<(), CliError> {
     let Some(bounds) = seen.get() else { return Ok(()) };
     let geographic = crs.map(|c| c.geographic).or(lonlat_header.then_some(true));
@@ -195,7 +193,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         "{} x {} cells of {}, {} with a value{}",
         raster.width,
         raster.height,
-        args.cell,
+        raster.geotransform[1],
         with_value,
         tin_stats.map(|s| format!(" (TIN, {} vertices)", s.vertices)).unwrap_or_default()
     ));
@@ -284,6 +282,8 @@ fn plan_grid(args: &Args, seen: &BoundsXy, crs: Option<&Crs>, facts: &TextFacts,
         facts.read_as.as_ref().map(|f| format!(" ({f})")).unwrap_or_default()
     ));
     let bounds = seen.get().ok_or_else(|| CliError::unreadable(format!("{}: no points", args.input)))?;
+    let cell = raster_io::units::length_in_crs_units("--cell", args.cell, args.cell_unit.as_deref(), crs.map(|c| c.wkt.as_str()));
+    let args = &Args { cell: cell.map_err(CliError::usage)?, ..args.clone() };
     let grid = match &args.bounds {
         Some(b) => GridSpec::from_edges(b[0], b[1], b[2], b[3], args.cell),
         None => GridSpec::covering(bounds, args.cell),
