@@ -269,7 +269,13 @@ pub fn read_tmesh_arg(arg: &str) -> Result<TMeshFile, CliError> {
             return Err(CliError::unreadable(format!("{name}: {what}")));
         }
     }
-    tspline::format::read(&bytes).map_err(|e| CliError::unreadable(format!("{name}: {e}")))
+    let file = tspline::format::read(&bytes).map_err(|e| CliError::unreadable(format!("{name}: {e}")))?;
+    // The CRS goes to GDAL as a C string: a NUL byte in it (a binary T-mesh can hold one) is the
+    // input's fault, not an internal error ("FfiNulError", exit 4).
+    if file.georef.crs.contains('\0') {
+        return Err(CliError::unreadable(format!("{name}: the CRS \"{}\" holds a NUL byte", input_limits::quote(&file.georef.crs.replace('\0', "\\0")))));
+    }
+    Ok(file)
 }
 
 /// What a file given as a T-mesh is instead, when it is a kind geofit reads elsewhere (a raster:

@@ -102,6 +102,18 @@ pub struct HealReport {
 pub struct Healed {
     pub document: Vec<u8>,
     pub report: HealReport,
+    /// What the input holds that other commands refuse, in file order, each as
+    /// "line:column: why": non-finite coordinates (the reader's error, exit 3 elsewhere) and
+    /// XLinks to nothing (a finding elsewhere). heal keeps the buildings they are in as they
+    /// were; the command refuses the input when no building is left to heal.
+    pub defects: Defects,
+}
+
+/// See [`Healed::defects`].
+#[derive(Debug, Clone, Default)]
+pub struct Defects {
+    pub bad_numbers: Vec<String>,
+    pub unresolved_xlinks: Vec<String>,
 }
 
 /// Why a document cannot be healed at all (a building that cannot be healed is not an error:
@@ -195,7 +207,11 @@ pub fn heal(original: &[u8], opts: &HealOptions, progress: &(dyn Fn(usize) + Syn
         rounds,
         back,
     };
-    Ok(Healed { document, report })
+    let defects = Defects {
+        bad_numbers: bad.iter().map(|b| format!("{}:{}: non-finite coordinate '{}'", b.line, b.column, b.token)).collect(),
+        unresolved_xlinks: city.unresolved_xlinks.iter().map(|x| format!("{}:{}: {}", x.span.line, x.span.column, input_limits::quote(&x.reason()))).collect(),
+    };
+    Ok(Healed { document, report, defects })
 }
 
 /// The verify-after-write loop of [`heal`]: apply the edits of the buildings not kept, read the

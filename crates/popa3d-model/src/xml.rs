@@ -663,7 +663,7 @@ impl Reading {
                 self.saw_root = true;
                 check_version(&el)
             }
-            (None, other) => Err(el.err(format!("the root element must be <popa3d>, found <{other}>"))),
+            (None, other) => Err(el.err(format!("the root element must be <popa3d>, found <{}>", input_limits::quote(other)))),
             (Some("popa3d"), "origin") => {
                 self.saw_origin = true;
                 self.model.origin = [el.f64("x")?, el.f64("y")?, el.f64("z")?];
@@ -707,7 +707,7 @@ impl Reading {
             }
             (Some("setups"), "setup") => self.setups.push(&el, parse_setup(&el)?),
             (Some("observations"), _) => self.observations.push(&el, parse_observation_element(&el)?),
-            (Some(p), c) => Err(el.err(format!("unexpected element <{c}> inside <{p}>"))),
+            (Some(p), c) => Err(el.err(format!("unexpected element <{}> inside <{}>", input_limits::quote(c), input_limits::quote(p)))),
         }
     }
 
@@ -775,7 +775,7 @@ impl Reading {
 
 fn check_version(el: &El) -> Result<(), XmlError> {
     match el.opt("version") {
-        Some(v) if v != VERSION => Err(el.err(format!("unsupported popa3d version \"{v}\" (this reader knows {VERSION})"))),
+        Some(v) if v != VERSION => Err(el.err(format!("unsupported popa3d version \"{}\" (this reader knows {VERSION})", input_limits::quote(v)))),
         _ => Ok(()),
     }
 }
@@ -833,7 +833,7 @@ fn parse_setup(el: &El) -> Result<Setup, XmlError> {
 fn parse_observation_element(el: &El) -> Result<Observation, XmlError> {
     let kind = parse_observation(el)?;
     let origin = match el.opt("origin") {
-        Some(o) => ObsOrigin::parse(o).ok_or_else(|| el.err(format!("unknown origin \"{o}\"")))?,
+        Some(o) => ObsOrigin::parse(o).ok_or_else(|| el.err(format!("unknown origin \"{}\"", input_limits::quote(o))))?,
         None => ObsOrigin::Measured,
     };
     let induced_by = match el.opt("inducedBy") {
@@ -859,14 +859,19 @@ fn element(s: &BytesStart, line: usize, column: usize) -> Result<El, XmlError> {
     let name = el_name(s);
     let mut attrs = Vec::new();
     for a in s.attributes() {
-        let a = a.map_err(|e| XmlError::Syntax { line, column, message: format!("<{name}>: bad attribute: {e}") })?;
+        let bad = |what: &str, e: &dyn std::fmt::Display| XmlError::Syntax {
+            line,
+            column,
+            message: format!("<{}>: {what}: {}", input_limits::quote(&name), input_limits::quote(&e.to_string())),
+        };
+        let a = a.map_err(|e| bad("bad attribute", &e))?;
         let key = String::from_utf8_lossy(a.key.local_name().as_ref()).into_owned();
         if a.key.as_ref().starts_with(b"xmlns") {
             continue;
         }
         let v = a
             .unescape_value()
-            .map_err(|e| XmlError::Syntax { line, column, message: format!("<{name}>: bad attribute value: {e}") })?
+            .map_err(|e| bad("bad attribute value", &e))?
             .into_owned();
         attrs.push((key, v));
     }

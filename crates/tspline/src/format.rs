@@ -218,6 +218,11 @@ pub fn read(data: &[u8]) -> Result<TMeshFile, TsplineError> {
         return crate::tmb::read(data);
     }
     let text_of = XmlText(data);
+    // XML allows no NUL character anywhere; one that reached the CRS went on to GDAL as a C
+    // string and failed there ("FfiNulError", exit 4) instead of naming the input.
+    if let Some(pos) = data.iter().position(|&b| b == 0) {
+        return Err(text_of.err(pos, "a NUL byte, which XML text cannot hold".into()));
+    }
     let mut r = Reader::from_reader(data);
     r.config_mut().trim_text(false);
     let mut parts = XmlParts::default();
@@ -521,6 +526,15 @@ mod tests {
         let mut buf2 = Vec::new();
         write(&back, &mut buf2).unwrap();
         assert_eq!(buf, buf2);
+    }
+
+    #[test]
+    fn nul_bytes_are_refused_with_their_position() {
+        let mut buf = Vec::new();
+        write(&TMeshFile { mesh: TMesh::grid(Degree::Cubic, 0.0, 0.0, 1.0, 2, 2), georef: Georef::identity(), mask: None, warp: None }, &mut buf).unwrap();
+        let text = String::from_utf8(buf).unwrap().replace("<crs>", "<crs>EPSG:\u{0}25832");
+        let e = read(text.as_bytes()).unwrap_err().to_string();
+        assert!(e.contains("line 3:") && e.contains("a NUL byte") && !e.contains('\0'), "{e}");
     }
 
     #[test]

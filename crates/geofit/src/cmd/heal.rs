@@ -150,6 +150,18 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     let healed = heal::heal(&bytes, &opts, &|n| progress.set(n as u64, "buildings adjusted")).map_err(|e| heal_error(&name, e))?;
     progress.finish("verified");
     let r = &healed.report;
+    // A file whose every building is kept for what the reader refuses heals nothing: it is
+    // refused as every other command refuses it (a non-finite coordinate: exit 3; an XLink to
+    // nothing: exit 1), not "0 of 1 healed" with exit 0. Defects in some buildings of a file whose
+    // others heal keep only their buildings (docs/decisions.md#messages-and-refusals-of-issue-40).
+    if r.healed == 0 {
+        if let Some(d) = healed.defects.bad_numbers.first() {
+            return Err(CliError::unreadable(format!("{name}:{d}; nothing healed")));
+        }
+        if let Some(d) = healed.defects.unresolved_xlinks.first() {
+            return Err(CliError::findings(format!("{name}:{d}; nothing healed")));
+        }
+    }
     if !config.quiet {
         print_summary(r);
     }

@@ -86,10 +86,14 @@ fn back_options(a: &Args) -> Result<BackOptions, CliError> {
     Ok(BackOptions { coplanar_tolerance: a.coplanar_tolerance, collapse_tolerance: a.collapse_tolerance, area_tolerance: a.area_tolerance, merge: !a.no_merge, precision: a.precision })
 }
 
+/// The error of the conversion back, its message bounded: the provenance checks repeat ids of
+/// the popa3d input (a polygon id of 100 MB came back whole), so the message is cut like any
+/// quote of the input (`input_limits`, at 800 bytes: the message around the ids stays whole).
 fn back_error(template: &str, e: BackError) -> CliError {
+    let message = format!("{template}: {}", input_limits::quote_max(&e.to_string(), 800));
     match e {
-        BackError::Write(_) => CliError::internal(format!("{template}: {e}")),
-        _ => CliError::findings(format!("{template}: {e}")),
+        BackError::Write(_) => CliError::internal(message),
+        _ => CliError::findings(message),
     }
 }
 
