@@ -10,7 +10,7 @@
 set -euo pipefail
 cd "$(dirname "$0")"
 SECONDS_PER_TARGET="${1:-60}"; shift || true
-TARGETS=("$@"); [ ${#TARGETS[@]} -gt 0 ] || TARGETS=(citygml popa3d tmesh obj points grid netcdf)
+TARGETS=("$@"); [ ${#TARGETS[@]} -gt 0 ] || TARGETS=(citygml popa3d tmesh obj points grid netcdf las gfim)
 SHARED="${GEOFIT_SHARED:-$(cd .. && pwd)/../shared}"
 TRIPLE=x86_64-unknown-linux-gnu
 export CARGO_TARGET_DIR="${GEOFIT_FUZZ_TARGET_DIR:-$HOME/.cache/geofit/fuzz-target}"
@@ -32,6 +32,8 @@ seeds_for() {  # shipped fixtures under 64 KiB that a target's parser reads
     points) find "$SHARED/fixtures/terrain" ../fixtures -name '*.txt' -size -64k -o -name '*.csv' -size -64k -o -name '*.xyz' -size -64k ;;
     grid) find "$SHARED/fixtures/terrain" ../fixtures -name '*.asc' -size -64k ;;
     netcdf) find "$SHARED/fixtures/terrain" -name '*.nc' -size -64k ;;
+    las) find "$SHARED/fixtures/terrain" ../fixtures -name '*.la[sz]' -size -64k ;;
+    gfim) find ../fixtures -name '*.gfim' -size -64k ;;
   esac 2>/dev/null | sort | head -n 200
 }
 scratch=$(mktemp -d); trap 'rm -rf "$scratch"' EXIT

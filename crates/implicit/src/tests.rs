@@ -153,3 +153,19 @@ fn models_with_non_finite_or_huge_parameters_are_refused() {
     assert!(build(&points, &[], &[], &opt, &mut |_| {}).unwrap_err().to_string().contains("normal weight"));
     assert!(t0.elapsed().as_secs() < 20);
 }
+
+/// Every reproducer the fuzzer found (fuzz/regressions/gfim) is refused when read; the corpus
+/// seed reads.
+#[test]
+fn fuzz_regressions_do_not_panic() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz");
+    let files = |d: &str| -> Vec<_> { std::fs::read_dir(root.join(d)).unwrap().map(|e| e.unwrap().path()).collect() };
+    let bad = files("regressions/gfim");
+    assert!(!bad.is_empty(), "no reproducers");
+    for f in bad {
+        assert!(crate::model::Model::from_bytes(&std::fs::read(&f).unwrap()).is_err(), "{}", f.display());
+    }
+    for f in files("corpus/gfim") {
+        assert!(crate::model::Model::from_bytes(&std::fs::read(&f).unwrap()).is_ok(), "{}", f.display());
+    }
+}
