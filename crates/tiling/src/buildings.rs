@@ -135,7 +135,7 @@ fn misplaced(centroid: [f64; 2], b: [f64; 4]) -> Option<String> {
     }
     let (w, h) = (b[2] - b[0], b[3] - b[1]);
     if w > MAX_BUILDING_SPAN || h > MAX_BUILDING_SPAN {
-        let zero = if b[0] <= 0.0 && b[1] <= 0.0 { " (a vertex at 0 0 0?)" } else { "" };
+        let zero = if b[0] <= 0.0 && b[1] <= 0.0 { " (one at 0 0 0?)" } else { "" };
         return Some(format!(
             "its coordinates span {} × {} m (x {} … {}, y {} … {}), wider than any building ({MAX_BUILDING_SPAN} m): a misplaced vertex{zero}; fix it",
             short(w),

@@ -150,6 +150,20 @@ pub(super) fn build_model(b: &BuildArgs, config: &Config) -> Result<(Model, Buil
             return Err(CliError::usage(format!("{n} must be a finite non-negative number, got {w}")));
         }
     }
+    // Weights are squared in the normal system: 1e300 overflowed it and the solve never
+    // returned (docs/decisions.md#crashes-and-hangs-of-issue-40).
+    for (w, n) in [(b.w_value, "--w-value"), (b.w_normal, "--w-normal"), (rough, "--w-rough")] {
+        if w > implicit::dsi::MAX_WEIGHT {
+            return Err(CliError::usage(format!("{n} {w:e} is above the largest weight, {:e}", implicit::dsi::MAX_WEIGHT)));
+        }
+    }
+    if b.max_iter > implicit::dsi::MAX_ITER || b.rounds > implicit::dsi::MAX_ROUNDS {
+        return Err(CliError::usage(format!(
+            "--max-iter is at most {} and --rounds at most {}",
+            implicit::dsi::MAX_ITER,
+            implicit::dsi::MAX_ROUNDS
+        )));
+    }
     let opt = BuildOptions {
         cell: b.cell,
         coarse: b.coarse,
