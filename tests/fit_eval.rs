@@ -623,7 +623,9 @@ fn per_cell_tolerance_from_uncertainty() {
     assert!(class(0.05)["max"].as_f64().unwrap() <= 0.05, "{out}");
     assert!(class(1.0)["max"].as_f64().unwrap() > 0.2, "the east's slack is not used: {out}");
     // the uniform tolerance of the west needs more control points
-    run_expect(&["-q", "fit", &p("survey.tif"), "-o", &p("e.tmesh"), "--max-error", "0.05", "--report", &p("e.json")], 0);
+    // two bands of no declared meaning: band 1 is chosen explicitly (issue 41)
+    run_expect(&["-q", "fit", &p("survey.tif"), "-o", &p("e.tmesh"), "--max-error", "0.05", "--report", &p("e.json")], 2);
+    run_expect(&["-q", "fit", &p("survey.tif"), "-b", "1", "-o", &p("e.tmesh"), "--max-error", "0.05", "--report", &p("e.json")], 0);
     let cp = |f: &str| serde_json::from_slice::<serde_json::Value>(&std::fs::read(p(f)).unwrap()).unwrap()["control_points"].as_u64().unwrap();
     assert!(cp("u.json") < cp("e.json"), "per cell {} control points, uniform {}", cp("u.json"), cp("e.json"));
 }

@@ -122,19 +122,20 @@ pub fn read_raster_arg_typed(arg: &str) -> Result<(Raster, String, SampleType), 
 /// Which band of a raster input a command reads (docs/decisions.md#raster-units-bands-and-no-data-issue-41).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Band {
-    /// The heights' band: the only one, band 1 of two (elevation and uncertainty); a file with
-    /// more is refused (exit 2) naming the count and `-b N`.
+    /// The only band, or band 1 of a survey whose bands say so (see [`choose_band`]).
     Only,
     /// `-b N` (1-based, as GDAL counts).
     Given(usize),
     /// Band 1 whatever the count (`--like`: the grid and its no-data cells).
     First,
+    /// Band 1 of two when band 2 is read as its uncertainty (`--max-error-from-uncertainty`).
+    ElevationOfSurvey,
 }
 
-/// The band `choice` picks in the file at `path`: a file of three or more bands without `-b`
-/// is refused (a 4-band Terrain-RGB PNG is not its red band), unless band 1 is a survey's
-/// elevation (a BAG: bands "elevation" and "uncertainty"). Two bands are elevation and
-/// uncertainty, as `--max-error-from-uncertainty` reads them (or grey and alpha): band 1.
+/// The band `choice` picks in the file at `path`: a multi-band file without `-b` is refused
+/// (a 4-band Terrain-RGB PNG is not its red band, a grey + alpha PNG not surely its grey),
+/// unless band 1 is a survey's elevation (a BAG: bands "elevation" and "uncertainty", or two
+/// bands read with `--max-error-from-uncertainty`).
 pub fn choose_band(path: &std::path::Path, name: &str, choice: Band) -> Result<usize, CliError> {
     let bands = raster_io::bands(path).map_err(raster_err)?;
     let n = bands.len();
@@ -144,7 +145,7 @@ pub fn choose_band(path: &std::path::Path, name: &str, choice: Band) -> Result<u
         Band::Given(b) if b == 0 || b > n => Err(CliError::usage(format!("-b {b}: {name} has {n} band(s) (1 to {n})"))),
         Band::Given(b) => Ok(b),
         Band::First => Ok(1),
-        _ if n <= 2 || survey => Ok(1),
+        _ if n <= 1 || survey || (choice == Band::ElevationOfSurvey && n == 2) => Ok(1),
         _ => {
             let what: Vec<String> = bands.iter().map(|b| if b.description.is_empty() { b.color.clone() } else { b.description.clone() }).collect();
             Err(CliError::usage(format!("{name} has {n} bands ({}): choose the heights with -b N (GDAL's band number)", what.join(", "))))
@@ -281,18 +282,15 @@ pub fn read_tmesh_arg(arg: &str) -> Result<TMeshFile, CliError> {
 /// What a file given as a T-mesh is instead, when it is a kind geofit reads elsewhere (a raster:
 /// `fit` makes a T-mesh of it; points: `rasterize`; CityGML), with the command that takes it.
 fn not_a_tmesh(path: &std::path::Path) -> Option<String> {
-    if std::fs::metadata(path).is_ok_and(|m| m.len() == 0) {
-        return None;
+    use file_kind::FileKind as K;
+    match file_kind::sniff_path(path).ok()? {
+        K::TMesh | K::Xml(_) | K::Empty => None,
+        K::Raster(_) | K::Unknown | K::Binary if raster_io::bands(path).is_ok_and(|b| !b.is_empty()) => Some(
+            "is a raster, not a T-mesh: `geofit fit RASTER --max-error E -o MESH.tmesh` makes the T-mesh this command takes".to_string(),
+        ),
+        K::Unknown | K::Binary => None,
+        k => Some(format!("is {}, not a T-mesh", k.describe())),
     }
-    use raster_io::gdal_io::FileKind;
-    match raster_io::gdal_io::sniff_kind(path) {
-        Some(FileKind::TMesh | FileKind::OtherXml) => return None,
-        Some(k) => return Some(format!("is {}, not a T-mesh", k.describe())),
-        None => {}
-    }
-    raster_io::bands(path).ok().filter(|b| !b.is_empty()).map(|_| {
-        "is a raster, not a T-mesh: `geofit fit RASTER --max-error E -o MESH.tmesh` makes the T-mesh this command takes".to_string()
-    })
 }
 
 /// `r` in the fit's parameter layout (`tspline_raster::layout`), errors naming the input.

@@ -287,74 +287,21 @@ fn not_a_raster(path: &Path) -> Option<String> {
     (meta.is_file() && meta.len() == 0).then(|| "is an empty file (0 bytes), not a raster".into())
 }
 
-/// Kinds of file geofit reads that are not rasters, told by their first bytes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum FileKind {
-    TMesh,
-    Las,
-    CityGml,
-    Popa3d,
-    CityJson,
-    OtherXml,
-    PointText,
-}
-
-impl FileKind {
-    /// What it is, with the command that takes it.
-    pub fn describe(self) -> &'static str {
-        match self {
-            FileKind::TMesh => "a T-mesh (`geofit eval` makes a raster of it)",
-            FileKind::Las => "a LAS/LAZ point cloud (`geofit rasterize --cell S` makes a raster of it)",
-            FileKind::CityGml => "a CityGML document (`geofit info`, `validate`, `heal`, `export` take it)",
-            FileKind::Popa3d => "a popa3d model (`geofit adjust` takes it)",
-            FileKind::CityJson => "a CityJSON document",
-            FileKind::OtherXml => "an XML document",
-            FileKind::PointText => "point text, x y z (`geofit rasterize --cell S` makes a raster of it)",
-        }
-    }
-}
-
-/// The kind of a file by its first 4 KiB, when it is one of the non-raster kinds geofit knows.
-pub fn sniff_kind(path: &Path) -> Option<FileKind> {
-    use std::io::Read;
-    let mut head = Vec::with_capacity(4096);
-    std::fs::File::open(path).ok()?.take(4096).read_to_end(&mut head).ok()?;
-    let text = String::from_utf8_lossy(&head);
-    let t = text.trim_start_matches('\u{feff}').trim_start();
-    let xml = t.starts_with('<');
-    Some(if head.starts_with(b"\x89TMB\r\n\x1a\n") || xml && t.contains("<tmesh") {
-        FileKind::TMesh
-    } else if head.starts_with(b"LASF") {
-        FileKind::Las
-    } else if xml && t.contains("CityModel") {
-        FileKind::CityGml
-    } else if xml && t.contains("popa3d") {
-        FileKind::Popa3d
-    } else if t.starts_with('{') && t.contains("CityJSON") {
-        FileKind::CityJson
-    } else if xml {
-        FileKind::OtherXml
-    } else if looks_like_point_text(t) {
-        FileKind::PointText
-    } else {
-        return None;
-    })
-}
-
-/// What a file GDAL cannot open as a raster is, when it is one of the other kinds geofit reads,
-/// with the command that takes it (issue 41: wrong file kinds name the fix).
+/// What a file GDAL cannot open as a raster is, when its first bytes show one of the other
+/// kinds geofit reads (the `file-kind` crate), with the command that takes it (issue 41:
+/// wrong file kinds name the fix).
 pub fn what_it_is(path: &Path) -> Option<String> {
-    sniff_kind(path).map(|k| format!("is {}, not a raster GDAL reads", k.describe()))
-}
-
-/// The first lines (after an optional header) are rows of three or more numbers.
-fn looks_like_point_text(t: &str) -> bool {
-    let rows: Vec<&str> = t.lines().filter(|l| !l.trim().is_empty()).take(4).collect();
-    let numeric = |l: &&str| {
-        let f: Vec<&str> = l.split(|c: char| c == ',' || c == ';' || c.is_whitespace()).filter(|f| !f.is_empty()).collect();
-        f.len() >= 3 && f.iter().all(|v| v.parse::<f64>().is_ok())
+    use file_kind::FileKind as K;
+    let kind = file_kind::sniff_path(path).ok()?;
+    let takes = match kind {
+        K::TMesh => " (`geofit eval` makes a raster of it)",
+        K::Las | K::PointText => " (`geofit rasterize --cell S` makes a raster of it)",
+        K::CityGml => " (`geofit info`, `validate`, `heal`, `export` take it)",
+        K::Popa3d => " (`geofit adjust` takes it)",
+        K::CityJson | K::Xml(_) | K::Obj | K::Gltf => "",
+        _ => return None,
     };
-    rows.len() >= 2 && rows.iter().skip(1).all(numeric)
+    Some(format!("is {}{takes}, not a raster GDAL reads", kind.describe()))
 }
 
 pub fn is_gdal_virtual_path(path: &Path) -> bool {

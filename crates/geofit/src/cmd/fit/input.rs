@@ -98,7 +98,11 @@ fn read_input(args: &Args) -> Result<(Raster, String, Option<Domain>), CliError>
     if window.is_some() && (args.indirect || args.max_error_from_uncertainty.is_some() || args.input == "-") {
         return Err(CliError::usage("--srcwin / --tile fit a window of a raster file with the direct fit (not stdin, --indirect or --max-error-from-uncertainty)"));
     }
-    let choice = args.band.map_or(Band::Only, Band::Given);
+    let choice = match args.band {
+        Some(b) => Band::Given(b),
+        None if args.max_error_from_uncertainty.is_some() => Band::ElevationOfSurvey,
+        None => Band::Only,
+    };
     if args.terrain_rgb && (window.is_some() || args.input == "-") {
         return Err(CliError::usage("--terrain-rgb reads a whole raster file (not stdin, --srcwin or --tile)"));
     }

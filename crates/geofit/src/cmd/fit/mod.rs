@@ -107,7 +107,7 @@ pub struct Args {
     #[arg(long, value_name = "UNIT")]
     pub z_unit: Option<String>,
     /// The band that holds the heights (GDAL's numbering, from 1); needed when the raster has
-    /// three or more (of two, band 1 is the elevation and band 2 its uncertainty, as in a BAG).
+    /// several (a BAG, or two bands read with --max-error-from-uncertainty, need none).
     #[arg(short = 'b', long = "band", value_name = "N")]
     pub band: Option<usize>,
     /// The input is a Mapbox Terrain-RGB raster: heights decoded from red, green and blue
