@@ -57,7 +57,11 @@ impl MemoryLimit {
 /// what a budget's cost per unit does not count (libraries loaded later, thread stacks).
 pub fn memory_headroom() -> Option<(u64, Option<MemoryLimit>)> {
     let mut best = available_memory().map(|b| (b, None));
-    let limits = [(cgroup_headroom(), MemoryLimit::Cgroup), (rlimit_headroom(RLIMIT_AS_NAME, "VmSize:"), MemoryLimit::AddressSpace), (rlimit_headroom(RLIMIT_DATA_NAME, "VmData:"), MemoryLimit::DataSize)];
+    let limits = [
+        (cgroup_headroom(), MemoryLimit::Cgroup),
+        (rlimit_headroom(RLIMIT_AS_NAME, "VmSize:"), MemoryLimit::AddressSpace),
+        (rlimit_headroom(RLIMIT_DATA_NAME, "VmData:"), MemoryLimit::DataSize),
+    ];
     for (bytes, limit) in limits {
         let Some(bytes) = bytes else { continue };
         let bytes = bytes - bytes / 8;
