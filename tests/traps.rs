@@ -26,24 +26,10 @@ fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
 
-/// A refusal: `exit`, exactly one stderr line containing every `words`, nothing at `out`
-/// (when given), and every file in `untouched` with the bytes it had.
+/// A refusal (see [`common::refused`]).
 #[track_caller]
 fn refused(args: &[&str], stdin: Option<&[u8]>, exit: i32, words: &[&str], out: Option<&Path>, untouched: &[&Path]) {
-    let before: Vec<Vec<u8>> = untouched.iter().map(|p| std::fs::read(p).unwrap()).collect();
-    let o = run(args, stdin);
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(code(&o), exit, "{args:?}: stderr {err}");
-    assert_eq!(err.trim_end().lines().count(), 1, "{args:?}: one line, got {err}");
-    for w in words {
-        assert!(err.contains(w), "{args:?}: '{w}' missing from: {err}");
-    }
-    if let Some(out) = out {
-        assert!(!out.exists() || untouched.contains(&out), "{args:?}: {} was written", out.display());
-    }
-    for (p, b) in untouched.iter().zip(before) {
-        assert_eq!(std::fs::read(p).unwrap(), b, "{args:?}: {} changed", p.display());
-    }
+    common::refused(args, stdin, exit, words, out, untouched);
 }
 
 #[test]

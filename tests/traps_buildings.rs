@@ -69,24 +69,10 @@ fn replace_srs_names(text: &str, srs_name: &str) -> String {
     out
 }
 
-/// A refusal: `exit`, exactly one stderr line containing every `words`, nothing at `out`
-/// (when given), and every file in `untouched` with the bytes it had.
+/// A refusal (see [`common::refused`]).
 #[track_caller]
 fn refused(args: &[&str], exit: i32, words: &[&str], out: Option<&Path>, untouched: &[&Path]) {
-    let before: Vec<Vec<u8>> = untouched.iter().map(|p| std::fs::read(p).unwrap()).collect();
-    let o = run(args, None);
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(code(&o), exit, "{args:?}: stderr {err}");
-    assert_eq!(err.trim_end().lines().count(), 1, "{args:?}: one line, got {err}");
-    for w in words {
-        assert!(err.contains(w), "{args:?}: '{w}' missing from: {err}");
-    }
-    if let Some(out) = out {
-        assert!(!out.exists(), "{args:?}: {} was written", out.display());
-    }
-    for (p, b) in untouched.iter().zip(before) {
-        assert_eq!(std::fs::read(p).unwrap(), b, "{args:?}: {} changed", p.display());
-    }
+    common::refused(args, None, exit, words, out, untouched);
 }
 
 fn validate_json(file: &Path) -> (i32, Value) {

@@ -121,20 +121,10 @@ fn tin_gives_the_plane(input: &str, stdin: Option<&[u8]>, dir: &Path, extra: &[&
     e
 }
 
-/// Runs geofit, expects exit `code` with exactly one stderr line holding every needle, no file
-/// at `out`, and `input` byte for byte as before.
+/// A refusal (see [`common::refused`]): `input` unchanged, nothing at `out`.
+#[track_caller]
 fn refused(args: &[&str], code: i32, needles: &[&str], input: &Path, out: &Path) -> String {
-    let before = std::fs::read(input).unwrap();
-    let o = common::run(args, None);
-    let e = stderr(&o);
-    assert_eq!(common::code(&o), code, "{args:?}: {e}");
-    assert_eq!(e.trim_end().lines().count(), 1, "one line expected: {e}");
-    for n in needles {
-        assert!(e.contains(n), "{args:?}: expected {n:?} in {e:?}");
-    }
-    assert!(!out.exists(), "{args:?} wrote {}", out.display());
-    assert_eq!(std::fs::read(input).unwrap(), before, "{args:?} changed its input");
-    e
+    common::refused(args, None, code, needles, Some(out), &[input])
 }
 
 /// The file: `x;y;z` over `341000,5;5724000,25;12,5` (German office CSV) was read as

@@ -122,19 +122,10 @@ fn fit_error_m(dir: &Path, input: &Path, args: &[&str], truth_m: &[f64], metres_
     (worst, report, err)
 }
 
-/// The refusal rule: exit `code`, one stderr line holding every needle, nothing at `out`, the
-/// input's bytes unchanged.
+/// The refusal rule (see [`common::refused`]): `input` unchanged, nothing at `out`.
+#[track_caller]
 fn assert_refused(args: &[&str], code: i32, needles: &[&str], input: &Path, out: &Path) {
-    let before = std::fs::read(input).ok();
-    let o = common::run(args, None);
-    let e = stderr(&o);
-    assert_eq!(common::code(&o), code, "{args:?}: {e}");
-    assert_eq!(e.trim_end().lines().count(), 1, "{args:?}: one line: {e}");
-    for n in needles {
-        assert!(e.contains(n), "{args:?}: {e:?} should name {n:?}");
-    }
-    assert!(!out.exists(), "{args:?}: wrote {}", out.display());
-    assert_eq!(std::fs::read(input).ok(), before, "{args:?}: the input changed");
+    common::refused(args, None, code, needles, Some(out), &[input]);
 }
 
 /// The case: a band in km fitted with --max-error 10 read it as 10 km. Now 0.5 m is

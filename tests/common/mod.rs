@@ -207,3 +207,25 @@ pub fn tileset_read_by_py3dtiles(tileset: &Path) -> Option<serde_json::Value> {
     assert!(o.status.success(), "py3dtiles on {}: {text}{}", tileset.display(), String::from_utf8_lossy(&o.stderr));
     Some(serde_json::from_str(text.lines().last().unwrap_or("")).expect("one JSON line"))
 }
+
+/// The refusal every trap test checks (issue 41): exit `exit`, exactly one stderr line holding
+/// every one of `words`, nothing written at `out` (unless `out` is one of the inputs), and every
+/// path in `untouched` with the bytes it had (or still missing). Returns stderr.
+#[track_caller]
+pub fn refused(args: &[&str], stdin: Option<&[u8]>, exit: i32, words: &[&str], out: Option<&Path>, untouched: &[&Path]) -> String {
+    let before: Vec<Option<Vec<u8>>> = untouched.iter().map(|p| std::fs::read(p).ok()).collect();
+    let o = run(args, stdin);
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert_eq!(code(&o), exit, "{args:?}: stderr {err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "{args:?}: one line, got {err}");
+    for w in words {
+        assert!(err.contains(w), "{args:?}: '{w}' missing from: {err}");
+    }
+    if let Some(out) = out {
+        assert!(!out.exists() || untouched.contains(&out), "{args:?}: {} was written", out.display());
+    }
+    for (p, b) in untouched.iter().zip(before) {
+        assert_eq!(std::fs::read(p).ok(), b, "{args:?}: {} changed", p.display());
+    }
+    err
+}
