@@ -229,6 +229,10 @@ pub fn build(
     let longest = ext[0].max(ext[1]).max(ext[2]);
     let coarse = opt.coarse.max(1);
     let cube0 = longest * 1.2 / coarse as f64;
+    // an infinite extent (points at ±1e308) would make the cube-doubling loop below endless
+    if !cube0.is_finite() {
+        return Err(Error::BadInput(format!("the points span {longest:e}: more than a model can hold")));
+    }
     let lp: Vec<V3> = pts.iter().map(|p| local(p.pos)).collect();
     let cell = match opt.cell {
         Some(c) if c > 0.0 && c.is_finite() => c,
