@@ -11,7 +11,11 @@
 //! - LAZ: the chunk table lies inside the file, and its chunk count fits the compressed data
 //!   (every chunk starts with one point stored raw, so it takes at least one record length —
 //!   at most 20 bytes are assumed, the smallest standard record);
-//! - LAS 1.4: the first EVLR (the one the `las` crate reads) lies inside the file.
+//! - LAS 1.4: the first EVLR (the one the `las` crate reads) lies inside the file;
+//! - LAZ: every item of the LASzip VLR has its type's size, and the items make the record
+//!   length (a POINT10 of 1 byte made `laz` panic);
+//! - layered LAZ (LAS 1.4): each chunk's layer sizes fit before the chunk table (`laz`
+//!   allocates them before reading: 0xFFFFFFFF took 4.2 GB).
 //!
 //! The compressed point count cannot be bounded by the file size (identical points compress to
 //! almost nothing): readers of LAZ must read in batches and let memory grow with what is
