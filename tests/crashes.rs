@@ -256,3 +256,22 @@ fn tile_plan_over_a_huge_extent_does_not_walk_empty_cells() {
     let plan = std::fs::read_to_string(&out).unwrap();
     assert_eq!(plan.lines().count(), 2, "{plan}");
 }
+
+/// A corrupt compressed stream (found by the `las` fuzz target) tripped an assertion inside
+/// laz's arithmetic decoder: now exit 3 and one line where it trips, never a panic.
+#[test]
+fn laz_decoder_panics_become_read_errors() {
+    let d = common::tempdir();
+    let bad = d.path().join("corrupt.laz");
+    std::fs::copy(common::repo_root().join("fuzz/regressions/las/laz-decoder-assertion.laz"), &bad).unwrap();
+    let out = d.path().join("out.tif");
+    let mut cmd = common::geofit();
+    cmd.args(["-q", "rasterize", s(&bad), "--cell", "1", "-o", s(&out)]);
+    let (code, err, _) = run_bounded(cmd);
+    assert!(code == 0 || code == 3, "exit {code}: {err}");
+    assert!(err.lines().count() <= 1 && !err.contains("panicked"), "{err}");
+    if code == 3 {
+        assert!(err.contains("corrupt.laz") && err.contains("corrupt"), "{err}");
+        assert!(!out.exists());
+    }
+}

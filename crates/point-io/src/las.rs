@@ -89,7 +89,8 @@ impl LasPoints {
     pub fn next_batch(&mut self) -> Result<Vec<[f64; 3]>, LasError> {
         let mut kept = Vec::new();
         while kept.is_empty() && self.read < self.total {
-            let batch = self.reader.read_points(BATCH_POINTS as u64).map_err(LasError::Read)?;
+            let reader = &mut self.reader;
+            let batch = decode_guarded(|| reader.read_points(BATCH_POINTS as u64))?.map_err(LasError::Read)?;
             if batch.is_empty() {
                 break;
             }
@@ -126,6 +127,22 @@ impl LasPoints {
             None => LasError::NoPoints,
         })
     }
+}
+
+/// Runs a decode of the `las`/`laz` crates, turning a panic inside them into a read error:
+/// corrupt compressed points can trip an assertion of `laz`'s arithmetic decoder (the `las`
+/// fuzz target found `sym < (1 << 16)`, docs/decisions.md#crashes-and-hangs-of-issue-40).
+/// The panic message is not printed (the error carries it): the hook is silenced meanwhile.
+fn decode_guarded<T>(f: impl FnOnce() -> T) -> Result<T, LasError> {
+    let hook = std::panic::take_hook();
+    std::panic::set_hook(Box::new(|_| {}));
+    let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(f));
+    std::panic::set_hook(hook);
+    r.map_err(|p| {
+        let why = p.downcast_ref::<&str>().map(|s| s.to_string()).or_else(|| p.downcast_ref::<String>().cloned()).unwrap_or_default();
+        let e = std::io::Error::new(std::io::ErrorKind::InvalidData, format!("the compressed points are corrupt (the LAZ decoder failed: {why})"));
+        LasError::Read(las::Error::Io(e))
+    })
 }
 
 /// Checks what the header of the file at `path` claims against its size before the `las` crate
@@ -261,7 +278,11 @@ pub(crate) mod tests {
         let bad = files("regressions/las");
         assert!(!bad.is_empty(), "no reproducers");
         for f in bad {
-            assert!(LasPoints::from_bytes(std::fs::read(&f).unwrap(), None).is_err(), "{}", f.display());
+            let read = LasPoints::from_bytes(std::fs::read(&f).unwrap(), None).and_then(|mut l| all(&mut l).and(l.check_end()));
+            // a corrupt compressed stream decodes to garbage where laz's debug assertions are off
+            if !f.file_name().unwrap().to_string_lossy().starts_with("laz-decoder") {
+                assert!(read.is_err(), "{}", f.display());
+            }
         }
         for f in files("corpus/las") {
             let mut las = LasPoints::from_bytes(std::fs::read(&f).unwrap(), None).unwrap();
