@@ -42,6 +42,8 @@ pub enum LasClaim {
     ItemSum { items: u64, record: u64 },
     #[error("LAZ chunk {chunk} at byte {at} claims layers of {layers} bytes, but only {have} bytes of compressed points follow")]
     Layers { chunk: u64, at: u64, layers: u64, have: u64 },
+    #[error("the header claims {points} points of {record} bytes, more bytes than any file can hold")]
+    Overflow { points: u64, record: u64 },
     #[error("{0}")]
     Io(#[from] io::Error),
 }
@@ -80,7 +82,8 @@ pub fn claims(h: &[u8]) -> Option<Claims> {
     let header_size = u16_at(h, 94);
     let format = h[104];
     let legacy = u32_at(h, 107);
-    let (evlr, large) = if minor >= 4 && header_size >= 375 && h.len() >= 375 {
+    // as the `las` crate reads them: by the version, whatever the header size says
+    let (evlr, large) = if minor >= 4 && h.len() >= 375 {
         (Some((u64_at(h, 235), u32_at(h, 243) as u32)), u64_at(h, 247))
     } else {
         (None, 0)
@@ -111,6 +114,10 @@ pub fn check<R: Read + Seek>(r: &mut R, len: u64) -> Result<(), LasClaim> {
         return Err(LasClaim::PointOffset { offset: c.offset_to_points, len });
     }
     let have = len - c.offset_to_points;
+    // the `las` crate computes offset + points × record length in u64 (an overflow panic)
+    if c.points.checked_mul(c.record_len).and_then(|n| n.checked_add(c.offset_to_points)).is_none() {
+        return Err(LasClaim::Overflow { points: c.points, record: c.record_len });
+    }
     if !c.compressed {
         let need = c.points as u128 * c.record_len as u128;
         if need > have as u128 {
