@@ -101,6 +101,30 @@ pub enum AxisOrder {
     LonLat,
 }
 
+impl AxisOrder {
+    /// A point's longitude and latitude, read in this order.
+    pub fn lon_lat(self, p: &[f64; 3]) -> (f64, f64) {
+        match self {
+            AxisOrder::LatLon => (p[1], p[0]),
+            AxisOrder::LonLat => (p[0], p[1]),
+        }
+    }
+
+    /// The first two axes in words: `latitude, longitude`.
+    pub fn describe(self) -> &'static str {
+        match self {
+            AxisOrder::LatLon => "latitude, longitude",
+            AxisOrder::LonLat => "longitude, latitude",
+        }
+    }
+}
+
+/// Whether a longitude and latitude are a position on the globe (|lat| ≤ 90°, |lon| ≤ 180°):
+/// a "latitude" beyond 90° is the tell of coordinates in the other axis order.
+pub fn is_position(lon: f64, lat: f64) -> bool {
+    lat.abs() <= 90.0 && lon.abs() <= 180.0
+}
+
 /// The axis order a geographic `srs_name` declares (docs/decisions.md#geographic-crss-and-vertical-datums-of-buildings-issue-41).
 pub fn axis_order(srs_name: &str) -> AxisOrder {
     if srs_name.contains("CRS84") {
@@ -289,11 +313,7 @@ pub fn vertical_part(srs_name: &str) -> Option<VerticalDatum> {
 pub fn describe(srs_name: &str) -> String {
     let mut s = format!("{} as {}", srs_name.trim(), proj_crs(srs_name));
     if let Some(epsg) = geographic_epsg(srs_name) {
-        let order = match axis_order(srs_name) {
-            AxisOrder::LatLon => "latitude, longitude",
-            AxisOrder::LonLat => "longitude, latitude",
-        };
-        s += &format!(", geographic (EPSG:{epsg}, degrees, {order})");
+        s += &format!(", geographic (EPSG:{epsg}, degrees, {})", axis_order(srs_name).describe());
     }
     match vertical_part(srs_name) {
         Some(v) => s += &format!("; heights: {v}"),

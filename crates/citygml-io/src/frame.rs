@@ -85,10 +85,7 @@ pub fn geographic_document(city: &crate::model::CityModel, srs_override: Option<
     if let Some(s) = srs_override {
         let epsg = crate::crs::geographic_epsg(s)?;
         let first = city.objects.iter().find_map(|o| first_point(o, None)).map(|(_, p)| p);
-        let lon_lat = first.map(|p| match crate::crs::axis_order(s) {
-            crate::crs::AxisOrder::LatLon => (p[1], p[0]),
-            crate::crs::AxisOrder::LonLat => (p[0], p[1]),
-        });
+        let lon_lat = first.map(|p| crate::crs::axis_order(s).lon_lat(&p));
         return Some(GeographicDocument { srs: s.to_string(), epsg, lon_lat });
     }
     let doc = city.srs_name.as_deref();
@@ -98,10 +95,7 @@ pub fn geographic_document(city: &crate::model::CityModel, srs_override: Option<
         .map(str::to_string)
         .or_else(|| first.as_ref().and_then(|(s, _)| s.clone()).filter(|s| crate::crs::geographic_epsg(s).is_some()))?;
     let epsg = crate::crs::geographic_epsg(&srs)?;
-    let lon_lat = first.map(|(_, p)| match crate::crs::axis_order(&srs) {
-        crate::crs::AxisOrder::LatLon => (p[1], p[0]),
-        crate::crs::AxisOrder::LonLat => (p[0], p[1]),
-    });
+    let lon_lat = first.map(|(_, p)| crate::crs::axis_order(&srs).lon_lat(&p));
     Some(GeographicDocument { srs, epsg, lon_lat })
 }
 
@@ -117,10 +111,7 @@ pub struct GeographicDocument {
 impl GeographicDocument {
     /// Whether the first point is a position in the declared axis order (|latitude| ≤ 90°).
     pub fn plausible(&self) -> bool {
-        match self.lon_lat {
-            Some((lon, lat)) => lat.abs() <= 90.0 && lon.abs() <= 180.0,
-            None => true,
-        }
+        self.lon_lat.is_none_or(|(lon, lat)| crate::crs::is_position(lon, lat))
     }
 
     /// `EPSG:32632 (the UTM zone of its first point)`, or a generic hint without points.
@@ -133,10 +124,6 @@ impl GeographicDocument {
 
     /// One line: `CRS urn:…4979 is geographic (EPSG:4979, degrees, latitude, longitude)`.
     pub fn what(&self) -> String {
-        let order = match crate::crs::axis_order(&self.srs) {
-            crate::crs::AxisOrder::LatLon => "latitude, longitude",
-            crate::crs::AxisOrder::LonLat => "longitude, latitude",
-        };
-        format!("CRS {} is geographic (EPSG:{}, degrees, {order})", self.srs, self.epsg)
+        format!("CRS {} is geographic (EPSG:{}, degrees, {})", self.srs, self.epsg, crate::crs::axis_order(&self.srs).describe())
     }
 }

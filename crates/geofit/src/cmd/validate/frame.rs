@@ -4,7 +4,7 @@
 //! and is checked for plausibility: a "latitude" beyond ±90° is refused in one line, not
 //! guessed (docs/decisions.md#geographic-crss-and-vertical-datums-of-buildings-issue-41).
 
-use citygml_io::crs::{axis_order, geographic_epsg, utm_epsg, AxisOrder};
+use citygml_io::crs::{axis_order, geographic_epsg, is_position, utm_epsg, AxisOrder};
 use citygml_io::frame::map_points;
 use citygml_io::{CityObject, Point3};
 use citygml_validate::document::ObjectFrame;
@@ -39,18 +39,12 @@ impl GeographicFrame {
     fn point(&mut self, srs: Option<&str>, p: &mut Point3) -> Result<(), String> {
         let Some(srs) = srs else { return Ok(()) };
         let Some((epsg, order)) = self.kind(srs) else { return Ok(()) };
-        let (lat, lon) = match order {
-            AxisOrder::LatLon => (p[0], p[1]),
-            AxisOrder::LonLat => (p[1], p[0]),
-        };
-        if !(lat.abs() <= 90.0 && lon.abs() <= 180.0) {
-            let (first, second) = match order {
-                AxisOrder::LatLon => ("latitude", "longitude"),
-                AxisOrder::LonLat => ("longitude", "latitude"),
-            };
-            return Err(if lon.abs() <= 90.0 && lat.abs() <= 180.0 {
+        let (lon, lat) = order.lon_lat(p);
+        if !is_position(lon, lat) {
+            let (first, axes) = (if order == AxisOrder::LatLon { "latitude" } else { "longitude" }, order.describe());
+            return Err(if is_position(lat, lon) {
                 format!(
-                    "srsName {srs} (EPSG:{epsg}) declares {first}, {second} but ({}, {}) has a {first} beyond its range: \
+                    "srsName {srs} (EPSG:{epsg}) declares {axes} but ({}, {}) has a {first} beyond its range: \
                      the coordinates are in the other order; declare that order (urn:ogc:def:crs:OGC:1.3:CRS84h is \
                      longitude, latitude, height) or swap the axes",
                     p[0], p[1]
@@ -89,10 +83,7 @@ impl ObjectFrame for GeographicFrame {
 
     fn describe(&self) -> Option<String> {
         let (zone, _, srs, epsg, order) = self.utm.as_ref()?;
-        let order = match order {
-            AxisOrder::LatLon => "latitude, longitude",
-            AxisOrder::LonLat => "longitude, latitude",
-        };
+        let order = order.describe();
         Some(format!(
             "{srs} (EPSG:{epsg}, degrees, {order}) checked in UTM zone {}{} (EPSG:{zone} axes, GRS80), metres; heights as written",
             zone % 100,
