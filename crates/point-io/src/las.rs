@@ -132,12 +132,24 @@ impl LasPoints {
 /// Runs a read of the `las`/`laz` crates, turning a panic inside them into a read error:
 /// corrupt compressed points can trip an assertion of `laz`'s arithmetic decoder (the `las`
 /// fuzz target found `sym < (1 << 16)`, docs/decisions.md#crashes-and-hangs-of-issue-40).
-/// The panic message is not printed (the error carries it): the hook is silenced meanwhile.
+/// The panic message is not printed (the error carries it). The hook is not swapped per call:
+/// that raced between threads reading several files (`info a.laz b.laz`) and could leave every
+/// later panic of the process silent. One hook, installed once, stays quiet only on a thread
+/// inside this guard.
 fn decode_guarded<T>(f: impl FnOnce() -> T) -> Result<T, LasError> {
-    let hook = std::panic::take_hook();
-    std::panic::set_hook(Box::new(|_| {}));
+    thread_local!(static DECODING: std::cell::Cell<bool> = const { std::cell::Cell::new(false) });
+    static QUIET_HOOK: std::sync::Once = std::sync::Once::new();
+    QUIET_HOOK.call_once(|| {
+        let previous = std::panic::take_hook();
+        std::panic::set_hook(Box::new(move |info| {
+            if !DECODING.with(std::cell::Cell::get) {
+                previous(info);
+            }
+        }));
+    });
+    DECODING.with(|d| d.set(true));
     let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(f));
-    std::panic::set_hook(hook);
+    DECODING.with(|d| d.set(false));
     r.map_err(|p| {
         let why = p.downcast_ref::<&str>().map(|s| s.to_string()).or_else(|| p.downcast_ref::<String>().cloned()).unwrap_or_default();
         let e = std::io::Error::new(std::io::ErrorKind::InvalidData, format!("the compressed points are corrupt (the LAZ decoder failed: {why})"));

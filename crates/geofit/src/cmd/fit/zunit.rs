@@ -25,14 +25,9 @@ impl FitUnits {
         self.error.metres / self.data.map_or(1.0, |z| z.unit.metres)
     }
 
-    /// `--max-error` in the data's unit.
+    /// `--max-error` in the data's unit (a factor of 1 leaves it bit for bit).
     pub fn to_data(&self, e: f64) -> f64 {
-        let f = self.factor();
-        if f == 1.0 {
-            e
-        } else {
-            e * f
-        }
+        e * self.factor()
     }
 
     /// The name of the heights' unit for the report (`z unit of the input` when undeclared).
