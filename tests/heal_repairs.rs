@@ -1,0 +1,3 @@
+//! Placeholder: filled by the issue work of this session.
+
+mod common;
