@@ -24,6 +24,7 @@
 
 pub mod crs;
 pub mod measure;
+pub mod repair;
 mod unit;
 
 use citygml_io::{CityModel, CityObject, Edit};
