@@ -10,4 +10,6 @@ for s in benches/*.sh; do
   echo "== $s"
   bash "$s" "$BIN" || { echo "bench $s failed"; status=1; }
 done
+# BENCHMARKS.md: today's figures from every benches/results/<area>.tsv (issue 39).
+python3 benches/summary.py || status=1
 exit $status

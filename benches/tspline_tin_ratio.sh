@@ -18,6 +18,8 @@ trap 'rm -rf "$T"' EXIT
 export GDAL_PAM_ENABLED=NO
 RES=benches/results/tspline_tin_ratio.md
 mkdir -p benches/results
+. benches/lib/current.sh
+current_reset tspline_tin_ratio
 "$PY" -c "import pydelatin" 2>/dev/null || { echo "tspline_tin_ratio: pydelatin missing (make setup-bench)"; exit 1; }
 
 cat >"$T/tin.py" <<'EOF'
@@ -63,5 +65,6 @@ median() { printf '%s\n' "$@" | sort -g | awk '{a[NR]=$1} END {print (NR % 2) ? 
     nv=$(printf '%s\n' "${tins[@]}" | head -1 | cut -d' ' -f2)
     cp=$("$PY" -c "import json,sys; print(json.load(open(sys.argv[1]))['control_points'])" "$T/x.json")
     printf '| %s | %s | %.2f | %.3f | %.1f× | %s | %s | %.2f |\n' "$1" "$e" "$fit" "$tin" "$(echo "$fit / $tin" | bc -l)" "$cp" "$nv" "$(echo "$cp / $nv" | bc -l)"
+    current_row tspline_tin_ratio "fit CPU, ${1%%.*} at E=$e" "$fit" "CPU s" pydelatin "$tin"
   done
 } | tee "$RES"
