@@ -33,3 +33,21 @@ pub fn heal_unit(b: &CityObject, tpl: &Template, opts: &HealOptions) -> Result<(
     }
     Ok((edits, report))
 }
+
+/// One building healed: the repairs beyond planarity first where it has findings they act on
+/// (`crate::repair`), else (or when they are refused) the planarity heal. The record says what
+/// the repairs did, for buildings with such findings.
+pub fn heal_or_repair(
+    b: &CityObject,
+    doc: &[u8],
+    tpl: &Template,
+    opts: &HealOptions,
+) -> (Result<(Vec<Edit>, BackReport), String>, Option<crate::repair::RepairRecord>) {
+    let ro = crate::repair::RepairOptions { validation: opts.validation, max_move: opts.max_move, max_area_change: opts.max_area_change };
+    let (edits, record) = crate::repair::repair_unit(b, doc, &ro);
+    if let Some(edits) = edits {
+        // the repairs replace the planarity heal for this building: both rewrite its rings
+        return (Ok((edits, BackReport::default())), record);
+    }
+    (heal_unit(b, tpl, opts), record)
+}
