@@ -194,3 +194,20 @@ fn refuse(before_objects: &[&CityObject], after_objects: &[&CityObject], before:
     }
     None
 }
+
+/// The heal report's per-building records (by building name): a building the heal's own
+/// verification kept has its repairs undone, and says why.
+pub fn records(units: &[&CityObject], records: Vec<Option<RepairRecord>>, kept: &[crate::Kept]) -> BTreeMap<String, RepairRecord> {
+    let why: HashMap<&str, &str> = kept.iter().map(|k| (k.building.as_str(), k.reason.as_str())).collect();
+    let mut out = BTreeMap::new();
+    for (b, r) in units.iter().zip(records) {
+        let Some(mut r) = r else { continue };
+        let name = normalize::citygml::unit_name(b);
+        if let (Some(reason), false) = (why.get(name.as_str()), r.repairs.is_empty()) {
+            r.repairs.clear();
+            r.refused = Some(reason.to_string());
+        }
+        out.insert(name, r);
+    }
+    out
+}
