@@ -97,6 +97,9 @@ pub struct HealReport {
     pub rounds: usize,
     /// The write-back of the healed buildings, summed.
     pub back: BackReport,
+    /// Per building with findings the repairs beyond planarity act on (by name): the repairs
+    /// written and how often, the codes left alone, or why the repairs were not written.
+    pub repairs: std::collections::BTreeMap<String, repair::RepairRecord>,
 }
 
 /// The healed document and the report.
@@ -156,14 +159,14 @@ pub fn heal(original: &[u8], opts: &HealOptions, progress: &(dyn Fn(usize) + Syn
     }
     let template = Template::new(bytes, &city);
     let done = AtomicUsize::new(0);
-    let results: Vec<Result<(Vec<Edit>, BackReport), String>> = units
+    let (results, records): (Vec<Result<(Vec<Edit>, BackReport), String>>, Vec<_>) = units
         .par_iter()
         .map(|b| {
-            let r = unit::heal_unit(b, &template, opts);
+            let r = unit::heal_or_repair(b, bytes, &template, opts);
             progress(done.fetch_add(1, Ordering::Relaxed) + 1);
             r
         })
-        .collect();
+        .unzip();
     let mut kept: Vec<Option<String>> = results.iter().map(|r| r.as_ref().err().cloned()).collect();
     let mut with_bad_numbers = Vec::new();
     for b in &bad {
@@ -197,7 +200,8 @@ pub fn heal(original: &[u8], opts: &HealOptions, progress: &(dyn Fn(usize) + Syn
         }
         t
     };
-    let report = HealReport {
+    let mut report = HealReport {
+        repairs: Default::default(),
         buildings: units.len(),
         healed: kept.iter().filter(|k| k.is_none()).count(),
         kept: units.iter().zip(&kept).filter_map(|(b, k)| k.as_ref().map(|r| Kept { building: unit_name(b), reason: r.clone() })).collect(),
@@ -208,6 +212,7 @@ pub fn heal(original: &[u8], opts: &HealOptions, progress: &(dyn Fn(usize) + Syn
         rounds,
         back,
     };
+    report.repairs = repair::records(&units, records, &report.kept);
     let defects = Defects {
         bad_numbers: bad.iter().map(|b| format!("{}:{}: non-finite coordinate '{}'", b.line, b.column, b.token)).collect(),
         unresolved_xlinks: city.unresolved_xlinks.iter().map(|x| format!("{}:{}: {}", x.span.line, x.span.column, input_limits::quote(&x.reason()))).collect(),
