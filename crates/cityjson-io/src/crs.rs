@@ -25,7 +25,8 @@ pub fn to_srs_name(reference_system: &str) -> String {
         return format!("urn:ogc:def:crs:EPSG::{code}");
     }
     if let Some(q) = reference_system.split_once("crs-compound?").map(|(_, q)| q) {
-        let codes: Option<Vec<u32>> = q.split('&').map(|kv| kv.split_once('=').and_then(|(_, u)| url_code(u))).collect();
+        let codes: Option<Vec<u32>> =
+            q.split('&').map(|kv| kv.split_once('=').and_then(|(_, u)| url_code(u))).collect();
         if let Some(codes) = codes.filter(|c| !c.is_empty()) {
             let parts: Vec<String> = codes.iter().map(|c| format!("crs:EPSG::{c}")).collect();
             return format!("urn:ogc:def:crs,{}", parts.join(","));
@@ -49,7 +50,8 @@ pub fn to_reference_system(srs_name: &str) -> Option<String> {
         [] => None,
         [one] => Some(format!("{EPSG_URL}{one}")),
         _ => {
-            let parts: Vec<String> = codes.iter().enumerate().map(|(i, c)| format!("{}={EPSG_URL}{c}", i + 1)).collect();
+            let parts: Vec<String> =
+                codes.iter().enumerate().map(|(i, c)| format!("{}={EPSG_URL}{c}", i + 1)).collect();
             Some(format!("https://www.opengis.net/def/crs-compound?{}", parts.join("&")))
         }
     }

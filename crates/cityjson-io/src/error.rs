@@ -23,7 +23,11 @@ pub enum CityJsonError {
 
 impl CityJsonError {
     pub(crate) fn json(e: &serde_json::Error, line_offset: usize) -> CityJsonError {
-        CityJsonError::Json { line: e.line() + line_offset, column: e.column(), message: strip_position(&e.to_string()) }
+        CityJsonError::Json {
+            line: e.line() + line_offset,
+            column: e.column(),
+            message: strip_position(&e.to_string()),
+        }
     }
 
     pub(crate) fn structure(object: Option<&str>, message: impl Into<String>) -> CityJsonError {
@@ -33,7 +37,9 @@ impl CityJsonError {
     /// The same error, located on CityJSONSeq line `line` (1-based).
     pub(crate) fn on_line(self, line: usize) -> CityJsonError {
         match self {
-            CityJsonError::Structure { object, message, .. } => CityJsonError::Structure { line: Some(line), object, message },
+            CityJsonError::Structure { object, message, .. } => {
+                CityJsonError::Structure { line: Some(line), object, message }
+            }
             CityJsonError::Json { column, message, .. } => CityJsonError::Json { line, column, message },
             other => other,
         }

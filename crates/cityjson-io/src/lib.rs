@@ -78,7 +78,9 @@ pub fn is_seq(bytes: &[u8]) -> bool {
     let Some(nl) = text.iter().position(|b| *b == b'\n') else { return false };
     let first = &text[..nl];
     let rest_starts_json = text[nl..].iter().find(|b| !b.is_ascii_whitespace()) == Some(&b'{');
-    rest_starts_json && serde_json::from_slice::<Value>(first).is_ok_and(|v| v.get("type").and_then(Value::as_str) == Some("CityJSON"))
+    rest_starts_json
+        && serde_json::from_slice::<Value>(first)
+            .is_ok_and(|v| v.get("type").and_then(Value::as_str) == Some("CityJSON"))
 }
 
 /// A CityJSON document or CityJSONSeq in memory → CityGML 2.0 text and the report. Objects
@@ -92,7 +94,10 @@ pub fn to_citygml(bytes: &[u8], opts: GmlOptions) -> Result<(Vec<u8>, Report), C
     }
     let v: Value = serde_json::from_slice(bytes).map_err(|e| CityJsonError::json(&e, 0))?;
     if v.get("type").and_then(Value::as_str) == Some("CityJSONFeature") {
-        return Err(CityJsonError::structure(None, "a lone CityJSONFeature: a CityJSONSeq starts with its CityJSON header line"));
+        return Err(CityJsonError::structure(
+            None,
+            "a lone CityJSONFeature: a CityJSONSeq starts with its CityJSON header line",
+        ));
     }
     let mut report = Report::default();
     let mut header = DocHeader::from_json(&v, &mut report)?;
@@ -101,7 +106,8 @@ pub fn to_citygml(bytes: &[u8], opts: GmlOptions) -> Result<(Vec<u8>, Report), C
     let verts = v.get("vertices").and_then(Value::as_array).map(Vec::as_slice).unwrap_or_default();
     let verts = to_gml::real_vertices(verts, &header.transform)?;
     if header.extent.is_none() && !verts.is_empty() {
-        let mut e = [f64::INFINITY, f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
+        let mut e =
+            [f64::INFINITY, f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
         for p in &verts {
             for i in 0..3 {
                 e[i] = e[i].min(p[i]);
@@ -122,7 +128,12 @@ pub fn to_citygml(bytes: &[u8], opts: GmlOptions) -> Result<(Vec<u8>, Report), C
 }
 
 /// The CityJSON members before the objects: type, version, transform, metadata.
-pub(crate) fn cityjson_header(t: &Transform, srs: Option<&str>, envelope: Option<citygml_io::Envelope>, report: &mut Report) -> Value {
+pub(crate) fn cityjson_header(
+    t: &Transform,
+    srs: Option<&str>,
+    envelope: Option<citygml_io::Envelope>,
+    report: &mut Report,
+) -> Value {
     let mut metadata = Map::new();
     if let Some(s) = srs {
         match crs::to_reference_system(s) {
@@ -133,9 +144,11 @@ pub(crate) fn cityjson_header(t: &Transform, srs: Option<&str>, envelope: Option
         }
     }
     if let Some(e) = envelope.filter(|e| !e.is_empty()) {
-        metadata.insert("geographicalExtent".into(), json!([e.min[0], e.min[1], e.min[2], e.max[0], e.max[1], e.max[2]]));
+        metadata
+            .insert("geographicalExtent".into(), json!([e.min[0], e.min[1], e.min[2], e.max[0], e.max[1], e.max[2]]));
     }
-    let mut h = json!({"type": "CityJSON", "version": "2.0", "transform": t.to_json(), "CityObjects": {}, "vertices": []});
+    let mut h =
+        json!({"type": "CityJSON", "version": "2.0", "transform": t.to_json(), "CityObjects": {}, "vertices": []});
     if !metadata.is_empty() {
         h["metadata"] = Value::Object(metadata);
     }
@@ -146,7 +159,8 @@ pub(crate) fn cityjson_header(t: &Transform, srs: Option<&str>, envelope: Option
 pub fn from_citygml(gml: &[u8], opts: &WriteOptions) -> Result<(Value, Report), CityJsonError> {
     let (seq, report, _) = seq::citygml_to_seq(gml, opts, Vec::new())?;
     let mut lines = seq.split(|b| *b == b'\n').filter(|l| !l.is_empty());
-    let mut doc: Value = serde_json::from_slice(lines.next().unwrap_or(b"{}")).map_err(|e| CityJsonError::json(&e, 0))?;
+    let mut doc: Value =
+        serde_json::from_slice(lines.next().unwrap_or(b"{}")).map_err(|e| CityJsonError::json(&e, 0))?;
     let t = Transform::from_json(doc.get("transform")).map_err(|m| CityJsonError::structure(None, m))?;
     let mut pool: Vec<Value> = Vec::new();
     let mut objects = Map::new();
@@ -208,7 +222,10 @@ fn shift_indices(o: &mut Value, offset: usize) {
 /// attributes (JSON types intact) of every object still there, and its metadata, extensions
 /// and other top-level members the CityGML view does not hold. Geometry stays the new one.
 pub fn overlay_original(new: &mut Value, original: &Value) {
-    if let (Some(objs), Some(orig)) = (new.get_mut("CityObjects").and_then(Value::as_object_mut), original.get("CityObjects").and_then(Value::as_object)) {
+    if let (Some(objs), Some(orig)) = (
+        new.get_mut("CityObjects").and_then(Value::as_object_mut),
+        original.get("CityObjects").and_then(Value::as_object),
+    ) {
         for (id, o) in objs.iter_mut() {
             let Some(src) = orig.get(id) else { continue };
             match src.get("attributes") {
@@ -224,7 +241,10 @@ pub fn overlay_original(new: &mut Value, original: &Value) {
     }
     if let (Some(n), Some(orig)) = (new.as_object_mut(), original.as_object()) {
         for (k, v) in orig {
-            if !matches!(k.as_str(), "CityObjects" | "vertices" | "transform" | "appearance" | "geometry-templates" | "version" | "type") {
+            if !matches!(
+                k.as_str(),
+                "CityObjects" | "vertices" | "transform" | "appearance" | "geometry-templates" | "version" | "type"
+            ) {
                 if k == "metadata" {
                     let extent = n.get("metadata").and_then(|m| m.get("geographicalExtent")).cloned();
                     let mut m = v.clone();

@@ -21,7 +21,11 @@ pub struct SeqStats {
 
 /// Streams a CityJSONSeq from `r` into CityGML 2.0 on `w`. Each feature's objects are written on
 /// the CityGML line with the number of the feature's CityJSONSeq line.
-pub fn seq_to_citygml<R: BufRead, W: Write>(mut r: R, w: W, opts: GmlOptions) -> Result<(W, Report, SeqStats), CityJsonError> {
+pub fn seq_to_citygml<R: BufRead, W: Write>(
+    mut r: R,
+    w: W,
+    opts: GmlOptions,
+) -> Result<(W, Report, SeqStats), CityJsonError> {
     let mut line = String::new();
     let mut n = 0usize;
     let mut writer: Option<GmlWriter<W>> = None;
@@ -83,7 +87,11 @@ fn feature<W: Write>(gw: &mut GmlWriter<W>, v: &Value, line: usize, header: bool
 
 /// CityGML → CityJSONSeq on `w`, one top-level feature per line, reading the CityGML object by
 /// object (bounded by the largest feature).
-pub fn citygml_to_seq<W: Write>(gml: &[u8], opts: &WriteOptions, mut w: W) -> Result<(W, Report, SeqStats), CityJsonError> {
+pub fn citygml_to_seq<W: Write>(
+    gml: &[u8],
+    opts: &WriteOptions,
+    mut w: W,
+) -> Result<(W, Report, SeqStats), CityJsonError> {
     let mut stream = citygml_io::ObjectStream::new(gml)?;
     let mut report = Report::default();
     let mut stats = SeqStats::default();

@@ -47,7 +47,11 @@ impl Transform {
 
     /// The real coordinates of a vertex as stored.
     pub fn apply(&self, v: [f64; 3]) -> [f64; 3] {
-        [v[0] * self.scale[0] + self.translate[0], v[1] * self.scale[1] + self.translate[1], v[2] * self.scale[2] + self.translate[2]]
+        [
+            v[0] * self.scale[0] + self.translate[0],
+            v[1] * self.scale[1] + self.translate[1],
+            v[2] * self.scale[2] + self.translate[2],
+        ]
     }
 
     /// The integer vertex of a real point (rounded to the nearest).
@@ -62,7 +66,9 @@ impl Transform {
         if self.scale == [1.0; 3] && self.translate == [0.0; 3] {
             return 6;
         }
-        let places = |v: f64| (0..=9).find(|d| ((v * 10f64.powi(*d)).round() - v * 10f64.powi(*d)).abs() < 1e-6).unwrap_or(9) as usize;
+        let places = |v: f64| {
+            (0..=9).find(|d| ((v * 10f64.powi(*d)).round() - v * 10f64.powi(*d)).abs() < 1e-6).unwrap_or(9) as usize
+        };
         self.scale.iter().map(|s| places(*s)).max().unwrap_or(3)
     }
 }

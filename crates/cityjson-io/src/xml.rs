@@ -33,7 +33,13 @@ pub fn polygon(out: &mut String, id: &str, rings: &[Vec<[f64; 3]>], decimals: us
             if k > 0 {
                 out.push(' ');
             }
-            let _ = write!(out, "{} {} {}", format_number(p[0], decimals), format_number(p[1], decimals), format_number(p[2], decimals));
+            let _ = write!(
+                out,
+                "{} {} {}",
+                format_number(p[0], decimals),
+                format_number(p[1], decimals),
+                format_number(p[2], decimals)
+            );
         }
         let _ = write!(out, "</gml:posList></gml:LinearRing></gml:{tag}>");
     }

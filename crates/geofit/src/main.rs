@@ -53,6 +53,8 @@ enum Command {
     Citygml2popa3d(cmd::citygml2popa3d::Args),
     /// Print shell completions (bash, zsh, fish, elvish, powershell).
     Completions(cmd::completions::Args),
+    /// Convert buildings between CityGML (1.0, 2.0, 3.0) and CityJSON 2.0 / CityJSONSeq.
+    Convert(cmd::convert::Args),
     /// Compare two rasters: |dz| statistics, error classes, error-class map PNG.
     Diff(cmd::diff::Args),
     /// Evaluate a T-mesh surface on a raster grid (GeoTIFF, netCDF, ASCII grid).
@@ -156,6 +158,7 @@ fn main() -> ExitCode {
         Command::Man(a) => cmd::completions::run_man(a, Cli::command()),
         Command::Implicit(a) => cmd::implicit::run(a, &config),
         Command::Heal(a) => cmd::heal::run(a, &config),
+        Command::Convert(a) => cmd::convert::run(a, &config),
         Command::Observe(a) => cmd::observe::run(a, &config),
         Command::Popa3d2citygml(a) => cmd::popa3d2citygml::run(a, &config),
         Command::Adjust(a) => cmd::adjust::run(a, &config),

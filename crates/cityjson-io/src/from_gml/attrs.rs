@@ -29,7 +29,11 @@ fn handled_elsewhere(local: &str) -> bool {
     if STRUCTURE.contains(&local) {
         return true;
     }
-    let Some(rest) = local.strip_prefix("lod").and_then(|r| r.get(1..)).filter(|_| local.as_bytes().get(3).is_some_and(u8::is_ascii_digit)) else {
+    let Some(rest) = local
+        .strip_prefix("lod")
+        .and_then(|r| r.get(1..))
+        .filter(|_| local.as_bytes().get(3).is_some_and(u8::is_ascii_digit))
+    else {
         return false;
     };
     matches!(rest, "Solid" | "MultiSurface" | "Geometry" | "FootPrint" | "RoofEdge")
@@ -47,7 +51,9 @@ fn qname(e: &BytesStart<'_>) -> String {
 fn typed(key: &str, text: &str) -> Value {
     let number = match key {
         "measuredHeight" => text.trim().parse::<f64>().ok().and_then(Number::from_f64),
-        "storeysAboveGround" | "storeysBelowGround" | "yearOfConstruction" | "yearOfDemolition" => text.trim().parse::<i64>().ok().map(Number::from),
+        "storeysAboveGround" | "storeysBelowGround" | "yearOfConstruction" | "yearOfDemolition" => {
+            text.trim().parse::<i64>().ok().map(Number::from)
+        }
         _ => None,
     };
     number.map(Value::Number).unwrap_or_else(|| Value::String(text.to_string()))
@@ -86,7 +92,9 @@ pub fn scan(bytes: &[u8], object: &str, report: &mut Report) -> Map<String, Valu
         };
         match ev {
             Event::Start(e) => child(&mut r, &e, &mut out, object, report),
-            Event::Empty(e) if !handled_elsewhere(&local(&e)) => report.add(format!("empty property {} (not mapped)", qname(&e)), Some(object)),
+            Event::Empty(e) if !handled_elsewhere(&local(&e)) => {
+                report.add(format!("empty property {} (not mapped)", qname(&e)), Some(object))
+            }
             Event::End(_) | Event::Eof => return out,
             _ => {}
         }
@@ -101,7 +109,8 @@ fn child(r: &mut Reader<&[u8]>, e: &BytesStart<'_>, out: &mut Map<String, Value>
         return;
     }
     if name.ends_with("Attribute") && name != "genericAttribute" {
-        let key = e.try_get_attribute("name").ok().flatten().and_then(|a| a.unescape_value().ok()).map(|s| s.into_owned());
+        let key =
+            e.try_get_attribute("name").ok().flatten().and_then(|a| a.unescape_value().ok()).map(|s| s.into_owned());
         let value = element_texts(r, e).into_iter().find(|(k, _)| k == "value").map(|(_, v)| v);
         return generic(out, &name, key, value, object, report);
     }
@@ -113,7 +122,8 @@ fn child(r: &mut Reader<&[u8]>, e: &BytesStart<'_>, out: &mut Map<String, Value>
         return generic(out, &element, key, value, object, report);
     }
     let q = qname(e);
-    let has_xml_attrs = e.attributes().flatten().any(|a| !(name == "measuredHeight" && a.key.local_name().as_ref() == b"uom"));
+    let has_xml_attrs =
+        e.attributes().flatten().any(|a| !(name == "measuredHeight" && a.key.local_name().as_ref() == b"uom"));
     let texts = element_texts(r, e);
     match &texts[..] {
         [(k, text)] if *k == name => {
@@ -131,7 +141,14 @@ fn child(r: &mut Reader<&[u8]>, e: &BytesStart<'_>, out: &mut Map<String, Value>
     }
 }
 
-fn generic(out: &mut Map<String, Value>, element: &str, key: Option<String>, value: Option<String>, object: &str, report: &mut Report) {
+fn generic(
+    out: &mut Map<String, Value>,
+    element: &str,
+    key: Option<String>,
+    value: Option<String>,
+    object: &str,
+    report: &mut Report,
+) {
     match (key, value) {
         (Some(k), Some(v)) if !element.to_ascii_lowercase().starts_with("genericattributeset") => {
             if element.to_ascii_lowercase().starts_with("measure") {
@@ -139,7 +156,8 @@ fn generic(out: &mut Map<String, Value>, element: &str, key: Option<String>, val
             }
             out.insert(k, typed_generic(element, &v));
         }
-        _ => report.add(format!("generic attribute {element} without name and value, or a set (not mapped)"), Some(object)),
+        _ => report
+            .add(format!("generic attribute {element} without name and value, or a set (not mapped)"), Some(object)),
     }
 }
 

@@ -99,7 +99,8 @@ impl SemanticTable<'_> {
                 if let Some(p) = self.list.parent[*s] {
                     o.insert("parent".into(), json!(self.local[&p]));
                 }
-                let children: Vec<usize> = self.order.iter().filter(|c| self.list.parent[**c] == Some(*s)).map(|c| self.local[c]).collect();
+                let children: Vec<usize> =
+                    self.order.iter().filter(|c| self.list.parent[**c] == Some(*s)).map(|c| self.local[c]).collect();
                 if !children.is_empty() {
                     o.insert("children".into(), json!(children));
                 }
@@ -110,7 +111,13 @@ impl SemanticTable<'_> {
 }
 
 /// One CityJSON geometry of `lod` from a citygml-io geometry.
-pub fn geometry(g: &Geometry, lod: &str, pool: &mut VertexPool, surfaces: &SurfaceList, semantic_of: &SemanticOf<'_>) -> Value {
+pub fn geometry(
+    g: &Geometry,
+    lod: &str,
+    pool: &mut VertexPool,
+    surfaces: &SurfaceList,
+    semantic_of: &SemanticOf<'_>,
+) -> Value {
     let mut t = SemanticTable { list: surfaces, local: HashMap::new(), order: Vec::new() };
     let mut any = false;
     let mut face = |p: &Polygon, pool: &mut VertexPool, t: &mut SemanticTable<'_>| {
@@ -118,8 +125,9 @@ pub fn geometry(g: &Geometry, lod: &str, pool: &mut VertexPool, surfaces: &Surfa
         any |= s.is_some();
         (pool.polygon(p), t.value(s))
     };
-    let mut shell =
-        |s: &Shell, pool: &mut VertexPool, t: &mut SemanticTable<'_>| -> (Vec<Value>, Vec<Value>) { s.polygons.iter().map(|p| face(p, pool, t)).unzip() };
+    let mut shell = |s: &Shell, pool: &mut VertexPool, t: &mut SemanticTable<'_>| -> (Vec<Value>, Vec<Value>) {
+        s.polygons.iter().map(|p| face(p, pool, t)).unzip()
+    };
     let (ty, boundaries, values) = match &g.kind {
         GeometryKind::Surfaces(ps) => {
             let (b, v): (Vec<Value>, Vec<Value>) = ps.iter().map(|p| face(p, pool, &mut t)).unzip();
@@ -127,16 +135,22 @@ pub fn geometry(g: &Geometry, lod: &str, pool: &mut VertexPool, surfaces: &Surfa
             (ty, json!(b), json!(v))
         }
         GeometryKind::Solid { exterior, interior } => {
-            let (b, v): (Vec<Value>, Vec<Value>) =
-                std::iter::once(exterior).chain(interior).map(|s| shell(s, pool, &mut t)).map(|(b, v)| (json!(b), json!(v))).unzip();
+            let (b, v): (Vec<Value>, Vec<Value>) = std::iter::once(exterior)
+                .chain(interior)
+                .map(|s| shell(s, pool, &mut t))
+                .map(|(b, v)| (json!(b), json!(v)))
+                .unzip();
             ("Solid", json!(b), json!(v))
         }
         GeometryKind::Solids(solids) => {
             let (b, v): (Vec<Value>, Vec<Value>) = solids
                 .iter()
                 .map(|(e, i)| {
-                    let (b, v): (Vec<Value>, Vec<Value>) =
-                        std::iter::once(e).chain(i).map(|s| shell(s, pool, &mut t)).map(|(b, v)| (json!(b), json!(v))).unzip();
+                    let (b, v): (Vec<Value>, Vec<Value>) = std::iter::once(e)
+                        .chain(i)
+                        .map(|s| shell(s, pool, &mut t))
+                        .map(|(b, v)| (json!(b), json!(v)))
+                        .unzip();
                     (json!(b), json!(v))
                 })
                 .unzip();
@@ -161,7 +175,11 @@ pub fn multi_surface(faces: &[(usize, &Polygon)], lod: &str, pool: &mut VertexPo
 /// The LoD of a geometry: the refinement geofit wrote into the gml:id (`…-lod2.2`) when it
 /// matches the property's LoD, else the property's LoD.
 pub fn lod_string(g: &Geometry) -> Option<String> {
-    let from_id = g.id.as_deref().filter(|id| id.starts_with("geofit-")).and_then(|id| id.rsplit_once("-lod")).map(|(_, l)| l.to_string());
+    let from_id =
+        g.id.as_deref()
+            .filter(|id| id.starts_with("geofit-"))
+            .and_then(|id| id.rsplit_once("-lod"))
+            .map(|(_, l)| l.to_string());
     match (from_id, g.lod) {
         (Some(l), Some(n)) if l.starts_with(char::from(b'0' + n)) && l.len() <= 3 => Some(l),
         (_, Some(n)) => Some(n.to_string()),

@@ -45,7 +45,11 @@ impl<'s> ObjectMapper<'s> {
     /// CityJSON has no place for it.
     pub fn object(&mut self, o: &CityObject, parent: Option<&str>, out: &mut Map<String, Value>) -> Option<String> {
         let Some(ty) = cityjson_type(&o.kind) else {
-            let what = format!("{}:{} feature (no CityJSON mapping in geofit: left out)", o.module.as_deref().unwrap_or("?"), o.kind);
+            let what = format!(
+                "{}:{} feature (no CityJSON mapping in geofit: left out)",
+                o.module.as_deref().unwrap_or("?"),
+                o.kind
+            );
             self.report.add(what, o.id.as_deref());
             return None;
         };
@@ -76,8 +80,12 @@ impl<'s> ObjectMapper<'s> {
             obj.insert("parents".into(), json!([p]));
         }
         out.insert(id.clone(), Value::Null);
-        let children: Vec<String> =
-            o.children.iter().filter(|c| SurfaceType::from_local_name(&c.kind).is_none()).filter_map(|c| self.object(c, Some(&id), out)).collect();
+        let children: Vec<String> = o
+            .children
+            .iter()
+            .filter(|c| SurfaceType::from_local_name(&c.kind).is_none())
+            .filter_map(|c| self.object(c, Some(&id), out))
+            .collect();
         if !children.is_empty() {
             obj.insert("children".into(), json!(children));
         }
@@ -90,10 +98,16 @@ impl<'s> ObjectMapper<'s> {
         let mut flat = Flat { list: SurfaceList { objects: Vec::new(), parent: Vec::new() }, features: Vec::new() };
         for s in o.children.iter().filter(|c| SurfaceType::from_local_name(&c.kind).is_some()) {
             let i = self.surface(s, None, &mut flat);
-            for op in s.children.iter().filter(|c| SurfaceType::from_local_name(&c.kind).is_some_and(SurfaceType::is_opening)) {
+            for op in
+                s.children.iter().filter(|c| SurfaceType::from_local_name(&c.kind).is_some_and(SurfaceType::is_opening))
+            {
                 self.surface(op, Some(i), &mut flat);
             }
-            for other in s.children.iter().filter(|c| !SurfaceType::from_local_name(&c.kind).is_some_and(SurfaceType::is_opening)) {
+            for other in s
+                .children
+                .iter()
+                .filter(|c| !SurfaceType::from_local_name(&c.kind).is_some_and(SurfaceType::is_opening))
+            {
                 self.report.add(format!("{} inside a boundary surface (not mapped)", other.kind), other.id.as_deref());
             }
         }
@@ -125,7 +139,8 @@ impl<'s> ObjectMapper<'s> {
     /// The object's own geometries, then its boundary surfaces' faces that none of them holds
     /// (one MultiSurface per LoD).
     fn geometries(&mut self, o: &CityObject, flat: &Flat<'_>, id: &str) -> Vec<Value> {
-        let by_id: HashMap<&str, usize> = flat.features.iter().enumerate().filter_map(|(i, f)| f.id.as_deref().map(|d| (d, i))).collect();
+        let by_id: HashMap<&str, usize> =
+            flat.features.iter().enumerate().filter_map(|(i, f)| f.id.as_deref().map(|d| (d, i))).collect();
         // Faces defined inline in a surface, and faces a surface points to by XLink.
         let mut claimed: HashMap<usize, usize> = HashMap::new();
         for (i, f) in flat.features.iter().enumerate() {
@@ -135,7 +150,12 @@ impl<'s> ObjectMapper<'s> {
                 }
             }
         }
-        let semantic_of = |p: &Polygon| p.semantic_owner.as_deref().and_then(|o| by_id.get(o).copied()).or_else(|| claimed.get(&p.span.bytes.start).copied());
+        let semantic_of = |p: &Polygon| {
+            p.semantic_owner
+                .as_deref()
+                .and_then(|o| by_id.get(o).copied())
+                .or_else(|| claimed.get(&p.span.bytes.start).copied())
+        };
         let mut covered: HashSet<usize> = HashSet::new();
         let mut out = Vec::new();
         for g in &o.geometries {
@@ -155,7 +175,9 @@ impl<'s> ObjectMapper<'s> {
         for (i, f) in flat.features.iter().enumerate() {
             for g in &f.geometries {
                 let Some(lod) = geometry::lod_string(g) else { continue };
-                for p in g.polygons().into_iter().filter(|p| p.via_xlink.is_none() && !covered.contains(&p.span.bytes.start)) {
+                for p in
+                    g.polygons().into_iter().filter(|p| p.via_xlink.is_none() && !covered.contains(&p.span.bytes.start))
+                {
                     loose.entry(lod.clone()).or_default().push((i, p));
                 }
             }

@@ -10,8 +10,17 @@ use crate::report::Report;
 use crate::xml::escape;
 
 /// Building-module properties of `_AbstractBuilding` in schema order.
-pub const BUILDING_PROPERTIES: &[&str] =
-    &["class", "function", "usage", "yearOfConstruction", "yearOfDemolition", "roofType", "measuredHeight", "storeysAboveGround", "storeysBelowGround"];
+pub const BUILDING_PROPERTIES: &[&str] = &[
+    "class",
+    "function",
+    "usage",
+    "yearOfConstruction",
+    "yearOfDemolition",
+    "roofType",
+    "measuredHeight",
+    "storeysAboveGround",
+    "storeysBelowGround",
+];
 /// The ones of rooms, installations and generic objects.
 pub const OTHER_PROPERTIES: &[&str] = &["class", "function", "usage"];
 /// `_CityObject` properties written in the core namespace.
@@ -28,7 +37,13 @@ pub struct AttributeXml {
 
 /// Maps `attrs`; `module_props` are the names the object's module defines (written as
 /// `module_prefix:name`), others become `gen:` attributes.
-pub fn attributes(attrs: &Map<String, Value>, module_prefix: &str, module_props: &[&str], object: &str, report: &mut Report) -> AttributeXml {
+pub fn attributes(
+    attrs: &Map<String, Value>,
+    module_prefix: &str,
+    module_props: &[&str],
+    object: &str,
+    report: &mut Report,
+) -> AttributeXml {
     let mut x = AttributeXml::default();
     if let Some(v) = attrs.get("description").and_then(Value::as_str) {
         let _ = write!(x.gml_core, "<gml:description>{}</gml:description>", escape(v));
@@ -75,11 +90,15 @@ pub fn generic(out: &mut String, key: &str, value: &Value, object: &str, report:
             return;
         }
         Value::Array(_) | Value::Object(_) => {
-            report.add("array or object attribute (written as a gen:stringAttribute holding its JSON text)", Some(object));
+            report.add(
+                "array or object attribute (written as a gen:stringAttribute holding its JSON text)",
+                Some(object),
+            );
             ("stringAttribute", value.to_string())
         }
     };
-    let _ = write!(out, "<gen:{element} name=\"{}\"><gen:value>{}</gen:value></gen:{element}>", escape(key), escape(&text));
+    let _ =
+        write!(out, "<gen:{element} name=\"{}\"><gen:value>{}</gen:value></gen:{element}>", escape(key), escape(&text));
 }
 
 fn scalar_text(v: &Value) -> String {

@@ -47,7 +47,9 @@ pub struct GeomContext<'a> {
 }
 
 fn idx(v: &Value, ctx_obj: &str, n: usize) -> Result<usize, CityJsonError> {
-    let i = v.as_u64().ok_or_else(|| CityJsonError::structure(Some(ctx_obj), "a boundary holds something other than a vertex index"))? as usize;
+    let i = v.as_u64().ok_or_else(|| {
+        CityJsonError::structure(Some(ctx_obj), "a boundary holds something other than a vertex index")
+    })? as usize;
     if i >= n {
         return Err(CityJsonError::structure(Some(ctx_obj), format!("vertex index {i} past the {n} vertices")));
     }
@@ -55,7 +57,9 @@ fn idx(v: &Value, ctx_obj: &str, n: usize) -> Result<usize, CityJsonError> {
 }
 
 fn arr<'v>(v: &'v Value, obj: &str) -> Result<&'v Vec<Value>, CityJsonError> {
-    v.as_array().ok_or_else(|| CityJsonError::structure(Some(obj), "boundaries are not nested arrays as the geometry type needs"))
+    v.as_array().ok_or_else(|| {
+        CityJsonError::structure(Some(obj), "boundaries are not nested arrays as the geometry type needs")
+    })
 }
 
 fn face(v: &Value, obj: &str, n: usize) -> Result<Face, CityJsonError> {
@@ -70,7 +74,12 @@ fn shape(ty: &str, b: &Value, obj: &str, n: usize) -> Result<Shape, CityJsonErro
     Ok(match ty {
         "MultiSurface" | "CompositeSurface" => Shape::Surfaces(faces(b, obj, n)?),
         "Solid" => Shape::Solid(arr(b, obj)?.iter().map(|s| faces(s, obj, n)).collect::<Result<_, _>>()?),
-        _ => Shape::Solids(arr(b, obj)?.iter().map(|solid| arr(solid, obj)?.iter().map(|s| faces(s, obj, n)).collect()).collect::<Result<_, _>>()?),
+        _ => Shape::Solids(
+            arr(b, obj)?
+                .iter()
+                .map(|solid| arr(solid, obj)?.iter().map(|s| faces(s, obj, n)).collect())
+                .collect::<Result<_, _>>()?,
+        ),
     })
 }
 
@@ -131,10 +140,12 @@ pub fn emit(ctx: &mut GeomContext<'_>, g: &Value) -> Result<Option<GeomOut>, Cit
             ctx.report.add(format!("geometry {key} (appearance: not carried to CityGML)"), Some(obj));
         }
     }
-    let boundaries = g.get("boundaries").ok_or_else(|| CityJsonError::structure(Some(obj), "geometry without \"boundaries\""))?;
+    let boundaries =
+        g.get("boundaries").ok_or_else(|| CityJsonError::structure(Some(obj), "geometry without \"boundaries\""))?;
     let shape = shape(ty, boundaries, obj, ctx.vertices.len())?;
     let semantics = g.get("semantics");
-    let surfaces: Vec<Value> = semantics.and_then(|s| s.get("surfaces")).and_then(Value::as_array).cloned().unwrap_or_default();
+    let surfaces: Vec<Value> =
+        semantics.and_then(|s| s.get("surfaces")).and_then(Value::as_array).cloned().unwrap_or_default();
     let values = semantic_values(ty, semantics.and_then(|s| s.get("values")));
     let gid = format!("geofit-{obj}-g{}-lod{lod}", ctx.index);
     let srs = ctx.srs_name.map(|s| format!(" srsName=\"{}\"", escape(s))).unwrap_or_default();
@@ -160,7 +171,10 @@ pub fn emit(ctx: &mut GeomContext<'_>, g: &Value) -> Result<Option<GeomOut>, Cit
         }
     };
     let mut xml = String::new();
-    let shell = |faces: &[Face], xml: &mut String, ctx: &mut GeomContext<'_>, member: &mut dyn FnMut(&Face, &mut String, &mut GeomContext<'_>)| {
+    let shell = |faces: &[Face],
+                 xml: &mut String,
+                 ctx: &mut GeomContext<'_>,
+                 member: &mut dyn FnMut(&Face, &mut String, &mut GeomContext<'_>)| {
         xml.push_str("<gml:CompositeSurface>");
         faces.iter().for_each(|f| member(f, xml, ctx));
         xml.push_str("</gml:CompositeSurface>");
@@ -229,7 +243,9 @@ impl Semantics {
             let t = surface_type(s);
             let parent_ok = match (t, s.get("parent").and_then(Value::as_u64)) {
                 (Some(t), None) => !t.is_opening(),
-                (Some(t), Some(p)) => t.is_opening() && surfaces.get(p as usize).and_then(surface_type).is_some_and(|pt| !pt.is_opening()),
+                (Some(t), Some(p)) => {
+                    t.is_opening() && surfaces.get(p as usize).and_then(surface_type).is_some_and(|pt| !pt.is_opening())
+                }
                 (None, _) => false,
             };
             if !parent_ok {
@@ -247,14 +263,23 @@ impl Semantics {
     }
 
     /// `<bldg:boundedBy>` for each top semantic surface holding faces (its own or its openings').
-    fn boundary_surfaces(&self, ctx: &mut GeomContext<'_>, surfaces: &[Value], polys: &[Vec<String>], lod: u8, lod_str: &str) -> Vec<String> {
+    fn boundary_surfaces(
+        &self,
+        ctx: &mut GeomContext<'_>,
+        surfaces: &[Value],
+        polys: &[Vec<String>],
+        lod: u8,
+        lod_str: &str,
+    ) -> Vec<String> {
         let parent = |s: &Value| s.get("parent").and_then(Value::as_u64).map(|p| p as usize);
         let mut out = Vec::new();
         for (i, s) in surfaces.iter().enumerate() {
             if !self.ok[i] || parent(s).is_some() {
                 continue;
             }
-            let openings: Vec<usize> = (0..surfaces.len()).filter(|j| self.ok[*j] && parent(&surfaces[*j]) == Some(i) && !polys[*j].is_empty()).collect();
+            let openings: Vec<usize> = (0..surfaces.len())
+                .filter(|j| self.ok[*j] && parent(&surfaces[*j]) == Some(i) && !polys[*j].is_empty())
+                .collect();
             if polys[i].is_empty() && openings.is_empty() {
                 continue;
             }
@@ -274,7 +299,15 @@ impl Semantics {
     }
 
     /// A surface's attributes and its `lodNMultiSurface` of faces.
-    fn surface_body(&self, ctx: &mut GeomContext<'_>, s: &Value, polys: &[String], lod: u8, lod_str: &str, id: &str) -> String {
+    fn surface_body(
+        &self,
+        ctx: &mut GeomContext<'_>,
+        s: &Value,
+        polys: &[String],
+        lod: u8,
+        lod_str: &str,
+        id: &str,
+    ) -> String {
         let mut x = String::new();
         if let Some(m) = s.as_object() {
             for (k, v) in m.iter().filter(|(k, _)| !matches!(k.as_str(), "type" | "parent" | "children" | "id")) {
@@ -282,7 +315,11 @@ impl Semantics {
             }
         }
         if !polys.is_empty() {
-            let _ = write!(x, "<bldg:lod{lod}MultiSurface><gml:MultiSurface gml:id=\"{}\">", escape(&format!("geofit-{id}-lod{lod_str}")));
+            let _ = write!(
+                x,
+                "<bldg:lod{lod}MultiSurface><gml:MultiSurface gml:id=\"{}\">",
+                escape(&format!("geofit-{id}-lod{lod_str}"))
+            );
             for p in polys {
                 let _ = write!(x, "<gml:surfaceMember>{p}</gml:surfaceMember>");
             }

@@ -47,7 +47,9 @@ impl DocHeader {
         }
         let version = v.get("version").and_then(Value::as_str).unwrap_or("").to_string();
         if !matches!(version.as_str(), "2.0" | "1.1" | "2.0.1" | "2.0.0") {
-            return Err(err(format!("CityJSON version \"{version}\": geofit reads 2.0 and 1.1 (upgrade with cjio FILE upgrade save OUT)")));
+            return Err(err(format!(
+                "CityJSON version \"{version}\": geofit reads 2.0 and 1.1 (upgrade with cjio FILE upgrade save OUT)"
+            )));
         }
         let transform = Transform::from_json(v.get("transform")).map_err(err)?;
         let meta = v.get("metadata");
@@ -70,8 +72,12 @@ impl DocHeader {
             None => None,
             Some(t) => {
                 let list = t.get("templates").and_then(Value::as_array).cloned().unwrap_or_default();
-                let verts =
-                    t.get("vertices-templates").and_then(Value::as_array).map(|a| real_vertices(a, &Transform::default())).transpose()?.unwrap_or_default();
+                let verts = t
+                    .get("vertices-templates")
+                    .and_then(Value::as_array)
+                    .map(|a| real_vertices(a, &Transform::default()))
+                    .transpose()?
+                    .unwrap_or_default();
                 Some((list, verts))
             }
         };
@@ -105,7 +111,12 @@ pub struct GmlWriter<W: Write> {
 
 impl<W: Write> GmlWriter<W> {
     /// Writes the XML declaration, the root and the envelope, all on line 1.
-    pub fn begin(mut out: W, header: DocHeader, opts: GmlOptions, report: Report) -> Result<GmlWriter<W>, CityJsonError> {
+    pub fn begin(
+        mut out: W,
+        header: DocHeader,
+        opts: GmlOptions,
+        report: Report,
+    ) -> Result<GmlWriter<W>, CityJsonError> {
         let mut s = format!("<?xml version=\"1.0\" encoding=\"UTF-8\"?><core:CityModel {CITYGML2_NAMESPACES}>");
         if let Some(e) = header.extent {
             let d = header.transform.decimals();
@@ -123,8 +134,22 @@ impl<W: Write> GmlWriter<W> {
 
     /// Writes top-level object `id` of `objects` (its children with it) as one
     /// `core:cityObjectMember`, starting on line `line` if that is below the current one.
-    pub fn write_object(&mut self, id: &str, objects: &Map<String, Value>, vertices: &[[f64; 3]], line: Option<usize>) -> Result<(), CityJsonError> {
-        let mut e = Emitter { objects, vertices, header: &self.header, opts: self.opts, report: &mut self.report, ids: HashSet::new(), depth: 0 };
+    pub fn write_object(
+        &mut self,
+        id: &str,
+        objects: &Map<String, Value>,
+        vertices: &[[f64; 3]],
+        line: Option<usize>,
+    ) -> Result<(), CityJsonError> {
+        let mut e = Emitter {
+            objects,
+            vertices,
+            header: &self.header,
+            opts: self.opts,
+            report: &mut self.report,
+            ids: HashSet::new(),
+            depth: 0,
+        };
         let Some(xml) = e.object(id)? else { return Ok(()) };
         let target = line.unwrap_or(self.line + 1).max(self.line);
         let pad = "\n".repeat(target - self.line);
@@ -143,7 +168,11 @@ impl<W: Write> GmlWriter<W> {
 
 /// The ids of `objects` that are not children of another (`parents` empty or absent).
 pub fn top_level_ids(objects: &Map<String, Value>) -> Vec<&str> {
-    objects.iter().filter(|(_, o)| o.get("parents").and_then(Value::as_array).is_none_or(|p| p.is_empty())).map(|(id, _)| id.as_str()).collect()
+    objects
+        .iter()
+        .filter(|(_, o)| o.get("parents").and_then(Value::as_array).is_none_or(|p| p.is_empty()))
+        .map(|(id, _)| id.as_str())
+        .collect()
 }
 
 /// A CityJSON object type's CityGML 2.0 element and the properties its module defines.
@@ -181,8 +210,14 @@ struct Emitter<'a> {
 impl Emitter<'_> {
     /// One object and its children, or `None` (reported) when CityGML 2.0 has no place for it.
     fn object(&mut self, id: &str) -> Result<Option<String>, CityJsonError> {
-        let o = self.objects.get(id).ok_or_else(|| CityJsonError::structure(Some(id), "listed as a child but not among the CityObjects"))?;
-        let ty = o.get("type").and_then(Value::as_str).ok_or_else(|| CityJsonError::structure(Some(id), "city object without \"type\""))?;
+        let o = self
+            .objects
+            .get(id)
+            .ok_or_else(|| CityJsonError::structure(Some(id), "listed as a child but not among the CityObjects"))?;
+        let ty = o
+            .get("type")
+            .and_then(Value::as_str)
+            .ok_or_else(|| CityJsonError::structure(Some(id), "city object without \"type\""))?;
         let Some((prefix, element, props)) = element_of(ty) else {
             self.report.add(format!("{ty} object (no CityGML 2.0 building-module counterpart: left out)"), Some(id));
             return Ok(None);
@@ -192,7 +227,8 @@ impl Emitter<'_> {
         }
         self.ids.insert(id.to_string());
         for k in o.as_object().map(|m| m.keys()).into_iter().flatten() {
-            if !matches!(k.as_str(), "type" | "attributes" | "geometry" | "children" | "parents" | "geographicalExtent") {
+            if !matches!(k.as_str(), "type" | "attributes" | "geometry" | "children" | "parents" | "geographicalExtent")
+            {
                 self.report.add(format!("object member \"{k}\" (not carried to CityGML)"), Some(id));
             }
         }
@@ -261,19 +297,39 @@ impl Emitter<'_> {
         if g.get("type").and_then(Value::as_str) != Some("GeometryInstance") {
             return Ok((g.clone(), None));
         }
-        let (templates, tverts) =
-            self.header.templates.as_ref().ok_or_else(|| CityJsonError::structure(Some(id), "GeometryInstance but no \"geometry-templates\""))?;
+        let (templates, tverts) = self
+            .header
+            .templates
+            .as_ref()
+            .ok_or_else(|| CityJsonError::structure(Some(id), "GeometryInstance but no \"geometry-templates\""))?;
         let t = g
             .get("template")
             .and_then(Value::as_u64)
             .and_then(|i| templates.get(i as usize))
             .ok_or_else(|| CityJsonError::structure(Some(id), "GeometryInstance names no existing template"))?;
-        let m: Vec<f64> = g.get("transformationMatrix").and_then(Value::as_array).map(|a| a.iter().filter_map(Value::as_f64).collect()).unwrap_or_default();
-        let refv = g.get("boundaries").and_then(|b| b.get(0)).and_then(Value::as_u64).and_then(|i| self.vertices.get(i as usize)).copied();
+        let m: Vec<f64> = g
+            .get("transformationMatrix")
+            .and_then(Value::as_array)
+            .map(|a| a.iter().filter_map(Value::as_f64).collect())
+            .unwrap_or_default();
+        let refv = g
+            .get("boundaries")
+            .and_then(|b| b.get(0))
+            .and_then(Value::as_u64)
+            .and_then(|i| self.vertices.get(i as usize))
+            .copied();
         let (Some(r), 16) = (refv, m.len()) else {
-            return Err(CityJsonError::structure(Some(id), "GeometryInstance without a reference vertex or a 4×4 transformationMatrix"));
+            return Err(CityJsonError::structure(
+                Some(id),
+                "GeometryInstance without a reference vertex or a 4×4 transformationMatrix",
+            ));
         };
-        let verts = tverts.iter().map(|p| [0, 1, 2].map(|i| m[4 * i] * p[0] + m[4 * i + 1] * p[1] + m[4 * i + 2] * p[2] + m[4 * i + 3] + r[i])).collect();
+        let verts = tverts
+            .iter()
+            .map(|p| {
+                [0, 1, 2].map(|i| m[4 * i] * p[0] + m[4 * i + 1] * p[1] + m[4 * i + 2] * p[2] + m[4 * i + 3] + r[i])
+            })
+            .collect();
         self.report.add("geometry instance (template expanded into its own geometry)", Some(id));
         let mut expanded = t.clone();
         if let (Some(lod), Some(obj)) = (t.get("lod").cloned(), expanded.as_object_mut()) {

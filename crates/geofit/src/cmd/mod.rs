@@ -10,6 +10,7 @@ pub mod fit;
 pub mod implicit;
 pub mod citygml2popa3d;
 pub mod completions;
+pub mod convert;
 pub mod info;
 pub mod obj2popa3d;
 pub mod rasterize;

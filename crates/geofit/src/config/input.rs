@@ -60,7 +60,15 @@ impl Input {
     /// (`input_limits::budget::ByteBudget`): a regular file is refused by its size before a byte
     /// is read, a pipe or device (`/dev/zero`, an endless stdin) once it has delivered more than
     /// the budget, with exit 3 naming the limit instead of the machine running out of memory.
+    ///
+    /// A CityJSON or CityJSONSeq input comes back as CityGML 2.0 text (issue 38; see
+    /// `encoding::as_citygml`); [`Input::read_all_raw`] gives the bytes as they are.
     pub fn read_all(&self) -> Result<Vec<u8>, CliError> {
+        super::encoding::as_citygml(&self.display_name(), self.read_all_raw()?)
+    }
+
+    /// The whole input as it is, within the byte budget.
+    pub fn read_all_raw(&self) -> Result<Vec<u8>, CliError> {
         self.read_all_within(input_limits::budget::ByteBudget::current())
     }
 
@@ -68,7 +76,24 @@ impl Input {
     /// a regular file is memory-mapped, whatever its size, and the reader releases the pages
     /// behind it (`InputBytes::release_before`), so memory stays bounded by the largest object
     /// (docs/decisions.md#streaming-citygml); anything else is read whole within the byte budget.
+    ///
+    /// CityJSON comes back as CityGML 2.0 text: a CityJSONSeq file converted line by line into a
+    /// mapped temporary file (bounded memory), a CityJSON document read whole and converted.
     pub fn map_or_read(&self) -> Result<InputBytes, CliError> {
+        let mapped = self.map_or_read_raw()?;
+        match super::encoding::Encoding::of_bytes(&mapped) {
+            super::encoding::Encoding::CityGml => Ok(mapped),
+            super::encoding::Encoding::CityJsonSeq if matches!(mapped, InputBytes::Mapped { .. }) => {
+                let path = self.path().expect("a mapped input is a file");
+                drop(mapped);
+                super::encoding::map_seq_as_citygml(&self.display_name(), path)
+            }
+            _ => super::encoding::as_citygml(&self.display_name(), mapped.to_vec()).map(InputBytes::Read),
+        }
+    }
+
+    /// [`Input::map_or_read`] without the CityJSON conversion: the bytes as they are.
+    pub fn map_or_read_raw(&self) -> Result<InputBytes, CliError> {
         let unreadable = |e: io::Error| CliError::unreadable(format!("{}: {e}", self.display_name()));
         if let Some(p) = self.path() {
             let file = File::open(p).map_err(unreadable)?;
@@ -76,7 +101,7 @@ impl Input {
                 return InputBytes::map(&file).map_err(unreadable);
             }
         }
-        self.read_all().map(InputBytes::Read)
+        self.read_all_raw().map(InputBytes::Read)
     }
 
     fn read_all_within(&self, budget: input_limits::budget::ByteBudget) -> Result<Vec<u8>, CliError> {

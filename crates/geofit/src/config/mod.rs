@@ -4,6 +4,7 @@
 //! (`batch.rs`), the checks of a command line's paths before the work (`paths.rs`), and stderr lines that never panic (here).
 
 mod batch;
+pub mod encoding;
 mod input;
 mod output;
 mod paths;

@@ -105,7 +105,8 @@ fn same_file(a: &Path, b: &Path) -> bool {
 const OUTPUT_EXTENSIONS: &[(&str, &str, &[&str])] = &[
     ("fit", "a T-mesh", &["tmesh", "tmb", "xml"]),
     ("tile stitch", "a T-mesh", &["tmesh", "tmb", "xml"]),
-    ("heal", "CityGML", &["gml", "xml", "citygml"]),
+    ("heal", "CityGML or CityJSON", &["gml", "xml", "citygml", "json", "jsonl"]),
+    ("convert", "CityGML or CityJSON", &["gml", "xml", "citygml", "json", "jsonl"]),
     ("popa3d2citygml", "CityGML", &["gml", "xml", "citygml"]),
     ("citygml2popa3d", "a popa3d model", &["popa3d", "xml"]),
     ("obj2popa3d", "a popa3d model", &["popa3d", "xml"]),
@@ -159,6 +160,7 @@ const INPUTS: &[(&str, &str, Takes)] = &[
     ("info", "inputs", Takes::Summarisable),
     ("validate", "inputs", Takes::CityGml),
     ("heal", "input", Takes::CityGml),
+    ("convert", "input", Takes::CityGml),
     ("citygml2popa3d", "input", Takes::CityGml),
     ("export", "input", Takes::CityGmlOrTMesh),
     ("popa3d2citygml", "input", Takes::Popa3d),
@@ -207,7 +209,9 @@ fn accepts(takes: Takes, kind: &FileKind, path: &Path) -> bool {
     use FileKind as K;
     match kind {
         K::Unknown => true,
-        K::Device(_) | K::CityJson | K::Gltf | K::Zip | K::Gzip => false,
+        K::Device(_) | K::Gltf | K::Zip | K::Gzip => false,
+        // Converted to CityGML at input (docs/decisions.md#cityjson-at-the-edges).
+        K::CityJson => matches!(takes, Takes::CityGml | Takes::CityGmlOrTMesh | Takes::Summarisable),
         // The XML and text readers locate these themselves (`empty.gml:1:1: empty file`);
         // GDAL and the point reader do not.
         K::Empty => !matches!(takes, Takes::Raster | Takes::Points),
@@ -237,14 +241,14 @@ fn accepts(takes: Takes, kind: &FileKind, path: &Path) -> bool {
 
 fn takes_what(takes: Takes) -> &'static str {
     match takes {
-        Takes::CityGml => "CityGML (1.0, 2.0, 3.0)",
-        Takes::CityGmlOrTMesh => "CityGML or a T-mesh",
+        Takes::CityGml => "CityGML (1.0, 2.0, 3.0) or CityJSON (2.0, 1.1, CityJSONSeq)",
+        Takes::CityGmlOrTMesh => "CityGML, CityJSON or a T-mesh",
         Takes::Popa3d => "a popa3d model (made by citygml2popa3d or obj2popa3d)",
         Takes::TMesh => "a T-mesh (.tmesh or .tmb, made by fit)",
         Takes::Raster => "a raster GDAL opens (GeoTIFF, netCDF, BAG, ASCII grid, ...)",
         Takes::Points => "point text (XYZ/CSV) or LAS/LAZ",
         Takes::Obj => "an OBJ sketch",
-        Takes::Summarisable => "CityGML, T-meshes, rasters and point files",
+        Takes::Summarisable => "CityGML, CityJSON, T-meshes, rasters and point files",
     }
 }
 
@@ -252,13 +256,12 @@ fn takes_what(takes: Takes) -> &'static str {
 fn hint(kind: &FileKind, value: &str) -> String {
     use FileKind as K;
     let commands = match kind {
-        K::CityGml => "validate, heal, export, citygml2popa3d, info",
+        K::CityGml | K::CityJson => "validate, heal, export, citygml2popa3d, convert, info",
         K::Popa3d => "adjust, observe, popa3d2citygml",
         K::TMesh => "eval, surface, export, info",
         K::Raster(_) => "fit, warp, unwarp, diff, info",
         K::Las | K::PointText => "rasterize, info, implicit",
         K::Obj => "obj2popa3d",
-        K::CityJson => return " (geofit reads CityGML; convert it with citygml-tools from-cityjson)".into(),
         K::Gltf => return " (glTF is what export and surface write; geofit does not read it)".into(),
         K::Gzip => return format!(" (decompress it first: gunzip -c {value} | geofit ... -, or for a raster give GDAL's /vsigzip/{value})"),
         K::Zip => return format!(" (unzip it first, or for a raster give GDAL's /vsizip/{value}/NAME)"),
@@ -279,7 +282,7 @@ mod tests {
         for k in kinds {
             assert!(hint(&k, "x").starts_with(" (read it with geofit "), "{k:?}");
         }
-        assert!(hint(&FileKind::CityJson, "x").contains("citygml-tools"));
+        assert!(hint(&FileKind::CityJson, "x").contains("convert"));
     }
 
     #[test]
@@ -291,6 +294,7 @@ mod tests {
         assert!(!accepts(Takes::Raster, &FileKind::CityGml, p));
         assert!(!accepts(Takes::Points, &FileKind::CityGml, p));
         assert!(!accepts(Takes::TMesh, &FileKind::Raster("TIFF/GeoTIFF"), p));
-        assert!(!accepts(Takes::CityGml, &FileKind::CityJson, p));
+        assert!(accepts(Takes::CityGml, &FileKind::CityJson, p));
+        assert!(!accepts(Takes::Popa3d, &FileKind::CityJson, p));
     }
 }
