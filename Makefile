@@ -19,7 +19,7 @@ APT_PACKAGES := pkg-config libgdal-dev gdal-bin libproj-dev proj-bin ocl-icd-ope
 VENV ?= $(CURDIR)/.venv
 export PATH := $(VENV)/bin:$(PATH)
 export GEOFIT_PYTHON := $(VENV)/bin/python3
-PIP_TEST_PACKAGES := numpy scipy lxml pymeshlab snakemake
+PIP_TEST_PACKAGES := numpy scipy lxml pymeshlab snakemake jsonschema cjio==0.10.1
 PIP_BENCH_PACKAGES := loopstructural pydelatin pymartini
 # py3dtiles reads the 3D Tiles tilesets back in the scale-out tests. Installed without its
 # dependencies: it pins numpy < 2 (for numba in its point-cloud converter, which the tests do not
@@ -47,7 +47,7 @@ setup-apt:
 
 setup-pip:
 	@test -x $(VENV)/bin/python3 || { echo "setup: creating the project's Python environment $(VENV)"; python3 -m venv $(VENV); }
-	@$(VENV)/bin/python3 -c "import numpy, scipy, lxml, pymeshlab, snakemake" 2>/dev/null \
+	@$(VENV)/bin/python3 -c "import numpy, scipy, lxml, pymeshlab, snakemake, jsonschema, cjio" 2>/dev/null \
 	  && echo "setup: Python packages present in $(VENV)" \
 	  || { echo "setup: installing into $(VENV): $(PIP_TEST_PACKAGES)"; \
 	       $(VENV)/bin/python3 -m pip install -q --disable-pip-version-check $(PIP_TEST_PACKAGES); }
