@@ -1,16 +1,18 @@
-//! The compact binary T-mesh (`.tmb`), lossless: it stores the same surface as the XML
-//! `.tmesh` (the documented exchange format, [`crate::format`]) in a fraction of the bytes.
+//! The compact binary T-mesh (`.tmb`): the same surface as the XML `.tmesh` (the documented
+//! exchange format, [`crate::format`]) in a fraction of the bytes; lossless, or with the
+//! heights stored to an error budget ([`heights`], issue 37). The full byte layout, for
+//! readers outside geofit, is in docs/tmb-format.md.
 //!
 //! Why: a text line "s t x y z w" spends ~60 bytes per control point where the information of
 //! a direct fit is one height; the reduced model was often bigger than the raster it reduces
-//! (issue 19). Here the mesh structure is implicit and the heights are compressed losslessly.
+//! (issue 19). Here the mesh structure is implicit and the heights are compressed.
 //!
 //! Layout (little-endian):
 //! ```text
 //! magic    8 bytes  89 'T' 'M' 'B' 0D 0A 1A 0A   (PNG-style: catches text-mode mangling)
-//! version  u8       1
+//! version  u8       2 (1: the same body, zlib instead of zstd, never quantised; still read)
 //! body_len u64      bytes of the body before compression
-//! body     deflate (zlib) stream of the body
+//! body     one zstd frame of the body (version 1: a deflate (zlib) stream)
 //! crc32    u32      CRC-32 (IEEE) of the uncompressed body
 //! ```
 //! Body: `degree u8`, `flags u8`, the georeference (`x0 y0 dx dy` f64, CRS as varint length +
@@ -25,18 +27,23 @@
 //!   first. Otherwise the explicit form: the distinct s and t values (varint count + f64 each) and per cell four
 //!   varint indices into them (s_min, s_max − s_min, t_min, t_max − t_min).
 //! - control points are the leaf corners in the canonical order of [`canonical`] (by t, then
-//!   s), so neither their count nor their parameters are stored. Heights: each f64 XOR-ed with
+//!   s), so neither their count nor their parameters are stored. Heights, flag [`QUANT`]:
+//!   quantised to a step (see [`heights`]); else lossless: each f64 XOR-ed with
 //!   the previous one (neighbours share sign, exponent and leading mantissa bits), then the 8
-//!   byte planes one after the other (the deflate stream then finds the zero runs). `x, y`
-//!   (flag [`XY`], else x = s, y = t) and `w` (flag [`W`], else 1) the same way.
+//!   byte planes one after the other (the compressor then finds the zero runs). `x, y`
+//!   (flag [`XY`], else x = s, y = t) and `w` (flag [`W`], else 1) always lossless that way.
 //! - mask (flag [`MASK`]): width, height, run count and the runs as varints (as the XML: from
 //!   t = 0, alternating no data / data, starting with no data); warp (flag [`WARP`]): varint
 //!   length + the JSON.
 //!
 //! Lossless: `read(write(f))` gives the mesh [`canonical`] gives, bit for bit; evaluation
 //! sums over points in the order of their parameters, not their ids (`PbSpline::from_parts`),
-//! so `.tmb` and `.tmesh` of one fit evaluate to the same bits. Every defect of a file (magic, version, truncation, checksum, lengths, an invalid mesh)
+//! so `.tmb` and `.tmesh` of one fit evaluate to the same bits. Quantised
+//! ([`write_with`]): the same mesh with every height within `q` of its own, so the surface
+//! within `q` of the lossless one at every point. Every defect of a file (magic, version, truncation, checksum, lengths, an invalid mesh)
 //! is a [`TsplineError::Format`] naming it, never a panic.
+
+pub mod heights;
 
 use std::collections::{HashMap, HashSet};
 use std::io::{Read, Write};
@@ -46,7 +53,8 @@ use crate::mesh::{ControlPoint, Degree, PointId, Rect, TMesh};
 use crate::TsplineError;
 
 pub const MAGIC: &[u8; 8] = b"\x89TMB\r\n\x1a\n";
-pub const VERSION: u8 = 1;
+/// The version written; [`read`] also reads 1 (zlib body, lossless heights).
+pub const VERSION: u8 = 2;
 /// Structure flag: leaf cells as a quadtree forest (else explicit).
 pub const QUADTREE: u8 = 1;
 /// Control points' x, y stored (else x = s, y = t).
@@ -58,6 +66,10 @@ pub const WARP: u8 = 16;
 /// Structure flag: leaf cells as a forest of 2-/4-split trees (anisotropic refinement, see
 /// [`kdtree`]); only when the quadtree form does not fit.
 pub const KDTREE: u8 = 32;
+/// Heights quantised to a step (version 2; [`heights`]).
+pub const QUANT: u8 = 64;
+/// zstd level of the body: the smallest files; ~0.1 s for a body of 10⁵ points.
+const ZSTD_LEVEL: i32 = 19;
 /// Largest body a reader inflates (a corrupt length must not allocate terabytes).
 const MAX_BODY: u64 = 1 << 36;
 
@@ -75,9 +87,11 @@ pub fn canonical(mesh: &TMesh) -> TMesh {
         remap[i as usize] = k as u32;
     }
     let points: Vec<ControlPoint> = ids.iter().map(|&i| mesh.points[i as usize]).collect();
-    let mut cells: Vec<(Rect, [PointId; 4])> = mesh.cells.iter().filter(|c| c.is_leaf()).map(|c| (c.rect, c.corners.map(|p| remap[p as usize]))).collect();
+    let mut cells: Vec<(Rect, [PointId; 4])> =
+        mesh.cells.iter().filter(|c| c.is_leaf()).map(|c| (c.rect, c.corners.map(|p| remap[p as usize]))).collect();
     cells.sort_by(|a, b| a.0.t_min.total_cmp(&b.0.t_min).then(a.0.s_min.total_cmp(&b.0.s_min)));
-    TMesh::from_cells(mesh.degree, points, cells.into_iter().map(|c| c.1).collect()).expect("a valid mesh stays valid when reordered")
+    TMesh::from_cells(mesh.degree, points, cells.into_iter().map(|c| c.1).collect())
+        .expect("a valid mesh stays valid when reordered")
 }
 
 fn put_varint(out: &mut Vec<u8>, mut v: u64) {
@@ -117,7 +131,12 @@ fn rect_key(r: &Rect) -> [u64; 4] {
 fn children(r: &Rect) -> [Rect; 4] {
     let sm = 0.5 * (r.s_min + r.s_max);
     let tm = 0.5 * (r.t_min + r.t_max);
-    [Rect::new(r.s_min, r.t_min, sm, tm), Rect::new(sm, r.t_min, r.s_max, tm), Rect::new(r.s_min, tm, sm, r.t_max), Rect::new(sm, tm, r.s_max, r.t_max)]
+    [
+        Rect::new(r.s_min, r.t_min, sm, tm),
+        Rect::new(sm, r.t_min, r.s_max, tm),
+        Rect::new(r.s_min, tm, sm, r.t_max),
+        Rect::new(sm, tm, r.s_max, r.t_max),
+    ]
 }
 
 /// Depth limit of a quadtree (2⁶⁰ subdivisions is far past f64 resolution).
@@ -164,7 +183,11 @@ impl Roots {
     /// The root squares row by row from the bottom: the order in which both forms walk them.
     fn cells(self) -> impl Iterator<Item = Rect> {
         let Roots { s0, t0, c0, ns, nt } = self;
-        (0..nt).flat_map(move |j| (0..ns).map(move |i| Rect::new(s0 + i as f64 * c0, t0 + j as f64 * c0, s0 + (i + 1) as f64 * c0, t0 + (j + 1) as f64 * c0)))
+        (0..nt).flat_map(move |j| {
+            (0..ns).map(move |i| {
+                Rect::new(s0 + i as f64 * c0, t0 + j as f64 * c0, s0 + (i + 1) as f64 * c0, t0 + (j + 1) as f64 * c0)
+            })
+        })
     }
 }
 
@@ -200,7 +223,9 @@ fn quadtree(leaves: &[Rect]) -> Option<(f64, f64, f64, u64, u64, Vec<u8>)> {
 fn kdtree(leaves: &[Rect]) -> Option<(f64, f64, f64, u64, u64, Vec<u8>)> {
     use rstar::{primitives::Rectangle, RTree, AABB};
     let roots = Roots::of_leaves(leaves)?;
-    let tree: RTree<Rectangle<[f64; 2]>> = RTree::bulk_load(leaves.iter().map(|r| Rectangle::from_corners([r.s_min, r.t_min], [r.s_max, r.t_max])).collect());
+    let tree: RTree<Rectangle<[f64; 2]>> = RTree::bulk_load(
+        leaves.iter().map(|r| Rectangle::from_corners([r.s_min, r.t_min], [r.s_max, r.t_max])).collect(),
+    );
     let mut syms: Vec<u8> = Vec::new();
     let mut found = 0usize;
     fn walk(r: Rect, depth: usize, tree: &RTree<Rectangle<[f64; 2]>>, syms: &mut Vec<u8>, found: &mut usize) -> bool {
@@ -210,7 +235,9 @@ fn kdtree(leaves: &[Rect]) -> Option<(f64, f64, f64, u64, u64, Vec<u8>)> {
             .map(|e| Rect::new(e.lower()[0], e.lower()[1], e.upper()[0], e.upper()[1]))
             .filter(|o| o.s_max.min(r.s_max) > o.s_min.max(r.s_min) && o.t_max.min(r.t_max) > o.t_min.max(r.t_min))
             .collect();
-        if inside.is_empty() || inside.iter().any(|o| o.s_min < r.s_min || o.s_max > r.s_max || o.t_min < r.t_min || o.t_max > r.t_max) {
+        if inside.is_empty()
+            || inside.iter().any(|o| o.s_min < r.s_min || o.s_max > r.s_max || o.t_min < r.t_min || o.t_max > r.t_max)
+        {
             return false; // a hole, or a leaf larger than the node
         }
         if inside.len() == 1 && inside[0] == r {
@@ -227,8 +254,12 @@ fn kdtree(leaves: &[Rect]) -> Option<(f64, f64, f64, u64, u64, Vec<u8>)> {
         let cut_t = !inside.iter().any(|o| o.t_min < tm && tm < o.t_max);
         let (sym, kids): (u8, Vec<Rect>) = match (cut_s, cut_t) {
             (true, true) => (1, children(&r).to_vec()),
-            (true, false) => (2, vec![Rect::new(r.s_min, r.t_min, sm, r.t_max), Rect::new(sm, r.t_min, r.s_max, r.t_max)]),
-            (false, true) => (3, vec![Rect::new(r.s_min, r.t_min, r.s_max, tm), Rect::new(r.s_min, tm, r.s_max, r.t_max)]),
+            (true, false) => {
+                (2, vec![Rect::new(r.s_min, r.t_min, sm, r.t_max), Rect::new(sm, r.t_min, r.s_max, r.t_max)])
+            }
+            (false, true) => {
+                (3, vec![Rect::new(r.s_min, r.t_min, r.s_max, tm), Rect::new(r.s_min, tm, r.s_max, r.t_max)])
+            }
             (false, false) => return false,
         };
         syms.push(sym);
@@ -240,8 +271,23 @@ fn kdtree(leaves: &[Rect]) -> Option<(f64, f64, f64, u64, u64, Vec<u8>)> {
     Some((roots.s0, roots.t0, roots.c0, roots.ns, roots.nt, packed_symbols(&syms, TreeForm::Kd)))
 }
 
-/// Writes the compact binary form of `f`.
+/// How [`write_with`] stores the heights.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct WriteOptions {
+    /// The storage share `q` of the tolerance: heights rounded to multiples of `2q`, so each
+    /// moves by at most `q` and so does the surface (partition of unity,
+    /// docs/decisions.md#heights-quantised-to-the-error-budget-issue-37). None: lossless.
+    pub quantum: Option<f64>,
+}
+
+/// Writes the compact binary form of `f`, lossless.
 pub fn write(f: &TMeshFile, w: &mut dyn Write) -> std::io::Result<()> {
+    write_with(f, &WriteOptions::default(), w)
+}
+
+/// Writes the compact binary form of `f` with the heights as `opts` says; a quantum too small
+/// for the heights (more than 2⁵² steps) is an `InvalidInput` error.
+pub fn write_with(f: &TMeshFile, opts: &WriteOptions, w: &mut dyn Write) -> std::io::Result<()> {
     let m = canonical(&f.mesh);
     let mut body = Vec::new();
     let leaves: Vec<Rect> = m.cells.iter().map(|c| c.rect).collect();
@@ -267,6 +313,9 @@ pub fn write(f: &TMeshFile, w: &mut dyn Write) -> std::io::Result<()> {
     }
     if f.warp.is_some() {
         flags |= WARP;
+    }
+    if opts.quantum.is_some() {
+        flags |= QUANT;
     }
     body.push(m.degree.k() as u8);
     body.push(flags);
@@ -297,7 +346,9 @@ pub fn write(f: &TMeshFile, w: &mut dyn Write) -> std::io::Result<()> {
                 put_varint(&mut body, v.len() as u64);
                 v.iter().for_each(|&x| put_f64(&mut body, x));
             }
-            let idx = |v: &[f64], x: f64| v.binary_search_by(|a| a.total_cmp(&(x + 0.0))).expect("a corner value is in its list") as u64;
+            let idx = |v: &[f64], x: f64| {
+                v.binary_search_by(|a| a.total_cmp(&(x + 0.0))).expect("a corner value is in its list") as u64
+            };
             put_varint(&mut body, leaves.len() as u64);
             for r in &leaves {
                 let (a, b) = (idx(&sv, r.s_min), idx(&sv, r.s_max));
@@ -308,7 +359,12 @@ pub fn write(f: &TMeshFile, w: &mut dyn Write) -> std::io::Result<()> {
             }
         }
     }
-    put_f64s(&mut body, &m.points.iter().map(|p| p.z).collect::<Vec<_>>());
+    let z: Vec<f64> = m.points.iter().map(|p| p.z).collect();
+    match opts.quantum {
+        Some(q) => heights::encode(&z, heights::step_for(q), &mut body)
+            .map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidInput, e))?,
+        None => put_f64s(&mut body, &z),
+    }
     if xy {
         put_f64s(&mut body, &m.points.iter().map(|p| p.x).collect::<Vec<_>>());
         put_f64s(&mut body, &m.points.iter().map(|p| p.y).collect::<Vec<_>>());
@@ -327,11 +383,14 @@ pub fn write(f: &TMeshFile, w: &mut dyn Write) -> std::io::Result<()> {
         put_varint(&mut body, json.len() as u64);
         body.extend_from_slice(json.as_bytes());
     }
-    let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::best());
-    z.write_all(&body)?;
-    let packed = z.finish()?;
+    seal(&body, w)
+}
+
+/// The header, the zstd frame of `body` and its checksum.
+fn seal(body: &[u8], w: &mut dyn Write) -> std::io::Result<()> {
+    let packed = zstd::bulk::compress(body, ZSTD_LEVEL)?;
     let mut crc = flate2::Crc::new();
-    crc.update(&body);
+    crc.update(body);
     w.write_all(MAGIC)?;
     w.write_all(&[VERSION])?;
     w.write_all(&(body.len() as u64).to_le_bytes())?;
@@ -352,7 +411,8 @@ impl<'a> Cursor<'a> {
     }
     fn take(&mut self, n: usize, what: &str) -> Result<&'a [u8], TsplineError> {
         if self.data.len() - self.pos < n {
-            return Err(self.err(format!("the body ends inside {what} ({n} bytes needed, {} left)", self.data.len() - self.pos)));
+            return Err(self
+                .err(format!("the body ends inside {what} ({n} bytes needed, {} left)", self.data.len() - self.pos)));
         }
         let s = &self.data[self.pos..self.pos + n];
         self.pos += n;
@@ -422,11 +482,17 @@ pub fn read(data: &[u8]) -> Result<TMeshFile, TsplineError> {
         return Err(head_err(0, "not a binary T-mesh (magic bytes missing)"));
     }
     if data.len() < 8 + 1 + 8 + 4 {
-        return Err(head_err(data.len(), format!("truncated binary T-mesh: {} bytes, the header and checksum alone take 21", data.len())));
+        return Err(head_err(
+            data.len(),
+            format!("truncated binary T-mesh: {} bytes, the header and checksum alone take 21", data.len()),
+        ));
     }
     let version = data[8];
-    if version != VERSION {
-        return Err(head_err(8, format!("binary T-mesh version {version} is not supported (this reader knows {VERSION})")));
+    if version != 1 && version != VERSION {
+        return Err(head_err(
+            8,
+            format!("binary T-mesh version {version} is not supported (this reader knows 1 and {VERSION})"),
+        ));
     }
     let body_len = u64::from_le_bytes(data[9..17].try_into().expect("8 bytes"));
     if body_len > MAX_BODY {
@@ -434,29 +500,55 @@ pub fn read(data: &[u8]) -> Result<TMeshFile, TsplineError> {
     }
     let (packed, crc_bytes) = data[17..].split_at(data.len() - 17 - 4);
     let mut body = Vec::with_capacity(body_len.min(1 << 26) as usize);
-    let mut dec = flate2::read::ZlibDecoder::new(packed).take(body_len + 1);
-    dec.read_to_end(&mut body).map_err(|e| head_err(17, format!("the compressed body is damaged or truncated: {e}")))?;
+    let damaged = |e: std::io::Error| head_err(17, format!("the compressed body is damaged or truncated: {e}"));
+    if version == 1 {
+        flate2::read::ZlibDecoder::new(packed).take(body_len + 1).read_to_end(&mut body).map_err(damaged)?;
+    } else {
+        // streaming, so a corrupt length cannot allocate more than the frame holds
+        zstd::stream::read::Decoder::with_buffer(packed)
+            .map_err(damaged)?
+            .take(body_len + 1)
+            .read_to_end(&mut body)
+            .map_err(damaged)?;
+    }
     if body.len() as u64 != body_len {
-        return Err(head_err(17, format!("the body holds {} bytes, the header says {body_len} (truncated or corrupt file)", body.len())));
+        return Err(head_err(
+            17,
+            format!("the body holds {} bytes, the header says {body_len} (truncated or corrupt file)", body.len()),
+        ));
     }
     let mut crc = flate2::Crc::new();
     crc.update(&body);
     let want = u32::from_le_bytes(crc_bytes.try_into().expect("4 bytes"));
     if crc.sum() != want {
-        return Err(head_err(data.len() - 4, format!("checksum mismatch (CRC-32 {:08x}, file says {want:08x}): the file is corrupt", crc.sum())));
+        return Err(head_err(
+            data.len() - 4,
+            format!("checksum mismatch (CRC-32 {:08x}, file says {want:08x}): the file is corrupt", crc.sum()),
+        ));
     }
-    parse_body(&body)
+    parse_body(&body, version)
 }
 
-fn parse_body(body: &[u8]) -> Result<TMeshFile, TsplineError> {
+fn parse_body(body: &[u8], version: u8) -> Result<TMeshFile, TsplineError> {
     let mut c = Cursor { data: body, pos: 0 };
     let k = c.u8("degree")?;
     let degree = Degree::from_u32(k as u32).ok_or_else(|| c.err(format!("degree {k} is not supported (1 or 3)")))?;
     let flags = c.u8("flags")?;
-    if flags & !(QUADTREE | XY | W | MASK | WARP | KDTREE) != 0 || flags & (QUADTREE | KDTREE) == QUADTREE | KDTREE {
+    let known = if version == 1 {
+        QUADTREE | XY | W | MASK | WARP | KDTREE
+    } else {
+        QUADTREE | XY | W | MASK | WARP | KDTREE | QUANT
+    };
+    if flags & !known != 0 || flags & (QUADTREE | KDTREE) == QUADTREE | KDTREE {
         return Err(c.err(format!("unknown flags {flags:#04x}")));
     }
-    let georef = Georef { x0: c.f64("georef x0")?, y0: c.f64("georef y0")?, dx: c.f64("georef dx")?, dy: c.f64("georef dy")?, crs: c.string("CRS")? };
+    let georef = Georef {
+        x0: c.f64("georef x0")?,
+        y0: c.f64("georef y0")?,
+        dx: c.f64("georef dx")?,
+        dy: c.f64("georef dy")?,
+        crs: c.string("CRS")?,
+    };
     if georef.dx == 0.0 || georef.dy == 0.0 {
         return Err(c.err("georef dx and dy must be non-zero"));
     }
@@ -468,21 +560,37 @@ fn parse_body(body: &[u8]) -> Result<TMeshFile, TsplineError> {
         read_explicit(&mut c)?
     };
     // points: the leaf corners in canonical order
-    let mut st: Vec<(f64, f64)> = leaves.iter().flat_map(|r| [(r.s_min, r.t_max), (r.s_max, r.t_max), (r.s_min, r.t_min), (r.s_max, r.t_min)]).collect();
+    let mut st: Vec<(f64, f64)> = leaves
+        .iter()
+        .flat_map(|r| [(r.s_min, r.t_max), (r.s_max, r.t_max), (r.s_min, r.t_min), (r.s_max, r.t_min)])
+        .collect();
     st.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.total_cmp(&b.0)));
     st.dedup_by(|a, b| a.0 == b.0 && a.1 == b.1);
     let n = st.len();
-    let z = c.f64s(n, "heights")?;
-    let (x, y) = if flags & XY != 0 { (c.f64s(n, "x")?, c.f64s(n, "y")?) } else { (st.iter().map(|p| p.0).collect(), st.iter().map(|p| p.1).collect()) };
+    let z = if flags & QUANT != 0 {
+        let (z, used) = heights::decode(&c.data[c.pos..], n).map_err(|e| c.err(format!("quantised heights: {e}")))?;
+        c.pos += used;
+        z
+    } else {
+        c.f64s(n, "heights")?
+    };
+    let (x, y) = if flags & XY != 0 {
+        (c.f64s(n, "x")?, c.f64s(n, "y")?)
+    } else {
+        (st.iter().map(|p| p.0).collect(), st.iter().map(|p| p.1).collect())
+    };
     let w = if flags & W != 0 { c.f64s(n, "weights")? } else { vec![1.0; n] };
-    let points: Vec<ControlPoint> = (0..n).map(|i| ControlPoint { s: st[i].0, t: st[i].1, x: x[i], y: y[i], z: z[i], w: w[i] }).collect();
+    let points: Vec<ControlPoint> =
+        (0..n).map(|i| ControlPoint { s: st[i].0, t: st[i].1, x: x[i], y: y[i], z: z[i], w: w[i] }).collect();
     let mut id: HashMap<(u64, u64), PointId> = HashMap::with_capacity(n);
     for (i, p) in st.iter().enumerate() {
         id.insert(((p.0 + 0.0).to_bits(), (p.1 + 0.0).to_bits()), i as PointId);
     }
     let pid = |s: f64, t: f64| id[&((s + 0.0).to_bits(), (t + 0.0).to_bits())];
-    let mut cells: Vec<(Rect, [PointId; 4])> =
-        leaves.iter().map(|r| (*r, [pid(r.s_min, r.t_max), pid(r.s_max, r.t_max), pid(r.s_min, r.t_min), pid(r.s_max, r.t_min)])).collect();
+    let mut cells: Vec<(Rect, [PointId; 4])> = leaves
+        .iter()
+        .map(|r| (*r, [pid(r.s_min, r.t_max), pid(r.s_max, r.t_max), pid(r.s_min, r.t_min), pid(r.s_max, r.t_min)]))
+        .collect();
     cells.sort_by(|a, b| a.0.t_min.total_cmp(&b.0.t_min).then(a.0.s_min.total_cmp(&b.0.s_min)));
     let mask = if flags & MASK != 0 { Some(read_mask(&mut c)?) } else { None };
     let warp = if flags & WARP != 0 { Some(c.string("warp")?) } else { None };
@@ -522,7 +630,9 @@ impl TreeForm {
         let tm = 0.5 * (r.t_min + r.t_max);
         match (self, v) {
             (TreeForm::Quad, _) | (TreeForm::Kd, 1) => children(r).to_vec(),
-            (TreeForm::Kd, 2) => vec![Rect::new(r.s_min, r.t_min, sm, r.t_max), Rect::new(sm, r.t_min, r.s_max, r.t_max)],
+            (TreeForm::Kd, 2) => {
+                vec![Rect::new(r.s_min, r.t_min, sm, r.t_max), Rect::new(sm, r.t_min, r.s_max, r.t_max)]
+            }
             _ => vec![Rect::new(r.s_min, r.t_min, r.s_max, tm), Rect::new(r.s_min, tm, r.s_max, r.t_max)],
         }
     }
@@ -609,7 +719,8 @@ fn read_explicit(c: &mut Cursor) -> Result<Vec<Rect>, TsplineError> {
 fn read_mask(c: &mut Cursor) -> Result<DataMask, TsplineError> {
     let width = c.varint("mask width")? as usize;
     let height = c.varint("mask height")? as usize;
-    let total = width.checked_mul(height).filter(|&t| t as u64 <= MAX_BODY * 8).ok_or_else(|| c.err("mask size overflows"))?;
+    let total =
+        width.checked_mul(height).filter(|&t| t as u64 <= MAX_BODY * 8).ok_or_else(|| c.err("mask size overflows"))?;
     let nr = c.count(1, "mask run count")?;
     let mut bits = Vec::with_capacity(total);
     let mut bit = false;
@@ -628,147 +739,4 @@ fn read_mask(c: &mut Cursor) -> Result<DataMask, TsplineError> {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::eval::{GridSpec, PbSpline};
-
-    fn sample_file(degree: Degree, xy: bool) -> TMeshFile {
-        let mut m = TMesh::grid(degree, -8.0, -4.0, 8.0, 5, 3);
-        let mut g = |s: f64, t: f64| (s, t, 0.0);
-        let c = m.leaves_in(Rect::new(4.5, 1.0, 4.5, 1.0))[0];
-        let kids = m.split(c, &mut g);
-        m.split(kids[2], &mut g);
-        m.repair(1.0, &mut g);
-        for (i, p) in m.points.iter_mut().enumerate() {
-            p.z = (p.s * 0.37).sin() * 10.0 + p.t * 0.01 + i as f64 * 1e-9;
-            if xy {
-                p.x = p.s + 0.25 * (p.t * 0.1).cos();
-                p.w = 1.0 + (i % 3) as f64 * 0.125;
-            }
-        }
-        TMeshFile {
-            mesh: m,
-            georef: Georef { x0: 500015.0, y0: 2150015.5, dx: 2.0, dy: -2.0, crs: "EPSG:32605".into() },
-            mask: Some(DataMask { width: 7, height: 5, bits: (0..35).map(|i| i % 5 != 1).collect() }),
-            warp: xy.then(|| r#"{"version":1}"#.to_string()),
-        }
-    }
-
-    fn bytes(f: &TMeshFile, binary: bool) -> Vec<u8> {
-        let mut buf = Vec::new();
-        if binary { write(f, &mut buf).unwrap() } else { crate::format::write(f, &mut buf).unwrap() }
-        buf
-    }
-
-    /// .tmb and .tmesh of one mesh read back to the same mesh (up to numbering) and evaluate to
-    /// the same bits on a grid that crosses every cell, and as the mesh itself; the quadtree form is taken for a refined grid and the
-    /// explicit one for a merged mesh with a gap.
-    #[test]
-    fn round_trip_equals_the_xml_bit_for_bit() {
-        for degree in [Degree::Linear, Degree::Cubic] {
-            for xy in [false, true] {
-                let f = sample_file(degree, xy);
-                let b = bytes(&f, true);
-                assert_eq!(b[..8], MAGIC[..]);
-                let fb = crate::format::read(&b).unwrap();
-                let fx = crate::format::read(&bytes(&f, false)).unwrap();
-                let cx = canonical(&fx.mesh);
-                assert_eq!(fb.mesh.points, cx.points);
-                let (cb, cc): (Vec<_>, Vec<_>) = (fb.mesh.cells.iter().map(|c| c.corners).collect(), cx.cells.iter().map(|c| c.corners).collect());
-                assert_eq!(cb, cc);
-                assert_eq!((fb.georef.clone(), fb.mask.clone(), fb.warp.clone()), (fx.georef.clone(), fx.mask.clone(), fx.warp.clone()));
-                let g = GridSpec { s0: -8.0, t0: -4.0, ds: 0.25, dt: 0.25, ns: 161, nt: 97 };
-                let (zb, zx) = (PbSpline::build(&fb.mesh).eval_grid(&g, true), PbSpline::build(&fx.mesh).eval_grid(&g, true));
-                let zm = PbSpline::build(&f.mesh).eval_grid(&g, true);
-                assert!(zb.iter().zip(&zx).all(|(a, b)| a.to_bits() == b.to_bits()));
-                assert!(zb.iter().zip(&zm).all(|(a, b)| a.to_bits() == b.to_bits()));
-                // and point by point (the reference path)
-                let (pb_b, pb_m) = (PbSpline::build(&fb.mesh), PbSpline::build(&f.mesh));
-                for q in 0..2000 {
-                    let (s, t) = (-8.0 + 40.0 * ((q * 37) % 1000) as f64 / 1000.0, -4.0 + 24.0 * ((q * 91) % 1000) as f64 / 1000.0);
-                    assert_eq!(pb_b.point(s, t)[2].to_bits(), pb_m.point(s, t)[2].to_bits());
-                }
-                // the quadtree form: far fewer bytes than the XML
-                assert!(b.len() * 3 < bytes(&f, false).len(), "{degree:?}: {} vs {}", b.len(), bytes(&f, false).len());
-                // writing the read-back file again gives the same bytes
-                assert_eq!(bytes(&fb, true), b);
-            }
-        }
-        let a = TMesh::grid(Degree::Cubic, 0.0, 0.0, 4.0, 5, 4);
-        let mut c = TMesh::grid(Degree::Cubic, 24.0, 4.0, 3.0, 3, 3);
-        c.points.iter_mut().for_each(|p| p.z = 1.0 + 0.1 * p.s);
-        let f = TMeshFile { mesh: a.merge(&c).unwrap(), georef: Georef::identity(), mask: None, warp: None };
-        let b = bytes(&f, true);
-        let body_flags = {
-            let mut d = flate2::read::ZlibDecoder::new(&b[17..b.len() - 4]);
-            let mut v = Vec::new();
-            d.read_to_end(&mut v).unwrap();
-            v[1]
-        };
-        assert_eq!(body_flags & QUADTREE, 0, "a mesh with a gap takes the explicit form");
-        let back = read(&b).unwrap();
-        assert_eq!(back.mesh.points, canonical(&f.mesh).points);
-    }
-
-    /// A mesh of anisotropic 2-splits (rectangles, docs/decisions.md#anisotropic-splits-issue-19)
-    /// is not a quadtree: it takes the 2-/4-split tree form (fewer bytes than the explicit one)
-    /// and reads back to the XML's mesh, which evaluates to the same bits; every truncation or
-    /// flipped byte of it is a format error or the same mesh.
-    #[test]
-    fn anisotropic_mesh_takes_the_kdtree_form() {
-        let mut m = crate::testing::aniso_mesh(Degree::Cubic, 7, 3);
-        for p in &mut m.points {
-            p.z = (p.s * 0.21).sin() * 5.0 + 0.1 * p.t;
-        }
-        let f = TMeshFile { mesh: m, georef: Georef::identity(), mask: None, warp: None };
-        let b = bytes(&f, true);
-        let mut d = flate2::read::ZlibDecoder::new(&b[17..b.len() - 4]);
-        let mut v = Vec::new();
-        d.read_to_end(&mut v).unwrap();
-        assert_eq!(v[1] & (QUADTREE | KDTREE), KDTREE);
-        let fb = read(&b).unwrap();
-        let fx = crate::format::read(&bytes(&f, false)).unwrap();
-        assert_eq!(fb.mesh.points, canonical(&fx.mesh).points);
-        let g = GridSpec { s0: -16.0, t0: 0.0, ds: 0.5, dt: 0.5, ns: 161, nt: 129 };
-        let (zb, zx) = (PbSpline::build(&fb.mesh).eval_grid(&g, true), PbSpline::build(&fx.mesh).eval_grid(&g, true));
-        assert!(zb.iter().zip(&zx).all(|(a, b)| a.to_bits() == b.to_bits()));
-        assert_eq!(bytes(&fb, true), b);
-        // the structure takes under a byte per leaf (the explicit form at least four)
-        let leaves: Vec<Rect> = canonical(&f.mesh).cells.iter().map(|c| c.rect).collect();
-        let (.., head) = kdtree(&leaves).unwrap();
-        assert!(head.len() < leaves.len(), "{} bytes for {} leaves", head.len(), leaves.len());
-        for n in 0..b.len() {
-            assert!(read(&b[..n]).is_err(), "truncated to {n} bytes");
-        }
-        for i in 0..b.len() {
-            let mut d = b.clone();
-            d[i] ^= 0x40;
-            if let Ok(g) = read(&d) {
-                assert_eq!(g.mesh.points, fb.mesh.points, "byte {i}");
-            }
-        }
-    }
-
-    /// Every truncation and a flipped byte anywhere give a Format error, never a panic or a
-    /// different mesh (a flip in the deflate stream's unused padding bits changes nothing).
-    #[test]
-    fn damaged_files_are_errors() {
-        let b = bytes(&sample_file(Degree::Cubic, true), true);
-        let good = read(&b).unwrap();
-        for n in 0..b.len() {
-            assert!(read(&b[..n]).is_err(), "truncated to {n} bytes");
-        }
-        for i in 0..b.len() {
-            let mut d = b.clone();
-            d[i] ^= 0x40;
-            match crate::format::read(&d) {
-                Err(TsplineError::Format { .. }) => {}
-                Err(e) => panic!("byte {i}: not a format error: {e}"),
-                Ok(f) => {
-                    assert_eq!(f.mesh.points, good.mesh.points, "byte {i} flipped: a different mesh read without error");
-                    assert_eq!((f.georef, f.mask, f.warp), (good.georef.clone(), good.mask.clone(), good.warp.clone()));
-                }
-            }
-        }
-    }
-}
+mod tests;
