@@ -62,7 +62,9 @@ pub enum PlanFormat {
     Make,
 }
 
-/// The plan as text in `format`, tiles in the given order.
+/// The plan as text in `format`, tiles in the given order. JSON lines hold every tile; the job
+/// lists (TSV, make) leave out raster tiles without data (`work` 0,
+/// docs/decisions.md#tiles-on-the-whole-fits-lattice).
 pub fn write_plan(tiles: &[Tile], format: PlanFormat) -> String {
     match format {
         PlanFormat::JsonLines => tiles
@@ -71,7 +73,7 @@ pub fn write_plan(tiles: &[Tile], format: PlanFormat) -> String {
             .collect(),
         PlanFormat::Tsv => {
             let mut s = String::from("#id\tkind\tsize\tcore\thalo\tcore_px\thalo_px\tneighbours\twork\tsources\n");
-            for t in tiles {
+            for t in tiles.iter().filter(|t| t.work > 0) {
                 let b = |w: &Window| w.bounds.map(|v| v.to_string()).join(",");
                 let px = |w: &Window| w.pixels.map(|p| p.map(|v| v.to_string()).join(",")).unwrap_or_else(|| "-".into());
                 s += &format!(
@@ -91,7 +93,7 @@ pub fn write_plan(tiles: &[Tile], format: PlanFormat) -> String {
             s
         }
         PlanFormat::Make => {
-            let ids: Vec<&str> = tiles.iter().map(|t| t.id.as_str()).collect();
+            let ids: Vec<&str> = tiles.iter().filter(|t| t.work > 0).map(|t| t.id.as_str()).collect();
             format!("# geofit tile plan: {} tiles\nTILES := {}\n", tiles.len(), ids.join(" "))
         }
     }

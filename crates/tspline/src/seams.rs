@@ -198,14 +198,36 @@ impl SeamCurve {
 /// data cell centre (½ px from the seam) and the shared seam curve costs the fit nothing there.
 const STRIP: f64 = 0.25;
 
+/// No strip along a seam on a pixel-centre line (a plan on the whole fit's lattice,
+/// docs/decisions.md#tiles-on-the-whole-fits-lattice): the seam's own row of cells lies on the
+/// border, where the surface is the curve, and the curve is refined until it holds them; the
+/// rows inside are the refit's. Measured on a 200² lidar window in 2×2 tiles, E = 0.25: ½-px
+/// strip 9,006 stitched control points, 1-px strip 4,922, none 2,594 (first passes 1,533), all
+/// within E.
+const STRIP_ON_CENTRES: f64 = f64::INFINITY;
+
+/// Whether a seam runs along pixel centres (integer plan coordinate) rather than pixel edges.
+fn on_centres(line: Line) -> bool {
+    line.c.fract() == 0.0
+}
+
+/// The side of the seam strip's cells along `line`.
+fn strip_of(line: Line) -> f64 {
+    if on_centres(line) { STRIP_ON_CENTRES } else { STRIP }
+}
+
 /// Samples per knot interval of the seam-curve fit.
 const SEAM_SAMPLES: usize = 8;
+/// Weight of a data cell lying on a pixel-centre seam in the seam-curve fit (against 1 for the
+/// interpolated samples between them): the curve IS the surface at those cells.
+const ON_SEAM_CELL_WEIGHT: f64 = 16.0;
 
 /// The seam curve of two first-pass meshes `p` and `q` (plan frame) along `line`: knots the
 /// union of both sides' border vertices, ends fixed to the corner values, the inner
 /// coefficients the least-squares fit to the mean of the two surfaces along the line. Symmetric
 /// in (p, q) bit for bit (the mean is a commutative sum), so both tiles' stitch jobs get the same.
-fn seam_curve(p: &PbSpline, pm: &TMesh, q: &PbSpline, qm: &TMesh, line: Line, z_ends: [f64; 2], source: &Source) -> Result<SeamCurve, TsplineError> {
+#[allow(clippy::too_many_arguments)]
+fn seam_curve(p: &PbSpline, pm: &TMesh, q: &PbSpline, qm: &TMesh, line: Line, z_ends: [f64; 2], source: &Source, max_error: f64) -> Result<SeamCurve, TsplineError> {
     let mut knots = border_vertices(pm, line);
     knots.extend(border_vertices(qm, line));
     knots.sort_by(f64::total_cmp);
@@ -215,7 +237,7 @@ fn seam_curve(p: &PbSpline, pm: &TMesh, q: &PbSpline, qm: &TMesh, line: Line, z_
     }
     // the seam strip: intervals halved down to STRIP (module doc); degree 1 has no boundary
     // layer (the border curve is the border vertices' polyline, which a held border keeps)
-    let strip = if pm.degree == Degree::Cubic { STRIP } else { f64::INFINITY };
+    let strip = if pm.degree == Degree::Cubic { strip_of(line) } else { f64::INFINITY };
     let mut fine = vec![knots[0]];
     for w in knots.windows(2) {
         let mut parts = 1usize;
@@ -230,13 +252,54 @@ fn seam_curve(p: &PbSpline, pm: &TMesh, q: &PbSpline, qm: &TMesh, line: Line, z_
     if curve.degree == Degree::Cubic {
         curve.freeze_ends();
     }
+    // on a pixel-centre seam the curve is the surface at the seam's own cells: refine it (halving
+    // the knot intervals around a cell it misses) until it holds them within the tolerance, so
+    // both tiles can reach it (docs/decisions.md#tiles-on-the-whole-fits-lattice)
+    for _ in 0..CURVE_ROUNDS {
+        fit_curve(&mut curve, p, q, line, z_ends, source)?;
+        if !on_centres(line) {
+            break;
+        }
+        let misses: Vec<usize> = curve
+            .knots
+            .windows(2)
+            .enumerate()
+            .filter(|(_, w)| w[1] - w[0] > 1.0)
+            .filter(|(_, w)| {
+                let (lo, hi) = (w[0].floor() as i64 + 1, w[1].ceil() as i64 - 1);
+                (lo..=hi).filter(|&r| r as f64 > line.u0 && (r as f64) < line.u1).any(|r| {
+                    seam_value(source, line, r as f64).is_some_and(|v| (curve.eval(r as f64) - v).abs() > CURVE_SHARE * max_error)
+                })
+            })
+            .map(|(i, _)| i)
+            .collect();
+        if misses.is_empty() {
+            break;
+        }
+        for &i in misses.iter().rev() {
+            let mid = 0.5 * (curve.knots[i] + curve.knots[i + 1]);
+            curve.knots.insert(i + 1, mid);
+        }
+    }
+    Ok(curve)
+}
+
+/// Rounds of seam-curve refinement (each halves the intervals around the cells it misses).
+const CURVE_ROUNDS: usize = 12;
+/// The share of the tolerance the seam curve may use at a cell on the seam.
+const CURVE_SHARE: f64 = 0.8;
+
+/// The seam curve's coefficients: ends fixed to the corner values, the inner ones the
+/// least-squares fit to the data on the seam where there is some, else the mean of the two
+/// surfaces (`p`, `q`) along the line.
+fn fit_curve(curve: &mut SeamCurve, p: &PbSpline, q: &PbSpline, line: Line, z_ends: [f64; 2], source: &Source) -> Result<(), TsplineError> {
     let n = curve.knots.len();
     curve.z = vec![0.0; n];
     curve.w = vec![1.0; n];
     curve.z[0] = z_ends[0];
     curve.z[n - 1] = z_ends[1];
     if n == 2 {
-        return Ok(curve);
+        return Ok(());
     }
     let seq = curve.sequence();
     // banded normal equations of the inner coefficients 1..n−2 (half bandwidth K)
@@ -244,9 +307,16 @@ fn seam_curve(p: &PbSpline, pm: &TMesh, q: &PbSpline, qm: &TMesh, line: Line, z_
     let m = n - 2;
     let mut band = vec![vec![0.0; bw + 1]; m]; // band[i][d] = A[i][i−d]
     let mut rhs = vec![0.0; m];
+    let mut at: Vec<(f64, f64)> = Vec::with_capacity(n * (SEAM_SAMPLES + 1));
     for w in curve.knots.windows(2) {
-        for k in 0..SEAM_SAMPLES {
-            let u = w[0] + (w[1] - w[0]) * (k as f64 + 0.5) / SEAM_SAMPLES as f64;
+        // a cell centre on a pixel-centre seam (not an end: those are fixed)
+        if on_centres(line) && w[0].fract() == 0.0 && w[0] != curve.knots[0] && seam_value(source, line, w[0]).is_some() {
+            at.push((w[0], ON_SEAM_CELL_WEIGHT));
+        }
+        at.extend((0..SEAM_SAMPLES).map(|k| (w[0] + (w[1] - w[0]) * (k as f64 + 0.5) / SEAM_SAMPLES as f64, 1.0)));
+    }
+    {
+        for (u, weight) in at {
             let (x, y) = line.at(u);
             let g = match seam_value(source, line, u) {
                 Some(v) => v,
@@ -268,10 +338,10 @@ fn seam_curve(p: &PbSpline, pm: &TMesh, q: &PbSpline, qm: &TMesh, line: Line, z_
                 })
                 .collect();
             for &(i, vi) in &row {
-                rhs[i] += vi * d;
+                rhs[i] += weight * vi * d;
                 for &(j, vj) in &row {
                     if j <= i && i - j <= bw {
-                        band[i][i - j] += vi * vj;
+                        band[i][i - j] += weight * vi * vj;
                     }
                 }
             }
@@ -279,7 +349,7 @@ fn seam_curve(p: &PbSpline, pm: &TMesh, q: &PbSpline, qm: &TMesh, line: Line, z_
     }
     let x = band_cholesky_solve(band, rhs).ok_or_else(|| TsplineError::Fit(format!("seam {line:?}: the seam-curve fit is singular")))?;
     curve.z[1..n - 1].copy_from_slice(&x);
-    Ok(curve)
+    Ok(())
 }
 
 /// The source raster in the plan's frame: the value of the cell centred at plan (s, t) (whole
@@ -290,8 +360,32 @@ pub type Source<'a> = dyn Fn(i64, i64) -> f64 + Sync + 'a;
 /// cells at −1.5, −0.5, +0.5, +1.5 px (the mean of the two nearest when the outer ones are
 /// missing), linear along the seam between the two nearest rows; None where the two cells next to
 /// the seam are not both valid. Only source cells, in a fixed order: the same bits in both jobs.
+/// On a pixel-centre seam: the cell on the seam.
 fn seam_value(source: &Source, line: Line, u: f64) -> Option<f64> {
+    if on_centres(line) {
+        return along_centres(source, line, u, |at| Some(at(0)).filter(|v| v.is_finite()));
+    }
     along_seam(source, line, u, |[a, b, c, d]| if a.is_finite() && d.is_finite() { (-a + 9.0 * b + 9.0 * c - d) / 16.0 } else { 0.5 * (b + c) })
+}
+
+/// `across` of the cells at −2 … +2 px from a pixel-centre seam (`at(k)`, NaN where missing),
+/// linear along the seam between the two nearest rows of cell centres on it.
+fn along_centres(source: &Source, line: Line, u: f64, across: impl Fn(&dyn Fn(i64) -> f64) -> Option<f64>) -> Option<f64> {
+    let c = line.c as i64;
+    let row = |r: i64| -> Option<f64> {
+        let at = |k: i64| if line.vertical { source(c + k, r) } else { source(r, c + k) };
+        across(&at)
+    };
+    let (lo, hi) = (line.u0.ceil() as i64, line.u1.floor() as i64);
+    let uc = u.clamp(lo as f64, hi as f64);
+    let r0 = (uc.floor() as i64).min(hi);
+    let f = uc - r0 as f64;
+    let v0 = row(r0)?;
+    if f == 0.0 || r0 == hi {
+        return Some(v0);
+    }
+    let v1 = row(r0 + 1)?;
+    Some((1.0 - f) * v0 + f * v1)
 }
 
 /// `across` of the four cells at −1.5, −0.5, +0.5, +1.5 px from the seam (the inner two valid,
@@ -425,6 +519,19 @@ struct OwnSeam {
 /// difference of the cells at −1.5 … +1.5 px (the 2-point one without the outer cells), linear
 /// along the seam as [`seam_value`].
 fn seam_slope(source: &Source, line: Line, u: f64) -> Option<f64> {
+    if on_centres(line) {
+        // centred differences across the seam's cell (one-sided where a side has no data)
+        return along_centres(source, line, u, |at| {
+            let (a, b, c, d, e) = (at(-2), at(-1), at(0), at(1), at(2));
+            match (b.is_finite(), c.is_finite(), d.is_finite()) {
+                (true, _, true) if a.is_finite() && e.is_finite() => Some((8.0 * (d - b) - (e - a)) / 12.0),
+                (true, _, true) => Some(0.5 * (d - b)),
+                (false, true, true) => Some(d - c),
+                (true, true, false) => Some(c - b),
+                _ => None,
+            }
+        });
+    }
     along_seam(source, line, u, |[a, b, c, d]| if a.is_finite() && d.is_finite() { (27.0 * (c - b) - (d - a)) / 24.0 } else { c - b })
 }
 
@@ -462,7 +569,7 @@ pub fn stitch(
         let ends = [line.at(line.u0), line.at(line.u1)].map(|(s, t)| corner_value(&pbs, s, t));
         // the pair in a fixed order (the one lower in the plan first)
         let (a, b) = if (ra.s_min, ra.t_min) < (n.rect().s_min, n.rect().t_min) { (0, k + 1) } else { (k + 1, 0) };
-        let curve = seam_curve(&pbs[a].0, &all[a].0, &pbs[b].0, &all[b].0, line, ends, source)?;
+        let curve = seam_curve(&pbs[a].0, &all[a].0, &pbs[b].0, &all[b].0, line, ends, source, opts.max_error)?;
         let side = match (line.vertical, line.c == ra.s_min, line.c == ra.t_min) {
             (true, true, _) => "west",
             (true, false, _) => "east",
@@ -511,7 +618,8 @@ pub fn stitch(
         }
         let mut geom = |s: f64, t: f64| (s, t, finite_or_zero(pb.point(s, t)[2]));
         // balance down to the strip's cells (the loop's own repair stops at one pixel)
-        mesh.repair(STRIP / 2.0, &mut geom);
+        let finest = seams.iter().map(|s| strip_of(s.line)).fold(2.0, f64::min);
+        mesh.repair(finest / 2.0, &mut geom);
         pb = PbSpline::build(&mesh);
     }
 
@@ -740,6 +848,13 @@ pub struct Continuity {
 /// [`Continuity`] of `a` and `b` along their shared border (None: they do not share one);
 /// `cell` the world size of a parameter unit in s and t (normals in world units).
 pub fn continuity(a: &Placed, b: &Placed, cell: [f64; 2]) -> Option<Continuity> {
+    continuity_in(a, b, cell, &|_, _| true)
+}
+
+/// [`continuity`] at the seam positions (plan frame) where `region` holds: what a user sees is
+/// the surface over the data, so a seam crossing no-data is measured where both sides have data
+/// (docs/decisions.md#seams-gate-on-the-data). None also when no position is in the region.
+pub fn continuity_in(a: &Placed, b: &Placed, cell: [f64; 2], region: &dyn Fn(f64, f64) -> bool) -> Option<Continuity> {
     let line = shared_line(a.rect(), b.rect())?;
     let (ma, mb) = (a.in_plan(), b.in_plan());
     let (pa, pb) = (PbSpline::build(&ma), PbSpline::build(&mb));
@@ -774,6 +889,13 @@ pub fn continuity(a: &Placed, b: &Placed, cell: [f64; 2]) -> Option<Continuity> 
         let n = (zx * zx + zy * zy + 1.0).sqrt();
         [-zx / n, -zy / n, 1.0 / n]
     };
+    pos.retain(|&u| {
+        let (s, t) = line.at(u);
+        region(s, t)
+    });
+    if pos.is_empty() {
+        return None;
+    }
     for &u in &pos {
         let (s, t) = line.at(u);
         let (za, zb) = (pa.point(s, t)[2], pb.point(s, t)[2]);

@@ -74,14 +74,22 @@ pub(super) fn check_tolerance_args(args: &Args) -> Result<(), CliError> {
     Ok(())
 }
 
-/// The window and initial cell size of a tile fit (--srcwin/--tile-cell or --plan/--tile).
-fn tile_window(args: &Args) -> Result<Option<([usize; 4], f64)>, CliError> {
+/// A tile fit's initial mesh: the plan's (the whole fit's lattice, docs/decisions.md#tiles-on-the-whole-fits-lattice)
+/// or, for --srcwin, square cells of --tile-cell anchored at the window's first pixel edge.
+enum TileDomain {
+    Plan(Domain),
+    Anchored(f64),
+}
+
+/// The window and initial mesh of a tile fit (--srcwin/--tile-cell or --plan/--tile).
+fn tile_window(args: &Args) -> Result<Option<([usize; 4], TileDomain)>, CliError> {
     if let (Some(plan), Some(id)) = (&args.plan, &args.tile) {
         let text = std::fs::read_to_string(plan).map_err(|e| CliError::unreadable(format!("{plan}: {e}")))?;
         let tiles = tiling::plan::read_plan(&text, plan).map_err(|e| CliError::unreadable(e.to_string()))?;
         let t = tiling::plan::find_tile(&tiles, id, plan).map_err(|e| CliError::usage(e.to_string()))?;
-        let px = t.core.pixels.ok_or_else(|| CliError::usage(format!("{plan}: tile {id} is not a raster tile")))?;
-        return Ok(Some((px, tiling::raster::base_cell(t.size as usize))));
+        let f = tiling::raster::fit_window(&tiles, t).map_err(|e| CliError::usage(format!("{plan}: {e}")))?;
+        let d = Domain { s0: f.s0, t0: f.t0, cell: f.cell, ns: f.ns, nt: f.nt };
+        return Ok(Some((f.pixels, TileDomain::Plan(d))));
     }
     let Some(w) = &args.srcwin else { return Ok(None) };
     let win = [w[0], w[1], w[2], w[3]];
@@ -89,7 +97,7 @@ fn tile_window(args: &Args) -> Result<Option<([usize; 4], f64)>, CliError> {
     if !(cell >= 1.0 && cell.is_finite()) {
         return Err(CliError::usage(format!("--tile-cell must be at least 1 pixel, got {cell}")));
     }
-    Ok(Some((win, cell)))
+    Ok(Some((win, TileDomain::Anchored(cell))))
 }
 
 /// The raster, or the window of it a tile fit reads, and the tile's domain.
@@ -106,7 +114,7 @@ fn read_input(args: &Args) -> Result<(Raster, String, Option<Domain>), CliError>
     if args.terrain_rgb && (window.is_some() || args.input == "-") {
         return Err(CliError::usage("--terrain-rgb reads a whole raster file (not stdin, --srcwin or --tile)"));
     }
-    let (raster, name) = match window {
+    let (raster, name) = match &window {
         _ if args.terrain_rgb => {
             let r = raster_io::read_terrain_rgb(std::path::Path::new(&args.input)).map_err(crate::terrain_io::raster_err)?;
             (r, args.input.clone())
@@ -114,12 +122,15 @@ fn read_input(args: &Args) -> Result<(Raster, String, Option<Domain>), CliError>
         Some((win, _)) => {
             let path = std::path::Path::new(&args.input);
             let band = choose_band(path, &args.input, choice)?;
-            let (r, _) = raster_io::read_raster_window_typed(path, band, Some(win)).map_err(crate::terrain_io::raster_err)?;
+            let (r, _) = raster_io::read_raster_window_typed(path, band, Some(*win)).map_err(crate::terrain_io::raster_err)?;
             (r, format!("{} (window {} {} {} {})", args.input, win[0], win[1], win[2], win[3]))
         }
         None => read_raster_arg_band(&args.input, choice).map(|(r, name, _)| (r, name))?,
     };
-    let domain = window.map(|(_, cell)| Domain::anchored(raster.width, raster.height, cell, raster.geotransform[5] < 0.0));
+    let domain = window.map(|(_, d)| match d {
+        TileDomain::Plan(d) => d,
+        TileDomain::Anchored(cell) => Domain::anchored(raster.width, raster.height, cell, raster.geotransform[5] < 0.0),
+    });
     Ok((raster, name, domain))
 }
 

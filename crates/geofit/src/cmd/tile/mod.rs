@@ -104,17 +104,16 @@ fn read_text(path: &str) -> Result<String, CliError> {
     std::fs::read_to_string(path).map_err(|e| CliError::unreadable(format!("{path}: {e}")))
 }
 
-/// A plan's raster tiles and the mesh of each (read by `template` with `{id}`), placed in the
-/// plan's frame.
-fn placed_tiles(plan: &str, template: &str, ids: &[&str]) -> Result<Vec<(String, tspline::format::TMeshFile, tspline::seams::Placed)>, CliError> {
-    let tiles = tiling::plan::read_plan(&read_text(plan)?, plan).map_err(tiling_error)?;
+/// A plan's raster tiles (`tiles`, read from `plan`) and the mesh of each (read by `template`
+/// with `{id}`), placed in the plan's frame.
+fn placed_tiles(tiles: &[tiling::Tile], plan: &str, template: &str, ids: &[&str]) -> Result<Vec<(String, tspline::format::TMeshFile, tspline::seams::Placed)>, CliError> {
     let mut out = Vec::new();
     for id in ids {
-        let t = tiling::plan::find_tile(&tiles, id, plan).map_err(tiling_error)?;
+        let t = tiling::plan::find_tile(tiles, id, plan).map_err(tiling_error)?;
         let path = template.replace("{id}", &t.id);
         let file = crate::terrain_io::read_tmesh_arg(&path)?;
         let g = &file.georef;
-        let offset = tiling::raster::frame_offset(&tiles, g.x0, g.y0, g.dx, g.dy);
+        let offset = tiling::raster::frame_offset(tiles, g.x0, g.y0, g.dx, g.dy);
         let placed = tspline::seams::Placed { mesh: file.mesh.clone(), offset };
         out.push((t.id.clone(), file, placed));
     }

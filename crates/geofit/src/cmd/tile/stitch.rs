@@ -71,10 +71,11 @@ pub(super) fn run(a: StitchArgs, config: &Config) -> CmdResult {
     let t0 = std::time::Instant::now();
     let tiles = tiling::plan::read_plan(&read_text(&a.plan)?, &a.plan).map_err(tiling_error)?;
     let tile = tiling::plan::find_tile(&tiles, &a.tile, &a.plan).map_err(tiling_error)?;
-    let px = tile.core.pixels.ok_or_else(|| CliError::usage(format!("{}: tile {} is not a raster tile", a.plan, a.tile)))?;
+    // the cells the tile's fit read (its core and the seam column/row it shares)
+    let px = tiling::raster::fit_window(&tiles, tile).map_err(tiling_error)?.pixels;
     let mut ids = vec![tile.id.as_str()];
     ids.extend(tile.neighbours.iter().map(|s| s.as_str()));
-    let mut placed = placed_tiles(&a.plan, &a.meshes, &ids)?;
+    let mut placed = placed_tiles(&tiles, &a.plan, &a.meshes, &ids)?;
     let (_, own_file, own) = placed.remove(0);
     let neighbours: Vec<tspline::seams::Placed> = placed.into_iter().map(|(_, _, p)| p).collect();
     crate::terrain_io::gdal_notices(config);
