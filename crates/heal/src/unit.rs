@@ -43,7 +43,11 @@ pub fn heal_or_repair(
     tpl: &Template,
     opts: &HealOptions,
 ) -> (Result<(Vec<Edit>, BackReport), String>, Option<crate::repair::RepairRecord>) {
-    let ro = crate::repair::RepairOptions { validation: opts.validation, max_move: opts.max_move, max_area_change: opts.max_area_change };
+    let ro = crate::repair::RepairOptions {
+        validation: opts.validation,
+        max_move: opts.max_move,
+        max_area_change: opts.max_area_change,
+    };
     let (edits, record) = crate::repair::repair_unit(b, doc, &ro);
     if let Some(edits) = edits {
         // the repairs replace the planarity heal for this building: both rewrite its rings

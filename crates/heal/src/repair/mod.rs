@@ -112,6 +112,7 @@ fn run_steps(w: &mut Work, opts: &RepairOptions) -> Counts {
     let tol = opts.validation.snap_tol;
     let mut counts = Counts::new();
     rings::fix_points(w, tol, &mut counts);
+    // T-junctions first: a gap snap may then collapse a short border edge the insertion made
     shell::insert_t_junctions(w, tol, &mut counts);
     if shell::snap_gaps(w, tol, opts.max_move, &mut counts) > 0 {
         rings::fix_points(w, tol, &mut counts);
@@ -135,8 +136,12 @@ pub fn repair_unit(b: &CityObject, doc: &[u8], opts: &RepairOptions) -> (Option<
     let mut record = RepairRecord { left_alone: totals.clone(), ..RepairRecord::default() };
     let mut w = Work::new(&objects);
     let counts = run_steps(&mut w, opts);
-    let changed: HashMap<(usize, usize), &work::WPoly> =
-        w.polys.iter().filter(|p| !p.frozen && p.changed()).map(|p| ((p.src.span.bytes.start, p.src.span.bytes.end), p)).collect();
+    let changed: HashMap<(usize, usize), &work::WPoly> = w
+        .polys
+        .iter()
+        .filter(|p| !p.frozen && p.changed())
+        .map(|p| ((p.src.span.bytes.start, p.src.span.bytes.end), p))
+        .collect();
     if changed.is_empty() {
         record.refused = Some("no repair applies to its findings".into());
         return (None, Some(record));
@@ -166,17 +171,30 @@ pub fn repair_unit(b: &CityObject, doc: &[u8], opts: &RepairOptions) -> (Option<
 }
 
 /// Why the repaired building must not be written, if it must not.
-fn refuse(before_objects: &[&CityObject], after_objects: &[&CityObject], before: &verify::Findings, after: &verify::Findings, opts: &RepairOptions) -> Option<String> {
+fn refuse(
+    before_objects: &[&CityObject],
+    after_objects: &[&CityObject],
+    before: &verify::Findings,
+    after: &verify::Findings,
+    opts: &RepairOptions,
+) -> Option<String> {
     let grown: Vec<String> = after
         .iter()
         .filter(|(k, n)| before.get(k).copied().unwrap_or(0) < **n)
-        .map(|((f, c), n)| format!("{c} ×{}→{n} in {}", before.get(&(f.clone(), *c)).copied().unwrap_or(0), f.as_deref().unwrap_or("(no id)")))
+        .map(|((f, c), n)| {
+            format!(
+                "{c} ×{}→{n} in {}",
+                before.get(&(f.clone(), *c)).copied().unwrap_or(0),
+                f.as_deref().unwrap_or("(no id)")
+            )
+        })
         .collect();
     if !grown.is_empty() {
         return Some(format!("the repairs would add validation findings ({})", grown.join(", ")));
     }
     let (tb, ta) = (code_totals(before), code_totals(after));
-    let fixed: usize = TARGETS.iter().map(|c| tb.get(c).copied().unwrap_or(0).saturating_sub(ta.get(c).copied().unwrap_or(0))).sum();
+    let fixed: usize =
+        TARGETS.iter().map(|c| tb.get(c).copied().unwrap_or(0).saturating_sub(ta.get(c).copied().unwrap_or(0))).sum();
     if fixed == 0 {
         return Some("the repairs would remove no finding".into());
     }
@@ -190,14 +208,21 @@ fn refuse(before_objects: &[&CityObject], after_objects: &[&CityObject], before:
     }
     let d = verify::max_vertex_distance(before_objects, after_objects);
     if !(d <= opts.max_move) {
-        return Some(format!("an input vertex would end {d:.3} m from the repaired surface (more than --max-move {} m)", opts.max_move));
+        return Some(format!(
+            "an input vertex would end {d:.3} m from the repaired surface (more than --max-move {} m)",
+            opts.max_move
+        ));
     }
     None
 }
 
 /// The heal report's per-building records (by building name): a building the heal's own
 /// verification kept has its repairs undone, and says why.
-pub fn records(units: &[&CityObject], records: Vec<Option<RepairRecord>>, kept: &[crate::Kept]) -> BTreeMap<String, RepairRecord> {
+pub fn records(
+    units: &[&CityObject],
+    records: Vec<Option<RepairRecord>>,
+    kept: &[crate::Kept],
+) -> BTreeMap<String, RepairRecord> {
     let why: HashMap<&str, &str> = kept.iter().map(|k| (k.building.as_str(), k.reason.as_str())).collect();
     let mut out = BTreeMap::new();
     for (b, r) in units.iter().zip(records) {

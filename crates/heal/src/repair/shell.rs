@@ -19,7 +19,9 @@ fn edge_uses(faces: &[Vec<Vec<Vx>>]) -> HashMap<(u32, u32), usize> {
         for r in f {
             for i in 0..r.len() {
                 let (a, b) = (r[i].0, r[(i + 1) % r.len()].0);
-                *m.entry((a.min(b), a.max(b))).or_insert(0) += 1;
+                if a != b {
+                    *m.entry((a.min(b), a.max(b))).or_insert(0) += 1;
+                }
             }
         }
     }
@@ -98,7 +100,8 @@ pub fn insert_t_junctions(w: &mut Work, tol: f64, counts: &mut Counts) -> usize 
 
 /// Closes gaps narrower than `gap` between the borders of a shell: a vertex on an edge used
 /// once moves onto the nearest other such vertex when that closes border edges (the vertex
-/// used by fewer faces moves). Kept per shell only when the number of border edges falls.
+/// used by fewer faces moves; a short border edge between them collapses). Kept per shell only
+/// when the number of border edges falls.
 pub fn snap_gaps(w: &mut Work, tol: f64, gap: f64, counts: &mut Counts) -> usize {
     let mut total = 0;
     for ci in 0..w.contexts.len() {
@@ -117,7 +120,11 @@ pub fn snap_gaps(w: &mut Work, tol: f64, gap: f64, counts: &mut Counts) -> usize
         }
         let moved: Vec<Vec<Vec<Vx>>> = faces
             .iter()
-            .map(|f| f.iter().map(|r| r.iter().map(|v| moves.get(&v.0).map_or(*v, |&t| (t, coords[t as usize]))).collect()).collect())
+            .map(|f| {
+                f.iter()
+                    .map(|r| r.iter().map(|v| moves.get(&v.0).map_or(*v, |&t| (t, coords[t as usize]))).collect())
+                    .collect()
+            })
             .collect();
         let border_after = edge_uses(&moved).values().filter(|&&u| u == 1).count();
         if border_after >= border_before {
@@ -133,7 +140,13 @@ pub fn snap_gaps(w: &mut Work, tol: f64, gap: f64, counts: &mut Counts) -> usize
 }
 
 /// Which border vertex moves onto which (by vertex id).
-fn gap_moves(faces: &[Vec<Vec<Vx>>], uses: &HashMap<(u32, u32), usize>, coords: &[P3], tol: f64, gap: f64) -> BTreeMap<u32, u32> {
+fn gap_moves(
+    faces: &[Vec<Vec<Vx>>],
+    uses: &HashMap<(u32, u32), usize>,
+    coords: &[P3],
+    tol: f64,
+    gap: f64,
+) -> BTreeMap<u32, u32> {
     let mut border: Vec<u32> = uses.iter().filter(|(_, &u)| u == 1).flat_map(|(e, _)| [e.0, e.1]).collect();
     border.sort_unstable();
     border.dedup();
@@ -150,8 +163,8 @@ fn gap_moves(faces: &[Vec<Vec<Vx>>], uses: &HashMap<(u32, u32), usize>, coords: 
     for (i, &a) in border.iter().enumerate() {
         for &b in &border[i + 1..] {
             let d = norm(&sub(&coords[a as usize], &coords[b as usize]));
-            let joined = uses.contains_key(&(a.min(b), a.max(b)));
-            if d > tol && d <= gap && !joined {
+            // a pair joined by a short border edge (a T-junction just inserted) collapses it
+            if d > tol && d <= gap {
                 pairs.push((d, a, b));
             }
         }
@@ -187,10 +200,12 @@ pub fn orient_shells(w: &mut Work, tol: f64, counts: &mut Counts) -> bool {
         }
         let (_, refs, faces) = w.snap(&w.contexts[ci], tol);
         // a face's rings as the shell uses it (a `-` use runs them the other way)
-        let used: Vec<Vec<Vec<Vx>>> = refs.iter().zip(&faces).map(|(r, f)| f.iter().map(|ring| oriented(ring, r.reversed)).collect()).collect();
+        let used: Vec<Vec<Vec<Vx>>> =
+            refs.iter().zip(&faces).map(|(r, f)| f.iter().map(|ring| oriented(ring, r.reversed)).collect()).collect();
         let Some(flip) = consistent_flips(&used) else { continue };
         let o = used.iter().flatten().flatten().next().map(|v| v.1).unwrap_or([0.0; 3]);
-        let volume: f64 = used.iter().zip(&flip).map(|(f, &fl)| if fl { -face_volume(f, &o) } else { face_volume(f, &o) }).sum();
+        let volume: f64 =
+            used.iter().zip(&flip).map(|(f, &fl)| if fl { -face_volume(f, &o) } else { face_volume(f, &o) }).sum();
         let outward = match kind {
             Kind::Interior => volume < 0.0,
             _ => volume > 0.0,

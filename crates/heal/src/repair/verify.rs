@@ -97,7 +97,12 @@ pub fn findings(objects: &[&CityObject], opts: &citygml_validate::Options) -> Fi
 }
 
 fn own_polygons<'a>(objects: &[&'a CityObject]) -> Vec<&'a Polygon> {
-    objects.iter().flat_map(|o| o.geometries.iter()).flat_map(|g| g.polygons()).filter(|p| p.via_xlink.is_none()).collect()
+    objects
+        .iter()
+        .flat_map(|o| o.geometries.iter())
+        .flat_map(|g| g.polygons())
+        .filter(|p| p.via_xlink.is_none())
+        .collect()
 }
 
 fn ring_area(r: &[P3]) -> f64 {
@@ -116,7 +121,8 @@ pub fn areas(objects: &[&CityObject]) -> BTreeMap<Option<citygml_io::SurfaceType
 
 /// Distance from `q` to a polygon (its rings in its Newell plane).
 fn polygon_distance(q: &P3, p: &Polygon) -> f64 {
-    let rings: Vec<&[P3]> = std::iter::once(p.exterior.points.as_slice()).chain(p.interiors.iter().map(|r| r.points.as_slice())).collect();
+    let rings: Vec<&[P3]> =
+        std::iter::once(p.exterior.points.as_slice()).chain(p.interiors.iter().map(|r| r.points.as_slice())).collect();
     let mut edge = f64::INFINITY;
     for r in &rings {
         for w in r.windows(2) {
@@ -169,7 +175,11 @@ fn point_segment(p: &P3, a: &P3, b: &P3) -> f64 {
 pub fn max_vertex_distance(before: &[&CityObject], after: &[&CityObject]) -> f64 {
     let bits = |q: &P3| q.map(f64::to_bits);
     let out_polys = own_polygons(after);
-    let out: HashSet<[u64; 3]> = out_polys.iter().flat_map(|p| std::iter::once(&p.exterior).chain(p.interiors.iter())).flat_map(|r| r.points.iter().map(bits)).collect();
+    let out: HashSet<[u64; 3]> = out_polys
+        .iter()
+        .flat_map(|p| std::iter::once(&p.exterior).chain(p.interiors.iter()))
+        .flat_map(|r| r.points.iter().map(bits))
+        .collect();
     let mut worst: f64 = 0.0;
     for p in own_polygons(before) {
         for r in std::iter::once(&p.exterior).chain(p.interiors.iter()) {

@@ -31,7 +31,8 @@ impl WPoly<'_> {
     pub fn changed(&self) -> bool {
         self.removed || !self.extra.is_empty() || self.face.len() != 1 + self.src.interiors.len() || {
             let orig = std::iter::once(&self.src.exterior).chain(self.src.interiors.iter());
-            orig.zip(&self.face).any(|(r, f)| r.points.len() != f.len() + 1 || r.points.iter().zip(f).any(|(a, b)| a != b))
+            orig.zip(&self.face)
+                .any(|(r, f)| r.points.len() != f.len() + 1 || r.points.iter().zip(f).any(|(a, b)| a != b))
         }
     }
     /// All faces, own first.
@@ -104,7 +105,8 @@ impl<'a> Work<'a> {
         for p in ps {
             let key = (p.span.bytes.start, p.span.bytes.end);
             let i = *index.entry(key).or_insert_with(|| {
-                let rings: Option<Face> = std::iter::once(&p.exterior).chain(p.interiors.iter()).map(|r| open_ring(&r.points)).collect();
+                let rings: Option<Face> =
+                    std::iter::once(&p.exterior).chain(p.interiors.iter()).map(|r| open_ring(&r.points)).collect();
                 let dims_ok = std::iter::once(&p.exterior).chain(p.interiors.iter()).all(|r| r.srs_dimension == 3);
                 let frozen = rings.is_none() || !dims_ok;
                 let face = rings.unwrap_or_default();
@@ -177,4 +179,3 @@ pub struct FaceRef {
     pub face: usize,
     pub reversed: bool,
 }
-

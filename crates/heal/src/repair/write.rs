@@ -57,7 +57,8 @@ pub fn polygon_edits(doc: &[u8], p: &WPoly) -> Result<Vec<Edit>, String> {
     }
     if !p.extra.is_empty() {
         let m = src.member_span.as_ref().ok_or("a polygon without a member element cannot be split")?;
-        let open_end = doc[m.bytes.start..m.bytes.end].iter().position(|&c| c == b'>').ok_or("member tag")? + m.bytes.start + 1;
+        let open_end =
+            doc[m.bytes.start..m.bytes.end].iter().position(|&c| c == b'>').ok_or("member tag")? + m.bytes.start + 1;
         let open = std::str::from_utf8(&doc[m.bytes.start..open_end]).map_err(|e| e.to_string())?;
         if open.ends_with("/>") || open.contains("href") {
             return Err("the polygon's member element cannot be repeated".into());
@@ -82,14 +83,26 @@ pub fn polygon_edits(doc: &[u8], p: &WPoly) -> Result<Vec<Edit>, String> {
             continue;
         }
         if ring.encoding == CoordEncoding::Pos && pts.len() != ring.pos_spans.len() {
-            let prefix = prefix_of(doc, ring.span.bytes.start, "LinearRing").ok_or("the ring's start tag cannot be read")?;
+            let prefix =
+                prefix_of(doc, ring.span.bytes.start, "LinearRing").ok_or("the ring's start tag cannot be read")?;
             let text = linear_ring_element(&prefix, ring.id.as_deref(), &pos_text(ring, r), 3);
             edits.push(Edit { bytes: ring.span.bytes.clone(), replacement: text.into_bytes() });
         } else {
-            edits.extend(ring_edits(ring, &pts).map_err(|e| e.to_string())?);
+            let same = |e: &Edit| numbers(&doc[e.bytes.clone()]) == numbers(&e.replacement);
+            edits.extend(ring_edits(ring, &pts).map_err(|e| e.to_string())?.into_iter().filter(|e| !same(e)));
         }
     }
     Ok(edits)
+}
+
+/// The numbers of a coordinate text (`gml:pos` positions that did not change keep their text).
+fn numbers(t: &[u8]) -> Option<Vec<f64>> {
+    std::str::from_utf8(t)
+        .ok()?
+        .split(|c: char| c.is_whitespace() || c == ',')
+        .filter(|x| !x.is_empty())
+        .map(|x| x.parse().ok())
+        .collect()
 }
 
 #[cfg(test)]
