@@ -23,15 +23,18 @@
 //! ```
 
 pub mod crs;
+pub mod hausdorff;
 pub mod measure;
 pub mod repair;
 mod unit;
+mod verify;
 
 use citygml_io::{CityModel, CityObject, Edit};
 use measure::Measures;
 use normalize::conditions::ConditionOptions;
 use normalize::citygml::unit_name;
 use normalize::to_citygml::{BackOptions, BackReport, Template};
+pub use verify::UnitResult;
 use rayon::prelude::*;
 use serde::Serialize;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -83,13 +86,24 @@ pub struct Kept {
 pub struct HealReport {
     /// Buildings and building parts with geometry of their own.
     pub buildings: usize,
+    /// Buildings whose geometry was rewritten and whose validation findings fell.
     pub healed: usize,
+    /// Buildings whose geometry was rewritten (healed or only made planar).
+    pub changed: usize,
+    /// Buildings without any validation finding, before and after.
+    pub valid_before: usize,
+    pub valid_after: usize,
     /// Buildings that keep their original geometry, with the reason.
     pub kept: Vec<Kept>,
     /// Surface area of all buildings before and after (m²; buildings whose area is not finite
     /// are left out of both).
     pub area_before_m2: f64,
     pub area_after_m2: f64,
+    /// Per rewritten building, the Hausdorff distance between its surface before and after (m):
+    /// the largest distance of an input vertex from the output surface or of an output vertex
+    /// from the input surface; and the largest of them.
+    pub moved_by_building_m: std::collections::BTreeMap<String, f64>,
+    pub max_moved_m: f64,
     /// Validation findings per code, all buildings, before and after.
     pub findings_before: std::collections::BTreeMap<u16, usize>,
     pub findings_after: std::collections::BTreeMap<u16, usize>,
@@ -139,57 +153,146 @@ fn units(city: &CityModel) -> Vec<&CityObject> {
     normalize::citygml::buildings(city).into_iter().filter(|b| normalize::citygml::has_own_geometry(b)).collect()
 }
 
-fn measure_all(units: &[&CityObject], which: &[usize], opts: &citygml_validate::Options) -> Vec<Measures> {
-    which.par_iter().map(|&i| measure::measure(&normalize::citygml::own_objects(units[i]), opts)).collect()
-}
-
 /// Heals every building of a CityGML document (see the crate documentation). `progress` is
 /// called with the number of buildings adjusted so far.
 pub fn heal(original: &[u8], opts: &HealOptions, progress: &(dyn Fn(usize) + Sync)) -> Result<Healed, HealError> {
-    let (bytes, city, bad) = parse_tolerant(original).map_err(|e| HealError::Unreadable(e.to_string()))?;
-    let bytes = bytes.as_slice();
-    if let Some(srs) = &city.srs_name {
-        if let Some(epsg) = crs::geographic_epsg(srs) {
-            return Err(HealError::Geographic { srs: srs.clone(), epsg });
-        }
-    }
-    let units = units(&city);
+    let doc = Document::read(original, false)?;
+    let units = units(&doc.city);
     if units.is_empty() {
         return Err(HealError::NoBuildings);
     }
-    let template = Template::new(bytes, &city);
+    let template = Template::new(&doc.bytes, &doc.city);
     let done = AtomicUsize::new(0);
-    let (results, records): (Vec<Result<(Vec<Edit>, BackReport), String>>, Vec<_>) = units
+    let (results, records): (Vec<UnitResult>, Vec<_>) = units
         .par_iter()
         .map(|b| {
-            let r = unit::heal_or_repair(b, bytes, &template, opts);
+            let r = unit::heal_or_repair(b, &doc.bytes, &template, opts);
             progress(done.fetch_add(1, Ordering::Relaxed) + 1);
             r
         })
         .unzip();
+    let mut healed = verified(original, &doc, &units, results, Vec::new(), opts)?;
+    healed.report.repairs = repair::records(&units, records, &healed.report.kept);
+    Ok(healed)
+}
+
+/// Writes an adjusted popa3d model back into its template (`popa3d2citygml`) through the same
+/// verification as [`heal`]: the edits are split by building, and a building that would get a
+/// new validation code, change its area by more than `opts.max_area_change` or move further than
+/// `opts.max_move` (Hausdorff) keeps its original geometry and is named in `report.kept`.
+/// Returns the verified document and the summed write-back report of the whole model.
+pub fn write_back(model: &popa3d_model::Popa3d, original: &[u8], back: &BackOptions, opts: &HealOptions) -> Result<(Healed, BackReport), WriteBackError> {
+    let doc = Document::read(original, true)?;
+    let units = units(&doc.city);
+    if units.is_empty() {
+        return Err(HealError::NoBuildings.into());
+    }
+    let template = Template::new(&doc.bytes, &doc.city);
+    let (edits, report) = normalize::to_citygml::back_edits(model, &template, back)?;
+    let (per_unit, always) = split_by_unit(&units, edits);
+    let results = per_unit.into_iter().map(|e| Ok((e, BackReport::default()))).collect();
+    let mut healed = verified(original, &doc, &units, results, always, opts)?;
+    healed.report.back = report.clone();
+    Ok((healed, report))
+}
+
+/// Why [`write_back`] failed: the model does not fit its template, or the document cannot be read.
+#[derive(Debug, thiserror::Error)]
+pub enum WriteBackError {
+    #[error(transparent)]
+    Back(#[from] normalize::to_citygml::BackError),
+    #[error(transparent)]
+    Heal(#[from] HealError),
+}
+
+/// Each edit goes to the innermost unit whose element holds it; edits outside every unit (none
+/// the write-back makes today) are returned apart and applied whatever is kept.
+fn split_by_unit(units: &[&CityObject], edits: Vec<Edit>) -> (Vec<Vec<Edit>>, Vec<Edit>) {
+    let mut per_unit = vec![Vec::new(); units.len()];
+    let mut always = Vec::new();
+    for e in edits {
+        let holder = (0..units.len()).filter(|&i| units[i].span.bytes.start <= e.bytes.start && e.bytes.end <= units[i].span.bytes.end).max_by_key(|&i| units[i].span.bytes.start);
+        match holder {
+            Some(i) => per_unit[i].push(e),
+            None => always.push(e),
+        }
+    }
+    (per_unit, always)
+}
+
+/// A document read for healing: the tolerant copy of its bytes, its model and its bad numbers.
+struct Document {
+    bytes: Vec<u8>,
+    city: CityModel,
+    bad: Vec<BadNumber>,
+}
+
+impl Document {
+    /// `geographic_ok`: a CRS in degrees is accepted (the write-back of a model adjusted
+    /// elsewhere), else refused (heal's tolerances are metres).
+    fn read(original: &[u8], geographic_ok: bool) -> Result<Document, HealError> {
+        let (bytes, city, bad) = parse_tolerant(original).map_err(|e| HealError::Unreadable(e.to_string()))?;
+        if let Some(srs) = city.srs_name.as_ref().filter(|_| !geographic_ok) {
+            if let Some(epsg) = crs::geographic_epsg(srs) {
+                return Err(HealError::Geographic { srs: srs.clone(), epsg });
+            }
+        }
+        Ok(Document { bytes, city, bad })
+    }
+}
+
+/// The verification of the units' edits (see [`verify`]) and the report.
+fn verified(original: &[u8], doc: &Document, units: &[&CityObject], results: Vec<UnitResult>, always: Vec<Edit>, opts: &HealOptions) -> Result<Healed, HealError> {
+    let bad = &doc.bad;
     let mut kept: Vec<Option<String>> = results.iter().map(|r| r.as_ref().err().cloned()).collect();
     let mut with_bad_numbers = Vec::new();
-    for b in &bad {
+    for b in bad {
         // the innermost unit holding the bad number keeps its geometry
         if let Some(i) = (0..units.len()).filter(|&i| units[i].span.bytes.contains(&b.byte)).max_by_key(|&i| units[i].span.bytes.start) {
             kept[i] = Some(format!("non-finite coordinate '{}' at line {}, column {}", b.token, b.line, b.column));
             with_bad_numbers.push(i);
         }
     }
-    reject_overlaps(&units, &results, &mut kept);
+    verify::reject_overlaps(units, &results, &mut kept);
     let all: Vec<usize> = (0..units.len()).collect();
-    let mut before = measure_all(&units, &all, &opts.validation);
+    let mut before = verify::measure_all(units, &all, None, &opts.validation);
     for &i in &with_bad_numbers {
         before[i].area = f64::NAN; // measured on the stand-in numbers: left out of the totals
     }
-    let touched_by = touch_map(&units, &results);
-    let verifier = Verifier { original, units: &units, results: &results, touched_by: &touched_by, with_bad_numbers: &with_bad_numbers, opts };
+    let touched_by = verify::touch_map(units, &results);
+    let verifier = verify::Verifier { original, units, results: &results, always: &always, touched_by: &touched_by, with_bad_numbers: &with_bad_numbers, opts };
     let (document, after, rounds) = verifier.run(&mut kept, &before)?;
+    let report = summary(original, units, &results, &kept, &before, &after, rounds);
+    let defects = Defects {
+        bad_numbers: bad.iter().map(|b| format!("{}:{}: non-finite coordinate '{}'", b.line, b.column, b.token)).collect(),
+        unresolved_xlinks: doc.city.unresolved_xlinks.iter().map(|x| format!("{}:{}: {}", x.span.line, x.span.column, input_limits::quote(&x.reason()))).collect(),
+    };
+    Ok(Healed { document, report, defects })
+}
+
+/// Whether a unit's edits change any byte of the document (an edit may write the same text).
+fn changes_bytes(original: &[u8], edits: &[Edit]) -> bool {
+    edits.iter().any(|e| original.get(e.bytes.clone()).is_none_or(|old| old != e.replacement.as_slice()))
+}
+
+/// The report of a verified write-back. "Healed" is honest: the unit's geometry was rewritten
+/// (its bytes changed) and its validation findings fell (docs/decisions.md#honest-heal-summaries).
+fn summary(original: &[u8], units: &[&CityObject], results: &[UnitResult], kept: &[Option<String>], before: &[Measures], after: &[Measures], rounds: usize) -> HealReport {
     let mut back = BackReport::default();
-    for (r, k) in results.iter().zip(&kept) {
-        if let (Ok((_, rep)), None) = (r, k) {
-            add_back(&mut back, rep);
+    let (mut healed, mut changed) = (0, 0);
+    let mut moved_m = std::collections::BTreeMap::new();
+    for (i, (r, k)) in results.iter().zip(kept).enumerate() {
+        let (Ok((edits, rep)), None) = (r, k) else { continue };
+        add_back(&mut back, rep);
+        if !changes_bytes(original, edits) {
+            continue;
         }
+        changed += 1;
+        let total = |m: &Measures| m.codes.values().sum::<usize>();
+        if total(&after[i]) < total(&before[i]) {
+            healed += 1;
+        }
+        moved_m.insert(unit_name(units[i]), after[i].moved);
     }
     let sum_codes = |m: &[Measures]| {
         let mut t = std::collections::BTreeMap::new();
@@ -200,94 +303,23 @@ pub fn heal(original: &[u8], opts: &HealOptions, progress: &(dyn Fn(usize) + Syn
         }
         t
     };
-    let mut report = HealReport {
+    let pairs = || before.iter().zip(after).map(|(b, a)| (b.area, a.area));
+    HealReport {
         repairs: Default::default(),
         buildings: units.len(),
-        healed: kept.iter().filter(|k| k.is_none()).count(),
-        kept: units.iter().zip(&kept).filter_map(|(b, k)| k.as_ref().map(|r| Kept { building: unit_name(b), reason: r.clone() })).collect(),
-        area_before_m2: finite_sum(before.iter().zip(&after).map(|(b, a)| (b.area, a.area)), |x| x.0),
-        area_after_m2: finite_sum(before.iter().zip(&after).map(|(b, a)| (b.area, a.area)), |x| x.1),
-        findings_before: sum_codes(&before),
-        findings_after: sum_codes(&after),
+        healed,
+        changed,
+        valid_before: before.iter().filter(|m| m.codes.is_empty()).count(),
+        valid_after: after.iter().filter(|m| m.codes.is_empty()).count(),
+        kept: units.iter().zip(kept).filter_map(|(b, k)| k.as_ref().map(|r| Kept { building: unit_name(b), reason: r.clone() })).collect(),
+        area_before_m2: finite_sum(pairs(), |x| x.0),
+        area_after_m2: finite_sum(pairs(), |x| x.1),
+        max_moved_m: moved_m.values().cloned().fold(0.0, f64::max),
+        moved_by_building_m: moved_m,
+        findings_before: sum_codes(before),
+        findings_after: sum_codes(after),
         rounds,
         back,
-    };
-    report.repairs = repair::records(&units, records, &report.kept);
-    let defects = Defects {
-        bad_numbers: bad.iter().map(|b| format!("{}:{}: non-finite coordinate '{}'", b.line, b.column, b.token)).collect(),
-        unresolved_xlinks: city.unresolved_xlinks.iter().map(|x| format!("{}:{}: {}", x.span.line, x.span.column, input_limits::quote(&x.reason()))).collect(),
-    };
-    Ok(Healed { document, report, defects })
-}
-
-/// The verify-after-write loop of [`heal`]: apply the edits of the buildings not kept, read the
-/// document back, measure what can have changed, keep every building the guard rejects (and the
-/// buildings whose edits reach it); repeat until a round keeps nothing new.
-struct Verifier<'a> {
-    original: &'a [u8],
-    units: &'a [&'a CityObject],
-    results: &'a [Result<(Vec<Edit>, BackReport), String>],
-    touched_by: &'a [std::collections::BTreeSet<usize>],
-    with_bad_numbers: &'a [usize],
-    opts: &'a HealOptions,
-}
-
-impl Verifier<'_> {
-    /// The written document, the measures after, and the number of rounds.
-    fn run(&self, kept: &mut [Option<String>], before: &[Measures]) -> Result<(Vec<u8>, Vec<Measures>, usize), HealError> {
-        for rounds in 1.. {
-            let (doc, after) = self.round(kept, before)?;
-            if !self.keep_the_worse(kept, before, &after) {
-                return Ok((doc, after, rounds));
-            }
-        }
-        unreachable!("every round that does not end keeps one more building")
-    }
-
-    /// Applies the edits of the buildings not kept and measures what they can have changed.
-    fn round(&self, kept: &[Option<String>], before: &[Measures]) -> Result<(Vec<u8>, Vec<Measures>), HealError> {
-        let (original, units, results, touched_by, opts) = (self.original, self.units, self.results, self.touched_by, self.opts);
-        let edits: Vec<Edit> = results.iter().zip(kept).filter(|(_, k)| k.is_none()).flat_map(|(r, _)| r.as_ref().map(|x| x.0.clone()).unwrap_or_default()).collect();
-        // the edits go into the original bytes (the tolerant copy differs only inside bad numbers)
-        let mut doc = Vec::with_capacity(original.len());
-        citygml_io::write_with_edits(original, &edits, &mut doc).map_err(|e| HealError::Internal(e.to_string()))?;
-        let (_, city2, _) = parse_tolerant(&doc).map_err(|e| HealError::Internal(format!("the healed document cannot be read back: {e}")))?;
-        let units2 = self::units(&city2);
-        if units2.len() != units.len() || units2.iter().zip(units).any(|(a, b)| a.id != b.id) {
-            return Err(HealError::Internal("the healed document does not hold the same buildings".into()));
-        }
-        // Only what the applied edits can have changed is measured again: a building being
-        // healed, or one that another healed building's edits reach.
-        let changed: Vec<usize> = (0..units.len()).filter(|&i| kept[i].is_none() || touched_by[i].iter().any(|&j| kept[j].is_none())).collect();
-        let mut after = before.to_vec();
-        for (i, m) in changed.iter().zip(measure_all(&units2, &changed, &opts.validation)) {
-            after[*i] = m;
-        }
-        for &i in self.with_bad_numbers {
-            after[i].area = f64::NAN;
-        }
-        Ok((doc, after))
-    }
-
-    /// Keeps every building the guard rejects, and the buildings whose edits reach it. Returns
-    /// whether anything was kept (then another round is needed).
-    fn keep_the_worse(&self, kept: &mut [Option<String>], before: &[Measures], after: &[Measures]) -> bool {
-        let mut failed = false;
-        for i in 0..self.units.len() {
-            let touching: Vec<usize> = self.touched_by[i].iter().copied().filter(|&j| kept[j].is_none()).collect();
-            if kept[i].is_some() && touching.is_empty() {
-                continue; // left as it was, and no other building's edit reaches it
-            }
-            let Some(why) = guard(&before[i], &after[i], self.opts) else { continue };
-            failed = true;
-            if kept[i].is_none() {
-                kept[i] = Some(why.clone());
-            }
-            for j in touching {
-                kept[j] = Some(format!("its write-back changes {} too, which would then get worse: {why}", unit_name(self.units[i])));
-            }
-        }
-        failed
     }
 }
 
@@ -330,94 +362,6 @@ fn parse_tolerant(bytes: &[u8]) -> Result<(Vec<u8>, CityModel, Vec<BadNumber>), 
 /// coordinate is kept and reported, and must not turn the totals into inf or NaN).
 fn finite_sum(pairs: impl Iterator<Item = (f64, f64)>, pick: impl Fn((f64, f64)) -> f64) -> f64 {
     pairs.filter(|p| p.0.is_finite() && p.1.is_finite()).map(pick).sum()
-}
-
-/// Why a healed building must keep its original geometry, if it must.
-fn guard(before: &Measures, after: &Measures, opts: &HealOptions) -> Option<String> {
-    let new = measure::new_findings(before, after);
-    if !new.is_empty() {
-        return Some(format!("healing would add validation findings ({})", new.join(", ")));
-    }
-    if before.area > 0.0 && before.area.is_finite() {
-        let change = after.area / before.area - 1.0;
-        if change.abs().partial_cmp(&opts.max_area_change) != Some(std::cmp::Ordering::Less) {
-            return Some(format!(
-                "healing would change its surface area by {:+.2} % ({:.2} → {:.2} m², limit ±{} %)",
-                100.0 * change,
-                before.area,
-                after.area,
-                100.0 * opts.max_area_change
-            ));
-        }
-    }
-    None
-}
-
-/// The bytes a unit's geometry is read from: its element and every polygon its geometries hold
-/// (polygons reached by XLink are defined elsewhere).
-fn footprint(b: &CityObject) -> Vec<std::ops::Range<usize>> {
-    let mut v = vec![b.span.bytes.clone()];
-    for o in normalize::citygml::own_objects(b) {
-        for g in &o.geometries {
-            v.extend(g.polygons().into_iter().map(|p| p.span.bytes.clone()));
-        }
-    }
-    v
-}
-
-/// For every unit, the other units whose edits touch its footprint (an XLink'd polygon, a
-/// nested part). Footprints sorted by start and searched in a window as long as the longest
-/// one, so the map costs about (edits × polygons near each edit), not units².
-fn touch_map(units: &[&CityObject], results: &[Result<(Vec<Edit>, BackReport), String>]) -> Vec<std::collections::BTreeSet<usize>> {
-    let mut fp: Vec<(std::ops::Range<usize>, usize)> = units.iter().enumerate().flat_map(|(i, b)| footprint(b).into_iter().map(move |r| (r, i))).collect();
-    fp.sort_by_key(|f| (f.0.start, f.0.end));
-    let longest = fp.iter().map(|f| f.0.len()).max().unwrap_or(0);
-    let mut out = vec![std::collections::BTreeSet::new(); units.len()];
-    for (j, r) in results.iter().enumerate() {
-        let Ok((edits, _)) = r else { continue };
-        for e in edits {
-            let from = fp.partition_point(|f| f.0.start < e.bytes.start.saturating_sub(longest));
-            for (f, i) in fp[from..].iter().take_while(|f| f.0.start <= e.bytes.end) {
-                if *i != j && touches(&e.bytes, f) {
-                    out[*i].insert(j);
-                }
-            }
-        }
-    }
-    out
-}
-
-/// Does an edit (a replaced range, or an insertion point when empty) touch the range `f`?
-fn touches(e: &std::ops::Range<usize>, f: &std::ops::Range<usize>) -> bool {
-    if e.is_empty() {
-        f.start <= e.start && e.start < f.end
-    } else {
-        e.start < f.end && f.start < e.end
-    }
-}
-
-/// Two buildings whose edits touch the same bytes (a polygon shared through an XLink and mapped
-/// by both): the later one keeps its geometry.
-fn reject_overlaps(units: &[&CityObject], results: &[Result<(Vec<Edit>, BackReport), String>], kept: &mut [Option<String>]) {
-    let mut spans: Vec<(usize, usize, usize)> = Vec::new();
-    for (u, r) in results.iter().enumerate() {
-        if let Ok((edits, _)) = r {
-            spans.extend(edits.iter().filter(|e| !e.bytes.is_empty()).map(|e| (e.bytes.start, e.bytes.end, u)));
-        }
-    }
-    spans.sort();
-    let mut reach: Option<(usize, usize)> = None;
-    for (s, e, u) in spans {
-        if let Some((end, owner)) = reach {
-            if s < end && owner != u && kept[u].is_none() && kept[owner].is_none() {
-                kept[u] = Some(format!("its geometry is shared with {} (XLink), which is healed instead", unit_name(units[owner])));
-                continue;
-            }
-        }
-        if reach.is_none_or(|(end, _)| e > end) {
-            reach = Some((e, u));
-        }
-    }
 }
 
 fn add_back(t: &mut BackReport, r: &BackReport) {

@@ -14,6 +14,9 @@ pub struct Measures {
     /// Total area of its polygons (exterior minus holes, m²); each polygon once (XLink copies
     /// skipped).
     pub area: f64,
+    /// After a write-back: the Hausdorff distance between the surface before and after (m, see
+    /// [`crate::hausdorff`]); 0 before.
+    pub moved: f64,
 }
 
 /// The objects of a unit and their own polygons (not those reached by XLink).
@@ -28,7 +31,14 @@ pub fn measure(objects: &[&CityObject], opts: &Options) -> Measures {
         *codes.entry(f.code).or_insert(0) += 1;
     }
     let area = own_polygons(objects).into_iter().map(polygon_area).sum();
-    Measures { codes, area }
+    Measures { codes, area, moved: 0.0 }
+}
+
+/// The surface of a unit (its own polygons) for [`crate::hausdorff`].
+pub fn surface(objects: &[&CityObject]) -> crate::hausdorff::Surface {
+    crate::hausdorff::Surface::new(
+        own_polygons(objects).into_iter().map(|p| std::iter::once(&p.exterior).chain(p.interiors.iter()).map(|r| r.points.clone()).collect()).collect(),
+    )
 }
 
 /// Vector area of a closed ring (Newell), m².

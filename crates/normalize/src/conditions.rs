@@ -199,7 +199,10 @@ fn semantic_with(m: &mut Popa3d, r: &Ranges, o: &ConditionOptions, inc: &Inciden
     let mut out: Vec<Observation> = Vec::new();
     let normal_face = largest_face_per_normal(m, r, &area);
     let normals: Vec<usize> = r.normals.clone().filter(|n| normal_face.contains_key(n)).collect();
-    let groups = angle_conditions(m, &normals, &normal_face, o, &mut out, &mut c);
+    // No squaring of the facets of a curved facade (docs/decisions.md#no-squaring-on-curved-facades).
+    let curved_faces = crate::curved::curved_facets(m, inc, pos, r.faces.clone());
+    let curved: std::collections::HashSet<usize> = normals.iter().copied().filter(|n| curved_faces.contains(&normal_face[n])).collect();
+    let groups = angle_conditions(m, &normals, &normal_face, &curved, o, &mut out, &mut c);
     // Coplanarity and wall–window distances within each parallel group.
     for (g, ns) in groups {
         let refn = unit(m.face_plane_value(FaceId::from(normal_face[&g])).n);
@@ -228,12 +231,13 @@ fn largest_face_per_normal(m: &Popa3d, r: &Ranges, area: &HashMap<usize, f64>) -
 }
 
 /// Parallelism and orthogonality conditions between every pair of normals within the angle
-/// tolerances (not swap pairs, orthogonal by construction, spec §3.2 step 4). Returns the
+/// tolerances (not swap pairs, not the facets of a curved facade `curved`, orthogonal by construction, spec §3.2 step 4). Returns the
 /// parallel groups (union–find over the parallel pairs) as (root, members), by root.
 fn angle_conditions(
     m: &Popa3d,
     normals: &[usize],
     normal_face: &HashMap<usize, usize>,
+    curved: &std::collections::HashSet<usize>,
     o: &ConditionOptions,
     out: &mut Vec<Observation>,
     c: &mut ConditionCounts,
@@ -250,6 +254,9 @@ fn angle_conditions(
         for &b in &normals[i + 1..] {
             if pset(a) == pset(b) {
                 continue; // a swap pair: orthogonal by construction (spec §3.2 step 4)
+            }
+            if curved.contains(&a) || curved.contains(&b) {
+                continue; // a facet of a curved facade is not squared
             }
             let (fa, fb) = (normal_face[&a], normal_face[&b]);
             let cs = dot(unit(m.face_plane_value(FaceId::from(fa)).n), unit(m.face_plane_value(FaceId::from(fb)).n));

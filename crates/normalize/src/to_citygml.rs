@@ -30,6 +30,8 @@ use popa3d_model::vec3::sub;
 use serde::Serialize;
 use std::collections::{BTreeMap, BTreeSet, HashMap, HashSet};
 
+mod dropped;
+
 /// Options of [`to_citygml`].
 #[derive(Debug, Clone, Serialize)]
 pub struct BackOptions {
@@ -548,14 +550,20 @@ pub fn back_edits(model: &Popa3d, tpl: &Template, opts: &BackOptions) -> Result<
     let absorbed = absorbed_polygons(&m, &tpl.polys);
     let mapped = mapped_polygons(tpl, &vmap, &absorbed);
     let mut report = BackReport { polygons_mapped: mapped.len(), ..Default::default() };
-    let new_rings = rewritten_rings(&mapped, &tpl.polys, &vmap, &pos, opts, &mut report)?;
-    let external = externally_referenced(tpl, &mapped);
     let face_of = face_of_polygon(&m);
+    let mut face_of_any = face_of.clone();
+    for (host, guests) in &absorbed {
+        if let Some(&f) = face_of.get(host) {
+            face_of_any.extend(guests.iter().map(|g| (g.clone(), f)));
+        }
+    }
+    let dropped = dropped::Dropped::new(&mapped, &tpl.polys, &face_of_any);
+    let new_rings = rewritten_rings(&mapped, &tpl.polys, &vmap, &pos, (&m, &dropped), opts, &mut report)?;
+    let external = externally_referenced(tpl, &mapped);
     let back = Back { tpl, opts, decimals: opts.precision.or(tpl.decimals), m: &m, plane_cluster, inc, pos, face_of, mapped: &mapped, external };
     let mut fate = Fate::default();
     back.remove_degenerate(&new_rings, &mut fate, &mut report);
     back.write_changed_faces_whole(&vmap, &absorbed, &mut fate, &mut report);
-    back.merge_absorbed(absorbed, &mut fate, &mut report);
     if opts.merge {
         back.merge_coplanar(&mut fate, &mut report);
     }
@@ -681,7 +689,8 @@ impl Back<'_, '_> {
             let Some(&f) = self.face_of.get(id) else { continue };
             let Some(loops) = self.m.face_loops(&self.inc, f, &self.pos) else { continue };
             let on_face: BTreeSet<NodeId> = loops.iter().flatten().copied().collect();
-            if nodes_of.get(id) == Some(&on_face) && !hosts.contains(id) {
+            // a host keeps its own ring, its guests theirs, all on the shared plane
+            if nodes_of.get(id) == Some(&on_face) || hosts.contains(id) {
                 continue;
             }
             let mut rings: Vec<Vec<P3>> = loops.iter().map(|l| collapse(l.iter().map(|n| self.pos[n.idx()]).collect(), self.opts.collapse_tolerance)).collect();
@@ -696,22 +705,6 @@ impl Back<'_, '_> {
         }
     }
 
-    /// The polygons merged into a face go with their host (their surface may empty, openings
-    /// move), unless one is referenced from another building or the host was not written whole.
-    fn merge_absorbed(&self, absorbed: Vec<(String, Vec<String>)>, fate: &mut Fate, report: &mut BackReport) {
-        for (host, guests) in absorbed {
-            if guests.iter().any(|g| self.external.contains(g)) || !fate.replaced.contains_key(&host) {
-                continue;
-            }
-            for g in &guests {
-                fate.removed.remove(g);
-                fate.merged_away.insert(g.clone(), host.clone());
-            }
-            report.removed_degenerate.retain(|r| !guests.contains(r));
-            report.merged.push((host, guests));
-        }
-    }
-
     /// 4. Polygons on one plane cluster with the same semantic type, orientation and solids that
     /// share edges become one polygon, written into the first of them.
     fn merge_coplanar(&self, fate: &mut Fate, report: &mut BackReport) {
@@ -722,13 +715,26 @@ impl Back<'_, '_> {
             }
             let es: Vec<Vec<(usize, usize)>> = ids.iter().map(|id| self.canonical_edges(id, &canon)).collect();
             for (_, members) in edge_components(&es) {
-                if members.len() < 2 {
-                    continue;
-                }
+                let Some(members) = self.keeping_identity(&ids, members) else { continue };
                 let Some(loops) = union_boundary(&es, &members, &self.pos, self.opts) else { continue };
                 self.merge_members(&ids, &members, loops, fate, report);
             }
         }
+    }
+
+    /// The members of a merge reordered so that the one polygon with a gml:id (if any) keeps the
+    /// merged polygon; `None` when fewer than two members or more than one has an id (merging
+    /// would delete an element with an identity).
+    fn keeping_identity(&self, ids: &[String], mut members: Vec<usize>) -> Option<Vec<usize>> {
+        let with_id: Vec<usize> = members.iter().copied().filter(|&k| self.tpl.polys[&ids[k]].poly.id.is_some()).collect();
+        if members.len() < 2 || with_id.len() > 1 {
+            return None;
+        }
+        if let Some(&k) = with_id.first() {
+            members.retain(|&x| x != k);
+            members.insert(0, k);
+        }
+        Some(members)
     }
 
     /// The polygons that may merge, keyed by (plane cluster, semantic type, orientation, solids).
@@ -742,7 +748,10 @@ impl Back<'_, '_> {
             let (Some(&f), Some(sem)) = (self.face_of.get(id), polys[id].poly.semantic) else { continue };
             let face = m.face(f);
             let solid = ((face.back.0.min(face.front.0) as usize) << 32) | face.back.0.max(face.front.0) as usize;
-            let key = (self.plane_cluster[face.plane.idx()], sem.local_name().to_string(), String::new(), face.orientation.i8() * m.plane(face.plane).sign.i8(), Some(solid));
+            // A surface with an id or attributes merges only its own polygons (its own group);
+            // surfaces without identity may merge with each other (docs/decisions.md#merges-keep-semantics-and-identity).
+            let surface = polys[id].surface.filter(|s| crate::identity::must_stay(self.tpl.bytes, s)).map(|s| s.span.bytes.start.to_string()).unwrap_or_default();
+            let key = (self.plane_cluster[face.plane.idx()], sem.local_name().to_string(), surface, face.orientation.i8() * m.plane(face.plane).sign.i8(), Some(solid));
             groups.entry(key).or_default().push(id.clone());
         }
         groups
@@ -973,6 +982,7 @@ fn rewritten_rings(
     polys: &HashMap<String, PolyInfo<'_>>,
     vmap: &HashMap<(String, u32, u32), NodeId>,
     pos: &[P3],
+    (m, dropped): (&Popa3d, &dropped::Dropped),
     opts: &BackOptions,
     report: &mut BackReport,
 ) -> Result<HashMap<String, Vec<Option<IndexedRing>>>, BackError> {
@@ -988,11 +998,17 @@ fn rewritten_rings(
             for k in 0..n {
                 // A vertex without node was merged into its neighbour by normalization (snap):
                 // it is written once, as the neighbour.
-                let Some(node) = vmap.get(&(id.clone(), ri as u32, k as u32)) else {
-                    report.vertices_dropped += 1;
-                    continue;
+                let q = match vmap.get(&(id.clone(), ri as u32, k as u32)) {
+                    Some(node) => pos[node.idx()],
+                    None => {
+                        let has_node = |j: usize| vmap.contains_key(&(id.clone(), ri as u32, j as u32));
+                        let Some(q) = dropped.position(m, p, ri as u32, k, &has_node) else {
+                            report.vertices_dropped += 1;
+                            continue;
+                        };
+                        q
+                    }
                 };
-                let q = pos[node.idx()];
                 let d = dist(q, r.points[k]);
                 if !d.is_finite() {
                     return Err(BackError::Geometry { element: format!("polygon `{id}` of {bname}"), message: format!("vertex {k} of ring {ri} would move by {d} m (a coordinate is not finite or out of range)") });

@@ -27,7 +27,11 @@ the input file uses (or --precision).
 Do no harm: the healed file is read back and every building validated and measured again. A
 building keeps its original geometry when healing would give it a validation finding it did not
 have (e.g. an open shell), change its surface area by more than --max-area-change percent, or
-move a vertex further than --max-move metres. Such buildings are named on stderr and in the
+move its surface further than --max-move metres (Hausdorff: no input vertex farther from the
+healed surface, no healed vertex farther from the input surface). Coplanar polygons merge only
+within one thematic surface type, and never so that a polygon or surface with a gml:id or
+attributes disappears. A building counts as healed when its geometry was rewritten and its
+validation findings fell. Such buildings are named on stderr and in the
 report; the output is complete and the exit code 0. With --strict any kept building is an error
 (exit 1, no output written). A file in a geographic CRS (degrees) is refused: the tolerances are
 metres.
@@ -87,6 +91,8 @@ const REPORT: ReportKind = ReportKind {
         ("back.max_move", "m"),
         ("back.mean_move", "m"),
         ("back.max_move_by_building.*", "m"),
+        ("moved_by_building_m.*", "m"),
+        ("max_moved_m", "m"),
     ],
 };
 
@@ -124,14 +130,17 @@ fn heal_error(name: &str, e: HealError) -> CliError {
 fn print_summary(r: &HealReport) {
     let pct = if r.area_before_m2 > 0.0 { 100.0 * (r.area_after_m2 / r.area_before_m2 - 1.0) } else { 0.0 };
     crate::say!(
-        "heal: {} of {} buildings healed, {} kept as they were; surface area {:.1} → {:.1} m² ({pct:+.3} %); vertex moves: largest {:.4} m, mean {:.4} m",
+        "heal: {} of {} buildings healed (geometry rewritten and validation findings fell), {} only rewritten (made planar), {} unchanged, {} kept as they were; {} → {} without any finding; surface area {:.1} → {:.1} m² ({pct:+.3} %); largest move {:.4} m (Hausdorff, input vertices to healed surface and back)",
         r.healed,
         r.buildings,
+        r.changed - r.healed,
+        r.buildings - r.changed - r.kept.len(),
         r.kept.len(),
+        r.valid_before,
+        r.valid_after,
         r.area_before_m2,
         r.area_after_m2,
-        r.back.max_move,
-        r.back.mean_move
+        r.max_moved_m
     );
     for k in &r.kept {
         crate::say!("heal: kept {}: {}", k.building, k.reason);
@@ -147,8 +156,9 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     let name = input.display_name();
     let bytes = input.read_all()?;
     let progress = config.progress("heal", 0);
-    let healed = heal::heal(&bytes, &opts, &|n| progress.set(n as u64, "buildings adjusted")).map_err(|e| heal_error(&name, e))?;
-    progress.finish("verified");
+    // no message per building: on a terminal the bar counts, elsewhere one summary line
+    let healed = heal::heal(&bytes, &opts, &|n| progress.set(n as u64, "")).map_err(|e| heal_error(&name, e))?;
+    progress.finish("buildings adjusted and verified");
     let r = &healed.report;
     // A file whose every building is kept for what the reader refuses heals nothing: it is
     // refused as every other command refuses it (a non-finite coordinate: exit 3; an XLink to
