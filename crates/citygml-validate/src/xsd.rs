@@ -54,13 +54,48 @@ extern "C" {
     fn xmlSchemaSetValidStructuredErrors(ctxt: *mut c_void, serror: Option<StructuredErrorFunc>, ctx: *mut c_void);
     fn xmlSchemaValidateDoc(ctxt: *mut c_void, doc: *mut c_void) -> c_int;
     fn xmlSchemaFreeValidCtxt(ctxt: *mut c_void);
-    fn xmlReadMemory(buffer: *const c_char, size: c_int, url: *const c_char, encoding: *const c_char, options: c_int) -> *mut c_void;
+    fn xmlReadMemory(
+        buffer: *const c_char,
+        size: c_int,
+        url: *const c_char,
+        encoding: *const c_char,
+        options: c_int,
+    ) -> *mut c_void;
     fn xmlFreeDoc(doc: *mut c_void);
+    fn xmlReaderForMemory(
+        buffer: *const c_char,
+        size: c_int,
+        url: *const c_char,
+        encoding: *const c_char,
+        options: c_int,
+    ) -> *mut c_void;
+    fn xmlTextReaderSetStructuredErrorHandler(reader: *mut c_void, f: Option<StructuredErrorFunc>, arg: *mut c_void);
+    fn xmlTextReaderSetSchema(reader: *mut c_void, schema: *mut c_void) -> c_int;
+    fn xmlTextReaderRead(reader: *mut c_void) -> c_int;
+    fn xmlTextReaderIsValid(reader: *mut c_void) -> c_int;
+    fn xmlFreeTextReader(reader: *mut c_void);
 }
 
 const XML_PARSE_NONET: c_int = 1 << 11;
 const XML_PARSE_COMPACT: c_int = 1 << 16;
 const XML_PARSE_BIG_LINES: c_int = 1 << 22;
+/// Lifts libxml2's default limits, among them the 10 MB dictionary that also interns every
+/// xs:ID value: past it each further id is "not a valid value of the atomic type 'xs:ID'"
+/// (a valid NRW tile ×250, 311 MB: false findings after 25 min; with it, valid in 22 s).
+/// docs/decisions.md#xsd-validation-of-big-files
+const XML_PARSE_HUGE: c_int = 1 << 19;
+/// libxml2's error domain of its allocator, and its out-of-memory code: failures of the
+/// machine, never findings about the document.
+const XML_FROM_MEMORY: c_int = 6;
+const XML_ERR_NO_MEMORY: c_int = 2;
+/// Documents from this size on are validated streaming (libxml2's reader with the schema
+/// attached) instead of as a tree, which takes about six times the document in memory.
+/// `GEOFIT_XSD_STREAM_BYTES` overrides it (the tests compare both ways on small files).
+pub const STREAM_FROM_BYTES: usize = 64 << 20;
+
+fn stream_from_bytes() -> usize {
+    std::env::var("GEOFIT_XSD_STREAM_BYTES").ok().and_then(|v| v.parse().ok()).unwrap_or(STREAM_FROM_BYTES)
+}
 
 static INIT: Once = Once::new();
 
@@ -80,8 +115,10 @@ fn init() {
 pub enum XsdError {
     #[error("cannot load schema {path}: {message}")]
     SchemaLoad { path: String, message: String },
-    #[error("document is too large for libxml2 ({0} bytes, limit 2 GiB)")]
+    #[error("document is too large for libxml2 ({0} bytes, limit 2 GiB); check it with --no-xsd")]
     TooLarge(usize),
+    #[error("libxml2 ran out of memory during the schema check ({0}); it says nothing about the file: check it with --no-xsd")]
+    OutOfMemory(String),
 }
 
 /// What kind of problem libxml2 reported.
@@ -109,6 +146,8 @@ pub struct XsdFinding {
 struct Collector {
     findings: Vec<(XsdErrorKind, XmlErrorCopy)>,
     kind: XsdErrorKind,
+    /// libxml2's own message when its allocator failed (docs/decisions.md#xsd-validation-of-big-files).
+    out_of_memory: Option<String>,
 }
 
 struct XmlErrorCopy {
@@ -133,6 +172,10 @@ unsafe extern "C" fn collect(ctx: *mut c_void, err: *const XmlError) {
     } else {
         CStr::from_ptr(e.message).to_string_lossy().trim_end().to_string()
     };
+    if e.domain == XML_FROM_MEMORY || e.code == XML_ERR_NO_MEMORY {
+        c.out_of_memory.get_or_insert(message);
+        return;
+    }
     let element = if !e.node.is_null() {
         let n = &*(e.node as *const XmlNodeHead);
         // XML_ELEMENT_NODE = 1
@@ -169,11 +212,14 @@ impl Schema {
         let shown = path.display().to_string();
         let c = CString::new(path.to_string_lossy().as_bytes())
             .map_err(|_| XsdError::SchemaLoad { path: shown.clone(), message: "path contains a NUL byte".into() })?;
-        let mut col = Collector { findings: Vec::new(), kind: XsdErrorKind::Invalid };
+        let mut col = Collector { findings: Vec::new(), kind: XsdErrorKind::Invalid, out_of_memory: None };
         unsafe {
             let pctxt = xmlSchemaNewParserCtxt(c.as_ptr());
             if pctxt.is_null() {
-                return Err(XsdError::SchemaLoad { path: shown, message: "libxml2 could not create a schema parser".into() });
+                return Err(XsdError::SchemaLoad {
+                    path: shown,
+                    message: "libxml2 could not create a schema parser".into(),
+                });
             }
             let colp = &mut col as *mut Collector as *mut c_void;
             xmlSchemaSetParserStructuredErrors(pctxt, Some(collect), colp);
@@ -203,8 +249,11 @@ impl Schema {
         if let Some(f) = too_many_attributes(xml, MAX_ATTRIBUTES) {
             return Ok(vec![f]);
         }
+        if xml.len() >= stream_from_bytes() {
+            return self.validate_streaming(xml, name);
+        }
         let url = CString::new(name.replace('\0', "")).unwrap_or_default();
-        let mut col = Collector { findings: Vec::new(), kind: XsdErrorKind::NotWellFormed };
+        let mut col = Collector { findings: Vec::new(), kind: XsdErrorKind::NotWellFormed, out_of_memory: None };
         unsafe {
             let colp = &mut col as *mut Collector as *mut c_void;
             xmlSetStructuredErrorFunc(colp, Some(collect));
@@ -213,7 +262,7 @@ impl Schema {
                 xml.len() as c_int,
                 url.as_ptr(),
                 std::ptr::null(),
-                XML_PARSE_NONET | XML_PARSE_COMPACT | XML_PARSE_BIG_LINES,
+                XML_PARSE_NONET | XML_PARSE_COMPACT | XML_PARSE_BIG_LINES | XML_PARSE_HUGE,
             );
             if doc.is_null() || !col.findings.is_empty() {
                 xmlSetStructuredErrorFunc(std::ptr::null_mut(), None);
@@ -223,17 +272,25 @@ impl Schema {
                 if col.findings.is_empty() {
                     col.findings.push((
                         XsdErrorKind::NotWellFormed,
-                        XmlErrorCopy { line: 1, column: 1, element: None, message: "document could not be parsed".into() },
+                        XmlErrorCopy {
+                            line: 1,
+                            column: 1,
+                            element: None,
+                            message: "document could not be parsed".into(),
+                        },
                     ));
                 }
-                return Ok(finish(col, xml));
+                return finish_checked(col, xml);
             }
             col.kind = XsdErrorKind::Invalid;
             let vctxt = xmlSchemaNewValidCtxt(self.ptr);
             if vctxt.is_null() {
                 xmlSetStructuredErrorFunc(std::ptr::null_mut(), None);
                 xmlFreeDoc(doc);
-                return Err(XsdError::SchemaLoad { path: name.into(), message: "cannot create a validation context".into() });
+                return Err(XsdError::SchemaLoad {
+                    path: name.into(),
+                    message: "cannot create a validation context".into(),
+                });
             }
             xmlSchemaSetValidStructuredErrors(vctxt, Some(collect), colp);
             let rc = xmlSchemaValidateDoc(vctxt, doc);
@@ -243,11 +300,76 @@ impl Schema {
             if rc != 0 && col.findings.is_empty() {
                 col.findings.push((
                     XsdErrorKind::Invalid,
-                    XmlErrorCopy { line: 0, column: 0, element: None, message: format!("validation failed (libxml2 code {rc})") },
+                    XmlErrorCopy {
+                        line: 0,
+                        column: 0,
+                        element: None,
+                        message: format!("validation failed (libxml2 code {rc})"),
+                    },
                 ));
             }
         }
-        Ok(finish(col, xml))
+        finish_checked(col, xml)
+    }
+
+    /// [`Schema::validate`] through libxml2's streaming reader with the schema attached: the
+    /// memory is that of the open elements and the id table, not of the whole tree.
+    fn validate_streaming(&self, xml: &[u8], name: &str) -> Result<Vec<XsdFinding>, XsdError> {
+        let url = CString::new(name.replace('\0', "")).unwrap_or_default();
+        let mut col = Collector { findings: Vec::new(), kind: XsdErrorKind::Invalid, out_of_memory: None };
+        unsafe {
+            let colp = &mut col as *mut Collector as *mut c_void;
+            xmlSetStructuredErrorFunc(colp, Some(collect));
+            let options = XML_PARSE_NONET | XML_PARSE_COMPACT | XML_PARSE_BIG_LINES | XML_PARSE_HUGE;
+            let reader = xmlReaderForMemory(
+                xml.as_ptr() as *const c_char,
+                xml.len() as c_int,
+                url.as_ptr(),
+                std::ptr::null(),
+                options,
+            );
+            if reader.is_null() {
+                xmlSetStructuredErrorFunc(std::ptr::null_mut(), None);
+                return Err(XsdError::OutOfMemory("cannot create a streaming reader".into()));
+            }
+            xmlTextReaderSetStructuredErrorHandler(reader, Some(collect), colp);
+            if xmlTextReaderSetSchema(reader, self.ptr) != 0 {
+                xmlFreeTextReader(reader);
+                xmlSetStructuredErrorFunc(std::ptr::null_mut(), None);
+                return Err(XsdError::SchemaLoad {
+                    path: name.into(),
+                    message: "cannot attach the schema to a streaming reader".into(),
+                });
+            }
+            let mut rc = 1;
+            while rc == 1 {
+                rc = xmlTextReaderRead(reader);
+            }
+            let valid = xmlTextReaderIsValid(reader);
+            xmlFreeTextReader(reader);
+            xmlSetStructuredErrorFunc(std::ptr::null_mut(), None);
+            if (rc < 0 || valid != 1) && col.findings.is_empty() && col.out_of_memory.is_none() {
+                col.findings.push((
+                    XsdErrorKind::Invalid,
+                    XmlErrorCopy {
+                        line: 0,
+                        column: 0,
+                        element: None,
+                        message: "validation failed (libxml2 streaming reader)".into(),
+                    },
+                ));
+            }
+        }
+        finish_checked(col, xml)
+    }
+}
+
+/// The findings, or the allocator's failure when libxml2 reported one: a machine that ran out
+/// of memory says nothing about the file.
+fn finish_checked(col: Collector, xml: &[u8]) -> Result<Vec<XsdFinding>, XsdError> {
+    match col.out_of_memory {
+        Some(why) => Err(XsdError::OutOfMemory(input_limits::quote(&why).into_owned())),
+        None => Ok(finish(col, xml)),
     }
 }
 
@@ -317,7 +439,15 @@ fn shorten_quoted(message: &str) -> String {
     parts
         .iter()
         .enumerate()
-        .map(|(i, p)| if i % 2 == 1 && i + 1 < parts.len() { input_limits::quote(p) } else { std::borrow::Cow::Borrowed(*p) })
+        .map(
+            |(i, p)| {
+                if i % 2 == 1 && i + 1 < parts.len() {
+                    input_limits::quote(p)
+                } else {
+                    std::borrow::Cow::Borrowed(*p)
+                }
+            },
+        )
         .collect::<Vec<_>>()
         .join("'")
 }
@@ -437,7 +567,11 @@ mod tests {
     fn long_quoted_values_are_shortened_and_attributes_counted() {
         let v = "9".repeat(1000);
         let m = shorten_quoted(&format!("Element 'pos': '{v}' is not a valid value of the atomic type 'xs:double'."));
-        assert!(m.starts_with("Element 'pos': '999") && m.contains("… (1000 bytes)' is not a valid value of the atomic type 'xs:double'."), "{m}");
+        assert!(
+            m.starts_with("Element 'pos': '999")
+                && m.contains("… (1000 bytes)' is not a valid value of the atomic type 'xs:double'."),
+            "{m}"
+        );
         assert_eq!(shorten_quoted("it's short"), "it's short");
         assert_eq!(count_attributes(br#" a="1" b='x=y' c = "=""#), 3);
         let many: String = (0..20).map(|i| format!(" a{i}=\"{i}\"")).collect();
