@@ -5,9 +5,12 @@
 //! ```
 //! use cityjson_io::crs::{to_srs_name, to_reference_system};
 //! assert_eq!(to_srs_name("https://www.opengis.net/def/crs/EPSG/0/7415"), "urn:ogc:def:crs:EPSG::7415");
-//! let compound = to_reference_system("urn:ogc:def:crs,crs:EPSG::25832,crs:EPSG::5783").unwrap();
-//! assert_eq!(compound, "https://www.opengis.net/def/crs-compound?1=https://www.opengis.net/def/crs/EPSG/0/25832&2=https://www.opengis.net/def/crs/EPSG/0/5783");
-//! assert_eq!(to_srs_name(&compound), "urn:ogc:def:crs,crs:EPSG::25832,crs:EPSG::5783");
+//! // The CityJSON schema takes one CRS URL: a compound without an EPSG code of its own keeps
+//! // its horizontal part, and the vertical one is reported.
+//! let (url, dropped) = to_reference_system("urn:ogc:def:crs,crs:EPSG::25832,crs:EPSG::5783").unwrap();
+//! assert_eq!((url.as_str(), dropped), ("https://www.opengis.net/def/crs/EPSG/0/25832", Some(5783)));
+//! let (url, dropped) = to_reference_system("urn:ogc:def:crs,crs:EPSG::28992,crs:EPSG::5709").unwrap();
+//! assert_eq!((url.as_str(), dropped), ("https://www.opengis.net/def/crs/EPSG/0/7415", None));
 //! ```
 
 const EPSG_URL: &str = "https://www.opengis.net/def/crs/EPSG/0/";
@@ -35,9 +38,13 @@ pub fn to_srs_name(reference_system: &str) -> String {
     reference_system.to_string()
 }
 
-/// A CityJSON `referenceSystem` for a CityGML srsName: one EPSG code → its URL, a compound
-/// (horizontal + vertical) → a `crs-compound` URL. `None` when no EPSG code can be named.
-pub fn to_reference_system(srs_name: &str) -> Option<String> {
+/// Compound EPSG codes for a horizontal + vertical pair (the CityJSON schema takes one URL).
+const COMPOUND: &[(u32, u32, u32)] = &[(28992, 5709, 7415)];
+
+/// A CityJSON `referenceSystem` for a CityGML srsName and the vertical EPSG code it could not
+/// name: one code → its URL; a known compound pair → the compound's URL; another pair → the
+/// horizontal URL (the vertical part reported by the caller). `None`: no EPSG code.
+pub fn to_reference_system(srs_name: &str) -> Option<(String, Option<u32>)> {
     let mut codes = citygml_io::crs::epsg_codes(srs_name);
     if codes.is_empty() {
         let proj = citygml_io::crs::proj_crs(srs_name);
@@ -48,11 +55,10 @@ pub fn to_reference_system(srs_name: &str) -> Option<String> {
     }
     match codes[..] {
         [] => None,
-        [one] => Some(format!("{EPSG_URL}{one}")),
-        _ => {
-            let parts: Vec<String> =
-                codes.iter().enumerate().map(|(i, c)| format!("{}={EPSG_URL}{c}", i + 1)).collect();
-            Some(format!("https://www.opengis.net/def/crs-compound?{}", parts.join("&")))
-        }
+        [one] => Some((format!("{EPSG_URL}{one}"), None)),
+        [h, v, ..] => match COMPOUND.iter().find(|c| c.0 == h && c.1 == v) {
+            Some(c) => Some((format!("{EPSG_URL}{}", c.2), None)),
+            None => Some((format!("{EPSG_URL}{h}"), Some(v))),
+        },
     }
 }

@@ -137,8 +137,11 @@ pub(crate) fn cityjson_header(
     let mut metadata = Map::new();
     if let Some(s) = srs {
         match crs::to_reference_system(s) {
-            Some(r) => {
+            Some((r, dropped)) => {
                 metadata.insert("referenceSystem".into(), json!(r));
+                if let Some(v) = dropped {
+                    report.add(format!("vertical CRS EPSG:{v} of {s} (metadata.referenceSystem names one CRS)"), None);
+                }
             }
             None => report.add(format!("srsName {s} (no EPSG code to name in metadata.referenceSystem)"), None),
         }
@@ -193,6 +196,29 @@ pub fn from_citygml(gml: &[u8], opts: &WriteOptions) -> Result<(Value, Report), 
     doc["CityObjects"] = Value::Object(objects);
     doc["vertices"] = Value::Array(pool);
     Ok((doc, report))
+}
+
+/// A CityJSON document as compact JSON with `type` and `version` first (serde_json sorts the
+/// keys; a reader sniffing the first bytes must meet `"type":"CityJSON"` early).
+pub fn to_vec(doc: &Value) -> Vec<u8> {
+    const FIRST: &[&str] = &["type", "version", "transform", "metadata", "extensions"];
+    let Some(m) = doc.as_object() else { return serde_json::to_vec(doc).unwrap_or_default() };
+    let keys = FIRST
+        .iter()
+        .copied()
+        .filter(|k| m.contains_key(*k))
+        .chain(m.keys().map(String::as_str).filter(|k| !FIRST.contains(k)));
+    let mut out = b"{".to_vec();
+    for (i, k) in keys.enumerate() {
+        if i > 0 {
+            out.push(b',');
+        }
+        out.extend(serde_json::to_vec(k).unwrap_or_default());
+        out.push(b':');
+        out.extend(serde_json::to_vec(&m[k]).unwrap_or_default());
+    }
+    out.extend(b"}\n");
+    out
 }
 
 /// Adds `offset` to every vertex index in an object's geometry boundaries.

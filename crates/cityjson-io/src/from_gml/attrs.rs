@@ -191,8 +191,10 @@ fn element_texts(r: &mut Reader<&[u8]>, e: &BytesStart<'_>) -> Vec<(String, Stri
     }
 }
 
+/// Entities resolved and line ends normalised as an XML parser must (`\r\n`, `\r` → `\n`).
 fn unescape(s: &str) -> String {
-    quick_xml::escape::unescape(s).map(|c| c.into_owned()).unwrap_or_else(|_| s.to_string())
+    let s = s.replace("\r\n", "\n").replace('\r', "\n");
+    quick_xml::escape::unescape(&s).map(|c| c.into_owned()).unwrap_or(s)
 }
 
 /// `&amp;` and friends, which quick-xml 0.38 reports as their own events.

@@ -181,6 +181,8 @@ pub fn lod_string(g: &Geometry) -> Option<String> {
             .and_then(|id| id.rsplit_once("-lod"))
             .map(|(_, l)| l.to_string());
     match (from_id, g.lod) {
+        // CityJSON has LoDs 0-3: CityGML 2.0's LoD 4 (interiors) is written as 3.
+        (_, Some(4)) => Some("3".into()),
         (Some(l), Some(n)) if l.starts_with(char::from(b'0' + n)) && l.len() <= 3 => Some(l),
         (_, Some(n)) => Some(n.to_string()),
         (_, None) => None,

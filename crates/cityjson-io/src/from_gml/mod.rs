@@ -163,6 +163,9 @@ impl<'s> ObjectMapper<'s> {
                 self.report.add(format!("{} geometry without a LoD (left out)", g.property), Some(id));
                 continue;
             };
+            if g.lod == Some(4) {
+                self.report.add("LoD 4 geometry (CityJSON has LoDs 0-3: written as LoD 3)", Some(id));
+            }
             if !g.skipped_members.is_empty() {
                 self.report.add("aggregate member the CityGML reader could not resolve (left out)", Some(id));
             }

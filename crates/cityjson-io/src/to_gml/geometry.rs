@@ -42,6 +42,8 @@ pub struct GeomContext<'a> {
     pub decimals: usize,
     /// srsName for the geometry element (when the document has no envelope to carry it).
     pub srs_name: Option<&'a str>,
+    /// The CityGML LoD to write whatever the CityJSON one (rooms: 4).
+    pub lod_override: Option<u8>,
     pub ids: &'a mut HashSet<String>,
     pub report: &'a mut Report,
 }
@@ -132,6 +134,7 @@ pub fn emit(ctx: &mut GeomContext<'_>, g: &Value) -> Result<Option<GeomOut>, Cit
     let Some((lod, lod_int)) = lod_of(g) else {
         return Err(CityJsonError::structure(Some(obj), format!("geometry {} has no \"lod\"", ctx.index)));
     };
+    let lod_int = ctx.lod_override.unwrap_or(lod_int);
     if lod_int > 4 {
         return Err(CityJsonError::structure(Some(obj), format!("geometry {} has lod {lod}", ctx.index)));
     }

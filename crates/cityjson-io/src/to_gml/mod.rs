@@ -182,17 +182,20 @@ fn element_of(ty: &str) -> Option<(&'static str, &'static str, &'static [&'stati
         "BuildingPart" => ("bldg", "BuildingPart", attributes::BUILDING_PROPERTIES),
         "BuildingInstallation" => ("bldg", "BuildingInstallation", attributes::OTHER_PROPERTIES),
         "BuildingRoom" => ("bldg", "Room", attributes::OTHER_PROPERTIES),
+        "BuildingFurniture" => ("bldg", "BuildingFurniture", attributes::OTHER_PROPERTIES),
         "GenericCityObject" => ("gen", "GenericCityObject", attributes::OTHER_PROPERTIES),
         _ => return None,
     })
 }
 
-/// The property linking a child object to its parent building.
-fn child_property(ty: &str) -> Option<&'static str> {
-    Some(match ty {
-        "BuildingPart" => "consistsOfBuildingPart",
-        "BuildingInstallation" => "outerBuildingInstallation",
-        "BuildingRoom" => "interiorRoom",
+/// The property linking a child object to its parent (a building or part, or a room).
+fn child_property(parent: &str, child: &str) -> Option<&'static str> {
+    Some(match (parent, child) {
+        ("Building" | "BuildingPart", "BuildingPart") => "consistsOfBuildingPart",
+        ("Building" | "BuildingPart", "BuildingInstallation") => "outerBuildingInstallation",
+        ("Building" | "BuildingPart", "BuildingRoom") => "interiorRoom",
+        ("BuildingRoom", "BuildingFurniture") => "interiorFurniture",
+        ("BuildingRoom", "BuildingInstallation") => "roomInstallation",
         _ => return None,
     })
 }
@@ -239,7 +242,7 @@ impl Emitter<'_> {
         let mut children: Vec<(usize, String)> = Vec::new();
         for c in o.get("children").and_then(Value::as_array).into_iter().flatten().filter_map(Value::as_str) {
             let cty = self.objects.get(c).and_then(|x| x.get("type")).and_then(Value::as_str).unwrap_or("");
-            let Some(prop) = child_property(cty).filter(|_| matches!(ty, "Building" | "BuildingPart")) else {
+            let Some(prop) = child_property(ty, cty) else {
                 self.report.add(format!("{cty} child of a {ty} (no CityGML 2.0 property for it: left out)"), Some(c));
                 continue;
             };
@@ -269,12 +272,15 @@ impl Emitter<'_> {
             let (g, verts) = self.resolve(id, g)?;
             // Without an envelope to carry it, each geometry names the CRS.
             let srs_name = if self.header.extent.is_none() { self.header.srs_name.as_deref() } else { None };
+            // CityGML 2.0 rooms and their furniture exist in LoD 4 only (CityJSON has no LoD 4).
+            let lod_override = matches!(ty, "BuildingRoom" | "BuildingFurniture").then_some(4);
             let mut ctx = GeomContext {
                 object: id,
                 index: k,
                 vertices: verts.as_deref().unwrap_or(self.vertices),
                 decimals,
                 srs_name,
+                lod_override,
                 ids: &mut self.ids,
                 report: self.report,
             };
@@ -342,7 +348,7 @@ impl Emitter<'_> {
 /// `lod2Solid`, `lod2MultiSurface`, `lod0FootPrint` then `lod0RoofEdge`, `lod2Geometry`.
 fn property_name(ty: &str, lod: u8, kind: &str, used: &HashSet<String>) -> String {
     match ty {
-        "BuildingInstallation" | "GenericCityObject" => format!("lod{lod}Geometry"),
+        "BuildingInstallation" | "GenericCityObject" | "BuildingFurniture" => format!("lod{lod}Geometry"),
         _ if lod == 0 => {
             if used.contains("lod0FootPrint") {
                 "lod0RoofEdge".into()
@@ -363,6 +369,8 @@ fn rank(ty: &str, prop: &str, lod: u8) -> usize {
         "outerBuildingInstallation" => 60,
         "boundedBy" if building => 70,
         "boundedBy" => 100,
+        "interiorFurniture" => 104,
+        "roomInstallation" => 105,
         "interiorRoom" => 110,
         "consistsOfBuildingPart" => 120,
         p => {

@@ -67,11 +67,11 @@ fn target(args: &Args, from: Encoding) -> Encoding {
         Some("citygml") => Encoding::CityGml,
         Some("cityjson") => Encoding::CityJson,
         Some("cityjsonseq") => Encoding::CityJsonSeq,
-        _ => args.output.as_deref().and_then(|o| Encoding::of_path(std::path::Path::new(o))).unwrap_or(if from == Encoding::CityGml {
-            Encoding::CityJson
-        } else {
-            Encoding::CityGml
-        }),
+        _ => args
+            .output
+            .as_deref()
+            .and_then(|o| Encoding::of_path(std::path::Path::new(o)))
+            .unwrap_or(if from == Encoding::CityGml { Encoding::CityJson } else { Encoding::CityGml }),
     }
 }
 
@@ -97,7 +97,13 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         }
     }
     if let Some(p) = &args.report {
-        let r = Report { input: name, from: from.describe(), to: to.describe(), precision: args.precision, report: &report };
+        let r = Report {
+            input: name,
+            from: from.describe(),
+            to: to.describe(),
+            precision: args.precision,
+            report: &report,
+        };
         write_json_report(p, &REPORT, &r)?;
     }
     Ok(Exit::Ok)

@@ -4,7 +4,7 @@
 //! extension names). The commands themselves only ever see CityGML
 //! (docs/decisions.md#cityjson-at-the-edges).
 
-use std::io::{BufReader, Write};
+use std::io::BufReader;
 use std::path::Path;
 use std::sync::Mutex;
 
@@ -118,8 +118,9 @@ pub fn map_seq_as_citygml(name: &str, path: &Path) -> Result<InputBytes, CliErro
     let file = std::fs::File::open(path).map_err(unreadable)?;
     let tmp = tempfile::tempfile().map_err(|e| CliError::internal(format!("temporary file: {e}")))?;
     let w = std::io::BufWriter::with_capacity(1 << 16, tmp);
-    let (w, report, _) = cityjson_io::seq::seq_to_citygml(BufReader::with_capacity(1 << 16, file), w, GmlOptions::default())
-        .map_err(|e| read_error(name, e))?;
+    let (w, report, _) =
+        cityjson_io::seq::seq_to_citygml(BufReader::with_capacity(1 << 16, file), w, GmlOptions::default())
+            .map_err(|e| read_error(name, e))?;
     notice(name, &report);
     remember(Encoding::CityJsonSeq, None);
     let tmp = w.into_inner().map_err(|e| CliError::internal(format!("temporary file: {}", e.error())))?;
@@ -136,7 +137,10 @@ pub fn write_document(output: &Output, citygml: &[u8]) -> Result<(), CliError> {
         return output.write_bytes(citygml);
     }
     let original = remembered.and_then(|r| r.original);
-    let transform = original.as_ref().and_then(|o| Transform::from_json(o.get("transform")).ok()).filter(|t| *t != Transform::default());
+    let transform = original
+        .as_ref()
+        .and_then(|o| Transform::from_json(o.get("transform")).ok())
+        .filter(|t| *t != Transform::default());
     let opts = WriteOptions { transform, ..WriteOptions::default() };
     let (bytes, report) = encode(citygml, encoding, &opts, original.as_ref())?;
     if !report.is_empty() {
@@ -147,7 +151,12 @@ pub fn write_document(output: &Output, citygml: &[u8]) -> Result<(), CliError> {
 
 /// CityGML text → the bytes of `to` (compact CityJSON; CityJSONSeq one feature per line) and
 /// the report of what `to` cannot hold.
-pub fn encode(citygml: &[u8], to: Encoding, opts: &WriteOptions, original: Option<&Value>) -> Result<(Vec<u8>, Report), CliError> {
+pub fn encode(
+    citygml: &[u8],
+    to: Encoding,
+    opts: &WriteOptions,
+    original: Option<&Value>,
+) -> Result<(Vec<u8>, Report), CliError> {
     let internal = |e: cityjson_io::CityJsonError| CliError::internal(format!("writing {}: {e}", to.describe()));
     match to {
         Encoding::CityGml => Ok((citygml.to_vec(), Report::default())),
@@ -160,22 +169,27 @@ pub fn encode(citygml: &[u8], to: Encoding, opts: &WriteOptions, original: Optio
             if let Some(o) = original {
                 cityjson_io::overlay_original(&mut doc, o);
             }
-            let mut out = serde_json::to_vec(&doc).map_err(|e| CliError::internal(e.to_string()))?;
-            out.write_all(b"\n").map_err(CliError::io_out)?;
-            Ok((out, report))
+            Ok((cityjson_io::to_vec(&doc), report))
         }
     }
 }
 
 /// `convert`: `raw` (of encoding `from`) → the bytes of `to`, through CityGML 2.0 text when
 /// both are CityJSON; the report joins what every step could not carry.
-pub fn convert(name: &str, raw: &[u8], from: Encoding, to: Encoding, precision: f64) -> Result<(Vec<u8>, Report), CliError> {
+pub fn convert(
+    name: &str,
+    raw: &[u8],
+    from: Encoding,
+    to: Encoding,
+    precision: f64,
+) -> Result<(Vec<u8>, Report), CliError> {
     let mut report = Report::default();
     let opts = WriteOptions { scale: precision, transform: None };
     if from == Encoding::CityGml {
         // Read errors of the CityGML reader are the input's (exit 3), not internal ones.
         citygml_io::ObjectStream::new(raw).map_err(|e| CliError::unreadable(format!("{name}:{e}")))?;
-        let (out, r) = encode(raw, to, &opts, None).map_err(|e| CliError::unreadable(format!("{name}: {}", e.message)))?;
+        let (out, r) =
+            encode(raw, to, &opts, None).map_err(|e| CliError::unreadable(format!("{name}: {}", e.message)))?;
         report.merge(r);
         return Ok((out, report));
     }
