@@ -4,7 +4,9 @@
 //! The algorithms are in `tspline` (the fit) and `tspline_raster` (layout, screening, warp).
 
 mod input;
+mod lerc;
 mod output;
+mod storage;
 mod zunit;
 
 use clap::{Args as ClapArgs, ValueEnum};
@@ -90,9 +92,18 @@ pub struct Args {
     /// Input raster (GeoTIFF, netCDF, ASCII grid, ...; `-` = stdin).
     pub input: String,
     /// Output T-mesh file (`-` or none = stdout): XML `.tmesh`, or the compact binary form when
-    /// the name ends in `.tmb` (lossless; `eval`, `surface`, `export` and `info` read both).
+    /// the name ends in `.tmb` (its heights stored to the error budget: --storage-share;
+    /// `eval`, `surface`, `export` and `info` read both).
     #[arg(short, long)]
     pub output: Option<String>,
+    /// `.tmb`: store the control-point heights as exact f64 (the fit then takes all of
+    /// --max-error).
+    #[arg(long)]
+    pub lossless: bool,
+    /// `.tmb`: the share of --max-error the stored heights may take (they are rounded to steps
+    /// of twice that; the fit aims at the rest). Default 0.3.
+    #[arg(long, value_name = "FRACTION")]
+    pub storage_share: Option<f64>,
     /// Maximum |Δz| allowed at every valid raster cell, in metres (--error-unit), converted
     /// into the unit of the heights (km, ft, cm, ...). With --max-error-from-uncertainty: the
     /// floor of the per-cell tolerance.
@@ -202,6 +213,7 @@ pub struct Args {
 fn check_args(args: &Args) -> Result<Degree, CliError> {
     crate::config::check_report_target(args.report.as_deref(), args.output.as_deref())?;
     input::check_tolerance_args(args)?;
+    storage::check_share(args)?;
     let degree = Degree::from_u32(args.degree).ok_or_else(|| CliError::usage(format!("--degree must be 1 or 3, got {}", args.degree)))?;
     if !(args.overhang >= 0.0 && args.overhang <= 4.0) {
         return Err(CliError::usage(format!("--overhang must be within 0..4, got {}", args.overhang)));
@@ -242,6 +254,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     let device_name = ocl.as_ref().map(|o| format!("opencl: {}", o.device_name())).unwrap_or_else(|| "cpu (rayon)".into());
     let mut opts = FitOptions::new(degree, prepared.e_min);
     opts.cell_tolerance = prepared.cell_tolerance.clone();
+    storage::fit_share(&args, &mut opts);
     opts.max_points = args.max_points;
     opts.max_iterations = args.max_iterations;
     opts.overhang = args.overhang;

@@ -6,7 +6,8 @@ use tspline::format::{DataMask, Encoding, TMeshFile};
 use tspline_raster::indirect;
 
 use super::input::{OutlierReport, Prepared};
-use super::Args;
+use super::storage::{self, Stored};
+use super::{lerc, Args};
 use crate::config::{Config, Input, Output};
 use crate::error::{CliError, CmdResult, Exit};
 use crate::report::{with_z_unit, write_json_report_with_units, ReportKind, Z_UNIT};
@@ -29,6 +30,11 @@ const REPORT: ReportKind = ReportKind {
         ("iterations[].seconds", "s"),
         ("seconds", "s"),
         ("peak_rss_mib", "MiB"),
+        ("output.quantum", Z_UNIT),
+        ("output.decoded_max_abs_error", Z_UNIT),
+        ("output.bytes", "bytes"),
+        ("output.lerc_zstd_bytes", "bytes"),
+        ("output.lerc_ratio", "output bytes per LERC_ZSTD byte"),
     ],
 };
 
@@ -66,6 +72,21 @@ struct Report<'a> {
     seconds: f64,
     /// Peak resident memory of the process (Linux VmHWM), MiB; null elsewhere.
     peak_rss_mib: Option<f64>,
+    /// The T-mesh file as written and the LERC GeoTIFF at the same error beside it (issue 37);
+    /// absent when no file was written.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    output: Option<OutputReport>,
+}
+
+/// The stored file beside its competitor (docs/decisions.md#lerc-beside-the-t-mesh-issue-37).
+#[derive(serde::Serialize)]
+struct OutputReport {
+    #[serde(flatten)]
+    stored: Stored,
+    /// Bytes of the raster as a LERC_ZSTD GeoTIFF at MAX_Z_ERROR = max_error (null: GDAL could
+    /// not encode it).
+    lerc_zstd_bytes: Option<usize>,
+    lerc_ratio: Option<f64>,
 }
 
 fn is_quad(s: &tspline::mesh::SplitRule) -> bool {
@@ -74,7 +95,8 @@ fn is_quad(s: &tspline::mesh::SplitRule) -> bool {
 
 /// The progress line of one iteration.
 pub(super) fn iteration_line(st: &IterationStats, e: &str) -> String {
-    let stage = if st.merged_cells > 0 { format!("coarsening ({} cells merged)", st.merged_cells) } else { "iteration".into() };
+    let stage =
+        if st.merged_cells > 0 { format!("coarsening ({} cells merged)", st.merged_cells) } else { "iteration".into() };
     format!(
         "{stage} {}: {} control points, max {:.4}, mean {:.4}, RMS {:.4}, {} cells over {} ({:.2} s: build {:.2}, optimise {:.2}, check {:.2})",
         st.iteration,
@@ -145,12 +167,15 @@ pub(super) fn write(args: &Args, config: &Config, p: Prepared, result: FitResult
         // The fit does not change its samples: their NaN cells are the footprint to store.
         None => (Some(DataMask::of_samples(&p.samples)), None),
     };
-    let file = TMeshFile { mesh, georef: p.georef, mask, warp };
+    let georef = p.georef.clone();
+    let file = TMeshFile { mesh, georef, mask, warp };
     // A fit that missed --max-error is a failed step: no mesh for the next one (make) unless
     // --keep-partial; the report below still says how far it got.
-    if config.keeps_output(done.exit, args.output.as_deref()) {
-        write_mesh(&file, args, config)?;
-    }
+    let output = if config.keeps_output(done.exit, args.output.as_deref()) {
+        Some(write_mesh(&file, args, config, &p, done.exit == Exit::Ok)?)
+    } else {
+        None
+    };
     if let Some(path) = &args.report {
         let rep = Report {
             input: name,
@@ -178,6 +203,7 @@ pub(super) fn write(args: &Args, config: &Config, p: Prepared, result: FitResult
             iterations: &result.iterations,
             seconds: done.t_start.elapsed().as_secs_f64(),
             peak_rss_mib: crate::process_stats::peak_rss_mib(),
+            output,
         };
         let mut units = with_z_unit(REPORT.units, p.units.data_name().unwrap_or(Z_UNIT));
         if rep.max_error_given.is_some() {
@@ -188,21 +214,38 @@ pub(super) fn write(args: &Args, config: &Config, p: Prepared, result: FitResult
     Ok(done.exit)
 }
 
-/// `-o x.tmb`: the compact binary form; anything else the XML exchange format. Says so when the
-/// result is not smaller than the input file.
-fn write_mesh(file: &TMeshFile, args: &Args, config: &Config) -> Result<(), CliError> {
-    let encoding = Encoding::for_path(args.output.as_deref());
-    let mut bytes = Vec::new();
-    tspline::format::write_as(file, encoding, &mut bytes).map_err(CliError::io_out)?;
-    Output::from_arg(args.output.as_deref()).write_with(|w| std::io::Write::write_all(w, &bytes).map_err(CliError::io_out))?;
-    if let Some(input_bytes) = Input::from_arg(&args.input).path().and_then(|p| std::fs::metadata(p).ok()).map(|m| m.len()) {
+/// `-o x.tmb`: the compact binary form (heights to the error budget unless --lossless,
+/// `storage`); anything else the XML exchange format. States the LERC GeoTIFF's size at the
+/// same error beside it, and says so when the result is not smaller than the input file.
+fn write_mesh(
+    file: &TMeshFile,
+    args: &Args,
+    config: &Config,
+    p: &Prepared,
+    fit_ok: bool,
+) -> Result<OutputReport, CliError> {
+    let (bytes, stored) = storage::encode(file, args, p, fit_ok)?;
+    Output::from_arg(args.output.as_deref())
+        .write_with(|w| std::io::Write::write_all(w, &bytes).map_err(CliError::io_out))?;
+    let lerc = lerc::lerc_zstd_bytes(&p.samples, p.e_min);
+    if let Some(l) = lerc {
+        config.notice(&lerc::line(&p.name, bytes.len(), l, &format!("{}", p.e_min)));
+    }
+    if let Some(input_bytes) =
+        Input::from_arg(&args.input).path().and_then(|p| std::fs::metadata(p).ok()).map(|m| m.len())
+    {
         if bytes.len() as u64 >= input_bytes {
             config.notice(&format!(
                 "notice: the T-mesh ({} bytes) is not smaller than the input raster file ({input_bytes} bytes){}",
                 bytes.len(),
-                if encoding == Encoding::Xml { "; -o NAME.tmb writes the compact binary form" } else { "" }
+                if Encoding::for_path(args.output.as_deref()) == Encoding::Xml {
+                    "; -o NAME.tmb writes the compact binary form"
+                } else {
+                    ""
+                }
             ));
         }
     }
-    Ok(())
+    let lerc_ratio = lerc.map(|l| bytes.len() as f64 / l as f64);
+    Ok(OutputReport { stored, lerc_zstd_bytes: lerc, lerc_ratio })
 }

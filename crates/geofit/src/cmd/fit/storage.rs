@@ -1,0 +1,113 @@
+//! Heights stored to the error budget (issue 37): `fit --max-error E -o x.tmb` fits at
+//! `E − q` and stores the control-point heights in steps of `2q`, `q` = the storage share of E;
+//! the blending functions are a partition of unity, so the decoded surface stays within E
+//! (docs/decisions.md#heights-quantised-to-the-error-budget-issue-37). The file's bytes are
+//! decoded again and evaluated at every valid cell before they are written: the guarantee
+//! is checked on the file as written, not on the fit's mesh.
+
+use tspline::eval::{GridSpec, PbSpline};
+use tspline::fit::{FitOptions, Samples};
+use tspline::format::{Encoding, TMeshFile};
+use tspline::tmb::WriteOptions;
+
+use super::input::Prepared;
+use super::Args;
+use crate::error::CliError;
+
+/// The storage share of the tolerance when `--storage-share` is not given: measured on the
+/// LiDAR DEM, the BAG and Kilauea at 0.2, 0.3 and 0.5 (benches/results/tmb.md,
+/// docs/decisions.md#heights-quantised-to-the-error-budget-issue-37).
+pub(super) const DEFAULT_SHARE: f64 = 0.3;
+
+/// The share of the tolerance the stored heights may take, or None for lossless heights (an
+/// XML output, `--lossless`, `--indirect`: its mesh is mapped back through the warp).
+pub(super) fn share(args: &Args) -> Option<f64> {
+    let binary = Encoding::for_path(args.output.as_deref()) == Encoding::Binary;
+    (binary && !args.lossless && !args.indirect).then(|| args.storage_share.unwrap_or(DEFAULT_SHARE))
+}
+
+/// `--storage-share` must leave the fit a share: within (0, 0.9].
+pub(super) fn check_share(args: &Args) -> Result<(), CliError> {
+    match args.storage_share {
+        Some(r) if !(r > 0.0 && r <= 0.9) => {
+            Err(CliError::usage(format!("--storage-share must be within (0, 0.9], got {r}")))
+        }
+        Some(_) if args.lossless => {
+            Err(CliError::usage("--storage-share sets how far the stored heights may move: not with --lossless"))
+        }
+        _ => Ok(()),
+    }
+}
+
+/// Takes the storage share off the fit's tolerances: the fit aims at (1 − r)·T at every cell
+/// (the floor and the uncertainty multiple alike), so T·(1 − r) + r·E_min ≤ T.
+pub(super) fn fit_share(args: &Args, opts: &mut FitOptions) {
+    if let Some(r) = share(args) {
+        opts.max_error *= 1.0 - r;
+        if let Some(c) = &mut opts.cell_tolerance {
+            c.k *= 1.0 - r;
+            c.floor *= 1.0 - r;
+        }
+    }
+}
+
+/// What the stored file holds and how far its decoded surface is from the data.
+#[derive(Debug, Clone, serde::Serialize)]
+pub(super) struct Stored {
+    /// The half-step `q` of the heights (the most a control point moved), null: lossless.
+    pub quantum: Option<f64>,
+    /// max |Δz| over the valid cells of the file decoded from its bytes (null: lossless
+    /// heights, which the fit checked as written, or a fit that missed its tolerance).
+    pub decoded_max_abs_error: Option<f64>,
+    pub bytes: usize,
+}
+
+/// Encodes `file` as `args` asks. A quantised `.tmb` of a fit that reached its tolerance is
+/// decoded and evaluated at every valid cell; a cell over its tolerance (not expected: the fit
+/// left `q` free) halves `q`, down to lossless heights after three tries.
+pub(super) fn encode(file: &TMeshFile, args: &Args, p: &Prepared, fit_ok: bool) -> Result<(Vec<u8>, Stored), CliError> {
+    let encoding = Encoding::for_path(args.output.as_deref());
+    let mut q = share(args).map(|r| r * p.e_min);
+    for tries in 0.. {
+        let mut bytes = Vec::new();
+        match encoding {
+            Encoding::Binary => {
+                tspline::tmb::write_with(file, &WriteOptions { quantum: q }, &mut bytes).map_err(CliError::io_out)?
+            }
+            Encoding::Xml => tspline::format::write(file, &mut bytes).map_err(CliError::io_out)?,
+        }
+        // lossless heights are the fit's own, checked as written by the fit
+        let checked = if fit_ok && q.is_some() { Some(decoded_errors(&bytes, p)?) } else { None };
+        if checked.map_or(true, |(_, over)| over == 0) {
+            let stored = Stored { quantum: q, decoded_max_abs_error: checked.map(|c| c.0), bytes: bytes.len() };
+            return Ok((bytes, stored));
+        }
+        q = if tries < 2 { q.map(|v| 0.5 * v) } else { None };
+    }
+    unreachable!("the loop returns by lossless heights at the latest")
+}
+
+/// (max |Δz|, cells over their tolerance) of the mesh decoded from `bytes`, evaluated at every
+/// cell of the raster as `geofit eval` evaluates it on the fitted grid.
+fn decoded_errors(bytes: &[u8], p: &Prepared) -> Result<(f64, usize), CliError> {
+    if p.points.is_some() {
+        return Ok((f64::NAN, 0)); // --indirect: stored lossless, checked by the fit
+    }
+    let back = tspline::format::read(bytes)
+        .map_err(|e| CliError::internal(format!("the T-mesh just encoded does not read back: {e}")))?;
+    let s: &Samples = &p.samples;
+    let g = GridSpec { s0: 0.0, t0: 0.0, ds: 1.0, dt: 1.0, ns: s.width, nt: s.height };
+    let z = PbSpline::build(&back.mesh).eval_grid(&g, true);
+    let (mut worst, mut over) = (0.0f64, 0usize);
+    for (q, zq) in z.iter().enumerate() {
+        let d = s.z.get(q);
+        if d.is_nan() {
+            continue;
+        }
+        let e = if zq.is_nan() { f64::INFINITY } else { (zq - d).abs() };
+        let tol = p.cell_tolerance.as_ref().map_or(p.e_min, |c| c.at(q));
+        worst = worst.max(e);
+        over += (e > tol) as usize;
+    }
+    Ok((worst, over))
+}
