@@ -288,7 +288,7 @@ fn inputs_read_whole_stop_at_the_byte_budget() {
     let o = run_with(&["info", "-"], Some(vec![0u8; 3_000_000]));
     fails(&o, 3, &["<stdin>", "more than 1000000 bytes set by GEOFIT_MAX_INPUT_BYTES"]);
     assert!(t.elapsed() < Duration::from_secs(20));
-    let endless_xml = b"<!-- a comment that never ends ".iter().copied().chain(std::iter::repeat(b'x').take(3_000_000)).collect();
+    let endless_xml = b"<!-- a comment that never ends ".iter().copied().chain(std::iter::repeat_n(b'x', 3_000_000)).collect();
     let o = run_with(&["-q", "heal", "-", "-o", s(&out)], Some(endless_xml));
     fails(&o, 3, &["<stdin>", "more than 1000000 bytes"]);
     let big = dir.path().join("big.gml");

@@ -7,6 +7,7 @@
 //!   reader whose ECEF positions come from PROJ's cs2cs (tests/scripts/scaleout_tileset.py);
 //! - Snakemake's own bookkeeping: a fault injected once is retried, a deleted output is exactly
 //!   what a dry run redoes, a second run does nothing; `make -j2` gives the same bytes.
+//!
 //! Rules: docs/decisions.md#scale-out-tiles-and-workflows.
 
 mod common;

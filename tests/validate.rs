@@ -437,7 +437,7 @@ fn building_doc(geometry: &str) -> String {
 fn composite_xml(solids: &[Vec<Vec<Pt>>]) -> String {
     let mut s = String::from("<gml:CompositeSolid gml:id=\"CS1\">\n");
     for (k, sol) in solids.iter().enumerate() {
-        s += &format!("<gml:solidMember>{}</gml:solidMember>\n", solid_xml(&[sol.clone()], &format!("S{}", k + 1)));
+        s += &format!("<gml:solidMember>{}</gml:solidMember>\n", solid_xml(std::slice::from_ref(sol), &format!("S{}", k + 1)));
     }
     s + "</gml:CompositeSolid>\n"
 }

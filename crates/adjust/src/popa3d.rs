@@ -251,50 +251,50 @@ impl<'a> Net<'a> {
     fn plane_slots(&self, p: pm::PlaneId) -> Vec<Slot> {
         plane_slots_of(self.m, &self.par, &self.pd, p)
     }
-    fn check<T>(&self, what: &str, id: usize, len: usize, el: &str) -> Result<(), ModelError> {
+    fn check(&self, what: &str, id: usize, len: usize, el: &str) -> Result<(), ModelError> {
         if id >= len {
             return Err(ModelError::Reference { element: el.to_string(), message: format!("references {what} {id}, which does not exist") });
         }
         Ok(())
     }
     fn face_plane(&self, f: pm::FaceId, el: &str) -> Result<pm::PlaneId, ModelError> {
-        self.check::<()>("face", f.idx(), self.m.faces.len(), el)?;
+        self.check("face", f.idx(), self.m.faces.len(), el)?;
         let p = self.m.face(f).plane;
-        self.check::<()>("plane", p.idx(), self.m.planes.len(), el)?;
+        self.check("plane", p.idx(), self.m.planes.len(), el)?;
         Ok(p)
     }
     fn edge_planes(&self, e: pm::EdgeId, el: &str) -> Result<[pm::PlaneId; 2], ModelError> {
-        self.check::<()>("edge", e.idx(), self.m.edges.len(), el)?;
+        self.check("edge", e.idx(), self.m.edges.len(), el)?;
         self.m.edge_planes(&self.inc, e).map_err(|err| ModelError::Reference { element: el.to_string(), message: err.to_string() })
     }
     fn node_planes(&self, n: pm::NodeId, el: &str) -> Result<[pm::PlaneId; 3], ModelError> {
-        self.check::<()>("node", n.idx(), self.m.nodes.len(), el)?;
+        self.check("node", n.idx(), self.m.nodes.len(), el)?;
         self.m.node_plane_triple(&self.inc, n).map_err(|err| ModelError::Reference { element: el.to_string(), message: err.to_string() })
     }
     fn setup_slots(&self, s: pm::SetupId, el: &str) -> Result<Vec<Slot>, ModelError> {
-        self.check::<()>("setup", s.idx(), self.m.setups.len(), el)?;
+        self.check("setup", s.idx(), self.m.setups.len(), el)?;
         let fpi = self.m.setups[s.idx()].fixed_point.idx();
-        self.check::<()>("fixed point", fpi, self.m.fixed_points.len(), el)?;
+        self.check("fixed point", fpi, self.m.fixed_points.len(), el)?;
         Ok(self.sq[s.idx()].iter().chain(self.fp[fpi].iter()).map(|&u| u.into()).collect())
     }
     fn unknown(&self, u: &pm::Unknown, el: &str) -> Result<UnknownId, ModelError> {
         Ok(match *u {
             pm::Unknown::PlaneD(p) => {
-                self.check::<()>("plane", p.idx(), self.pd.len(), el)?;
+                self.check("plane", p.idx(), self.pd.len(), el)?;
                 self.pd[p.idx()]
             }
             pm::Unknown::Param(p) => {
-                self.check::<()>("parameter", p.idx(), self.par.len(), el)?;
+                self.check("parameter", p.idx(), self.par.len(), el)?;
                 self.par[p.idx()]
             }
             pm::Unknown::Translation(f, k) => {
-                self.check::<()>("fixed point", f.idx(), self.fp.len(), el)?;
-                self.check::<()>("translation component", k as usize, 3, el)?;
+                self.check("fixed point", f.idx(), self.fp.len(), el)?;
+                self.check("translation component", k as usize, 3, el)?;
                 self.fp[f.idx()][k as usize]
             }
             pm::Unknown::Rotation(s, k) => {
-                self.check::<()>("setup", s.idx(), self.sq.len(), el)?;
-                self.check::<()>("quaternion component", k as usize, 4, el)?;
+                self.check("setup", s.idx(), self.sq.len(), el)?;
+                self.check("quaternion component", k as usize, 4, el)?;
                 self.sq[s.idx()][k as usize]
             }
         })
@@ -456,7 +456,7 @@ impl Mapping<'_> {
             }
             ObsKind::RelativeDistancePlanePlane { lower, upper, l } => {
                 for q in [lower, upper] {
-                    net.check::<()>("plane", q.idx(), m.planes.len(), el)?;
+                    net.check("plane", q.idx(), m.planes.len(), el)?;
                 }
                 // d' = sign·d along the normal object's own direction (popa3d-model convention).
                 let x = vec![Slot { unknown: net.pd[lower.idx()], sign: m.plane(*lower).sign.f64() }, Slot { unknown: net.pd[upper.idx()], sign: m.plane(*upper).sign.f64() }];
@@ -464,13 +464,13 @@ impl Mapping<'_> {
             }
             ObsKind::RelativeAngleNormalNormal { a, b, l } => {
                 for q in [a, b] {
-                    net.check::<()>("normal", q.idx(), m.normals.len(), el)?;
+                    net.check("normal", q.idx(), m.normals.len(), el)?;
                 }
                 let x = [net.normal_slots(*a, 1.0), net.normal_slots(*b, 1.0)].concat();
                 self.add_measured(el, i, *l, RelativeAngleNormalNormal, x)
             }
             ObsKind::NormNV { normal, sigma } => {
-                net.check::<()>("normal", normal.idx(), m.normals.len(), el)?;
+                net.check("normal", normal.idx(), m.normals.len(), el)?;
                 let x = net.normal_slots(*normal, 1.0);
                 match sigma {
                     Some(s) => self.add_measured(el, i, pm::Measured { value: 1.0, sigma: *s }, NormNvObs, x),
@@ -478,7 +478,7 @@ impl Mapping<'_> {
                 }
             }
             ObsKind::NormQ { setup } => {
-                net.check::<()>("setup", setup.idx(), m.setups.len(), el)?;
+                net.check("setup", setup.idx(), m.setups.len(), el)?;
                 let x = net.sq[setup.idx()].iter().map(|&u| u.into()).collect();
                 self.add_restriction(el, NormQ, x)
             }

@@ -49,7 +49,7 @@ impl Snapper {
                         for &id in ids {
                             let d2 = (self.points[id as usize] - q).norm_squared();
                             let hit = if self.tol > 0.0 { d2 <= tol2 } else { d2 == 0.0 };
-                            if hit && best.map_or(true, |b| id < b) {
+                            if hit && best.is_none_or(|b| id < b) {
                                 best = Some(id);
                             }
                         }

@@ -55,7 +55,7 @@ fn locate(obj: &CityObject, geom: &Geometry, shells: &[Vec<&Polygon>], issue: Is
     };
     let mut detail = issue.detail;
     if let Some(i) = issue.polygon {
-        if poly.map_or(true, |p| p.id.is_none()) {
+        if poly.is_none_or(|p| p.id.is_none()) {
             detail = format!("polygon #{}: {}", i + 1, detail);
         }
     }

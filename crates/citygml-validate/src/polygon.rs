@@ -134,7 +134,7 @@ fn check_polygon(
     }
     let pts = |r: &Vec<u32>| -> Vec<V3> { r.iter().map(|&i| snap.points[i as usize]).collect() };
     let ext3 = pts(&rs[0]);
-    let all3: Vec<V3> = rs.iter().flat_map(|r| pts(r)).collect();
+    let all3: Vec<V3> = rs.iter().flat_map(pts).collect();
     let newell = newell_normal(&ext3);
     let extent = extent_from_first(&all3);
     if !(newell.norm() > 1e-12 * extent * extent) {

@@ -65,7 +65,7 @@ pub fn memory_headroom() -> Option<(u64, Option<MemoryLimit>)> {
     for (bytes, limit) in limits {
         let Some(bytes) = bytes else { continue };
         let bytes = bytes - bytes / 8;
-        if best.map_or(true, |(b, _)| bytes < b) {
+        if best.is_none_or(|(b, _)| bytes < b) {
             best = Some((bytes, Some(limit)));
         }
     }
@@ -330,7 +330,7 @@ mod tests {
     #[test]
     fn the_smallest_headroom_applies() {
         if let Some((bytes, _)) = memory_headroom() {
-            assert!(available_memory().map_or(true, |a| bytes <= a));
+            assert!(available_memory().is_none_or(|a| bytes <= a));
         }
     }
 }

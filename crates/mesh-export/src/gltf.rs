@@ -124,10 +124,10 @@ impl Builder {
         bytes: &[u8],
         target: json::buffer::Target,
     ) -> json::Index<json::buffer::View> {
-        debug_assert!(self.bin.len() % 4 == 0);
+        debug_assert!(self.bin.len().is_multiple_of(4));
         let offset = self.bin.len();
         self.bin.extend_from_slice(bytes);
-        while self.bin.len() % 4 != 0 {
+        while !self.bin.len().is_multiple_of(4) {
             self.bin.push(0);
         }
         self.root.push(json::buffer::View {

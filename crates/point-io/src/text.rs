@@ -245,7 +245,7 @@ pub fn could_be_decimal_commas(fields: &[&str]) -> bool {
         !d.is_empty() && d.bytes().all(|b| b.is_ascii_digit())
     };
     let unsigned = |f: &str| !f.is_empty() && f.bytes().all(|b| b.is_ascii_digit());
-    fields.len() >= 6 && fields.len() % 2 == 0 && fields.chunks(2).all(|p| whole(p[0]) && unsigned(p[1]))
+    fields.len() >= 6 && fields.len().is_multiple_of(2) && fields.chunks(2).all(|p| whole(p[0]) && unsigned(p[1]))
 }
 
 /// Why a field is not a usable number; the message follows `axis = "field"` in an error.

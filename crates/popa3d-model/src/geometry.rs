@@ -106,7 +106,7 @@ impl Popa3d {
                     let det = Matrix3::from_rows(&[units[i].transpose(), units[j].transpose(), units[k].transpose()])
                         .determinant()
                         .abs();
-                    if best.map_or(true, |(_, b)| det > b + 1e-12) {
+                    if best.is_none_or(|(_, b)| det > b + 1e-12) {
                         best = Some(([planes[i], planes[j], planes[k]], det));
                     }
                 }
@@ -132,7 +132,7 @@ impl Popa3d {
                 let a = Vector3::from(self.plane_value(planes[i]).n);
                 let b = Vector3::from(self.plane_value(planes[j]).n);
                 let s = a.cross(&b).norm() / (a.norm() * b.norm()).max(f64::MIN_POSITIVE);
-                if best.map_or(true, |(_, x)| s > x + 1e-12) {
+                if best.is_none_or(|(_, x)| s > x + 1e-12) {
                     best = Some(([planes[i], planes[j]], s));
                 }
             }

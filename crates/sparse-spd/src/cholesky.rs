@@ -187,7 +187,7 @@ impl Workspace {
             self.factor.reserve_exact(room - self.factor.len());
         }
         self.factor.resize(len, 0.0);
-        let fits = |b: &MemBuffer| b.len() >= req.size_bytes() && (b.as_ptr() as usize) % req.align_bytes().max(1) == 0;
+        let fits = |b: &MemBuffer| b.len() >= req.size_bytes() && (b.as_ptr() as usize).is_multiple_of(req.align_bytes().max(1));
         if !self.scratch.as_ref().is_some_and(fits) {
             self.scratch = None;
             self.scratch = Some(MemBuffer::new(req));

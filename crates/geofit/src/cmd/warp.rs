@@ -108,7 +108,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     let needs_tiff = |opts: &raster_io::WriteOptions| {
         let tiff = match &opts.format {
             Some(f) => matches!(f, RasterFormat::Cog | RasterFormat::GeoTiff),
-            None => args.output.as_deref().map_or(true, |p| {
+            None => args.output.as_deref().is_none_or(|p| {
                 let ext = std::path::Path::new(p).extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
                 matches!(ext.as_deref(), Some("tif" | "tiff")) || p == "-"
             }),
