@@ -105,6 +105,8 @@ CLIPPY_ALLOW := -A clippy::neg_cmp_op_on_partial_ord -A clippy::needless_range_l
   -A clippy::too_many_arguments -A clippy::excessive_precision -A clippy::collapsible_match -A clippy::large_enum_variant
 MSRV := $(shell sed -n 's/^rust-version = "\(.*\)"/\1/p' Cargo.toml)
 lint:
+	python3 docs/index_decisions.py --check
+	python3 benches/summary.py --check
 	$(CARGO) fmt --all -- --check
 	$(CARGO) clippy --workspace --all-targets -- -D warnings $(CLIPPY_ALLOW)
 	RUSTDOCFLAGS="-D warnings" $(CARGO) doc --workspace --no-deps -q

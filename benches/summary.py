@@ -2,7 +2,8 @@
 """Builds BENCHMARKS.md from benches/results/: first the table of today's figures (one row per
 benchmark from every benches/results/<area>.tsv: figure, the peer's figure in the same run, the
 ratio, date and commit), then the links to each area's full write-up and to the history.
-Run by `make bench` after the benchmarks (issue 39); by hand: python3 benches/summary.py."""
+Run by `make bench` after the benchmarks (issue 39); by hand: python3 benches/summary.py
+(--check, in `make lint`: exit 1 when BENCHMARKS.md does not match the results)."""
 import csv
 import pathlib
 import sys
@@ -62,7 +63,12 @@ def main():
     for md in sorted(HISTORY.glob("*.md")):
         lines.append(f"- [{md.stem}](benches/history/{md.name})")
     lines += ["", "Design decisions behind these figures: [docs/decisions.md](docs/decisions.md) (index at its top)."]
-    (ROOT / "BENCHMARKS.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
+    text = "\n".join(lines) + "\n"
+    if "--check" in sys.argv:
+        if (ROOT / "BENCHMARKS.md").read_text(encoding="utf-8") != text:
+            sys.exit("BENCHMARKS.md is stale: run python3 benches/summary.py")
+        return
+    (ROOT / "BENCHMARKS.md").write_text(text, encoding="utf-8")
 
 
 if __name__ == "__main__":
