@@ -178,7 +178,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     if args.strict && !r.kept.is_empty() {
         return Err(CliError::findings(format!("{name}: --strict: {} building(s) would keep their original geometry (first: {}: {}); nothing written", r.kept.len(), r.kept[0].building, r.kept[0].reason)));
     }
-    output.write_bytes(&healed.document)?;
+    crate::config::encoding::write_document(&output, &healed.document)?;
     if let Some(p) = &args.report {
         write_json_report(p, &REPORT, &Report { input: name, heal: r })?;
     }
