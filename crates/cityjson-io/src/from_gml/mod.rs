@@ -66,8 +66,8 @@ impl<'s> ObjectMapper<'s> {
         };
         let bytes = self.src.get(o.span.bytes.clone()).unwrap_or_default();
         let attributes = attrs::scan(bytes, &id, &mut self.report);
-        let surfaces = self.surfaces(o);
-        let geometry = self.geometries(o, &surfaces, &id);
+        let mut surfaces = self.surfaces(o);
+        let geometry = self.geometries(o, &mut surfaces, &id);
         let mut obj = Map::new();
         obj.insert("type".into(), json!(ty));
         if !attributes.is_empty() {
@@ -138,7 +138,7 @@ impl<'s> ObjectMapper<'s> {
 
     /// The object's own geometries, then its boundary surfaces' faces that none of them holds
     /// (one MultiSurface per LoD).
-    fn geometries(&mut self, o: &CityObject, flat: &Flat<'_>, id: &str) -> Vec<Value> {
+    fn geometries(&mut self, o: &CityObject, flat: &mut Flat<'_>, id: &str) -> Vec<Value> {
         let by_id: HashMap<&str, usize> =
             flat.features.iter().enumerate().filter_map(|(i, f)| f.id.as_deref().map(|d| (d, i))).collect();
         // Faces defined inline in a surface, and faces a surface points to by XLink.

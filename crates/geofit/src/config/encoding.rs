@@ -195,8 +195,14 @@ pub fn convert(
     }
     let strict = to == Encoding::CityGml;
     let (gml, r) = cityjson_io::to_citygml(raw, GmlOptions { strict }).map_err(|e| read_error(name, e))?;
-    report.merge(r);
-    let (out, r) = encode(&gml, to, &opts, None)?;
+    // CityJSON to CityJSON keeps what CityGML cannot type (booleans, nulls, metadata), as a
+    // write-back does.
+    let original: Option<Value> =
+        (from == Encoding::CityJson && to == Encoding::CityJson).then(|| serde_json::from_slice(raw).ok()).flatten();
+    if original.is_none() {
+        report.merge(r);
+    }
+    let (out, r) = encode(&gml, to, &opts, original.as_ref())?;
     report.merge(r);
     Ok((out, report))
 }
