@@ -13,18 +13,22 @@
 #   jobs.sh tileset  OUT TILE...         → OUT/tileset.json
 #   jobs.sh tile     OUT TILE            → extract, validate, heal, export of one tile (skips done steps)
 #
-# The raster pipeline (docs/decisions.md#raster-tiles-and-seams), SRC any GDAL raster:
-#   jobs.sh rplan    OUT SRC             → OUT/plan.jsonl (core windows of GEOFIT_TILE_PIXELS)
-#   jobs.sh rplanmk  OUT SRC             → OUT/plan.mk
-#   jobs.sh rfit     OUT SRC TILE        → OUT/fit/TILE.tmb (the tile's window only, read by GDAL)
-#   jobs.sh stitch   OUT SRC TILE        → OUT/stitched/TILE.tmb (+ .json): C0 with its neighbours
-#   jobs.sh reval    OUT TILE            → OUT/eval/TILE.tif (the surface on the tile's cells)
-#   jobs.sh seams    OUT                 → OUT/seams.json (gap and normal-angle jump per seam)
-#   jobs.sh mosaic   OUT TILE...         → OUT/mosaic.vrt (gdalbuildvrt over the tiles' rasters)
-#   jobs.sh rrange   OUT SRC             → OUT/zrange.txt (the source's min and max: one colour ramp)
-#   jobs.sh rglb     OUT TILE            → OUT/glb/TILE.glb (the stitched surface, every
-#                                          GEOFIT_SURFACE_STEP cells; tiles share their seam vertices)
-#   jobs.sh rtileset OUT TILE...         → OUT/tileset.json (3D Tiles 1.1 over the tiles' glb)
+# The raster pipeline (docs/decisions.md#raster-tiles-and-seams), SRC any GDAL raster. Every
+# raster step reads only the paths it is given and writes only its output path (what Snakemake's
+# {input} and {output} are: storage plugins stage them); tile lists come from the plan, never from
+# the command line (docs/decisions.md#raster-jobs-read-input-write-output):
+#   jobs.sh rplan    PLAN SRC                     → PLAN (JSON lines; tiles without data: work 0)
+#   jobs.sh rplanmk  PLAN.mk SRC                  → the make fragment (TILES := ids with data)
+#   jobs.sh rfit     PLAN SRC TILE OUT.tmb        → the tile's fit (its window only, read by GDAL)
+#   jobs.sh stitch   PLAN SRC TILE FIT.tmb OUT.tmb OUT.json
+#                                                 → C0 with its neighbours, whose fits lie beside FIT.tmb
+#   jobs.sh reval    IN.tmb OUT.tif               → the surface on the tile's cells
+#   jobs.sh seams    PLAN ZRANGE ONE.tmb OUT.json → gap and normal-angle jump per seam (meshes beside ONE.tmb)
+#   jobs.sh mosaic   PLAN ONE.tif OUT.vrt         → gdalbuildvrt over the tiles' rasters (beside ONE.tif)
+#   jobs.sh rrange   SRC OUT.txt                  → the source's min and max (one colour ramp)
+#   jobs.sh rglb     IN.tmb ZRANGE OUT.glb        → the stitched surface, every GEOFIT_SURFACE_STEP
+#                                                   cells; tiles share their seam vertices
+#   jobs.sh rtileset PLAN ONE.glb OUT.json        → 3D Tiles 1.1 over the tiles' glb (beside ONE.glb)
 #
 # Every output is written atomically (geofit writes a temporary file and renames it; the one
 # stdout capture below does the same), so a killed job leaves no half-written file.
@@ -60,6 +64,12 @@ findings_ok() {
     local rc=0
     "$@" || rc=$?
     [ "$rc" -le 1 ] || exit "$rc"
+}
+
+# The ids of a raster plan's tiles with data (work > 0), one a line: the JSON lines geofit writes
+# hold "id" first and "work" after the windows, so sed reads them without a JSON tool.
+plan_ids() {
+    sed -n 's/^{"id":"\([^"]*\)".*"work":\([0-9]*\).*/\1 \2/p' "$1" | awk '$2 > 0 { print $1 }'
 }
 
 fail_once() {
@@ -124,66 +134,75 @@ tile)
     [ -e "$out/glb/$t.glb" ] || bash "$here" export "$out" "$t"
     ;;
 rplan)
-    mkdir -p "$out"
-    "$GEOFIT" -q tile plan --tile-size "${GEOFIT_TILE_PIXELS:-1024}" --halo 2 -o "$out/plan.jsonl" "$1"
+    mkdir -p "$(dirname "$out")"
+    "$GEOFIT" -q tile plan --tile-size "${GEOFIT_TILE_PIXELS:-1024}" --halo 2 -o "$out" "$1"
     ;;
 rplanmk)
-    mkdir -p "$out"
-    "$GEOFIT" -q tile plan --tile-size "${GEOFIT_TILE_PIXELS:-1024}" --halo 2 --format make -o "$out/plan.mk" "$1"
+    mkdir -p "$(dirname "$out")"
+    "$GEOFIT" -q tile plan --tile-size "${GEOFIT_TILE_PIXELS:-1024}" --halo 2 --format make -o "$out" "$1"
     ;;
 rfit)
-    src=$1 t=$2
+    plan=$out src=$1 t=$2 dst=$3
+    out=$(dirname "$plan") # the fail-once markers' default place
     fail_once "$t"
-    mkdir -p "$out/fit"
+    mkdir -p "$(dirname "$dst")"
     read -r -a FIT_ARGS <<<"${GEOFIT_FIT_ARGS:-}"
-    "$GEOFIT" -q fit "$src" --plan "$out/plan.jsonl" --tile "$t" --max-error "${GEOFIT_MAX_ERROR:-0.5}" "${FIT_ARGS[@]}" -o "$out/fit/$t.tmb"
+    "$GEOFIT" -q fit "$src" --plan "$plan" --tile "$t" --max-error "${GEOFIT_MAX_ERROR:-0.5}" "${FIT_ARGS[@]}" -o "$dst"
     ;;
 stitch)
-    src=$1 t=$2
-    mkdir -p "$out/stitched"
-    "$GEOFIT" -q tile stitch "$src" --plan "$out/plan.jsonl" --tile "$t" --meshes "$out/fit/{id}.tmb" --max-error "${GEOFIT_MAX_ERROR:-0.5}" -o "$out/stitched/$t.tmb" --report "$out/stitched/$t.json"
+    plan=$out src=$1 t=$2 fit=$3 dst=$4 report=$5
+    mkdir -p "$(dirname "$dst")" "$(dirname "$report")"
+    "$GEOFIT" -q tile stitch "$src" --plan "$plan" --tile "$t" --meshes "$(dirname "$fit")/{id}.tmb" --max-error "${GEOFIT_MAX_ERROR:-0.5}" -o "$dst" --report "$report"
     ;;
 reval)
-    t=$1
-    mkdir -p "$out/eval"
-    "$GEOFIT" -q eval "$out/stitched/$t.tmb" -o "$out/eval/$t.tif"
+    src=$out dst=$1
+    mkdir -p "$(dirname "$dst")"
+    "$GEOFIT" -q eval "$src" -o "$dst"
     ;;
 seams)
-    "$GEOFIT" -q tile seams "$out/plan.jsonl" --meshes "$out/stitched/{id}.tmb" -o "$out/seams.json"
+    plan=$out zrange=$1 one=$2 dst=$3
+    read -r zmin zmax <"$zrange"
+    range=(--z-range "$zmin" "$zmax")
+    [ "$zmin" != "$zmax" ] || range=()
+    mkdir -p "$(dirname "$dst")"
+    "$GEOFIT" -q tile seams "$plan" "${range[@]}" --meshes "$(dirname "$one")/{id}.tmb" -o "$dst"
     ;;
 mosaic)
-    args=()
-    for t in "$@"; do args+=("$out/eval/$t.tif"); done
-    tmp="$out/.mosaic.$$.vrt"
-    trap 'rm -f "$tmp"' EXIT
-    gdalbuildvrt -q "$tmp" "${args[@]}"
+    plan=$out one=$1 dst=$2
+    dir=$(dirname "$one")
+    tmp="$(dirname "$dst")/.mosaic.$$.vrt" list="$(dirname "$dst")/.mosaic.$$.txt"
+    trap 'rm -f "$tmp" "$list"' EXIT
+    plan_ids "$plan" | sed "s|.*|$dir/&.tif|" >"$list"
+    gdalbuildvrt -q -input_file_list "$list" "$tmp"
     # the VRT names its sources relative to itself: same directory, so the rename keeps them valid
-    mv "$tmp" "$out/mosaic.vrt"
+    mv "$tmp" "$dst"
     ;;
 rrange)
-    src=$1
-    # runs beside the plan job (it needs only the source), so OUT may not exist yet
-    mkdir -p "$out"
-    tmp=$(mktemp "$out/.zrange.XXXXXX")
+    src=$out dst=$1
+    # runs beside the plan job (it needs only the source), so the directory may not exist yet
+    mkdir -p "$(dirname "$dst")"
+    tmp=$(mktemp "$(dirname "$dst")/.zrange.XXXXXX")
     trap 'rm -f "$tmp"' EXIT
     # GDAL computes the exact min/max block by block (bounded memory, no .aux.xml written)
     gdalinfo -mm "$src" | sed -n 's/.*Computed Min\/Max=\([^,]*\),\(.*\)$/\1 \2/p' | head -n 1 >"$tmp"
     [ -s "$tmp" ] || { echo "jobs.sh rrange: gdalinfo -mm gave no Min/Max for $src" >&2; exit 1; }
-    chmod 644 "$tmp" && mv "$tmp" "$out/zrange.txt"
+    chmod 644 "$tmp" && mv "$tmp" "$dst"
     ;;
 rglb)
-    t=$1 step=${GEOFIT_SURFACE_STEP:-4}
-    read -r zmin zmax <"$out/zrange.txt"
+    src=$out zrange=$1 dst=$2 step=${GEOFIT_SURFACE_STEP:-4}
+    read -r zmin zmax <"$zrange"
     # a flat source (min = max at gdalinfo's 3 decimals) has no ramp to share
     range=(--height-range "$zmin" "$zmax")
     [ "$zmin" != "$zmax" ] || range=()
-    mkdir -p "$out/glb"
-    "$GEOFIT" -q surface "$out/stitched/$t.tmb" --step "$step" --no-cell-edges "${range[@]}" -o "$out/glb/$t.glb"
+    mkdir -p "$(dirname "$dst")"
+    "$GEOFIT" -q surface "$src" --step "$step" --no-cell-edges "${range[@]}" -o "$dst"
     ;;
 rtileset)
-    args=()
-    for t in "$@"; do args+=("$out/glb/$t.glb"); done
-    "$GEOFIT" -q tile tileset "${TILESET_ARGS[@]}" "${args[@]}" -o "$out/tileset.json"
+    plan=$out one=$1 dst=$2
+    dir=$(dirname "$one")
+    mapfile -t args < <(plan_ids "$plan" | sed "s|.*|$dir/&.glb|")
+    mkdir -p "$(dirname "$dst")"
+    "$GEOFIT" -q tile tileset "${TILESET_ARGS[@]}" "${args[@]}" -o "$dst"
     ;;
 *)
     echo "jobs.sh: unknown step '$step'" >&2

@@ -2,7 +2,10 @@
 #   plan → fit(t) → stitch(t) [needs the fits of t and its neighbours] → eval(t) → mosaic.vrt
 #                                                                      ├→ seams.json
 #   zrange ──────────────────────────────────────────────────────────→ glb(t) → tileset.json
-# Every job is one line of workflows/jobs.sh.
+# Every job is one line of workflows/jobs.sh that reads its {input} and writes its {output}
+# (storage plugins stage both); tile lists are read from the plan by the job, never passed on the
+# command line; the plan is parsed once per workflow run
+# (docs/decisions.md#raster-jobs-read-input-write-output). Tiles without data (work 0) have no jobs.
 
 import json
 import os
@@ -21,22 +24,41 @@ ENV = " ".join(
         ("GEOFIT_TILESET_ARGS", config.get("tileset_args", "")),
     ]
 )
+JOB = f"env {ENV} bash {JOBS}"
+
+_PLAN = {}
 
 
-def plan_tiles():
-    """The plan's tiles (known once the plan checkpoint has run)."""
-    with open(checkpoints.plan.get().output[0]) as f:
-        return [json.loads(line) for line in f if line.strip()]
+def plan():
+    """The plan's tiles with data, by id, and their ids in plan order: parsed once per plan file
+    (its path, size and mtime), however often the DAG asks."""
+    path = checkpoints.plan.get().output[0]
+    st = os.stat(path)
+    key = (path, st.st_size, st.st_mtime_ns)
+    if key not in _PLAN:
+        tiles = {}
+        with open(path) as f:
+            for line in f:
+                if line.strip():
+                    t = json.loads(line)
+                    if t["work"] > 0:
+                        tiles[t["id"]] = t["neighbours"]
+        _PLAN.clear()
+        _PLAN[key] = (tiles, list(tiles))
+    return _PLAN[key]
 
 
 def tile_ids():
-    return [t["id"] for t in plan_tiles()]
+    return plan()[1]
 
 
-def stitch_inputs(wildcards):
-    """A tile's stitch reads its own first-pass mesh and its neighbours'."""
-    t = next(t for t in plan_tiles() if t["id"] == wildcards.tile)
-    return [f"{OUT}/fit/{i}.tmb" for i in [t["id"]] + t["neighbours"]]
+def neighbour_fits(wildcards):
+    """A tile's stitch reads its neighbours' first-pass meshes (its own is `fit`)."""
+    return [f"{OUT}/fit/{i}.tmb" for i in plan()[0][wildcards.tile]]
+
+
+def every(pattern):
+    return lambda wc: [pattern.format(i) for i in tile_ids()]
 
 
 # the targets of `rule all` (workflows/Snakefile); the per-tile rasters too, so a deleted one is
@@ -45,8 +67,8 @@ TARGETS = [
     f"{OUT}/mosaic.vrt",
     f"{OUT}/seams.json",
     f"{OUT}/tileset.json",
-    lambda wc: expand(f"{OUT}/eval/{{tile}}.tif", tile=tile_ids()),
-    lambda wc: expand(f"{OUT}/glb/{{tile}}.glb", tile=tile_ids()),
+    every(f"{OUT}/eval/{{}}.tif"),
+    every(f"{OUT}/glb/{{}}.glb"),
 ]
 
 
@@ -55,12 +77,8 @@ checkpoint plan:
         RASTER,
     output:
         f"{OUT}/plan.jsonl",
-    params:
-        env=ENV,
-        jobs=JOBS,
-        out=OUT,
     shell:
-        "env {params.env} bash {params.jobs} rplan {params.out} {input}"
+        JOB + " rplan {output} {input}"
 
 
 rule fit:
@@ -69,28 +87,21 @@ rule fit:
         raster=RASTER,
     output:
         f"{OUT}/fit/{{tile}}.tmb",
-    params:
-        env=ENV,
-        jobs=JOBS,
-        out=OUT,
     shell:
-        "env {params.env} bash {params.jobs} rfit {params.out} {input.raster} {wildcards.tile}"
+        JOB + " rfit {input.plan} {input.raster} {wildcards.tile} {output}"
 
 
 rule stitch:
     input:
-        stitch_inputs,
+        neighbour_fits,
+        fit=f"{OUT}/fit/{{tile}}.tmb",
         plan=f"{OUT}/plan.jsonl",
         raster=RASTER,
     output:
         mesh=f"{OUT}/stitched/{{tile}}.tmb",
         report=f"{OUT}/stitched/{{tile}}.json",
-    params:
-        env=ENV,
-        jobs=JOBS,
-        out=OUT,
     shell:
-        "env {params.env} bash {params.jobs} stitch {params.out} {input.raster} {wildcards.tile}"
+        JOB + " stitch {input.plan} {input.raster} {wildcards.tile} {input.fit} {output.mesh} {output.report}"
 
 
 rule eval:
@@ -98,39 +109,33 @@ rule eval:
         f"{OUT}/stitched/{{tile}}.tmb",
     output:
         f"{OUT}/eval/{{tile}}.tif",
-    params:
-        env=ENV,
-        jobs=JOBS,
-        out=OUT,
     shell:
-        "env {params.env} bash {params.jobs} reval {params.out} {wildcards.tile}"
+        JOB + " reval {input} {output}"
 
 
 rule seams:
     input:
-        lambda wc: expand(f"{OUT}/stitched/{{tile}}.tmb", tile=tile_ids()),
+        every(f"{OUT}/stitched/{{}}.tmb"),
+        plan=f"{OUT}/plan.jsonl",
+        zrange=f"{OUT}/zrange.txt",
     output:
         f"{OUT}/seams.json",
     params:
-        env=ENV,
-        jobs=JOBS,
-        out=OUT,
+        one=lambda wc, input: input[0],
     shell:
-        "env {params.env} bash {params.jobs} seams {params.out}"
+        JOB + " seams {input.plan} {input.zrange} {params.one} {output}"
 
 
 rule mosaic:
     input:
-        lambda wc: expand(f"{OUT}/eval/{{tile}}.tif", tile=tile_ids()),
+        every(f"{OUT}/eval/{{}}.tif"),
+        plan=f"{OUT}/plan.jsonl",
     output:
         f"{OUT}/mosaic.vrt",
     params:
-        env=ENV,
-        jobs=JOBS,
-        out=OUT,
-        tiles=lambda wc: " ".join(tile_ids()),
+        one=lambda wc, input: input[0],
     shell:
-        "env {params.env} bash {params.jobs} mosaic {params.out} {params.tiles}"
+        JOB + " mosaic {input.plan} {params.one} {output}"
 
 
 rule zrange:
@@ -138,12 +143,8 @@ rule zrange:
         RASTER,
     output:
         f"{OUT}/zrange.txt",
-    params:
-        env=ENV,
-        jobs=JOBS,
-        out=OUT,
     shell:
-        "env {params.env} bash {params.jobs} rrange {params.out} {input}"
+        JOB + " rrange {input} {output}"
 
 
 rule glb:
@@ -152,23 +153,17 @@ rule glb:
         zrange=f"{OUT}/zrange.txt",
     output:
         f"{OUT}/glb/{{tile}}.glb",
-    params:
-        env=ENV,
-        jobs=JOBS,
-        out=OUT,
     shell:
-        "env {params.env} bash {params.jobs} rglb {params.out} {wildcards.tile}"
+        JOB + " rglb {input.mesh} {input.zrange} {output}"
 
 
 rule tileset:
     input:
-        lambda wc: expand(f"{OUT}/glb/{{tile}}.glb", tile=tile_ids()),
+        every(f"{OUT}/glb/{{}}.glb"),
+        plan=f"{OUT}/plan.jsonl",
     output:
         f"{OUT}/tileset.json",
     params:
-        env=ENV,
-        jobs=JOBS,
-        out=OUT,
-        tiles=lambda wc: " ".join(tile_ids()),
+        one=lambda wc, input: input[0],
     shell:
-        "env {params.env} bash {params.jobs} rtileset {params.out} {params.tiles}"
+        JOB + " rtileset {input.plan} {params.one} {output}"

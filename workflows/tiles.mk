@@ -35,35 +35,35 @@ all: $(OUT)/mosaic.vrt $(OUT)/seams.json $(OUT)/tileset.json $(TILES:%=$(OUT)/ev
 .DEFAULT_GOAL := all
 
 $(OUT)/plan.jsonl: $(RASTER)
-	bash $(JOBS) rplan $(OUT) $(RASTER)
+	bash $(JOBS) rplan $@ $(RASTER)
 
 $(OUT)/plan.mk: $(RASTER)
-	bash $(JOBS) rplanmk $(OUT) $(RASTER)
+	bash $(JOBS) rplanmk $@ $(RASTER)
 
 $(OUT)/fit/%.tmb: $(OUT)/plan.jsonl $(RASTER)
-	bash $(JOBS) rfit $(OUT) $(RASTER) $*
+	bash $(JOBS) rfit $(OUT)/plan.jsonl $(RASTER) $* $@
 
 # a stitch reads its neighbours' fits: make waits for all of them (Snakemake for the neighbours only)
 $(OUT)/stitched/%.tmb $(OUT)/stitched/%.json: $(TILES:%=$(OUT)/fit/%.tmb)
-	bash $(JOBS) stitch $(OUT) $(RASTER) $*
+	bash $(JOBS) stitch $(OUT)/plan.jsonl $(RASTER) $* $(OUT)/fit/$*.tmb $(OUT)/stitched/$*.tmb $(OUT)/stitched/$*.json
 
 $(OUT)/eval/%.tif: $(OUT)/stitched/%.tmb
-	bash $(JOBS) reval $(OUT) $*
+	bash $(JOBS) reval $< $@
 
-$(OUT)/seams.json: $(TILES:%=$(OUT)/stitched/%.tmb) $(OUT)/plan.mk
-	bash $(JOBS) seams $(OUT)
+$(OUT)/seams.json: $(TILES:%=$(OUT)/stitched/%.tmb) $(OUT)/plan.mk $(OUT)/zrange.txt
+	bash $(JOBS) seams $(OUT)/plan.jsonl $(OUT)/zrange.txt $(OUT)/stitched/$(firstword $(TILES)).tmb $@
 
 $(OUT)/mosaic.vrt: $(TILES:%=$(OUT)/eval/%.tif) $(OUT)/plan.mk
-	bash $(JOBS) mosaic $(OUT) $(TILES)
+	bash $(JOBS) mosaic $(OUT)/plan.jsonl $(OUT)/eval/$(firstword $(TILES)).tif $@
 
 $(OUT)/zrange.txt: $(RASTER)
-	bash $(JOBS) rrange $(OUT) $(RASTER)
+	bash $(JOBS) rrange $(RASTER) $@
 
 $(OUT)/glb/%.glb: $(OUT)/stitched/%.tmb $(OUT)/zrange.txt
-	bash $(JOBS) rglb $(OUT) $*
+	bash $(JOBS) rglb $< $(OUT)/zrange.txt $@
 
 $(OUT)/tileset.json: $(TILES:%=$(OUT)/glb/%.glb) $(OUT)/plan.mk
-	bash $(JOBS) rtileset $(OUT) $(TILES)
+	bash $(JOBS) rtileset $(OUT)/plan.jsonl $(OUT)/glb/$(firstword $(TILES)).glb $@
 
 else
 ifeq ($(strip $(SOURCES)),)

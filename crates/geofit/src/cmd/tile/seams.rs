@@ -18,8 +18,9 @@ pub struct SeamsArgs {
     #[arg(long, value_name = "TEMPLATE")]
     pub meshes: String,
     /// Fail (exit 1) when a seam's gap over the data, relative to the data's height range,
-    /// exceeds this.
-    #[arg(long, default_value_t = 1e-9)]
+    /// exceeds this (1e-6: a micrometre per metre of relief, far below what a viewer shows and
+    /// above the rounding of heights far from zero).
+    #[arg(long, default_value_t = 1e-6)]
     pub max_gap_relative: f64,
     /// The data's height range (e.g. `gdalinfo -mm`); default: the range of the tiles' control
     /// points.
