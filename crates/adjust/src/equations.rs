@@ -105,7 +105,7 @@ fn frozen_abs<D: Scalar>(e: D, observed: D) -> D {
 }
 
 equation! {
-    /// DistanceFaceFace: slots [plane i, plane j], obs [l]. l + v = |d_j − s·d_i| with s = sign⟨n_i, n_j⟩.
+    /// DistanceFaceFace: slots [plane i, plane j], obs \[l\]. l + v = |d_j − s·d_i| with s = sign⟨n_i, n_j⟩.
     DistanceFaceFace, "DistanceFaceFace", |x, l| {
         let [(ni, di), (nj, dj)] = planes(x);
         let s = if dot(&ni, &nj).re() >= 0.0 { 1.0 } else { -1.0 };
@@ -114,7 +114,7 @@ equation! {
 }
 
 equation! {
-    /// DistanceFaceEdge: slots [face i, edge plane j, edge plane k], obs [l]. l + v = |d_i − ⟨n_i, p_jk⟩|.
+    /// DistanceFaceEdge: slots [face i, edge plane j, edge plane k], obs \[l\]. l + v = |d_i − ⟨n_i, p_jk⟩|.
     DistanceFaceEdge, "DistanceFaceEdge", |x, l| {
         let [(ni, di), (nj, dj), (nk, dk)] = planes(x);
         let p = edge_point(&nj, dj, &nk, dk);
@@ -123,7 +123,7 @@ equation! {
 }
 
 equation! {
-    /// DistanceFaceNode: slots [face i, node planes j, k, l], obs [l]. l + v = |d_i − ⟨n_i, p_jkl⟩|.
+    /// DistanceFaceNode: slots [face i, node planes j, k, l], obs \[l\]. l + v = |d_i − ⟨n_i, p_jkl⟩|.
     DistanceFaceNode, "DistanceFaceNode", |x, l| {
         let [(ni, di), (n1, d1), (n2, d2), (n3, d3)] = planes(x);
         let p = node_point(&n1, d1, &n2, d2, &n3, d3);
@@ -132,7 +132,7 @@ equation! {
 }
 
 equation! {
-    /// DistanceEdgeEdge: slots [i, j, k, l], obs [l]. l + v = ‖p_ij − p_kl‖ (T 3.23 corrected).
+    /// DistanceEdgeEdge: slots [i, j, k, l], obs \[l\]. l + v = ‖p_ij − p_kl‖ (T 3.23 corrected).
     DistanceEdgeEdge, "DistanceEdgeEdge", |x, l| {
         let [(n1, d1), (n2, d2), (n3, d3), (n4, d4)] = planes(x);
         let a = edge_point(&n1, d1, &n2, d2);
@@ -142,7 +142,7 @@ equation! {
 }
 
 equation! {
-    /// DistanceEdgeNode: slots [edge i, j, node k, l, m], obs [l]. l + v = ‖p_ij(p_klm) − p_klm‖.
+    /// DistanceEdgeNode: slots [edge i, j, node k, l, m], obs \[l\]. l + v = ‖p_ij(p_klm) − p_klm‖.
     DistanceEdgeNode, "DistanceEdgeNode", |x, l| {
         let [(n1, d1), (n2, d2), (n3, d3), (n4, d4), (n5, d5)] = planes(x);
         let q = node_point(&n3, d3, &n4, d4, &n5, d5);
@@ -152,7 +152,7 @@ equation! {
 }
 
 equation! {
-    /// DistanceNodeNode: slots [i, j, k, l, m, n], obs [l]. l + v = ‖p_ijk − p_lmn‖.
+    /// DistanceNodeNode: slots [i, j, k, l, m, n], obs \[l\]. l + v = ‖p_ijk − p_lmn‖.
     DistanceNodeNode, "DistanceNodeNode", |x, l| {
         let [(n1, d1), (n2, d2), (n3, d3), (n4, d4), (n5, d5), (n6, d6)] = planes(x);
         let a = node_point(&n1, d1, &n2, d2, &n3, d3);
@@ -203,7 +203,7 @@ equation! {
 }
 
 equation! {
-    /// NormNV as pseudo-observation (T 3.5): slots [n], obs [l = 1]. l + v = ‖n‖.
+    /// NormNV as pseudo-observation (T 3.5): slots \[n\], obs [l = 1]. l + v = ‖n‖.
     NormNvObs, "NormNV", |x, l| {
         norm(&[x[0], x[1], x[2]]) - l[0]
     }
@@ -227,7 +227,7 @@ equation! {
 }
 
 /// Soft-datum offset of a plane at a fixed reference point c (PlaneOffsetObs): slots [n(3), d],
-/// obs [l]. l + v = d − ⟨n, c⟩, the signed distance of the plane from c along its normal (sign
+/// obs \[l\]. l + v = d − ⟨n, c⟩, the signed distance of the plane from c along its normal (sign
 /// reversed). Unlike the identity observation of d (spec §4.7 item 2, whose "drawback is that these
 /// values depend on the datum"), it does not change when the model origin moves, as long as c is a
 /// point of the plane's own geometry (see [`crate::popa3d::plane_reference_points`]): d and ⟨n, c⟩

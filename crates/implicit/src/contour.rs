@@ -1,4 +1,4 @@
-//! Iso-surfaces by marching tetrahedra (seed §2.1, a specialisation of marching cubes [LC87]),
+//! Iso-surfaces by marching tetrahedra (seed §2.1, a specialisation of marching cubes \[LC87\]),
 //! plane sections, and CSG of two models by min/max of their fields (seed §4).
 //!
 //! Conventions: a vertex counts as "below" when f < iso, else "above", so every tetrahedron

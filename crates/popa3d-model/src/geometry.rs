@@ -59,7 +59,7 @@ impl Popa3d {
 
     /// Position of a node (model coordinates, i.e. relative to `origin`) from the distinct planes of
     /// its faces (spec §2.3): 3 planes → the 3×3 system (T 2.3); more → least squares
-    /// AᵀA·P = Aᵀd (T 2.4, corrected from the printed "A d", spec §2.3 [erratum]).
+    /// AᵀA·P = Aᵀd (T 2.4, corrected from the printed "A d", spec §2.3 \[erratum\]).
     pub fn node_position(&self, inc: &Incidence, node: NodeId) -> Result<[f64; 3], GeometryError> {
         let planes = inc.node_planes(self, node);
         self.intersect_planes(&planes).ok_or_else(|| {
@@ -88,7 +88,7 @@ impl Popa3d {
     }
 
     /// The best-conditioned triple of a node's planes (max |det| of the three unit normals), the
-    /// choice spec §2.3 [proposal] makes for equations that use exactly three planes per node
+    /// choice spec §2.3 \[proposal\] makes for equations that use exactly three planes per node
     /// (spec §10.2 item 11: decided here; ties are broken by the lowest plane ids).
     pub fn node_plane_triple(&self, inc: &Incidence, node: NodeId) -> Result<[PlaneId; 3], GeometryError> {
         let planes = inc.node_planes(self, node);

@@ -83,7 +83,7 @@ pub struct HalfEdge {
 
 /// A face: a planar polygon, possibly with holes, separating two solids.
 ///
-/// Orientation convention (spec §2.2 [gap], §10.2 item 12, decided here): the *face normal* is the
+/// Orientation convention (spec §2.2 \[gap\], §10.2 item 12, decided here): the *face normal* is the
 /// right-hand normal of its outer loop (half-edges chained in their signed direction); `front` is the
 /// solid on the side the face normal points to, `back` the one behind it. The face normal equals
 /// `orientation ×` the plane's normal, because a plane is shared by faces of either orientation.

@@ -98,7 +98,7 @@ impl Observation {
 
 /// The equation classes of Table B.1. Names are the thesis class names (also the XML element names).
 ///
-/// Angle constraints store *signed* cosines (spec §4.5 [proposal]: MA09 allows −1, and |·| has no
+/// Angle constraints store *signed* cosines (spec §4.5 \[proposal\]: MA09 allows −1, and |·| has no
 /// derivative at 0): `value` = ⟨a, b⟩ of the unit directions involved, with a face's direction being its
 /// plane's signed normal and an edge's direction n_j×n_k / ‖n_j×n_k‖ (j, k: the planes of its two faces
 /// in the order of its half-edges). Distances are ≥ 0 (MA11).

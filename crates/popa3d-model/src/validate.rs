@@ -1,6 +1,6 @@
 //! Layered integrity rules of spec §7 (MA, TA, GA, AA), checked bottom-up: a layer runs only when
 //! the layers below it hold (spec §7.1). Each violation names its rule, the element and the reason
-//! (spec §7.6 [proposal]).
+//! (spec §7.6 \[proposal\]).
 //!
 //! Decisions: GA03 (self-intersecting face boundaries) is not checked here (the CityGML validator
 //! covers it on the source polygons); TA10: see [`topology_axioms`]; AA02 is the counting condition m + p ≥ u (a rank check belongs to the

@@ -7,7 +7,7 @@
 //! - The geotransform is GDAL's: the world position of the pixel *corner* (col, row) is
 //!   `x = gt[0] + col·gt[1] + row·gt[2]`, `y = gt[3] + col·gt[4] + row·gt[5]`.
 //!   A cell's value belongs to its CENTRE, i.e. pixel position (col + ½, row + ½). The thesis'
-//!   "cell (i, j) at (x0 + i·dx, y0 + j·dy)" is that centre with x0 = gt[0] + ½·gt[1].
+//!   "cell (i, j) at (x0 + i·dx, y0 + j·dy)" is that centre with x0 = gt\[0\] + ½·gt\[1\].
 //! - "Pixel coordinates" (`px`, `py`) in this crate are continuous and centre-based: integer
 //!   values hit cell centres, so `(px, py) = (col, row)` is the centre of cell (col, row).
 //! - No data is NaN in `data` and nothing else: every value is finite or NaN (±∞ becomes NaN
@@ -47,7 +47,7 @@ pub struct Raster {
 }
 
 /// What [`Raster::sample`] does when a bilinear corner with non-zero weight has no value
-/// (spec §2.1 "[decision]").
+/// (spec §2.1 "\[decision\]").
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum MissingCorners {
     /// Any missing corner with non-zero weight ⇒ no value. The safe default: no value is ever

@@ -1,7 +1,7 @@
 //! The comparison's figures (spec §4.2): the error-class map framed with a title and a legend
 //! (one swatch per class with its bounds and unit, grey and "no value" explained, the maximum
 //! named) and the class histogram as a bar chart with axes. Both are what a person looks at;
-//! the numbers are in the [`DiffReport`](crate::diff::DiffReport).
+//! the numbers are in the [`crate::diff::DiffReport`].
 //!
 //! # Examples
 //!

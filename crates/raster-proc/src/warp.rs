@@ -27,7 +27,7 @@
 //! - The target frame is the rotated frame (rotation about the centroid, so coordinates stay
 //!   near the source's); the warped raster has square cells of area dx·dy and no CRS of its
 //!   own (its coordinates are not the CRS's); the source CRS is kept in the field.
-//! - Inverse mapping is exact for the piecewise-linear warp (spec §2.3.7 [decision]):
+//! - Inverse mapping is exact for the piecewise-linear warp (spec §2.3.7 \[decision\]):
 //!   barycentric coordinates in the displaced triangle applied to the source triangle.
 
 use serde::{Deserialize, Serialize};

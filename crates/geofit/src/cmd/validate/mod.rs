@@ -82,7 +82,7 @@ pub struct Args {
     /// Print the report as JSON on stdout instead of text.
     #[arg(long)]
     pub json: bool,
-    /// Directory with the wrapper schemas citygml-<version>.xsd.
+    /// Directory with the wrapper schemas `citygml-<version>.xsd`.
     #[arg(long, value_name = "DIR")]
     pub schemas: Option<PathBuf>,
     /// Skip the XSD validation (geometric checks only).
