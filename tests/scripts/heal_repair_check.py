@@ -11,7 +11,14 @@ resolved, gml:OrientableSurface orientation="-" reverses its polygon):
 - orientation: the signed volume of an exterior shell is > 0 (faces point outwards), of an
   interior shell < 0.
 
-Prints JSON {"shells": n, "problems": [...], "per_feature": {id: [problems]}} on stdout.
+Also measured, for the no-harm comparison of a file before and after: the area of the polygons
+defined in each Building / BuildingPart per thematic surface type (nearest *Surface / Window /
+Door ancestor; "none" outside one), |Newell(exterior)|/2 - sum |Newell(interior)|/2, and the
+gml:ids of the document, each with the id of the Building / BuildingPart it is in (null when
+outside one).
+
+Prints JSON {"shells": n, "problems": [...], "per_feature": {id: [problems]},
+"areas": {id: {type: m2}}, "ids": {id: building id}} on stdout.
 Usage: heal_repair_check.py FILE.gml [--snap 0.001] [--only ID,ID,...]
 """
 import json
@@ -139,6 +146,54 @@ def check_shell(polys, tol, interior):
     return problems
 
 
+def newell_area(pts):
+    P = np.array([p[:3] for p in pts], dtype=float)
+    if len(P) < 3:
+        return 0.0
+    P = P - P[0]
+    n = np.sum(np.cross(P, np.roll(P, -1, axis=0)), axis=0)
+    return 0.5 * float(np.linalg.norm(n))
+
+
+def unit_of(el):
+    """The gml:id of the nearest Building / BuildingPart around an element (itself included)."""
+    for anc in [el] + list(el.iterancestors()):
+        if local(anc.tag) in ("Building", "BuildingPart"):
+            return anc.get("{%s}id" % GML_NS[0]) or anc.get("{%s}id" % GML_NS[1]) or "(no id)"
+    return None
+
+
+def areas(tree):
+    """Area per unit (Building / BuildingPart id, else "#n") and thematic type."""
+    out = {}
+    n = 0
+    keys = {}
+    for el in tree.iter():
+        if local(el.tag) in ("Building", "BuildingPart"):
+            keys[el] = el.get("{%s}id" % GML_NS[0]) or el.get("{%s}id" % GML_NS[1]) or "#%d" % n
+            n += 1
+    for poly in tree.iter():
+        if local(poly.tag) != "Polygon":
+            continue
+        kind, unit = None, None
+        for anc in poly.iterancestors():
+            name = local(anc.tag)
+            if kind is None and (name.endswith("Surface") and name[0].isupper() and name not in ("CompositeSurface", "MultiSurface", "OrientableSurface", "TriangulatedSurface") or name in ("Window", "Door")):
+                kind = name
+            if name in ("Building", "BuildingPart"):
+                unit = keys[anc]
+                break
+        if unit is None:
+            continue
+        rings = polygon_rings(poly)
+        if not rings:
+            continue
+        a = newell_area(rings[0]) - sum(newell_area(r) for r in rings[1:])
+        d = out.setdefault(unit, {})
+        d[kind or "none"] = d.get(kind or "none", 0.0) + a
+    return out
+
+
 def main():
     args = sys.argv[1:]
     tol, only = 0.001, None
@@ -180,6 +235,8 @@ def main():
                     if probs:
                         report["per_feature"].setdefault(fid, []).extend(probs)
                         report["problems"].extend("%s: %s" % (fid, p) for p in probs)
+    report["areas"] = areas(tree)
+    report["ids"] = {k: unit_of(el) for k, el in sorted(ids.items())}
     json.dump(report, sys.stdout, indent=1)
 
 
