@@ -31,11 +31,18 @@ const SURFACE_STEP: &str = "4";
 const CRS: &str = "EPSG:26915";
 
 fn ok(o: &Output, what: &str) {
-    assert!(o.status.success(), "{what} failed ({:?}):\nstdout: {}\nstderr: {}", o.status, String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
+    assert!(
+        o.status.success(),
+        "{what} failed ({:?}):\nstdout: {}\nstderr: {}",
+        o.status,
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
 }
 
 fn tools() -> bool {
-    let have = ["snakemake", "gdal_translate", "gdal_create", "gdalbuildvrt", "gdalinfo"].iter().all(|t| common::tool(t));
+    let have =
+        ["snakemake", "gdal_translate", "gdal_create", "gdalbuildvrt", "gdalinfo"].iter().all(|t| common::tool(t));
     let py = common::python().args(["-c", "import numpy"]).output().map(|o| o.status.success()).unwrap_or(false);
     if !(have && py) {
         if common::in_ci() {
@@ -74,10 +81,23 @@ fn snakemake_raster_tiles_keep_the_tolerance_and_meet_at_the_seams() {
     ok(&c.output().unwrap(), "gdal_translate -srcwin");
 
     // 1. the workflow, with the centre tile's fit failing once (injected) and retried
-    let config = [format!("raster={}", src.display()), "out=out".into(), format!("geofit={geofit}"), format!("max_error={MAX_ERROR}"), format!("tile_pixels={TILE}")];
+    let config = [
+        format!("raster={}", src.display()),
+        "out=out".into(),
+        format!("geofit={geofit}"),
+        format!("max_error={MAX_ERROR}"),
+        format!("tile_pixels={TILE}"),
+    ];
     let snakemake = |extra: &[&str]| {
         let mut c = Command::new("snakemake");
-        c.arg("-s").arg(common::repo_root().join("workflows/Snakefile")).arg("--directory").arg(work.path()).args(["--cores", "2"]).args(extra).arg("--config").args(&config);
+        c.arg("-s")
+            .arg(common::repo_root().join("workflows/Snakefile"))
+            .arg("--directory")
+            .arg(work.path())
+            .args(["--cores", "2"])
+            .args(extra)
+            .arg("--config")
+            .args(&config);
         c.env_remove("GEOFIT_FAIL_ONCE");
         c
     };
@@ -87,20 +107,31 @@ fn snakemake_raster_tiles_keep_the_tolerance_and_meet_at_the_seams() {
     ok(&c.output().unwrap(), "snakemake --cores 2 --retries 1 (raster, one injected failure)");
     assert!(marker.join("c1_r1").exists(), "the injected failure happened");
     let out = work.path().join("out");
-    let plan: Vec<Value> = std::fs::read_to_string(out.join("plan.jsonl")).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    let plan: Vec<Value> = std::fs::read_to_string(out.join("plan.jsonl"))
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
     assert_eq!(plan.len(), 9, "a 3×3 plan");
     let ids: Vec<String> = plan.iter().map(|t| t["id"].as_str().unwrap().to_string()).collect();
     for id in &ids {
-        let rep: Value = serde_json::from_slice(&std::fs::read(out.join(format!("stitched/{id}.json"))).unwrap()).unwrap();
+        let rep: Value =
+            serde_json::from_slice(&std::fs::read(out.join(format!("stitched/{id}.json"))).unwrap()).unwrap();
         assert_eq!(rep["stop"]["reason"], "tolerance_reached", "{id}: {rep}");
-        eprintln!("stitch {id}: {} control points, {} rounds, C1 held {}", rep["control_points"], rep["iterations"].as_array().unwrap().len(), rep["c1_held"]);
+        eprintln!(
+            "stitch {id}: {} control points, {} rounds, C1 held {}",
+            rep["control_points"],
+            rep["iterations"].as_array().unwrap().len(),
+            rep["c1_held"]
+        );
     }
 
     // 2. the tiles' surfaces on a grid of ⅛-pixel points: every pixel edge is a grid line (binary
     //    fractions keep the positions exact), and along a seam every other point falls halfway
     //    between two seam vertices (¼ px apart)
     let (w, h) = (WINDOW[2].parse::<f64>().unwrap(), WINDOW[3].parse::<f64>().unwrap());
-    let info: Value = serde_json::from_slice(&Command::new("gdalinfo").arg("-json").arg(&src).output().unwrap().stdout).unwrap();
+    let info: Value =
+        serde_json::from_slice(&Command::new("gdalinfo").arg("-json").arg(&src).output().unwrap().stdout).unwrap();
     let gt: Vec<f64> = info["geoTransform"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
     let (q, n, m) = (gt[1] / 8.0, (8.0 * w) as usize + 1, (8.0 * h) as usize + 1);
     let edges = work.path().join("edges.tif");
@@ -114,7 +145,15 @@ fn snakemake_raster_tiles_keep_the_tolerance_and_meet_at_the_seams() {
     let mut edge_tifs = Vec::new();
     for id in &ids {
         let p = work.path().join(format!("edges_{id}.tif"));
-        let o = common::geofit().args(["-q", "eval"]).arg(out.join(format!("stitched/{id}.tmb"))).arg("--like").arg(&edges).args(["--no-mask", "-ot", "Float64", "-o"]).arg(&p).output().unwrap();
+        let o = common::geofit()
+            .args(["-q", "eval"])
+            .arg(out.join(format!("stitched/{id}.tmb")))
+            .arg("--like")
+            .arg(&edges)
+            .args(["--no-mask", "-ot", "Float64", "-o"])
+            .arg(&p)
+            .output()
+            .unwrap();
         ok(&o, "geofit eval --like edges");
         edge_tifs.push(p);
     }
@@ -156,14 +195,21 @@ fn snakemake_raster_tiles_keep_the_tolerance_and_meet_at_the_seams() {
     assert_eq!(seams["seams"], 12, "a 3×3 plan has 12 shared edges");
     assert_eq!(seams["z_range_from"], "--z-range", "{seams}");
     assert!(seams["max_gap_relative"].as_f64().unwrap() <= 1e-6, "{seams}");
-    let medians: Vec<f64> = seams["per_seam"].as_array().unwrap().iter().map(|s| s["median_normal_angle_deg"].as_f64().unwrap()).collect();
+    let medians: Vec<f64> =
+        seams["per_seam"].as_array().unwrap().iter().map(|s| s["median_normal_angle_deg"].as_f64().unwrap()).collect();
     eprintln!(
         "seams: max gap {} ({} relative), C1: max normal-angle jump {}°, per-seam medians {medians:?}°",
         seams["max_gap"], seams["max_gap_relative"], seams["max_normal_angle_deg"]
     );
 
     // 5. the terrain tileset: glb valid, tileset read back independently, tiles meeting at seams
-    let o = common::python().arg(common::repo_root().join("tests/scripts/tileset_seams.py")).arg(out.join("plan.jsonl")).arg(out.join("glb")).arg(SURFACE_STEP).output().unwrap();
+    let o = common::python()
+        .arg(common::repo_root().join("tests/scripts/tileset_seams.py"))
+        .arg(out.join("plan.jsonl"))
+        .arg(out.join("glb"))
+        .arg(SURFACE_STEP)
+        .output()
+        .unwrap();
     let text = String::from_utf8_lossy(&o.stdout).into_owned();
     eprintln!("glb seams: {text}");
     // the seams run along pixel centres (docs/decisions.md#tiles-on-the-whole-fits-lattice), so the
@@ -179,12 +225,21 @@ fn snakemake_raster_tiles_keep_the_tolerance_and_meet_at_the_seams() {
     if common::tool("node") && common::tool("cs2cs") {
         for id in &ids {
             let glb = out.join(format!("glb/{id}.glb"));
-            let o = Command::new("node").arg(common::repo_root().join("tests/scripts/gltf_validator.js")).arg(&glb).output().unwrap();
+            let o = Command::new("node")
+                .arg(common::repo_root().join("tests/scripts/gltf_validator.js"))
+                .arg(&glb)
+                .output()
+                .unwrap();
             ok(&o, "gltf_validator.js");
             let v: Value = serde_json::from_slice(&o.stdout).expect("validator report is JSON");
             assert_eq!(v["issues"]["numErrors"], 0, "{}: {}", glb.display(), v["issues"]["messages"]);
         }
-        let o = common::python().arg(common::repo_root().join("tests/scripts/scaleout_tileset.py")).arg(out.join("tileset.json")).args(["--crs", CRS]).output().unwrap();
+        let o = common::python()
+            .arg(common::repo_root().join("tests/scripts/scaleout_tileset.py"))
+            .arg(out.join("tileset.json"))
+            .args(["--crs", CRS])
+            .output()
+            .unwrap();
         let text = String::from_utf8_lossy(&o.stdout).into_owned();
         ok(&o, "scaleout_tileset.py");
         let r: Value = serde_json::from_str(text.lines().last().unwrap()).unwrap();
@@ -205,7 +260,8 @@ fn snakemake_raster_tiles_keep_the_tolerance_and_meet_at_the_seams() {
     assert!(jobs.is_empty(), "second run would do {jobs:?}");
     std::fs::remove_file(out.join("glb/c1_r1.glb")).unwrap();
     let jobs = common::snakemake_dry_run_jobs(&snakemake(&["-n"]).output().unwrap());
-    let want: std::collections::BTreeSet<(String, String)> = [("glb", "c1_r1"), ("tileset", ""), ("all", "")].iter().map(|(r, t)| (r.to_string(), t.to_string())).collect();
+    let want: std::collections::BTreeSet<(String, String)> =
+        [("glb", "c1_r1"), ("tileset", ""), ("all", "")].iter().map(|(r, t)| (r.to_string(), t.to_string())).collect();
     assert_eq!(jobs, want);
     ok(&snakemake(&[]).output().unwrap(), "snakemake (one glb made again)");
     assert!(files(&out) == first, "the remade glb and tileset are the same bytes");
@@ -241,11 +297,19 @@ fn a_rotated_raster_is_refused_by_the_plan() {
     let text = std::fs::read_to_string(&vrt).unwrap();
     let (a, rest) = text.split_once("<GeoTransform>").unwrap();
     let (_, b) = rest.split_once("</GeoTransform>").unwrap();
-    std::fs::write(&vrt, format!("{a}<GeoTransform>429392.3, 0.8660254, -0.5, 5150745.4, -0.5, -0.8660254</GeoTransform>{b}")).unwrap();
+    std::fs::write(
+        &vrt,
+        format!("{a}<GeoTransform>429392.3, 0.8660254, -0.5, 5150745.4, -0.5, -0.8660254</GeoTransform>{b}"),
+    )
+    .unwrap();
     let plan = work.path().join("plan.jsonl");
-    let o = common::run(&["tile", "plan", "--tile-size", "40", "-o", plan.to_str().unwrap(), vrt.to_str().unwrap()], None);
+    let o =
+        common::run(&["tile", "plan", "--tile-size", "40", "-o", plan.to_str().unwrap(), vrt.to_str().unwrap()], None);
     assert_eq!(o.status.code(), Some(3), "{}", String::from_utf8_lossy(&o.stderr));
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(err.contains("rot.vrt") && err.contains("rotated rasters are not supported") && err.contains("gdalwarp"), "{err}");
+    assert!(
+        err.contains("rot.vrt") && err.contains("rotated rasters are not supported") && err.contains("gdalwarp"),
+        "{err}"
+    );
     assert!(!plan.exists(), "no plan written");
 }

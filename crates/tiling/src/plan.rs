@@ -67,15 +67,15 @@ pub enum PlanFormat {
 /// docs/decisions.md#tiles-on-the-whole-fits-lattice).
 pub fn write_plan(tiles: &[Tile], format: PlanFormat) -> String {
     match format {
-        PlanFormat::JsonLines => tiles
-            .iter()
-            .map(|t| serde_json::to_string(t).expect("a tile serialises") + "\n")
-            .collect(),
+        PlanFormat::JsonLines => {
+            tiles.iter().map(|t| serde_json::to_string(t).expect("a tile serialises") + "\n").collect()
+        }
         PlanFormat::Tsv => {
             let mut s = String::from("#id\tkind\tsize\tcore\thalo\tcore_px\thalo_px\tneighbours\twork\tsources\n");
             for t in tiles.iter().filter(|t| t.work > 0) {
                 let b = |w: &Window| w.bounds.map(|v| v.to_string()).join(",");
-                let px = |w: &Window| w.pixels.map(|p| p.map(|v| v.to_string()).join(",")).unwrap_or_else(|| "-".into());
+                let px =
+                    |w: &Window| w.pixels.map(|p| p.map(|v| v.to_string()).join(",")).unwrap_or_else(|| "-".into());
                 s += &format!(
                     "{}\t{}\t{}\t{}\t{}\t{}\t{}\t{}\t{}\t{}\n",
                     t.id,
@@ -133,7 +133,17 @@ mod tests {
 
     fn tile(id: &str) -> Tile {
         let w = Window { bounds: [0.0, 0.0, 1.0, 1.0], pixels: None };
-        Tile { id: id.into(), kind: TileKind::Buildings, size: 1.0, core: w, halo: w, neighbours: vec![], work: 2, halo_buildings: vec![], sources: vec!["a.gml".into()] }
+        Tile {
+            id: id.into(),
+            kind: TileKind::Buildings,
+            size: 1.0,
+            core: w,
+            halo: w,
+            neighbours: vec![],
+            work: 2,
+            halo_buildings: vec![],
+            sources: vec!["a.gml".into()],
+        }
     }
 
     #[test]

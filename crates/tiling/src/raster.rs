@@ -39,7 +39,10 @@ pub fn plan(path: &str, opts: &RasterTiling) -> Result<Vec<Tile>, TilingError> {
     let gt = ds.geo_transform().map_err(|e| TilingError::unreadable(path, format!("no geotransform: {e}")))?;
     if gt[2] != 0.0 || gt[4] != 0.0 {
         // the fit of every tile would refuse it (tspline_raster::Error::Rotated): say so once, here
-        return Err(TilingError::unreadable(path, format!("rotated rasters are not supported (geotransform {gt:?}); gdalwarp it to a north-up grid first")));
+        return Err(TilingError::unreadable(
+            path,
+            format!("rotated rasters are not supported (geotransform {gt:?}); gdalwarp it to a north-up grid first"),
+        ));
     }
     // an absolute path in the plan: a job may run in another directory (a local file; /vsi*
     // paths and URLs are kept as given)
@@ -52,7 +55,9 @@ pub fn plan(path: &str, opts: &RasterTiling) -> Result<Vec<Tile>, TilingError> {
     let nodata = band.no_data_value();
     for t in &mut tiles {
         let [x, y, cw, ch] = t.core.pixels.expect("raster tiles have pixel windows");
-        let buf = band.read_as::<f64>((x as isize, y as isize), (cw, ch), (cw, ch), None).map_err(|e| TilingError::unreadable(path, e))?;
+        let buf = band
+            .read_as::<f64>((x as isize, y as isize), (cw, ch), (cw, ch), None)
+            .map_err(|e| TilingError::unreadable(path, e))?;
         t.work = buf.data().iter().filter(|&&v| is_valid(v, nodata)).count();
     }
     drop_empty_neighbours(&mut tiles);
@@ -194,7 +199,8 @@ impl Grid {
     fn fit_window(&self, core: [usize; 4]) -> FitWindow {
         let (sa, sb) = (core[0], core[0] + core[2]);
         // plan t of the core's rows: north-up rasters count t from the bottom row
-        let (ta, tb) = if self.north_up { (self.h - core[1] - core[3], self.h - core[1]) } else { (core[1], core[1] + core[3]) };
+        let (ta, tb) =
+            if self.north_up { (self.h - core[1] - core[3], self.h - core[1]) } else { (core[1], core[1] + core[3]) };
         let (s_lo, s_hi) = self.ends(0, sa, sb, self.w);
         let (t_lo, t_hi) = self.ends(1, ta, tb, self.h);
         let (c0, c1) = (s_lo.max(0) as usize, s_hi.min(self.w as i64 - 1) as usize);
@@ -213,7 +219,8 @@ impl Grid {
 
     /// The grid of a plan's tiles (all of them, empty ones included: they still span the raster).
     fn of_plan(tiles: &[Tile]) -> Result<Grid, TilingError> {
-        let px = |t: &Tile| t.core.pixels.ok_or_else(|| TilingError::Usage(format!("tile {} is not a raster tile", t.id)));
+        let px =
+            |t: &Tile| t.core.pixels.ok_or_else(|| TilingError::Usage(format!("tile {} is not a raster tile", t.id)));
         let (mut w, mut h, mut side) = (0usize, 0usize, 0usize);
         for t in tiles {
             let p = px(t)?;
@@ -305,7 +312,9 @@ fn georef(gt: &[f64; 6], px: [usize; 4]) -> [f64; 4] {
     let at = |c: f64, r: f64| (gt[0] + c * gt[1] + r * gt[2], gt[3] + c * gt[4] + r * gt[5]);
     let (c0, r0, c1, r1) = (px[0] as f64, px[1] as f64, (px[0] + px[2]) as f64, (px[1] + px[3]) as f64);
     let corners = [at(c0, r0), at(c1, r0), at(c0, r1), at(c1, r1)];
-    corners.iter().fold([f64::MAX, f64::MAX, f64::MIN, f64::MIN], |b, p| [b[0].min(p.0), b[1].min(p.1), b[2].max(p.0), b[3].max(p.1)])
+    corners.iter().fold([f64::MAX, f64::MAX, f64::MIN, f64::MIN], |b, p| {
+        [b[0].min(p.0), b[1].min(p.1), b[2].max(p.0), b[3].max(p.1)]
+    })
 }
 
 #[cfg(test)]
@@ -358,7 +367,11 @@ mod tests {
                         assert_eq!((p[0] as i64 - lat.origin[0]).rem_euclid(lat.cell), 0);
                     }
                     if p[0] + p[2] < w {
-                        assert_eq!(f.pixels[0] + f.pixels[2], p[0] + p[2] + 1, "{w} {side}: reaches the neighbour's first column");
+                        assert_eq!(
+                            f.pixels[0] + f.pixels[2],
+                            p[0] + p[2] + 1,
+                            "{w} {side}: reaches the neighbour's first column"
+                        );
                         assert_eq!(f.s0 + (f.ns as f64) * f.cell, f.pixels[2] as f64 - 1.0);
                     }
                     let h_all = f.pixels[1] + f.pixels[3];
@@ -382,7 +395,8 @@ mod tests {
     #[test]
     fn empty_tiles_are_nobodys_neighbours() {
         let gt = [0.0, 1.0, 0.0, 60.0, 0.0, -1.0];
-        let mut tiles = plan_grid("r", 90, 60, gt, &RasterTiling { tile_pixels: Some(30), cells_per_tile: 0, halo: 2 }).unwrap();
+        let mut tiles =
+            plan_grid("r", 90, 60, gt, &RasterTiling { tile_pixels: Some(30), cells_per_tile: 0, halo: 2 }).unwrap();
         tiles[4].work = 0;
         drop_empty_neighbours(&mut tiles);
         assert!(tiles.iter().all(|t| !t.neighbours.contains(&tiles[4].id)));

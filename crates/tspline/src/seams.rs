@@ -44,7 +44,12 @@ impl Placed {
     }
     fn rect(&self) -> Rect {
         let b = self.mesh.bounds();
-        Rect::new(b.s_min + self.offset[0], b.t_min + self.offset[1], b.s_max + self.offset[0], b.t_max + self.offset[1])
+        Rect::new(
+            b.s_min + self.offset[0],
+            b.t_min + self.offset[1],
+            b.s_max + self.offset[0],
+            b.t_max + self.offset[1],
+        )
     }
 }
 
@@ -70,7 +75,11 @@ pub struct Line {
 
 impl Line {
     fn at(&self, u: f64) -> (f64, f64) {
-        if self.vertical { (self.c, u) } else { (u, self.c) }
+        if self.vertical {
+            (self.c, u)
+        } else {
+            (u, self.c)
+        }
     }
     fn shift(&self, off: [f64; 2]) -> Line {
         let (dc, du) = if self.vertical { (off[0], off[1]) } else { (off[1], off[0]) };
@@ -122,10 +131,12 @@ impl SeamCurve {
     /// (index, B_i(u)) of the non-zero basis functions at u.
     fn bases(&self, seq: &[f64], u: f64) -> Vec<(usize, f64)> {
         let k = self.degree.k();
-        (0..self.knots.len()).filter_map(|i| {
-            let b = basis(&seq[i..i + k + 2], k, u, false);
-            (b != 0.0).then_some((i, b))
-        }).collect()
+        (0..self.knots.len())
+            .filter_map(|i| {
+                let b = basis(&seq[i..i + k + 2], k, u, false);
+                (b != 0.0).then_some((i, b))
+            })
+            .collect()
     }
 
     /// The curve at u strictly inside the seam (NaN at the ends for K = 3: 0/0).
@@ -213,7 +224,11 @@ fn on_centres(line: Line) -> bool {
 
 /// The side of the seam strip's cells along `line`.
 fn strip_of(line: Line) -> f64 {
-    if on_centres(line) { STRIP_ON_CENTRES } else { STRIP }
+    if on_centres(line) {
+        STRIP_ON_CENTRES
+    } else {
+        STRIP
+    }
 }
 
 /// Samples per knot interval of the seam-curve fit.
@@ -227,13 +242,24 @@ const ON_SEAM_CELL_WEIGHT: f64 = 16.0;
 /// coefficients the least-squares fit to the mean of the two surfaces along the line. Symmetric
 /// in (p, q) bit for bit (the mean is a commutative sum), so both tiles' stitch jobs get the same.
 #[allow(clippy::too_many_arguments)]
-fn seam_curve(p: &PbSpline, pm: &TMesh, q: &PbSpline, qm: &TMesh, line: Line, z_ends: [f64; 2], source: &Source, max_error: f64) -> Result<SeamCurve, TsplineError> {
+fn seam_curve(
+    p: &PbSpline,
+    pm: &TMesh,
+    q: &PbSpline,
+    qm: &TMesh,
+    line: Line,
+    z_ends: [f64; 2],
+    source: &Source,
+    max_error: f64,
+) -> Result<SeamCurve, TsplineError> {
     let mut knots = border_vertices(pm, line);
     knots.extend(border_vertices(qm, line));
     knots.sort_by(f64::total_cmp);
     knots.dedup();
     if knots.first() != Some(&line.u0) || knots.last() != Some(&line.u1) {
-        return Err(TsplineError::Fit(format!("seam {line:?}: its ends are not vertices of both tiles (the tiles' domains do not meet at whole cells)")));
+        return Err(TsplineError::Fit(format!(
+            "seam {line:?}: its ends are not vertices of both tiles (the tiles' domains do not meet at whole cells)"
+        )));
     }
     // the seam strip: intervals halved down to STRIP (module doc); degree 1 has no boundary
     // layer (the border curve is the border vertices' polyline, which a held border keeps)
@@ -268,7 +294,8 @@ fn seam_curve(p: &PbSpline, pm: &TMesh, q: &PbSpline, qm: &TMesh, line: Line, z_
             .filter(|(_, w)| {
                 let (lo, hi) = (w[0].floor() as i64 + 1, w[1].ceil() as i64 - 1);
                 (lo..=hi).filter(|&r| r as f64 > line.u0 && (r as f64) < line.u1).any(|r| {
-                    seam_value(source, line, r as f64).is_some_and(|v| (curve.eval(r as f64) - v).abs() > CURVE_SHARE * max_error)
+                    seam_value(source, line, r as f64)
+                        .is_some_and(|v| (curve.eval(r as f64) - v).abs() > CURVE_SHARE * max_error)
                 })
             })
             .map(|(i, _)| i)
@@ -292,7 +319,14 @@ const CURVE_SHARE: f64 = 0.8;
 /// The seam curve's coefficients: ends fixed to the corner values, the inner ones the
 /// least-squares fit to the data on the seam where there is some, else the mean of the two
 /// surfaces (`p`, `q`) along the line.
-fn fit_curve(curve: &mut SeamCurve, p: &PbSpline, q: &PbSpline, line: Line, z_ends: [f64; 2], source: &Source) -> Result<(), TsplineError> {
+fn fit_curve(
+    curve: &mut SeamCurve,
+    p: &PbSpline,
+    q: &PbSpline,
+    line: Line,
+    z_ends: [f64; 2],
+    source: &Source,
+) -> Result<(), TsplineError> {
     let n = curve.knots.len();
     curve.z = vec![0.0; n];
     curve.w = vec![1.0; n];
@@ -310,7 +344,8 @@ fn fit_curve(curve: &mut SeamCurve, p: &PbSpline, q: &PbSpline, line: Line, z_en
     let mut at: Vec<(f64, f64)> = Vec::with_capacity(n * (SEAM_SAMPLES + 1));
     for w in curve.knots.windows(2) {
         // a cell centre on a pixel-centre seam (not an end: those are fixed)
-        if on_centres(line) && w[0].fract() == 0.0 && w[0] != curve.knots[0] && seam_value(source, line, w[0]).is_some() {
+        if on_centres(line) && w[0].fract() == 0.0 && w[0] != curve.knots[0] && seam_value(source, line, w[0]).is_some()
+        {
             at.push((w[0], ON_SEAM_CELL_WEIGHT));
         }
         at.extend((0..SEAM_SAMPLES).map(|k| (w[0] + (w[1] - w[0]) * (k as f64 + 0.5) / SEAM_SAMPLES as f64, 1.0)));
@@ -347,7 +382,8 @@ fn fit_curve(curve: &mut SeamCurve, p: &PbSpline, q: &PbSpline, line: Line, z_en
             }
         }
     }
-    let x = band_cholesky_solve(band, rhs).ok_or_else(|| TsplineError::Fit(format!("seam {line:?}: the seam-curve fit is singular")))?;
+    let x = band_cholesky_solve(band, rhs)
+        .ok_or_else(|| TsplineError::Fit(format!("seam {line:?}: the seam-curve fit is singular")))?;
     curve.z[1..n - 1].copy_from_slice(&x);
     Ok(())
 }
@@ -365,12 +401,23 @@ fn seam_value(source: &Source, line: Line, u: f64) -> Option<f64> {
     if on_centres(line) {
         return along_centres(source, line, u, |at| Some(at(0)).filter(|v| v.is_finite()));
     }
-    along_seam(source, line, u, |[a, b, c, d]| if a.is_finite() && d.is_finite() { (-a + 9.0 * b + 9.0 * c - d) / 16.0 } else { 0.5 * (b + c) })
+    along_seam(source, line, u, |[a, b, c, d]| {
+        if a.is_finite() && d.is_finite() {
+            (-a + 9.0 * b + 9.0 * c - d) / 16.0
+        } else {
+            0.5 * (b + c)
+        }
+    })
 }
 
 /// `across` of the cells at −2 … +2 px from a pixel-centre seam (`at(k)`, NaN where missing),
 /// linear along the seam between the two nearest rows of cell centres on it.
-fn along_centres(source: &Source, line: Line, u: f64, across: impl Fn(&dyn Fn(i64) -> f64) -> Option<f64>) -> Option<f64> {
+fn along_centres(
+    source: &Source,
+    line: Line,
+    u: f64,
+    across: impl Fn(&dyn Fn(i64) -> f64) -> Option<f64>,
+) -> Option<f64> {
     let c = line.c as i64;
     let row = |r: i64| -> Option<f64> {
         let at = |k: i64| if line.vertical { source(c + k, r) } else { source(r, c + k) };
@@ -454,7 +501,11 @@ fn band_cholesky_solve(mut l: Vec<Vec<f64>>, mut b: Vec<f64>) -> Option<Vec<f64>
 
 /// Positions along `line` of the mesh's vertices on it (corners of leaves touching the line).
 fn border_vertices(m: &TMesh, line: Line) -> Vec<f64> {
-    let r = if line.vertical { Rect::new(line.c, line.u0, line.c, line.u1) } else { Rect::new(line.u0, line.c, line.u1, line.c) };
+    let r = if line.vertical {
+        Rect::new(line.c, line.u0, line.c, line.u1)
+    } else {
+        Rect::new(line.u0, line.c, line.u1, line.c)
+    };
     let mut v = Vec::new();
     for c in m.leaves_in(r) {
         for &p in &m.cells[c as usize].corners {
@@ -473,7 +524,8 @@ fn border_vertices(m: &TMesh, line: Line) -> Vec<f64> {
 /// The value of the plan's surfaces at a tile corner: the mean over the tiles whose domain
 /// holds it, summed in ascending order (the same bits in every job that computes it).
 fn corner_value(pbs: &[(PbSpline, Rect)], s: f64, t: f64) -> f64 {
-    let mut v: Vec<f64> = pbs.iter().filter(|(_, r)| r.contains_closed(s, t)).map(|(pb, _)| pb.point(s, t)[2]).collect();
+    let mut v: Vec<f64> =
+        pbs.iter().filter(|(_, r)| r.contains_closed(s, t)).map(|(pb, _)| pb.point(s, t)[2]).collect();
     v.sort_by(f64::total_cmp);
     v.iter().sum::<f64>() / v.len() as f64
 }
@@ -532,7 +584,12 @@ fn seam_slope(source: &Source, line: Line, u: f64) -> Option<f64> {
             }
         });
     }
-    along_seam(source, line, u, |[a, b, c, d]| if a.is_finite() && d.is_finite() { (27.0 * (c - b) - (d - a)) / 24.0 } else { c - b })
+    along_seam(
+        source,
+        line,
+        u,
+        |[a, b, c, d]| if a.is_finite() && d.is_finite() { (27.0 * (c - b) - (d - a)) / 24.0 } else { c - b },
+    )
 }
 
 /// Stitches one tile: `own` and its plan neighbours (first-pass meshes, any of the 8 around it),
@@ -580,7 +637,11 @@ pub fn stitch(
         let back = [-own.offset[0], -own.offset[1]];
         let local = line.shift(back);
         let du = if line.vertical { back[1] } else { back[0] };
-        let slope = if degree == Degree::Cubic { curve.knots.iter().map(|&u| seam_slope(source, line, u)).collect() } else { Vec::new() };
+        let slope = if degree == Degree::Cubic {
+            curve.knots.iter().map(|&u| seam_slope(source, line, u)).collect()
+        } else {
+            Vec::new()
+        };
         let mut c = curve;
         c.knots.iter_mut().for_each(|u| *u += du);
         seams.push(OwnSeam { line: local, curve: c, side, neighbour: k, slope });
@@ -604,7 +665,11 @@ pub fn stitch(
                 let probe = Rect::new(s, t, s, t);
                 let cell = mesh.leaves_in(probe).into_iter().find(|&c| {
                     let r = mesh.cells[c as usize].rect;
-                    if seam.line.vertical { r.t_min < t && t < r.t_max } else { r.s_min < s && s < r.s_max }
+                    if seam.line.vertical {
+                        r.t_min < t && t < r.t_max
+                    } else {
+                        r.s_min < s && s < r.s_max
+                    }
                 });
                 if let Some(c) = cell {
                     let mut geom = |s: f64, t: f64| (s, t, finite_or_zero(pb.point(s, t)[2]));
@@ -649,7 +714,9 @@ fn refit_loop(
 ) -> Result<Stitched, TsplineError> {
     if opts.split != crate::mesh::SplitRule::Quad {
         // docs/decisions.md#anisotropic-splits-issue-19: the seams need square cells
-        return Err(TsplineError::Fit("anisotropic splits are not available for tiles of a plan (their seams need square cells)".into()));
+        return Err(TsplineError::Fit(
+            "anisotropic splits are not available for tiles of a plan (their seams need square cells)".into(),
+        ));
     }
     let (tol, tol_final) = crate::fit::tolerances(samples, None, opts)?;
     let mut iterations = Vec::new();
@@ -664,9 +731,14 @@ fn refit_loop(
         let mut pb = PbSpline::build(&mesh);
         let free: Vec<bool> = pb.point_ids.iter().map(|&id| !on_seam[id as usize]).collect();
         let t_build = t0.elapsed().as_secs_f64();
-        let z = crate::fit::fit_lsq_local(crate::fit::LsqProblem { free: Some(&free), ..crate::fit::LsqProblem::global(&mesh, samples) }, &pb)?;
+        let z = crate::fit::fit_lsq_local(
+            crate::fit::LsqProblem { free: Some(&free), ..crate::fit::LsqProblem::global(&mesh, samples) },
+            &pb,
+        )?;
         if z.iter().any(|v| !v.is_finite()) {
-            return Err(TsplineError::Fit(format!("stitch iteration {it}: the least-squares solution has non-finite control points")));
+            return Err(TsplineError::Fit(format!(
+                "stitch iteration {it}: the least-squares solution has non-finite control points"
+            )));
         }
         crate::fit::set_z(&mut mesh, &mut pb, &z);
         let t_opt = t0.elapsed().as_secs_f64();
@@ -697,7 +769,12 @@ fn refit_loop(
         if let Some(stop) = stop {
             let infos = seams
                 .iter()
-                .map(|s| SeamInfo { side: s.side, neighbour: s.neighbour, curve_vertices: s.curve.knots.len(), max_curve_deviation: curve_deviation(&pb, s) })
+                .map(|s| SeamInfo {
+                    side: s.side,
+                    neighbour: s.neighbour,
+                    curve_vertices: s.curve.knots.len(),
+                    max_curve_deviation: curve_deviation(&pb, s),
+                })
                 .collect();
             return Ok(Stitched { mesh, stop, iterations, seams: infos, c1_held: hold_c1 });
         }
@@ -720,7 +797,17 @@ fn hold_inward_columns(mesh: &mut TMesh, seams: &[OwnSeam], held: &mut [bool]) {
     for seam in seams {
         let l = seam.line;
         // inward: towards the tile's interior
-        let dir = if l.vertical { if l.c == b.s_min { 1.0 } else { -1.0 } } else if l.c == b.t_min { 1.0 } else { -1.0 };
+        let dir = if l.vertical {
+            if l.c == b.s_min {
+                1.0
+            } else {
+                -1.0
+            }
+        } else if l.c == b.t_min {
+            1.0
+        } else {
+            -1.0
+        };
         for (k, &u) in seam.curve.knots.iter().enumerate() {
             let Some(g) = seam.slope.get(k).copied().flatten() else { continue };
             let (s, t) = l.at(u);
@@ -749,11 +836,24 @@ fn hold_inward_columns(mesh: &mut TMesh, seams: &[OwnSeam], held: &mut [bool]) {
 }
 
 fn finite_or_zero(z: f64) -> f64 {
-    if z.is_finite() { z } else { 0.0 }
+    if z.is_finite() {
+        z
+    } else {
+        0.0
+    }
 }
 
 #[allow(clippy::too_many_arguments)]
-fn stats(it: usize, pb: &PbSpline, mesh: &TMesh, refined: usize, err: &ErrorStats, t0: std::time::Instant, t_build: f64, t_opt: f64) -> IterationStats {
+fn stats(
+    it: usize,
+    pb: &PbSpline,
+    mesh: &TMesh,
+    refined: usize,
+    err: &ErrorStats,
+    t0: std::time::Instant,
+    t_build: f64,
+    t_opt: f64,
+) -> IterationStats {
     let t = t0.elapsed().as_secs_f64();
     IterationStats {
         iteration: it,
@@ -789,7 +889,11 @@ fn sync_seams(mesh: &mut TMesh, seams: &mut [OwnSeam], lambda: f64) -> Vec<bool>
         }
     }
     let omega = |seams: &[OwnSeam], line: Line, u: f64| -> f64 {
-        seams.iter().find(|s| s.line == line).and_then(|s| s.curve.knots.binary_search_by(|k| k.total_cmp(&u)).ok().map(|k| s.curve.w[k])).unwrap_or(1.0)
+        seams
+            .iter()
+            .find(|s| s.line == line)
+            .and_then(|s| s.curve.knots.binary_search_by(|k| k.total_cmp(&u)).ok().map(|k| s.curve.w[k]))
+            .unwrap_or(1.0)
     };
     if mesh.degree == Degree::Cubic {
         let pb = PbSpline::build(mesh);
@@ -871,7 +975,17 @@ pub fn continuity_in(a: &Placed, b: &Placed, cell: [f64; 2], region: &dyn Fn(f64
     pos.push(line.u1);
     let ra = a.rect();
     // into a: the direction from the seam into tile a, across the seam
-    let into_a = if line.vertical { if line.c == ra.s_max { -1.0 } else { 1.0 } } else if line.c == ra.t_max { -1.0 } else { 1.0 };
+    let into_a = if line.vertical {
+        if line.c == ra.s_max {
+            -1.0
+        } else {
+            1.0
+        }
+    } else if line.c == ra.t_max {
+        -1.0
+    } else {
+        1.0
+    };
     let h = 1e-3;
     let (mut gap, mut zmax, mut ang) = (0.0f64, 0.0f64, 0.0f64);
     let mut angles = Vec::with_capacity(pos.len());
@@ -909,7 +1023,13 @@ pub fn continuity_in(a: &Placed, b: &Placed, cell: [f64; 2], region: &dyn Fn(f64
     }
     angles.sort_by(f64::total_cmp);
     let median = angles[angles.len() / 2];
-    Some(Continuity { samples: pos.len(), max_gap: gap, max_gap_relative: gap / zmax.max(f64::MIN_POSITIVE), max_normal_angle_deg: ang, median_normal_angle_deg: median })
+    Some(Continuity {
+        samples: pos.len(),
+        max_gap: gap,
+        max_gap_relative: gap / zmax.max(f64::MIN_POSITIVE),
+        max_normal_angle_deg: ang,
+        median_normal_angle_deg: median,
+    })
 }
 
 #[cfg(test)]
@@ -920,7 +1040,12 @@ mod tests {
     #[test]
     fn knot_insertion_keeps_the_curve() {
         for degree in [Degree::Linear, Degree::Cubic] {
-            let mut c = SeamCurve { degree, knots: vec![0.0, 1.0, 3.0, 4.0, 8.0], z: vec![1.0, -2.0, 5.0, 0.5, 3.0], w: vec![1.0; 5] };
+            let mut c = SeamCurve {
+                degree,
+                knots: vec![0.0, 1.0, 3.0, 4.0, 8.0],
+                z: vec![1.0, -2.0, 5.0, 0.5, 3.0],
+                w: vec![1.0; 5],
+            };
             let before: Vec<f64> = (1..80).map(|k| c.eval(k as f64 * 0.1)).collect();
             for tau in [0.5, 2.0, 6.0, 3.5, 7.75, 0.25] {
                 c.insert(tau);
@@ -938,11 +1063,17 @@ mod tests {
         let n = 6;
         let a = |i: usize, j: usize| -> f64 {
             let d = i.abs_diff(j);
-            match d { 0 => 4.0 + i as f64, 1 => -1.0, 2 => 0.5, _ => 0.0 }
+            match d {
+                0 => 4.0 + i as f64,
+                1 => -1.0,
+                2 => 0.5,
+                _ => 0.0,
+            }
         };
         let x: Vec<f64> = (0..n).map(|i| i as f64 - 2.0).collect();
         let b: Vec<f64> = (0..n).map(|i| (0..n).map(|j| a(i, j) * x[j]).sum()).collect();
-        let band: Vec<Vec<f64>> = (0..n).map(|i| (0..=2).map(|d| if d <= i { a(i, i - d) } else { 0.0 }).collect()).collect();
+        let band: Vec<Vec<f64>> =
+            (0..n).map(|i| (0..=2).map(|d| if d <= i { a(i, i - d) } else { 0.0 }).collect()).collect();
         let y = band_cholesky_solve(band, b).unwrap();
         for (p, q) in x.iter().zip(&y) {
             assert!((p - q).abs() < 1e-9, "{p} vs {q}");
@@ -969,13 +1100,20 @@ mod tests {
                 placed.push(Placed { mesh: r.mesh.compacted(), offset: [(tile * w) as f64, 0.0] });
                 samples.push(s);
             }
-            let source = |s: i64, t: i64| if s >= 0 && t >= 0 && (s as usize) < 2 * w && (t as usize) < h { f(s as f64, t as f64) } else { f64::NAN };
+            let source = |s: i64, t: i64| {
+                if s >= 0 && t >= 0 && (s as usize) < 2 * w && (t as usize) < h {
+                    f(s as f64, t as f64)
+                } else {
+                    f64::NAN
+                }
+            };
             let mut out = Vec::new();
             for tile in 0..2 {
                 let mut o = FitOptions::new(degree, e);
                 o.domain = None;
                 let other = placed[1 - tile].clone();
-                let r = stitch(&placed[tile], &[other], &samples[tile], &source, &o, &Backend::Cpu, &mut |_| {}).unwrap();
+                let r =
+                    stitch(&placed[tile], &[other], &samples[tile], &source, &o, &Backend::Cpu, &mut |_| {}).unwrap();
                 assert!(r.seams[0].max_curve_deviation < 1e-6, "{degree:?}: {:?}", r.seams);
                 assert_eq!(r.stop, StopReason::ToleranceReached, "{degree:?} tile {tile}");
                 assert_eq!(r.seams.len(), 1);

@@ -106,7 +106,12 @@ fn read_text(path: &str) -> Result<String, CliError> {
 
 /// A plan's raster tiles (`tiles`, read from `plan`) and the mesh of each (read by `template`
 /// with `{id}`), placed in the plan's frame.
-fn placed_tiles(tiles: &[tiling::Tile], plan: &str, template: &str, ids: &[&str]) -> Result<Vec<(String, tspline::format::TMeshFile, tspline::seams::Placed)>, CliError> {
+fn placed_tiles(
+    tiles: &[tiling::Tile],
+    plan: &str,
+    template: &str,
+    ids: &[&str],
+) -> Result<Vec<(String, tspline::format::TMeshFile, tspline::seams::Placed)>, CliError> {
     let mut out = Vec::new();
     for id in ids {
         let t = tiling::plan::find_tile(tiles, id, plan).map_err(tiling_error)?;

@@ -79,42 +79,72 @@ pub(super) fn run(a: StitchArgs, config: &Config) -> CmdResult {
     let (_, own_file, own) = placed.remove(0);
     let neighbours: Vec<tspline::seams::Placed> = placed.into_iter().map(|(_, _, p)| p).collect();
     crate::terrain_io::gdal_notices(config);
-    let (raster, _) = raster_io::read_raster_window_typed(Path::new(&a.source), 1, Some(px)).map_err(crate::terrain_io::raster_err)?;
+    let (raster, _) = raster_io::read_raster_window_typed(Path::new(&a.source), 1, Some(px))
+        .map_err(crate::terrain_io::raster_err)?;
     let name = format!("{} (tile {})", a.source, a.tile);
     let layout = crate::terrain_io::raster_layout(raster, &name)?;
     let (samples, georef) = (layout.samples, layout.georef);
     if georef.x0 != own_file.georef.x0 || georef.y0 != own_file.georef.y0 {
-        return Err(CliError::usage(format!("{}: the mesh of tile {} was not fitted on this tile's window of {}", a.meshes.replace("{id}", &a.tile), a.tile, a.source)));
+        return Err(CliError::usage(format!(
+            "{}: the mesh of tile {} was not fitted on this tile's window of {}",
+            a.meshes.replace("{id}", &a.tile),
+            a.tile,
+            a.source
+        )));
     }
     let mut opts = tspline::fit::FitOptions::new(own.mesh.degree, a.max_error);
     opts.max_iterations = a.max_iterations;
     let progress = config.progress("stitch", a.max_iterations as u64);
     let mut cb = |st: &tspline::fit::IterationStats| {
-        progress.set(st.iteration as u64, &format!("round {}: {} control points, max {:.4}, {} cells over {}", st.iteration, st.control_points, st.error.max, st.error.over_tolerance, a.max_error));
+        progress.set(
+            st.iteration as u64,
+            &format!(
+                "round {}: {} control points, max {:.4}, {} cells over {}",
+                st.iteration, st.control_points, st.error.max, st.error.over_tolerance, a.max_error
+            ),
+        );
     };
     // the source around the tile (its halo window): the data on both sides of every seam
     let hp = tile.halo.pixels.unwrap_or(px);
     let short = [px[0] - hp[0], px[1] - hp[1], (hp[0] + hp[2]) - (px[0] + px[2]), (hp[1] + hp[3]) - (px[1] + px[3])];
     if !tile.neighbours.is_empty() && short.iter().all(|&m| m < 2) {
-        return Err(CliError::usage(format!("{}: the plan's halo is under 2 px; the seams need the cells on both sides: plan with --halo 2 (or more)", a.plan)));
+        return Err(CliError::usage(format!(
+            "{}: the plan's halo is under 2 px; the seams need the cells on both sides: plan with --halo 2 (or more)",
+            a.plan
+        )));
     }
-    let (halo, _) = raster_io::read_raster_window_typed(Path::new(&a.source), 1, Some(hp)).map_err(crate::terrain_io::raster_err)?;
+    let (halo, _) = raster_io::read_raster_window_typed(Path::new(&a.source), 1, Some(hp))
+        .map_err(crate::terrain_io::raster_err)?;
     let halo_layout = crate::terrain_io::raster_layout(halo, &name)?;
     let (hs, hg) = (halo_layout.samples, halo_layout.georef);
     let ho = tiling::raster::frame_offset(&tiles, hg.x0, hg.y0, hg.dx, hg.dy);
     let source = |s: i64, t: i64| -> f64 {
         let (i, j) = (s - ho[0] as i64, t - ho[1] as i64);
-        if i < 0 || j < 0 || i as usize >= hs.width || j as usize >= hs.height { f64::NAN } else { hs.get(i as usize, j as usize) }
+        if i < 0 || j < 0 || i as usize >= hs.width || j as usize >= hs.height {
+            f64::NAN
+        } else {
+            hs.get(i as usize, j as usize)
+        }
     };
     let r = tspline::seams::stitch(&own, &neighbours, &samples, &source, &opts, &tspline::fit::Backend::Cpu, &mut cb)
         .map_err(|e| crate::terrain_io::tspline_err(&name, e))?;
     let ok = r.stop == tspline::fit::StopReason::ToleranceReached;
-    progress.finish(&if ok { format!("every valid cell within {}, {} seams", a.max_error, r.seams.len()) } else { format!("stopped: {:?}", r.stop) });
+    progress.finish(&if ok {
+        format!("every valid cell within {}, {} seams", a.max_error, r.seams.len())
+    } else {
+        format!("stopped: {:?}", r.stop)
+    });
     let exit = if ok { Exit::Ok } else { Exit::Findings };
-    let file = tspline::format::TMeshFile { mesh: r.mesh, georef: own_file.georef.clone(), mask: own_file.mask.clone(), warp: None };
+    let file = tspline::format::TMeshFile {
+        mesh: r.mesh,
+        georef: own_file.georef.clone(),
+        mask: own_file.mask.clone(),
+        warp: None,
+    };
     if config.keeps_output(exit, Some(&a.output)) {
         let mut bytes = Vec::new();
-        tspline::format::write_as(&file, tspline::format::Encoding::for_path(Some(&a.output)), &mut bytes).map_err(CliError::io_out)?;
+        tspline::format::write_as(&file, tspline::format::Encoding::for_path(Some(&a.output)), &mut bytes)
+            .map_err(CliError::io_out)?;
         output.write_bytes(&bytes)?;
     }
     if let Some(path) = &a.report {
@@ -136,7 +166,11 @@ pub(super) fn run(a: StitchArgs, config: &Config) -> CmdResult {
         crate::report::write_json_report(path, &STITCH_REPORT, &rep)?;
     }
     if !ok {
-        crate::say!("geofit: {name}: stitching stopped before every valid cell was within {}: {:?}", a.max_error, r.stop);
+        crate::say!(
+            "geofit: {name}: stitching stopped before every valid cell was within {}: {:?}",
+            a.max_error,
+            r.stop
+        );
     }
     Ok(exit)
 }
