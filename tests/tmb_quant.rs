@@ -75,6 +75,8 @@ fn quantised_heights_move_by_at_most_q_and_the_file_stays_within_e() {
         rs,
         "--max-error",
         &e.to_string(),
+        "--storage-share",
+        "0.3",
         "-o",
         q_file.to_str().unwrap(),
         "--report",
@@ -153,10 +155,8 @@ fn lossless_is_exact_and_version_1_files_read() {
     let rs = r.to_str().unwrap();
     let (tmb, xml) = (dir.path().join("a.tmb"), dir.path().join("a.tmesh"));
     for out in [&tmb, &xml] {
-        let o = run(
-            &["fit", rs, "--max-error", "0.2", "--lossless", "-o", out.to_str().unwrap(), "--device", "cpu"],
-            None,
-        );
+        let o =
+            run(&["fit", rs, "--max-error", "0.2", "--lossless", "-o", out.to_str().unwrap(), "--device", "cpu"], None);
         assert_eq!(code(&o), 0, "{}", String::from_utf8_lossy(&o.stderr));
     }
     let (step, z) = heights(&tmb);

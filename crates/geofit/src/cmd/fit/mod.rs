@@ -101,7 +101,7 @@ pub struct Args {
     #[arg(long)]
     pub lossless: bool,
     /// `.tmb`: the share of --max-error the stored heights may take (they are rounded to steps
-    /// of twice that; the fit aims at the rest). Default 0.3.
+    /// of twice that; the fit aims at the rest). Default 0.15.
     #[arg(long, value_name = "FRACTION")]
     pub storage_share: Option<f64>,
     /// Maximum |Δz| allowed at every valid raster cell, in metres (--error-unit), converted

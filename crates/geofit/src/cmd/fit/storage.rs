@@ -14,16 +14,20 @@ use super::input::Prepared;
 use super::Args;
 use crate::error::CliError;
 
-/// The storage share of the tolerance when `--storage-share` is not given: measured on the
-/// LiDAR DEM, the BAG and Kilauea at 0.2, 0.3 and 0.5 (benches/results/tmb.md,
-/// docs/decisions.md#heights-quantised-to-the-error-budget-issue-37).
-pub(super) const DEFAULT_SHARE: f64 = 0.3;
+/// The storage share of the tolerance when `--storage-share` is not given: the smallest files
+/// in total over the LiDAR DEM (0.5, 0.25, 0.1 m), the BAG (0.25, 0.1 m) and Kilauea (5 m) among
+/// 0.1, 0.15, 0.2, 0.3 and 0.5 (within 5 % of each row's best; 0.3 was 1–30 % larger, 0.5 up to
+/// 95 %): benches/results/tmb.md, docs/decisions.md#heights-quantised-to-the-error-budget-issue-37.
+pub(super) const DEFAULT_SHARE: f64 = 0.15;
 
 /// The share of the tolerance the stored heights may take, or None for lossless heights (an
-/// XML output, `--lossless`, `--indirect`: its mesh is mapped back through the warp).
+/// XML output, `--lossless`, `--indirect`: its mesh is mapped back through the warp; a tile of
+/// a plan, `--srcwin` / `--tile`: `tile stitch` joins the tiles' own heights along the seams and
+/// writes the delivered files itself).
 pub(super) fn share(args: &Args) -> Option<f64> {
     let binary = Encoding::for_path(args.output.as_deref()) == Encoding::Binary;
-    (binary && !args.lossless && !args.indirect).then(|| args.storage_share.unwrap_or(DEFAULT_SHARE))
+    let tile = args.srcwin.is_some() || args.tile.is_some();
+    (binary && !args.lossless && !args.indirect && !tile).then(|| args.storage_share.unwrap_or(DEFAULT_SHARE))
 }
 
 /// `--storage-share` must leave the fit a share: within (0, 0.9].
