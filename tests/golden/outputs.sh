@@ -46,6 +46,7 @@ for doc in docs:
 
 # --- README: buildings
 geofit heal "$TILE" -o healed.gml --report heal.json
+geofit convert "$TILE" -o tile.city.json --report convert.json
 drop_timings heal.json
 geofit validate healed.gml --json > findings.json
 drop_timings findings.json

@@ -34,11 +34,14 @@ pub struct ObjectMapper<'s> {
     pub pool: Pool,
     pub report: Report,
     generated: usize,
+    /// Surface type of every face defined in a boundary surface of the current top-level
+    /// feature (by its byte offset): a face another feature of the tree points to keeps it.
+    defined: HashMap<usize, SurfaceType>,
 }
 
 impl<'s> ObjectMapper<'s> {
     pub fn new(src: &'s [u8], pool: Pool) -> ObjectMapper<'s> {
-        ObjectMapper { src, pool, report: Report::default(), generated: 0 }
+        ObjectMapper { src, pool, report: Report::default(), generated: 0, defined: HashMap::new() }
     }
 
     /// Maps `o` (and its children) into `out`; returns its id, or `None` (reported) when
@@ -53,6 +56,14 @@ impl<'s> ObjectMapper<'s> {
             self.report.add(what, o.id.as_deref());
             return None;
         };
+        if parent.is_none() {
+            self.defined = o
+                .walk()
+                .into_iter()
+                .filter_map(|f| SurfaceType::from_local_name(&f.kind).map(|t| (f, t)))
+                .flat_map(|(f, t)| f.geometries.iter().flat_map(|g| g.polygons()).filter(|p| p.via_xlink.is_none()).map(move |p| (p.span.bytes.start, t)))
+                .collect();
+        }
         if o.kind == "IntBuildingInstallation" {
             self.report.add("IntBuildingInstallation (written as a BuildingInstallation)", o.id.as_deref());
         }
@@ -150,6 +161,7 @@ impl<'s> ObjectMapper<'s> {
                 }
             }
         }
+        let defined = &self.defined;
         let semantic_of = |p: &Polygon| {
             p.semantic_owner
                 .as_deref()
