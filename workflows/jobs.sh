@@ -135,7 +135,10 @@ tile)
     ;;
 rplan)
     mkdir -p "$(dirname "$out")"
-    "$GEOFIT" -q tile plan --tile-size "${GEOFIT_TILE_PIXELS:-1024}" --halo 2 -o "$out" "$1"
+    # the plan names the source by an absolute path (a job may run elsewhere); /vsi* and URLs as given
+    src=$1
+    case $src in /* | *://*) ;; *) src=$PWD/$src ;; esac
+    "$GEOFIT" -q tile plan --tile-size "${GEOFIT_TILE_PIXELS:-1024}" --halo 2 -o "$out" "$src"
     ;;
 rplanmk)
     mkdir -p "$(dirname "$out")"

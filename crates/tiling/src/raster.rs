@@ -44,13 +44,7 @@ pub fn plan(path: &str, opts: &RasterTiling) -> Result<Vec<Tile>, TilingError> {
             format!("rotated rasters are not supported (geotransform {gt:?}); gdalwarp it to a north-up grid first"),
         ));
     }
-    // an absolute path in the plan: a job may run in another directory (a local file; /vsi*
-    // paths and URLs are kept as given)
-    let source = match std::fs::canonicalize(path) {
-        Ok(p) if !path.starts_with("/vsi") => p.to_string_lossy().into_owned(),
-        _ => path.to_string(),
-    };
-    let mut tiles = plan_grid(&source, w, h, gt, opts)?;
+    let mut tiles = plan_grid(path, w, h, gt, opts)?;
     let band = ds.rasterband(1).map_err(|e| TilingError::unreadable(path, e))?;
     let nodata = band.no_data_value();
     for t in &mut tiles {

@@ -41,11 +41,13 @@ the cell of a grid (aligned at 0, power-of-two metres) that holds its footprint 
 centroid of its GroundSurface polygons on xy, else its envelope centre). The step is the largest
 that keeps every tile at or under --buildings-per-tile, or --tile-size. Buildings of other tiles
 that reach into a tile are its halo: listed in the plan, read-only, never extracted twice.
-Rasters: square core windows of about --cells-per-tile cells, halo grown by --halo pixels and
-clipped to the raster; only the size and geotransform are read. `fit --plan --tile` fits a tile's
-core window; `stitch` makes it C0 with its neighbours' fits along every seam (reading its halo:
-plan with --halo 2 or more) and re-checks --max-error on every valid cell; `seams` reports the
-gap and the normal-angle jump per seam (exit 1 when a gap exceeds --max-gap-relative).
+Rasters: core windows of about --cells-per-tile cells cut along the knot lattice of the whole
+raster's fit (seams on pixel centres), halo grown by --halo pixels and clipped to the raster; the
+data is read one core at a time and tiles without a valid cell get work 0 (no jobs, no seams).
+`fit --plan --tile` fits a tile's window as the whole fit would; `stitch` makes it C0 with its
+neighbours' fits along every seam (reading its halo: plan with --halo 2 or more) and re-checks
+--max-error on every valid cell; `seams` reports the gap and the normal-angle jump per seam over
+the data (exit 1 when a gap exceeds --max-gap-relative of the height range).
 
 Tileset heights: 3D Tiles wants ellipsoidal heights (m). A CRS that names a height system (NRW's
 urn:adv:crs:ETRS89_UTM32*DE_DHHN2016_NH*GCG2016, a compound CRS such as EPSG:25832+5773) gets the
