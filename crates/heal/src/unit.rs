@@ -51,6 +51,7 @@ pub fn heal_or_repair(
     let (edits, record) = crate::repair::repair_unit(b, doc, &ro);
     if let Some(edits) = edits {
         // the repairs replace the planarity heal for this building: both rewrite its rings
+        // (docs/decisions.md#issue-35-repairs-verified-before-writing-instead-of-the-planarity-heal)
         return (Ok((edits, BackReport::default())), record);
     }
     (heal_unit(b, tpl, opts), record)

@@ -10,16 +10,18 @@
 //!    vertices has no area and goes (a polygon only where nothing refers to it).
 //! 2. `insert_t_junction` (302): a vertex of the shell lying on an edge used by one face only is
 //!    inserted into that edge; `snap_gap` (302): a border vertex within `max_move` of another
-//!    moves onto it, where that closes border edges.
+//!    moves onto it, where that closes border edges (docs/decisions.md#issue-35-repairs-gap-snap-bound).
 //! 3. `cut_keyhole` / `split_pinch` / `remove_fold` (104): a ring that passes twice through a
 //!    vertex is split into an outer ring, holes (a keyhole's cut dropped), lobes (new polygons)
 //!    and zero-area loops (dropped).
 //! 4. `orient_faces` (307) / `orient_shell` (405): the faces of a shell are turned to agree
 //!    along every edge, then all of them outwards by the signed volume.
 //!
-//! The result is validated and measured before anything is written ([`verify`]); the codes the
-//! building still has are reported as left alone. Vertex identity is the validator's (its
-//! snapper, `--snap-tol`), so a repair sees exactly the vertices the finding was about.
+//! The result is validated and measured before anything is written ([`verify`],
+//! docs/decisions.md#issue-35-repairs-verified-before-writing-instead-of-the-planarity-heal); the
+//! codes the building still has are reported as left alone. Vertex identity is the validator's
+//! (its snapper, `--snap-tol`), so a repair sees exactly the vertices the finding was about
+//! (docs/decisions.md#issue-35-repairs-vertex-identity-is-the-validators).
 //!
 //! # Examples
 //! ```
@@ -107,16 +109,22 @@ fn code_totals(f: &verify::Findings) -> BTreeMap<u16, usize> {
     m
 }
 
+/// How far from an edge (in snap tolerances) a shell vertex may lie and still be inserted into
+/// it as a T-junction: coordinates written to the millimetre put a vertex that lies on the edge
+/// up to 1 mm and a rounding error off it, just beyond one snap tolerance (NRW tile
+/// 338_5724: 1.0000002 mm). See docs/decisions.md#issue-35-repairs-t-junction-reach.
+pub const T_JUNCTION_REACH: f64 = 2.0;
+
 /// Runs the repair steps on the working copy.
 fn run_steps(w: &mut Work, opts: &RepairOptions) -> Counts {
     let tol = opts.validation.snap_tol;
     let mut counts = Counts::new();
     rings::fix_points(w, tol, &mut counts);
     // T-junctions first: a gap snap may then collapse a short border edge the insertion made
-    shell::insert_t_junctions(w, tol, &mut counts);
+    shell::insert_t_junctions(w, tol, T_JUNCTION_REACH * tol, &mut counts);
     if shell::snap_gaps(w, tol, opts.max_move, &mut counts) > 0 {
         rings::fix_points(w, tol, &mut counts);
-        shell::insert_t_junctions(w, tol, &mut counts);
+        shell::insert_t_junctions(w, tol, T_JUNCTION_REACH * tol, &mut counts);
     }
     rings::split_rings(w, tol, &mut counts);
     shell::orient_shells(w, tol, &mut counts);

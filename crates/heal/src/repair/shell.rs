@@ -60,9 +60,9 @@ fn on_segment(a: &Vx, b: &Vx, coords: &[P3], tol: f64) -> Vec<Vx> {
 }
 
 /// Inserts into every edge used by one face only the vertices of the shell lying on it (a
-/// T-junction: the neighbour's edge is split there, this one is not). Returns the number of
-/// vertices inserted.
-pub fn insert_t_junctions(w: &mut Work, tol: f64, counts: &mut Counts) -> usize {
+/// T-junction: the neighbour's edge is split there, this one is not); `reach`: how far off the
+/// edge such a vertex may lie. Returns the number of vertices inserted.
+pub fn insert_t_junctions(w: &mut Work, tol: f64, reach: f64, counts: &mut Counts) -> usize {
     let mut total = 0;
     for ci in 0..w.contexts.len() {
         if w.contexts[ci].kind == Kind::Surfaces {
@@ -80,7 +80,7 @@ pub fn insert_t_junctions(w: &mut Work, tol: f64, counts: &mut Counts) -> usize 
                         let (a, b) = (&ring[i], &ring[(i + 1) % ring.len()]);
                         out.push(*a);
                         if uses.get(&(a.0.min(b.0), a.0.max(b.0))) == Some(&1) {
-                            let add = on_segment(a, b, &coords, tol);
+                            let add = on_segment(a, b, &coords, reach);
                             n += add.len();
                             out.extend(add);
                         }
