@@ -47,6 +47,8 @@
 pub mod ring;
 pub mod rings;
 pub mod shell;
+#[cfg(test)]
+mod tests;
 pub mod verify;
 pub mod work;
 mod write;
