@@ -37,11 +37,20 @@ pub struct ObjectMapper<'s> {
     /// Surface type of every face defined in a boundary surface of the current top-level
     /// feature (by its byte offset): a face another feature of the tree points to keeps it.
     defined: HashMap<usize, SurfaceType>,
+    /// The same by the face's gml:id (a copy reached by XLink may come from a re-parse).
+    defined_ids: HashMap<String, SurfaceType>,
 }
 
 impl<'s> ObjectMapper<'s> {
     pub fn new(src: &'s [u8], pool: Pool) -> ObjectMapper<'s> {
-        ObjectMapper { src, pool, report: Report::default(), generated: 0, defined: HashMap::new() }
+        ObjectMapper {
+            src,
+            pool,
+            report: Report::default(),
+            generated: 0,
+            defined: HashMap::new(),
+            defined_ids: HashMap::new(),
+        }
     }
 
     /// Maps `o` (and its children) into `out`; returns its id, or `None` (reported) when
@@ -61,7 +70,23 @@ impl<'s> ObjectMapper<'s> {
                 .walk()
                 .into_iter()
                 .filter_map(|f| SurfaceType::from_local_name(&f.kind).map(|t| (f, t)))
-                .flat_map(|(f, t)| f.geometries.iter().flat_map(|g| g.polygons()).filter(|p| p.via_xlink.is_none()).map(move |p| (p.span.bytes.start, t)))
+                .flat_map(|(f, t)| {
+                    f.geometries
+                        .iter()
+                        .flat_map(|g| g.polygons())
+                        .filter(|p| p.via_xlink.is_none())
+                        .map(move |p| (p.span.bytes.start, t))
+                })
+                .collect();
+        }
+        if parent.is_none() {
+            self.defined_ids = o
+                .walk()
+                .into_iter()
+                .filter_map(|f| SurfaceType::from_local_name(&f.kind).map(|t| (f, t)))
+                .flat_map(|(f, t)| {
+                    f.geometries.iter().flat_map(|g| g.polygons()).filter_map(move |p| p.id.clone().map(|id| (id, t)))
+                })
                 .collect();
         }
         if o.kind == "IntBuildingInstallation" {
@@ -161,12 +186,32 @@ impl<'s> ObjectMapper<'s> {
                 }
             }
         }
-        let defined = &self.defined;
+        // A face whose surface belongs to another feature (an XLink across features, e.g. into
+        // a nested installation) keeps its type: one id-less semantic surface per type.
+        let (defined, defined_ids) = (&self.defined, &self.defined_ids);
+        let type_of = |p: &Polygon| {
+            p.semantic
+                .or_else(|| defined.get(&p.span.bytes.start).copied())
+                .or_else(|| p.id.as_ref().and_then(|i| defined_ids.get(i).copied()))
+        };
+        let mut foreign: HashMap<SurfaceType, usize> = HashMap::new();
+        for p in o.geometries.iter().flat_map(|g| g.polygons()) {
+            let own = p.semantic_owner.as_deref().is_some_and(|o| by_id.contains_key(o))
+                || claimed.contains_key(&p.span.bytes.start);
+            if let (Some(t), false) = (type_of(p), own) {
+                foreign.entry(t).or_insert_with(|| {
+                    flat.list.objects.push(Map::from_iter([("type".to_string(), json!(t.local_name()))]));
+                    flat.list.parent.push(None);
+                    flat.list.objects.len() - 1
+                });
+            }
+        }
         let semantic_of = |p: &Polygon| {
             p.semantic_owner
                 .as_deref()
                 .and_then(|o| by_id.get(o).copied())
                 .or_else(|| claimed.get(&p.span.bytes.start).copied())
+                .or_else(|| type_of(p).and_then(|t| foreign.get(&t).copied()))
         };
         let mut covered: HashSet<usize> = HashSet::new();
         let mut out = Vec::new();
