@@ -46,6 +46,7 @@
 
 pub mod ring;
 pub mod rings;
+mod screen;
 pub mod shell;
 #[cfg(test)]
 mod tests;
@@ -138,13 +139,16 @@ fn run_steps(w: &mut Work, opts: &RepairOptions) -> Counts {
 /// the repairs act on).
 pub fn repair_unit(b: &CityObject, doc: &[u8], opts: &RepairOptions) -> (Option<Vec<Edit>>, Option<RepairRecord>) {
     let objects = normalize::citygml::own_objects(b);
+    let mut w = Work::new(&objects);
+    if !screen::suspect(&w, opts.validation.snap_tol) {
+        return (None, None);
+    }
     let before = verify::findings(&objects, &opts.validation);
     let totals = code_totals(&before);
     if !TARGETS.iter().any(|c| totals.contains_key(c)) {
         return (None, None);
     }
     let mut record = RepairRecord { left_alone: totals.clone(), ..RepairRecord::default() };
-    let mut w = Work::new(&objects);
     let counts = run_steps(&mut w, opts);
     let changed: HashMap<(usize, usize), &work::WPoly> = w
         .polys
