@@ -14,20 +14,68 @@ use super::input::Prepared;
 use super::Args;
 use crate::error::CliError;
 
-/// The storage share of the tolerance when `--storage-share` is not given: the smallest files
-/// in total over the LiDAR DEM (0.5, 0.25, 0.1 m), the BAG (0.25, 0.1 m) and Kilauea (5 m) among
-/// 0.1, 0.15, 0.2, 0.3 and 0.5 (within 5 % of each row's best; 0.3 was 1–30 % larger, 0.5 up to
-/// 95 %): benches/results/tmb.md, docs/decisions.md#heights-quantised-to-the-error-budget-issue-37.
-pub(super) const DEFAULT_SHARE: f64 = 0.15;
+/// The storage share of the tolerance on smooth data (when `--storage-share` is not given): the
+/// smallest files in total over the LiDAR DEM (0.5, 0.25, 0.1 m), the BAG (0.25, 0.1 m) and
+/// Kilauea (5 m) among 0.1, 0.15, 0.2, 0.3 and 0.5 (within 5 % of each row's best; 0.3 was
+/// 1–30 % larger, 0.5 up to 95 %): benches/results/tmb.md,
+/// docs/decisions.md#heights-quantised-to-the-error-budget-issue-37.
+pub(super) const SMOOTH_SHARE: f64 = 0.15;
+/// The share on data rough at cell scale, where the mesh needs nearly a control point per cell
+/// whatever the fit's share, so the bytes per height decide: 0.7 was the smallest of 0.15 … 0.7
+/// on all seven rough rows measured (Iceland, GMT bathymetry, Guinea bay, DEM hills).
+pub(super) const ROUGH_SHARE: f64 = 0.7;
+/// Fraction of second differences over E from which data counts as rough: the smooth rows
+/// measured were ≤ 0.06, the rough ones ≥ 0.28.
+const ROUGH_FRACTION: f64 = 0.2;
 
 /// The share of the tolerance the stored heights may take, or None for lossless heights (an
 /// XML output, `--lossless`, `--indirect`: its mesh is mapped back through the warp; a tile of
 /// a plan, `--srcwin` / `--tile`: `tile stitch` joins the tiles' own heights along the seams and
 /// writes the delivered files itself).
-pub(super) fn share(args: &Args) -> Option<f64> {
+pub(super) fn share(args: &Args, p: &Prepared) -> Option<f64> {
     let binary = Encoding::for_path(args.output.as_deref()) == Encoding::Binary;
     let tile = args.srcwin.is_some() || args.tile.is_some();
-    (binary && !args.lossless && !args.indirect && !tile).then(|| args.storage_share.unwrap_or(DEFAULT_SHARE))
+    if !binary || args.lossless || args.indirect || tile {
+        return None;
+    }
+    Some(args.storage_share.unwrap_or_else(|| {
+        if roughness(&p.samples, p.e_min) >= ROUGH_FRACTION {
+            ROUGH_SHARE
+        } else {
+            SMOOTH_SHARE
+        }
+    }))
+}
+
+/// The fraction of the raster's second differences (|z[i−1] − 2 z[i] + z[i+1]| along rows and
+/// columns, over valid cells) above `e`: how much of the data a smooth surface cannot follow
+/// within E between neighbouring cells.
+pub(super) fn roughness(s: &Samples, e: f64) -> f64 {
+    let (w, h) = (s.width, s.height);
+    let z = |i: usize, j: usize| s.z.get(j * w + i);
+    let (mut n, mut over) = (0usize, 0usize);
+    let mut count = |a: f64, b: f64, c: f64| {
+        let d = (a - 2.0 * b + c).abs();
+        if d.is_finite() {
+            n += 1;
+            over += (d > e) as usize;
+        }
+    };
+    for j in 0..h {
+        for i in 1..w.saturating_sub(1) {
+            count(z(i - 1, j), z(i, j), z(i + 1, j));
+        }
+    }
+    for j in 1..h.saturating_sub(1) {
+        for i in 0..w {
+            count(z(i, j - 1), z(i, j), z(i, j + 1));
+        }
+    }
+    if n == 0 {
+        0.0
+    } else {
+        over as f64 / n as f64
+    }
 }
 
 /// `--storage-share` must leave the fit a share: within (0, 0.9].
@@ -45,8 +93,8 @@ pub(super) fn check_share(args: &Args) -> Result<(), CliError> {
 
 /// Takes the storage share off the fit's tolerances: the fit aims at (1 − r)·T at every cell
 /// (the floor and the uncertainty multiple alike), so T·(1 − r) + r·E_min ≤ T.
-pub(super) fn fit_share(args: &Args, opts: &mut FitOptions) {
-    if let Some(r) = share(args) {
+pub(super) fn fit_share(args: &Args, p: &Prepared, opts: &mut FitOptions) {
+    if let Some(r) = share(args, p) {
         opts.max_error *= 1.0 - r;
         if let Some(c) = &mut opts.cell_tolerance {
             c.k *= 1.0 - r;
@@ -71,7 +119,7 @@ pub(super) struct Stored {
 /// left `q` free) halves `q`, down to lossless heights after three tries.
 pub(super) fn encode(file: &TMeshFile, args: &Args, p: &Prepared, fit_ok: bool) -> Result<(Vec<u8>, Stored), CliError> {
     let encoding = Encoding::for_path(args.output.as_deref());
-    let mut q = share(args).map(|r| r * p.e_min);
+    let mut q = share(args, p).map(|r| r * p.e_min);
     for tries in 0.. {
         let mut bytes = Vec::new();
         match encoding {
