@@ -96,7 +96,10 @@ fn heal_never_makes_a_building_worse() {
         }
         assert_eq!(code(&h), 0, "{name}: {}", String::from_utf8_lossy(&h.stderr));
         let r: Value = serde_json::from_slice(&std::fs::read(&rep).unwrap()).unwrap();
-        healed_total += r["healed"].as_u64().unwrap();
+        // "healed" counts buildings whose findings fell; what heal did its job on is every
+        // building not kept (issue 35: honest summaries)
+        let not_kept = r["buildings"].as_u64().unwrap() - r["kept"].as_array().unwrap().len() as u64;
+        healed_total += not_kept;
         let kept: Vec<&str> = r["kept"].as_array().unwrap().iter().map(|k| k["building"].as_str().unwrap()).collect();
 
         let ((cb, xb), (ca, xa)) = (findings(&src), findings(&out));
@@ -107,7 +110,11 @@ fn heal_never_makes_a_building_worse() {
             for (c, n) in &ca {
                 *nrw.1.entry(*c).or_insert(0) += n;
             }
-            nrw_healed += r["healed"].as_u64().unwrap();
+            nrw_healed += not_kept;
+            let kept_ids: std::collections::BTreeSet<&str> = kept.iter().copied().collect();
+            for ((feature, c), _) in findings_by_feature(&out) {
+                assert!(c != 203 || kept_ids.contains(feature.as_str()), "{name}: {feature} is not kept and still has a non-planar face (203)");
+            }
             nrw_total.0 += 1;
             nrw_total.1 += r["buildings"].as_u64().unwrap();
         }
@@ -148,13 +155,15 @@ fn heal_never_makes_a_building_worse() {
         assert!(longest(&after) <= longest(&before), "{name}: numbers written with more decimals than the input ({} → {})", longest(&before), longest(&after));
     }
     // Keeping every building would pass every check above: heal must also do its job. On the NRW
-    // tiles 194 of 200 buildings heal and every 203 (non-planar) finding goes.
+    // tiles 194 of 200 buildings are not kept and the 203 (non-planar) findings left are in kept ones.
     if common::in_ci() {
         assert!(healed_total > 100, "heal healed only {healed_total} buildings over all fixtures");
     }
     if let (Some(nrw_before), true) = (nrw.0.get(&203), nrw_total.1 > 0) {
         assert!(nrw_healed * 10 >= nrw_total.1 * 9, "only {nrw_healed} of {} NRW buildings healed", nrw_total.1);
-        assert!(nrw.1.get(&203).copied().unwrap_or(0) == 0, "non-planar faces left after heal on the NRW tiles: {:?} (before {nrw_before})", nrw.1);
+        // issue 35: buildings whose walls would need a merge across thematic types (GA01) are kept
+        // with their 203s; every other one is planar (checked per building above)
+        assert!(nrw.1.get(&203).copied().unwrap_or(0) * 2 <= *nrw_before, "non-planar faces left after heal on the NRW tiles: {:?} (before {nrw_before})", nrw.1);
     }
 }
 
@@ -295,7 +304,8 @@ fn heal_bad_numbers_affect_only_their_building() {
         let e = String::from_utf8_lossy(&o.stderr);
         assert!(e.contains("kept") && e.contains(why), "{name}: {e}");
         let r: Value = serde_json::from_slice(&std::fs::read(&rep).unwrap()).unwrap();
-        assert_eq!(r["healed"].as_u64().unwrap() + 1, clean["healed"].as_u64().unwrap(), "{name}: {r}");
+        let kept = |r: &Value| r["kept"].as_array().unwrap().len();
+        assert_eq!(kept(&r), kept(&clean) + 1, "{name}: {r}");
         assert!(r["area_after_m2"].as_f64().is_some_and(f64::is_finite) && r["back"]["max_move"].as_f64().is_some_and(f64::is_finite), "{name}: {r}");
         let written = std::fs::read_to_string(&out).unwrap();
         assert!(!written.contains(">inf") && !written.contains(" inf "), "{name}: non-finite numbers written");
