@@ -14,10 +14,17 @@ use crate::equations::*;
 use crate::problem::{Identity, Problem, Slot, UnknownId};
 use crate::solve::{adjust, Datum, Options, Solution};
 use crate::{AdjustError, Equation, Scalar};
-use popa3d_model::{self as pm, Incidence, ObsKind, ObsOrigin, Popa3d};
 use popa3d_model::vec3::dot;
+use popa3d_model::{self as pm, Incidence, ObsKind, ObsOrigin, Popa3d};
 use serde::Serialize;
 use std::collections::BTreeMap;
+
+mod reference;
+mod report;
+
+use self::reference::*;
+pub use self::reference::{plane_node_points, plane_reference_points};
+use self::report::*;
 
 /// Which datum to use (spec §4.7).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -49,7 +56,13 @@ pub struct ModelOptions {
 
 impl Default for ModelOptions {
     fn default() -> Self {
-        ModelOptions { datum: DatumChoice::Free, soft_sigma_d: 1.0, soft_sigma_param: 0.01, polar_start: false, engine: Options::default() }
+        ModelOptions {
+            datum: DatumChoice::Free,
+            soft_sigma_d: 1.0,
+            soft_sigma_param: 0.01,
+            polar_start: false,
+            engine: Options::default(),
+        }
     }
 }
 
@@ -162,59 +175,15 @@ impl std::fmt::Display for PlaneShift {
     }
 }
 
-/// Reference point of every plane, in model coordinates: the centroid of the positions of the
-/// nodes on its faces (spec §2.3 node points), so it moves with the geometry when the model origin
-/// moves. A plane without a computable node falls back to its foot point n·d/‖n‖² (which does
-/// depend on the origin). Planes, normals and parameters must be valid references.
-pub fn plane_reference_points(m: &Popa3d, inc: &Incidence) -> Vec<[f64; 3]> {
-    reference_points_of(m, &plane_node_points(m, inc))
-}
-
-/// The positions of the nodes on every plane's faces (model coordinates; nodes without three
-/// independent planes are left out).
-pub fn plane_node_points(m: &Popa3d, inc: &Incidence) -> Vec<Vec<[f64; 3]>> {
-    let np = m.planes.len();
-    let mut pts = vec![Vec::new(); np];
-    for i in 0..m.nodes.len() {
-        let planes = inc.node_planes(m, pm::NodeId::from(i));
-        if planes.iter().any(|q| q.idx() >= np) {
-            continue;
-        }
-        let Some(x) = m.intersect_planes(&planes) else { continue };
-        if !x.iter().all(|v| v.is_finite()) {
-            continue;
-        }
-        for q in planes {
-            pts[q.idx()].push(x);
-        }
-    }
-    pts
-}
-
-fn reference_points_of(m: &Popa3d, pts: &[Vec<[f64; 3]>]) -> Vec<[f64; 3]> {
-    pts.iter()
-        .enumerate()
-        .map(|(i, xs)| {
-            if !xs.is_empty() {
-                let s = xs.iter().fold([0.0; 3], |a, x| [a[0] + x[0], a[1] + x[1], a[2] + x[2]]);
-                s.map(|v| v / xs.len() as f64)
-            } else {
-                let pv = m.plane_value(pm::PlaneId::from(i));
-                let nn = dot(pv.n, pv.n);
-                if nn > 0.0 {
-                    pv.n.map(|v| v * pv.d / nn)
-                } else {
-                    [0.0; 3]
-                }
-            }
-        })
-        .collect()
-}
-
 /// The slots [n(3), d] of a plane (its signed normal from the shared parameters, and its d).
 fn plane_slots_of(m: &Popa3d, params: &[UnknownId], pd: &[UnknownId], p: pm::PlaneId) -> Vec<Slot> {
     let pl = m.plane(p);
-    let mut s: Vec<Slot> = m.normal(pl.normal).comps.iter().map(|(q, sg)| Slot { unknown: params[q.idx()], sign: pl.sign.f64() * sg.f64() }).collect();
+    let mut s: Vec<Slot> = m
+        .normal(pl.normal)
+        .comps
+        .iter()
+        .map(|(q, sg)| Slot { unknown: params[q.idx()], sign: pl.sign.f64() * sg.f64() })
+        .collect();
     s.push(pd[p.idx()].into());
     s
 }
@@ -253,7 +222,10 @@ impl<'a> Net<'a> {
     }
     fn check(&self, what: &str, id: usize, len: usize, el: &str) -> Result<(), ModelError> {
         if id >= len {
-            return Err(ModelError::Reference { element: el.to_string(), message: format!("references {what} {id}, which does not exist") });
+            return Err(ModelError::Reference {
+                element: el.to_string(),
+                message: format!("references {what} {id}, which does not exist"),
+            });
         }
         Ok(())
     }
@@ -265,11 +237,15 @@ impl<'a> Net<'a> {
     }
     fn edge_planes(&self, e: pm::EdgeId, el: &str) -> Result<[pm::PlaneId; 2], ModelError> {
         self.check("edge", e.idx(), self.m.edges.len(), el)?;
-        self.m.edge_planes(&self.inc, e).map_err(|err| ModelError::Reference { element: el.to_string(), message: err.to_string() })
+        self.m
+            .edge_planes(&self.inc, e)
+            .map_err(|err| ModelError::Reference { element: el.to_string(), message: err.to_string() })
     }
     fn node_planes(&self, n: pm::NodeId, el: &str) -> Result<[pm::PlaneId; 3], ModelError> {
         self.check("node", n.idx(), self.m.nodes.len(), el)?;
-        self.m.node_plane_triple(&self.inc, n).map_err(|err| ModelError::Reference { element: el.to_string(), message: err.to_string() })
+        self.m
+            .node_plane_triple(&self.inc, n)
+            .map_err(|err| ModelError::Reference { element: el.to_string(), message: err.to_string() })
     }
     fn setup_slots(&self, s: pm::SetupId, el: &str) -> Result<Vec<Slot>, ModelError> {
         self.check("setup", s.idx(), self.m.setups.len(), el)?;
@@ -340,22 +316,52 @@ pub struct Mapped {
 /// Build the engine problem of a model (spec §6.2 parameter net).
 pub fn map_model(m: &Popa3d) -> Result<Mapped, ModelError> {
     let mut p = Problem::new();
-    let pd: Vec<UnknownId> = m.planes.iter().enumerate().map(|(i, pl)| p.add_unknown(format!("plane {i} d"), pl.d)).collect();
-    let par: Vec<UnknownId> = m.parameters.iter().enumerate().map(|(i, q)| p.add_unknown(format!("parameter {i}"), q.value)).collect();
-    let fp: Vec<[UnknownId; 3]> = m.fixed_points.iter().enumerate().map(|(i, f)| [0, 1, 2].map(|k| p.add_unknown(format!("fixedpoint {i} t{}", ["x", "y", "z"][k]), f.t[k]))).collect();
-    let sq: Vec<[UnknownId; 4]> = m.setups.iter().enumerate().map(|(i, s)| [0, 1, 2, 3].map(|k| p.add_unknown(format!("setup {i} q{k}"), s.q[k]))).collect();
+    let pd: Vec<UnknownId> =
+        m.planes.iter().enumerate().map(|(i, pl)| p.add_unknown(format!("plane {i} d"), pl.d)).collect();
+    let par: Vec<UnknownId> =
+        m.parameters.iter().enumerate().map(|(i, q)| p.add_unknown(format!("parameter {i}"), q.value)).collect();
+    let fp: Vec<[UnknownId; 3]> = m
+        .fixed_points
+        .iter()
+        .enumerate()
+        .map(|(i, f)| [0, 1, 2].map(|k| p.add_unknown(format!("fixedpoint {i} t{}", ["x", "y", "z"][k]), f.t[k])))
+        .collect();
+    let sq: Vec<[UnknownId; 4]> = m
+        .setups
+        .iter()
+        .enumerate()
+        .map(|(i, s)| [0, 1, 2, 3].map(|k| p.add_unknown(format!("setup {i} q{k}"), s.q[k])))
+        .collect();
     check_normal_references(m)?;
     let net = Net { m, inc: Incidence::new(m), pd, par, fp, sq };
     let node_points = plane_node_points(m, &net.inc);
     let reference_points = reference_points_of(m, &node_points);
-    let mut mapping = Mapping { datum_param: datum_parameter_values(m), net, p, origins: Vec::new(), cond_obs: Vec::new(), reference_points };
+    let mut mapping = Mapping {
+        datum_param: datum_parameter_values(m),
+        net,
+        p,
+        origins: Vec::new(),
+        cond_obs: Vec::new(),
+        reference_points,
+    };
     for (i, ob) in m.observations.iter().enumerate() {
         mapping.map_observation(i, ob)?;
     }
     mapping.add_levelled_restrictions()?;
     let Mapping { net: Net { pd, par, fp, sq, .. }, p, origins, cond_obs, reference_points, .. } = mapping;
     let object_unknowns: Vec<UnknownId> = pd.iter().chain(par.iter()).copied().collect();
-    Ok(Mapped { problem: p, object_unknowns, origins, cond_obs, reference_points, node_points, plane_d: pd, params: par, fixed: fp, setups: sq })
+    Ok(Mapped {
+        problem: p,
+        object_unknowns,
+        origins,
+        cond_obs,
+        reference_points,
+        node_points,
+        plane_d: pd,
+        params: par,
+        fixed: fp,
+        setups: sq,
+    })
 }
 
 /// Planes and normals are indexed directly while mapping (normal vectors, reference points), so
@@ -363,13 +369,19 @@ pub fn map_model(m: &Popa3d) -> Result<Mapped, ModelError> {
 fn check_normal_references(m: &Popa3d) -> Result<(), ModelError> {
     for (i, pl) in m.planes.iter().enumerate() {
         if pl.normal.idx() >= m.normals.len() {
-            return Err(ModelError::Reference { element: format!("plane {i}"), message: format!("references normal {}, which does not exist", pl.normal.0) });
+            return Err(ModelError::Reference {
+                element: format!("plane {i}"),
+                message: format!("references normal {}, which does not exist", pl.normal.0),
+            });
         }
     }
     for (i, n) in m.normals.iter().enumerate() {
         for (q, _) in &n.comps {
             if q.idx() >= m.parameters.len() {
-                return Err(ModelError::Reference { element: format!("normal {i}"), message: format!("references parameter {}, which does not exist", q.0) });
+                return Err(ModelError::Reference {
+                    element: format!("normal {i}"),
+                    message: format!("references parameter {}, which does not exist", q.0),
+                });
             }
         }
     }
@@ -441,7 +453,9 @@ impl Mapping<'_> {
                 let x = net.slots_of([net.node_planes(*a, el)?.into(), net.node_planes(*b, el)?.into()]);
                 self.add_measured(el, i, *l, DistanceNodeNode, x)
             }
-            ObsKind::PointOnFace { .. } | ObsKind::PointOnEdge { .. } | ObsKind::PointOnNode { .. } => self.add_polar(i, &ob.kind, el),
+            ObsKind::PointOnFace { .. } | ObsKind::PointOnEdge { .. } | ObsKind::PointOnNode { .. } => {
+                self.add_polar(i, &ob.kind, el)
+            }
             ObsKind::ConstraintFaceFace { a, b, l } => {
                 let x = net.normals_of([net.face_planes(*a, el)?, net.face_planes(*b, el)?]);
                 self.add_measured(el, i, *l, ConstraintFaceFace, x)
@@ -459,7 +473,10 @@ impl Mapping<'_> {
                     net.check("plane", q.idx(), m.planes.len(), el)?;
                 }
                 // d' = sign·d along the normal object's own direction (popa3d-model convention).
-                let x = vec![Slot { unknown: net.pd[lower.idx()], sign: m.plane(*lower).sign.f64() }, Slot { unknown: net.pd[upper.idx()], sign: m.plane(*upper).sign.f64() }];
+                let x = vec![
+                    Slot { unknown: net.pd[lower.idx()], sign: m.plane(*lower).sign.f64() },
+                    Slot { unknown: net.pd[upper.idx()], sign: m.plane(*upper).sign.f64() },
+                ];
                 self.add_measured(el, i, *l, RelativeDistancePlanePlane, x)
             }
             ObsKind::RelativeAngleNormalNormal { a, b, l } => {
@@ -486,7 +503,9 @@ impl Mapping<'_> {
                 let u = net.unknown(unknown, el)?;
                 self.add_restriction(el, FixTo(*value), vec![u.into()])
             }
-            ObsKind::ParameterObs { unknown: pm::Unknown::PlaneD(q), l } if ob.origin == ObsOrigin::Datum && q.idx() < m.planes.len() => {
+            ObsKind::ParameterObs { unknown: pm::Unknown::PlaneD(q), l }
+                if ob.origin == ObsOrigin::Datum && q.idx() < m.planes.len() =>
+            {
                 self.add_plane_offset(i, el, *q, *l)
             }
             ObsKind::ParameterObs { unknown, l } => {
@@ -499,13 +518,24 @@ impl Mapping<'_> {
     /// One engine observation of document observation `i` (`comp` names the component of a
     /// polar observation, empty otherwise).
     fn add_obs(&mut self, el: &str, i: usize, comp: &'static str, l: pm::Measured) -> Result<crate::ObsId, ModelError> {
-        let o = self.p.add_observation(format!("{el}{}", if comp.is_empty() { String::new() } else { format!(" {comp}") }), l.value, l.sigma)?;
+        let o = self.p.add_observation(
+            format!("{el}{}", if comp.is_empty() { String::new() } else { format!(" {comp}") }),
+            l.value,
+            l.sigma,
+        )?;
         self.origins.push(ObsOrigin2 { obs: i, component: comp, class: None });
         Ok(o)
     }
 
     /// A condition `equation(x, l)` on one measured value `l`.
-    fn add_measured<E: Equation>(&mut self, el: &str, i: usize, l: pm::Measured, equation: E, x: Vec<Slot>) -> Result<(), ModelError> {
+    fn add_measured<E: Equation>(
+        &mut self,
+        el: &str,
+        i: usize,
+        l: pm::Measured,
+        equation: E,
+        x: Vec<Slot>,
+    ) -> Result<(), ModelError> {
         let o = self.add_obs(el, i, "", l)?;
         self.p.add_condition(el, equation, x, vec![o])?;
         Ok(())
@@ -522,8 +552,12 @@ impl Mapping<'_> {
         let net = &self.net;
         let (setup, planes, hz, v, s): (&pm::SetupId, Vec<pm::PlaneId>, _, _, _) = match kind {
             ObsKind::PointOnFace { setup, target, hz, v, s } => (setup, vec![net.face_plane(*target, el)?], hz, v, s),
-            ObsKind::PointOnEdge { setup, target, hz, v, s } => (setup, net.edge_planes(*target, el)?.to_vec(), hz, v, s),
-            ObsKind::PointOnNode { setup, target, hz, v, s } => (setup, net.node_planes(*target, el)?.to_vec(), hz, v, s),
+            ObsKind::PointOnEdge { setup, target, hz, v, s } => {
+                (setup, net.edge_planes(*target, el)?.to_vec(), hz, v, s)
+            }
+            ObsKind::PointOnNode { setup, target, hz, v, s } => {
+                (setup, net.node_planes(*target, el)?.to_vec(), hz, v, s)
+            }
             _ => return Ok(()),
         };
         let ss = net.setup_slots(*setup, el)?;
@@ -573,7 +607,11 @@ impl Mapping<'_> {
         for (i, s) in self.net.m.setups.iter().enumerate() {
             if s.levelled {
                 for k in [1usize, 2] {
-                    self.p.add_restriction(format!("setup {i} levelled (q{k} = 0)"), Levelled, vec![self.net.sq[i][k].into()])?;
+                    self.p.add_restriction(
+                        format!("setup {i} levelled (q{k} = 0)"),
+                        Levelled,
+                        vec![self.net.sq[i][k].into()],
+                    )?;
                 }
             }
         }
@@ -694,7 +732,8 @@ pub fn adjust_model(m: &mut Popa3d, opts: &ModelOptions) -> Result<Report, Model
     };
     let sol = adjust(&mapped.problem, &eng)?;
     // Write back.
-    let before: Vec<pm::geometry::PlaneValue> = (0..m.planes.len()).map(|i| m.plane_value(pm::PlaneId::from(i))).collect();
+    let before: Vec<pm::geometry::PlaneValue> =
+        (0..m.planes.len()).map(|i| m.plane_value(pm::PlaneId::from(i))).collect();
     for (i, &u) in mapped.plane_d.iter().enumerate() {
         m.planes[i].d = sol.x[u.0];
     }
@@ -715,122 +754,6 @@ pub fn adjust_model(m: &mut Popa3d, opts: &ModelOptions) -> Result<Report, Model
     Ok(build_report(m, &mapped, &sol, &misclosures, datum_name, shift_at))
 }
 
-/// The plane that moved most (see [`Report::max_plane_shift`]): |Δd − ⟨Δn, x⟩| (m) over the
-/// plane's nodes x (its reference point when it has none), from the values before (`before`) and
-/// now (`m`).
-fn largest_plane_shift(m: &Popa3d, before: &[pm::geometry::PlaneValue], nodes: &[Vec<[f64; 3]>], refs: &[[f64; 3]]) -> Option<PlaneShift> {
-    let mut best: Option<(usize, f64, [f64; 3])> = None;
-    for (i, b) in before.iter().enumerate() {
-        let a = m.plane_value(pm::PlaneId::from(i));
-        let dn = [a.n[0] - b.n[0], a.n[1] - b.n[1], a.n[2] - b.n[2]];
-        let xs: &[[f64; 3]] = if nodes[i].is_empty() { std::slice::from_ref(&refs[i]) } else { &nodes[i] };
-        for x in xs {
-            let s = ((a.d - b.d) - dot(dn, *x)).abs();
-            // NaN counts as the largest shift, so a broken solution cannot hide behind it.
-            if best.is_none_or(|(_, w, _)| s > w || (s.is_nan() && !w.is_nan())) {
-                best = Some((i, s, *x));
-            }
-        }
-    }
-    let (i, shift, c) = best?;
-    let face = m.faces.iter().position(|f| f.plane.idx() == i);
-    let (polygon, solid) = match face {
-        Some(f) => {
-            let fc = &m.faces[f];
-            let solid = [fc.front, fc.back]
-                .iter()
-                .filter_map(|s| m.solids.get(s.idx()))
-                .find(|s| s.kind != pm::SolidKind::Exterior)
-                .and_then(|s| s.name.clone());
-            (fc.source.as_ref().map(|s| s.polygon.clone()), solid)
-        }
-        None => (None, None),
-    };
-    Some(PlaneShift {
-        plane: i as u32,
-        shift,
-        at: [c[0] + m.origin[0], c[1] + m.origin[1], c[2] + m.origin[2]],
-        face: face.map(|f| f as u32),
-        polygon,
-        solid,
-    })
-}
-
-fn build_report(m: &Popa3d, mapped: &Mapped, sol: &Solution, misclosures: &[f64], datum: &str, shift_at: Option<PlaneShift>) -> Report {
-    let p = &mapped.problem;
-    let mut obs: Vec<ObsReport> = Vec::with_capacity(sol.obs.len());
-    for (k, r) in sol.obs.iter().enumerate() {
-        let o = &mapped.origins[k];
-        let (class, origin, label) = if o.obs == usize::MAX {
-            (o.class.unwrap_or("ParameterObs").to_string(), "datum".to_string(), Some(p.observation_name(crate::ObsId(k)).to_string()))
-        } else {
-            let ob = &m.observations[o.obs];
-            (o.class.unwrap_or(ob.kind.class_name()).to_string(), ob.origin.as_str().to_string(), ob.label.clone())
-        };
-        obs.push(ObsReport {
-            observation: if o.obs == usize::MAX { u32::MAX } else { o.obs as u32 },
-            class,
-            origin,
-            label,
-            component: o.component.to_string(),
-            value: p.observation_value(crate::ObsId(k)),
-            sigma: p.observation_sigma(crate::ObsId(k)),
-            v: r.v,
-            redundancy: r.redundancy,
-            normalised: r.normalised,
-            controllable: r.controllable,
-            rejected: r.rejected,
-        });
-    }
-    let mut per_type: BTreeMap<String, TypeStats> = BTreeMap::new();
-    for (c, &w) in misclosures.iter().enumerate() {
-        let kind = p.condition_kind(crate::ConditionId(c)).to_string();
-        let e = per_type.entry(kind).or_default();
-        e.max_misclosure_before = e.max_misclosure_before.max(w.abs());
-    }
-    for o in &obs {
-        let e = per_type.entry(o.class.clone()).or_default();
-        e.count += 1;
-        e.max_abs_residual = e.max_abs_residual.max(o.v.abs());
-        e.mean_redundancy += o.redundancy;
-    }
-    for e in per_type.values_mut() {
-        if e.count > 0 {
-            e.mean_redundancy /= e.count as f64;
-        }
-    }
-    let not_yet_measured: Vec<ObsReport> = obs
-        .iter()
-        .filter(|o| o.origin == ObsOrigin::Sketch.as_str() && !o.controllable)
-        .cloned()
-        .collect();
-    let largest_suspect = sol.largest_suspect.map(|o| obs[o.0].clone());
-    let mut sorted = obs;
-    sorted.sort_by(|a, b| b.normalised.total_cmp(&a.normalised).then(a.observation.cmp(&b.observation)));
-    let _ = &mapped.cond_obs;
-    Report {
-        datum: datum.to_string(),
-        unknowns: (0..p.unknown_count()).filter(|&u| !p.is_fixed(UnknownId(u))).count(),
-        conditions: p.condition_count(),
-        restrictions: p.restriction_count(),
-        datum_restrictions: sol.datum_restrictions,
-        redundancy: sol.redundancy,
-        redundancy_sum: sol.redundancy_sum,
-        iterations: sol.iterations,
-        components: sol.components,
-        vtpv: sol.vtpv,
-        sigma0: sol.sigma0_post,
-        global_test: sol.global_test.clone(),
-        critical_w: sol.critical_w,
-        largest_suspect,
-        not_yet_measured,
-        per_type,
-        observations: sorted,
-        max_plane_shift: shift_at.as_ref().map_or(0.0, |s| s.shift),
-        max_plane_shift_at: shift_at,
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -848,7 +771,10 @@ f 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\nf 3 4 8 7\nf 4 1 5 8\n";
         let mut m = Popa3d::new([0.0; 3]);
         normalize::normalize_into(&mut m, &soup, &normalize::Tolerances::default()).unwrap();
         for n in 0..m.normals.len() {
-            m.add_observation(Observation::new(ObsKind::NormNV { normal: NormalId::from(n), sigma: None }, ObsOrigin::Consistency));
+            m.add_observation(Observation::new(
+                ObsKind::NormNV { normal: NormalId::from(n), sigma: None },
+                ObsOrigin::Consistency,
+            ));
         }
         let face = |want: [f64; 3]| {
             (0..m.faces.len())
@@ -860,7 +786,10 @@ f 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\nf 3 4 8 7\nf 4 1 5 8\n";
                 .unwrap()
         };
         let (south, east) = (face([0.0, -1.0, 0.0]), face([1.0, 0.0, 0.0]));
-        m.add_observation(Observation::new(ObsKind::ConstraintFaceFace { a: south, b: east, l: Measured::new(0.0, 1e-6) }, ObsOrigin::Semantic));
+        m.add_observation(Observation::new(
+            ObsKind::ConstraintFaceFace { a: south, b: east, l: Measured::new(0.0, 1e-6) },
+            ObsOrigin::Semantic,
+        ));
         m
     }
 
@@ -900,7 +829,11 @@ f 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\nf 3 4 8 7\nf 4 1 5 8\n";
         }
         let rb = adjust_model(&mut b, opts).unwrap();
         let (pa, pb) = (positions(&a), positions(&b));
-        let moved = before.iter().zip(&pa).map(|(p, q)| (0..3).map(|k| (p[k] - q[k]).powi(2)).sum::<f64>().sqrt()).fold(0.0, f64::max);
+        let moved = before
+            .iter()
+            .zip(&pa)
+            .map(|(p, q)| (0..3).map(|k| (p[k] - q[k]).powi(2)).sum::<f64>().sqrt())
+            .fold(0.0, f64::max);
         let mut worst = 0.0f64;
         for (p, q) in pa.iter().zip(&pb) {
             for k in 0..3 {
@@ -922,10 +855,23 @@ f 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\nf 3 4 8 7\nf 4 1 5 8\n";
         // The condition really rotated the walls (the test is not vacuous).
         assert!(moved > 0.01, "largest node move {moved} m");
         assert!(worst < 1e-6, "node positions differ by {worst} m between the two origins (largest move {moved} m)");
-        assert!(ra.per_type.contains_key("PlaneOffsetObs") && ra.per_type.contains_key("ParameterObs"), "{:?}", ra.per_type.keys());
+        assert!(
+            ra.per_type.contains_key("PlaneOffsetObs") && ra.per_type.contains_key("ParameterObs"),
+            "{:?}",
+            ra.per_type.keys()
+        );
         // The reported movement is the origin-independent one, and about the node moves.
-        assert!((ra.max_plane_shift - rb.max_plane_shift).abs() < 1e-6, "{} vs {}", ra.max_plane_shift, rb.max_plane_shift);
-        assert!(ra.max_plane_shift > 0.001 && ra.max_plane_shift < moved + 1e-9, "{} vs node move {moved}", ra.max_plane_shift);
+        assert!(
+            (ra.max_plane_shift - rb.max_plane_shift).abs() < 1e-6,
+            "{} vs {}",
+            ra.max_plane_shift,
+            rb.max_plane_shift
+        );
+        assert!(
+            ra.max_plane_shift > 0.001 && ra.max_plane_shift < moved + 1e-9,
+            "{} vs node move {moved}",
+            ra.max_plane_shift
+        );
     }
 
     /// Observations that fit exactly (no condition to meet) put vᵀPv = 0 below the lower χ²
@@ -949,11 +895,17 @@ f 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\nf 3 4 8 7\nf 4 1 5 8\n";
         let mut m = skewed_room();
         for i in 0..m.planes.len() {
             let l = Measured::new(m.planes[i].d, 0.1);
-            m.add_observation(Observation::new(ObsKind::ParameterObs { unknown: pm::Unknown::PlaneD(pm::PlaneId::from(i)), l }, ObsOrigin::Datum));
+            m.add_observation(Observation::new(
+                ObsKind::ParameterObs { unknown: pm::Unknown::PlaneD(pm::PlaneId::from(i)), l },
+                ObsOrigin::Datum,
+            ));
         }
         for i in 0..m.parameters.len() {
             let l = Measured::new(m.parameters[i].value, 0.05);
-            m.add_observation(Observation::new(ObsKind::ParameterObs { unknown: pm::Unknown::Param(pm::ParamId::from(i)), l }, ObsOrigin::Datum));
+            m.add_observation(Observation::new(
+                ObsKind::ParameterObs { unknown: pm::Unknown::Param(pm::ParamId::from(i)), l },
+                ObsOrigin::Datum,
+            ));
         }
         let (moved, worst, ra, _) = adjust_at_two_origins(&m, &ModelOptions::default());
         assert!(moved > 0.01, "largest node move {moved} m");
