@@ -130,7 +130,7 @@ impl Verifier<'_> {
 pub(crate) fn guard(before: &Measures, after: &Measures, opts: &HealOptions) -> Option<String> {
     let new = measure::new_findings(before, after);
     if !new.is_empty() {
-        return Some(format!("healing would add validation findings ({})", new.join(", ")));
+        return Some(format!("the new geometry would add validation findings ({})", new.join(", ")));
     }
     if after.moved > opts.max_move {
         return Some(format!(
@@ -142,7 +142,7 @@ pub(crate) fn guard(before: &Measures, after: &Measures, opts: &HealOptions) -> 
         let change = after.area / before.area - 1.0;
         if change.abs().partial_cmp(&opts.max_area_change) != Some(std::cmp::Ordering::Less) {
             return Some(format!(
-                "healing would change its surface area by {:+.2} % ({:.2} → {:.2} m², limit ±{} %)",
+                "the new geometry would change its surface area by {:+.2} % ({:.2} → {:.2} m², limit ±{} %)",
                 100.0 * change,
                 before.area,
                 after.area,

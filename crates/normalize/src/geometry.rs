@@ -252,7 +252,10 @@ fn coplanar_planes(n_clusters: usize, fcluster: &[usize], fd: &[f64], farea: &[f
 
 /// The GA01 repair: nearly coplanar faces across the deficient nodes merged, two-neighbour
 /// nodes removed ([`crate::topology::repair`]) and the part built again from the repaired
-/// topology, with a notice per merged pair. `None` when the repair changed nothing.
+/// topology, with a notice per merged pair. `None` when the repair changed nothing. The merge is
+/// one of the model only, whatever the faces' thematic types: the write-back keeps every
+/// polygon's own ring (and type) on the shared plane
+/// (docs/decisions.md#merges-keep-semantics-and-identity).
 fn repaired(soup: &Soup, topo: &Topo, tol: &Tolerances, origin: [f64; 3], depth: usize, net: &PlaneNet, deficient: &[usize]) -> Result<Option<Part>, Rejection> {
     let cos_merge = ILL_CONDITIONED_DEG.to_radians().cos();
     let fnormal = &net.fnormal;
@@ -260,7 +263,6 @@ fn repaired(soup: &Soup, topo: &Topo, tol: &Tolerances, origin: [f64; 3], depth:
         topo.faces[f].back == topo.faces[g].back
             && topo.faces[f].front == topo.faces[g].front
             && fnormal[f].dot(&fnormal[g]).abs() >= cos_merge
-            && may_merge(&soup.polygons[topo.faces[f].polygon], &soup.polygons[topo.faces[g].polygon])
     };
     let mut merged = Vec::new();
     let mut t2 = topo.clone();
@@ -285,14 +287,6 @@ fn repaired(soup: &Soup, topo: &Topo, tol: &Tolerances, origin: [f64; 3], depth:
     // Report the soup as it was read.
     part.counts.stages[0] = StageCounts::new("points", topo.soup_nodes, topo.soup_edges, topo.soup_faces, 0, 0, 0);
     Ok(Some(part))
-}
-
-/// Whether the GA01 repair may merge two polygons into one face: only within one thematic
-/// surface type (a ClosureSurface is virtual, a WallSurface a real facade: energy and solar
-/// studies read exactly these types). The merge is one of the model only: the write-back keeps
-/// every polygon's own ring on the shared plane (docs/decisions.md#merges-keep-semantics-and-identity).
-pub fn may_merge(a: &crate::soup::SoupPolygon, b: &crate::soup::SoupPolygon) -> bool {
-    a.source.semantic == b.source.semantic
 }
 
 /// The part's solids (the exterior first), nodes and edges with their sorted, deduplicated
