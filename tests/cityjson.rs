@@ -73,7 +73,9 @@ fn the_checker_sees_a_lost_attribute_and_a_moved_vertex() {
     let mut doc: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
     let objects = doc["CityObjects"].as_object_mut().unwrap();
     let (_, b) = objects.iter_mut().find(|(_, o)| o["type"] == "Building").unwrap();
-    b["attributes"].as_object_mut().unwrap().remove("measuredHeight").expect("FZK-Haus has a measuredHeight");
+    let attrs = b["attributes"].as_object_mut().expect("FZK-Haus has attributes");
+    let key = attrs.keys().next().expect("at least one").clone();
+    attrs.remove(&key);
     doc["vertices"][0][0] = serde_json::json!(doc["vertices"][0][0].as_i64().unwrap() + 50);
     std::fs::write(&json, serde_json::to_vec(&doc).unwrap()).unwrap();
     let back = tmp.path().join("b.gml");
@@ -83,7 +85,7 @@ fn the_checker_sees_a_lost_attribute_and_a_moved_vertex() {
         .output()
         .unwrap();
     let problems = String::from_utf8_lossy(&o.stdout);
-    assert!(problems.contains("attribute measuredHeight"), "{problems}");
+    assert!(problems.contains(&format!("attribute {key}=")), "{problems}");
     assert!(problems.contains("coordinates moved"), "{problems}");
 }
 
@@ -182,6 +184,9 @@ fn validate_findings_on_cityjson_equal_those_on_citygml() {
             .into_iter()
             .flatten()
             // An id-less feature gets one in CityJSON (`geofit-N`): compare it as id-less.
+            // 103 (ring not closed): CityJSON rings are closed implicitly, so the defect has no
+            // CityJSON form (docs/decisions.md#cityjson-semantics-as-boundary-surfaces).
+            .filter(|f| f["code"].to_string().trim_matches('"') != "103")
             .map(|f| (f["code"].to_string(), f["feature"].as_str().filter(|id| !id.starts_with("geofit-")).unwrap_or("").to_string()))
             .collect();
         c.sort();
