@@ -86,7 +86,11 @@ pub fn iso_surface(mesh: &TetMesh, field: &[f64], iso: f64, attr: Option<&[f64]>
                 let (fa, fb) = (f[ia as usize], f[ib as usize]);
                 let w = (iso - fa) / (fb - fa);
                 let (pa, pb) = (mesh.verts[ia as usize], mesh.verts[ib as usize]);
-                s.positions.push([pa[0] + w * (pb[0] - pa[0]), pa[1] + w * (pb[1] - pa[1]), pa[2] + w * (pb[2] - pa[2])]);
+                s.positions.push([
+                    pa[0] + w * (pb[0] - pa[0]),
+                    pa[1] + w * (pb[1] - pa[1]),
+                    pa[2] + w * (pb[2] - pa[2]),
+                ]);
                 if let (Some(sc), Some(at)) = (s.scalars.as_mut(), attr) {
                     sc.push(at[ia as usize] + w * (at[ib as usize] - at[ia as usize]));
                 }
@@ -96,7 +100,8 @@ pub fn iso_surface(mesh: &TetMesh, field: &[f64], iso: f64, attr: Option<&[f64]>
         };
         let tris: Vec<[u32; 3]> = match below.len() {
             1 | 3 => {
-                let (lone, others) = if below.len() == 1 { (below[0], above.clone()) } else { (above[0], below.clone()) };
+                let (lone, others) =
+                    if below.len() == 1 { (below[0], above.clone()) } else { (above[0], below.clone()) };
                 vec![[vert(lone, others[0], &mut s), vert(lone, others[1], &mut s), vert(lone, others[2], &mut s)]]
             }
             _ => {
@@ -214,6 +219,20 @@ fn collapse_short_edges(s: &mut Surface, vsize: &[f64], rel: f64) {
         }
     }
     // Compact.
+    compact_collapsed(s, &map, &dead);
+}
+
+/// Compacts a surface after [`collapse_short_edges`]: drops dead and degenerate triangles, maps
+/// collapsed vertices to their survivors (`map`, a union-find forest) and keeps only the vertices
+/// still used, so the collapse loop itself never has to renumber.
+fn compact_collapsed(s: &mut Surface, map: &[u32], dead: &[bool]) {
+    let n = s.positions.len();
+    let find = |m: &[u32], mut x: u32| {
+        while m[x as usize] != x {
+            x = m[x as usize];
+        }
+        x
+    };
     let mut new_id = vec![u32::MAX; n];
     let mut pos = Vec::new();
     let mut sc = s.scalars.as_ref().map(|_| Vec::new());
@@ -222,7 +241,7 @@ fn collapse_short_edges(s: &mut Surface, vsize: &[f64], rel: f64) {
         if dead[ti] {
             continue;
         }
-        let t = t.map(|v| find(&map, v));
+        let t = t.map(|v| find(map, v));
         if t[0] == t[1] || t[1] == t[2] || t[0] == t[2] {
             continue;
         }
@@ -288,7 +307,9 @@ pub fn csg(a: &Model, b: &Model, op: CsgOp) -> (Surface, TetMesh, Vec<f64>) {
     // elements along them must be small.
     let target = r.level_of_cube_fraction(cell) + 3;
     let mut samples: Vec<V3> = iso_surface(&a.mesh, &a.phi, 0.0, None).positions;
-    samples.extend(iso_surface(&b.mesh, &b.phi, 0.0, None).positions.iter().map(|p| [p[0] + off[0], p[1] + off[1], p[2] + off[2]]));
+    samples.extend(
+        iso_surface(&b.mesh, &b.phi, 0.0, None).positions.iter().map(|p| [p[0] + off[0], p[1] + off[1], p[2] + off[2]]),
+    );
     r.add_points(&samples, target);
     r.refine();
     let mesh = r.mesh();
@@ -317,7 +338,10 @@ pub fn csg(a: &Model, b: &Model, op: CsgOp) -> (Surface, TetMesh, Vec<f64>) {
 /// Locator-free helper: the world bounding box of a model's mesh.
 pub fn world_bounds(m: &Model) -> (V3, V3) {
     let (lo, hi) = m.mesh.bounds();
-    ([lo[0] + m.origin[0], lo[1] + m.origin[1], lo[2] + m.origin[2]], [hi[0] + m.origin[0], hi[1] + m.origin[1], hi[2] + m.origin[2]])
+    (
+        [lo[0] + m.origin[0], lo[1] + m.origin[1], lo[2] + m.origin[2]],
+        [hi[0] + m.origin[0], hi[1] + m.origin[1], hi[2] + m.origin[2]],
+    )
 }
 
 #[allow(dead_code)]
