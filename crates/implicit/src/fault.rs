@@ -49,7 +49,9 @@ pub fn read_fault_obj(bytes: &[u8], name: &str, origin: V3) -> Result<Fault, Err
 pub fn fault_samples(f: &Fault, spacing: f64) -> Vec<V3> {
     let mut out = Vec::new();
     for t in &f.tris {
-        let l = crate::geom::norm(sub(t[1], t[0])).max(crate::geom::norm(sub(t[2], t[0]))).max(crate::geom::norm(sub(t[2], t[1])));
+        let l = crate::geom::norm(sub(t[1], t[0]))
+            .max(crate::geom::norm(sub(t[2], t[0])))
+            .max(crate::geom::norm(sub(t[2], t[1])));
         let n = ((l / spacing).ceil() as usize).clamp(1, 2000);
         for i in 0..=n {
             for j in 0..=n - i {
@@ -92,25 +94,7 @@ pub fn cut(mesh: &TetMesh, faults: &[Fault]) -> Result<(TetMesh, Vec<u32>), Erro
         s
     };
     // Triangle bounding boxes for a cheap reject.
-    let boxes: Vec<Vec<(V3, V3)>> = faults
-        .iter()
-        .map(|f| {
-            f.tris
-                .iter()
-                .map(|t| {
-                    let mut lo = t[0];
-                    let mut hi = t[0];
-                    for p in &t[1..] {
-                        for k in 0..3 {
-                            lo[k] = lo[k].min(p[k]);
-                            hi[k] = hi[k].max(p[k]);
-                        }
-                    }
-                    (lo, hi)
-                })
-                .collect()
-        })
-        .collect();
+    let boxes = fault_triangle_boxes(faults);
     let mut hits = vec![0usize; faults.len()];
     let cutf: Vec<Option<usize>> = {
         use rayon::prelude::*;
@@ -141,23 +125,7 @@ pub fn cut(mesh: &TetMesh, faults: &[Fault]) -> Result<(TetMesh, Vec<u32>), Erro
     }
     // Incidences (vertex, tet) in CSR by vertex.
     let nv = mesh.verts.len();
-    let mut start = vec![0usize; nv + 1];
-    for t in &mesh.tets {
-        for &v in t {
-            start[v as usize + 1] += 1;
-        }
-    }
-    for i in 0..nv {
-        start[i + 1] += start[i];
-    }
-    let mut fill = start.clone();
-    let mut inc = vec![0u32; start[nv]];
-    for (ti, t) in mesh.tets.iter().enumerate() {
-        for &v in t {
-            inc[fill[v as usize]] = ti as u32;
-            fill[v as usize] += 1;
-        }
-    }
+    let (start, inc) = vertex_tet_incidences(mesh);
     let pos = |v: u32, t: u32| -> u32 {
         let s = start[v as usize];
         (s + inc[s..start[v as usize + 1]].iter().position(|&x| x == t).unwrap_or(0)) as u32
@@ -189,11 +157,54 @@ pub fn cut(mesh: &TetMesh, faults: &[Fault]) -> Result<(TetMesh, Vec<u32>), Erro
             dof_of_inc[k] = dof_of_inc[r];
         }
     }
-    let tets = mesh
-        .tets
-        .iter()
-        .enumerate()
-        .map(|(ti, t)| t.map(|v| dof_of_inc[pos(v, ti as u32) as usize]))
-        .collect();
+    let tets = mesh.tets.iter().enumerate().map(|(ti, t)| t.map(|v| dof_of_inc[pos(v, ti as u32) as usize])).collect();
     Ok((TetMesh { verts, tets }, dof_vertex))
+}
+
+/// The bounding box of every fault triangle, per fault: the cheap reject before the exact
+/// segment/triangle test in [`cut`].
+fn fault_triangle_boxes(faults: &[Fault]) -> Vec<Vec<(V3, V3)>> {
+    faults
+        .iter()
+        .map(|f| {
+            f.tris
+                .iter()
+                .map(|t| {
+                    let mut lo = t[0];
+                    let mut hi = t[0];
+                    for p in &t[1..] {
+                        for k in 0..3 {
+                            lo[k] = lo[k].min(p[k]);
+                            hi[k] = hi[k].max(p[k]);
+                        }
+                    }
+                    (lo, hi)
+                })
+                .collect()
+        })
+        .collect()
+}
+
+/// The (vertex, tet) incidences of `mesh` in CSR form by vertex: `start` (one more entry than
+/// vertices) and the tets, so each vertex's incidences can be split into copies along a fault.
+fn vertex_tet_incidences(mesh: &TetMesh) -> (Vec<usize>, Vec<u32>) {
+    let nv = mesh.verts.len();
+    let mut start = vec![0usize; nv + 1];
+    for t in &mesh.tets {
+        for &v in t {
+            start[v as usize + 1] += 1;
+        }
+    }
+    for i in 0..nv {
+        start[i + 1] += start[i];
+    }
+    let mut fill = start.clone();
+    let mut inc = vec![0u32; start[nv]];
+    for (ti, t) in mesh.tets.iter().enumerate() {
+        for &v in t {
+            inc[fill[v as usize]] = ti as u32;
+            fill[v as usize] += 1;
+        }
+    }
+    (start, inc)
 }
