@@ -45,17 +45,13 @@ pub enum GltfBuffer<'a> {
     Embedded,
     /// In a separate file written to `bin`, referenced from the JSON by `uri` (relative, e.g.
     /// `"model.bin"`).
-    External {
-        uri: &'a str,
-        bin: &'a mut dyn Write,
-    },
+    External { uri: &'a str, bin: &'a mut dyn Write },
 }
 
 /// Writes `scene` as a binary glTF (`.glb`): header, JSON chunk, BIN chunk.
 pub fn write_glb(scene: &Scene, out: &mut dyn Write) -> Result<(), ExportError> {
     let (root, bin) = build(scene, None)?;
-    let mut json_bytes =
-        json::serialize::to_vec(&root).map_err(|e| ExportError::Json(e.to_string()))?;
+    let mut json_bytes = json::serialize::to_vec(&root).map_err(|e| ExportError::Json(e.to_string()))?;
     // GLB chunks are 4-byte aligned: JSON padded with spaces, BIN with zeros (glTF 2.0 §4.4.3).
     while json_bytes.len() % 4 != 0 {
         json_bytes.push(b' ');
@@ -82,21 +78,15 @@ pub fn write_glb(scene: &Scene, out: &mut dyn Write) -> Result<(), ExportError> 
 }
 
 /// Writes `scene` as glTF JSON (`.gltf`, pretty-printed) with its buffer as chosen by `buffer`.
-pub fn write_gltf(
-    scene: &Scene,
-    out: &mut dyn Write,
-    buffer: GltfBuffer<'_>,
-) -> Result<(), ExportError> {
+pub fn write_gltf(scene: &Scene, out: &mut dyn Write, buffer: GltfBuffer<'_>) -> Result<(), ExportError> {
     match buffer {
         GltfBuffer::Embedded => {
             let (root, _) = build(scene, Some(BufferUri::Embed))?;
-            json::serialize::to_writer_pretty(&mut *out, &root)
-                .map_err(|e| ExportError::Json(e.to_string()))?;
+            json::serialize::to_writer_pretty(&mut *out, &root).map_err(|e| ExportError::Json(e.to_string()))?;
         }
         GltfBuffer::External { uri, bin } => {
             let (root, data) = build(scene, Some(BufferUri::External(uri)))?;
-            json::serialize::to_writer_pretty(&mut *out, &root)
-                .map_err(|e| ExportError::Json(e.to_string()))?;
+            json::serialize::to_writer_pretty(&mut *out, &root).map_err(|e| ExportError::Json(e.to_string()))?;
             bin.write_all(&data)?;
         }
     }
@@ -119,11 +109,7 @@ struct Builder {
 }
 
 impl Builder {
-    fn view(
-        &mut self,
-        bytes: &[u8],
-        target: json::buffer::Target,
-    ) -> json::Index<json::buffer::View> {
+    fn view(&mut self, bytes: &[u8], target: json::buffer::Target) -> json::Index<json::buffer::View> {
         debug_assert!(self.bin.len().is_multiple_of(4));
         let offset = self.bin.len();
         self.bin.extend_from_slice(bytes);
@@ -203,41 +189,19 @@ impl Builder {
             }
         }
         let view = self.view(&bytes, json::buffer::Target::ArrayBuffer);
-        self.accessor(
-            view,
-            normals.len(),
-            json::accessor::ComponentType::F32,
-            json::accessor::Type::Vec3,
-            None,
-        )
+        self.accessor(view, normals.len(), json::accessor::ComponentType::F32, json::accessor::Type::Vec3, None)
     }
 
     fn colors(&mut self, colors: &[[f32; 4]]) -> json::Index<json::Accessor> {
-        let bytes: Vec<u8> = colors
-            .iter()
-            .flatten()
-            .flat_map(|v| v.to_le_bytes())
-            .collect();
+        let bytes: Vec<u8> = colors.iter().flatten().flat_map(|v| v.to_le_bytes()).collect();
         let view = self.view(&bytes, json::buffer::Target::ArrayBuffer);
-        self.accessor(
-            view,
-            colors.len(),
-            json::accessor::ComponentType::F32,
-            json::accessor::Type::Vec4,
-            None,
-        )
+        self.accessor(view, colors.len(), json::accessor::ComponentType::F32, json::accessor::Type::Vec4, None)
     }
 
     fn indices(&mut self, indices: &[u32]) -> json::Index<json::Accessor> {
         let bytes: Vec<u8> = indices.iter().flat_map(|v| v.to_le_bytes()).collect();
         let view = self.view(&bytes, json::buffer::Target::ElementArrayBuffer);
-        self.accessor(
-            view,
-            indices.len(),
-            json::accessor::ComponentType::U32,
-            json::accessor::Type::Scalar,
-            None,
-        )
+        self.accessor(view, indices.len(), json::accessor::ComponentType::U32, json::accessor::Type::Scalar, None)
     }
 
     fn primitive(
@@ -250,10 +214,7 @@ impl Builder {
         mode: json::mesh::Mode,
     ) -> json::mesh::Primitive {
         let mut attributes = BTreeMap::new();
-        attributes.insert(
-            Valid(json::mesh::Semantic::Positions),
-            self.positions(positions),
-        );
+        attributes.insert(Valid(json::mesh::Semantic::Positions), self.positions(positions));
         if let Some(n) = normals {
             attributes.insert(Valid(json::mesh::Semantic::Normals), self.normals(n));
         }
@@ -290,16 +251,18 @@ impl Builder {
             // and reads past the end when the vertex count is not a multiple of 3 (crash): pad
             // with repeats of the last vertex, which no index refers to (valid glTF).
             let pad = (3 - l.positions.len() % 3) % 3;
-            let positions: Vec<[f64; 3]> = l.positions.iter().chain(std::iter::repeat_n(l.positions.last().unwrap_or(&[0.0; 3]), pad)).copied().collect();
-            let colors: Option<Vec<[f32; 4]>> = l.colors.as_ref().map(|c| c.iter().chain(std::iter::repeat_n(c.last().unwrap_or(&[0.0; 4]), pad)).copied().collect());
-            let p = self.primitive(
-                &positions,
-                &l.indices,
-                None,
-                colors.as_deref(),
-                l.material,
-                json::mesh::Mode::Lines,
-            );
+            let positions: Vec<[f64; 3]> = l
+                .positions
+                .iter()
+                .chain(std::iter::repeat_n(l.positions.last().unwrap_or(&[0.0; 3]), pad))
+                .copied()
+                .collect();
+            let colors: Option<Vec<[f32; 4]>> = l
+                .colors
+                .as_ref()
+                .map(|c| c.iter().chain(std::iter::repeat_n(c.last().unwrap_or(&[0.0; 4]), pad)).copied().collect());
+            let p =
+                self.primitive(&positions, &l.indices, None, colors.as_deref(), l.material, json::mesh::Mode::Lines);
             primitives.push(p);
         }
         let mesh = if primitives.is_empty() {
@@ -318,9 +281,7 @@ impl Builder {
             children.push(self.node(c)?);
         }
         let extras = match &n.extras {
-            Some(v) => Some(
-                serde_json::value::to_raw_value(v).map_err(|e| ExportError::Json(e.to_string()))?,
-            ),
+            Some(v) => Some(serde_json::value::to_raw_value(v).map_err(|e| ExportError::Json(e.to_string()))?),
             None => None,
         };
         Ok(self.root.push(json::Node {
@@ -335,46 +296,16 @@ impl Builder {
 
 fn build(scene: &Scene, uri: Option<BufferUri<'_>>) -> Result<(json::Root, Vec<u8>), ExportError> {
     scene.validate()?;
-    let mut used: Vec<usize> = scene
-        .walk()
-        .iter()
-        .flat_map(|n| {
-            let m = n
-                .meshes
-                .iter()
-                .filter(|m| !m.indices.is_empty())
-                .filter_map(|m| m.material);
-            m.chain(
-                n.lines
-                    .iter()
-                    .filter(|l| !l.indices.is_empty())
-                    .filter_map(|l| l.material),
-            )
-            .collect::<Vec<_>>()
-        })
-        .collect();
-    used.sort_unstable();
-    used.dedup();
+    let used = used_materials(scene);
 
-    let mut b = Builder {
-        root: json::Root::default(),
-        bin: Vec::new(),
-        origin: scene.origin,
-        material_map: BTreeMap::new(),
-    };
-    b.root.asset = json::Asset {
-        version: "2.0".into(),
-        generator: scene.generator.clone(),
-        ..Default::default()
-    };
+    let mut b =
+        Builder { root: json::Root::default(), bin: Vec::new(), origin: scene.origin, material_map: BTreeMap::new() };
+    b.root.asset = json::Asset { version: "2.0".into(), generator: scene.generator.clone(), ..Default::default() };
     for (k, &mi) in used.iter().enumerate() {
         let m = &scene.materials[mi];
         b.material_map.insert(mi, k as u32);
-        let alpha_mode = if m.rgba[3] < 1.0 {
-            json::material::AlphaMode::Blend
-        } else {
-            json::material::AlphaMode::Opaque
-        };
+        let alpha_mode =
+            if m.rgba[3] < 1.0 { json::material::AlphaMode::Blend } else { json::material::AlphaMode::Opaque };
         b.root.push(json::Material {
             name: Some(m.name.clone()),
             alpha_mode: Valid(alpha_mode),
@@ -411,12 +342,7 @@ fn build(scene: &Scene, uri: Option<BufferUri<'_>>) -> Result<(json::Root, Vec<u
         extras: Some(extras),
         ..Default::default()
     });
-    let scene_index = b.root.push(json::Scene {
-        extensions: None,
-        extras: None,
-        name: None,
-        nodes: vec![root_node],
-    });
+    let scene_index = b.root.push(json::Scene { extensions: None, extras: None, name: None, nodes: vec![root_node] });
     b.root.scene = Some(scene_index);
 
     if !b.bin.is_empty() {
@@ -437,4 +363,20 @@ fn build(scene: &Scene, uri: Option<BufferUri<'_>>) -> Result<(json::Root, Vec<u
         });
     }
     Ok((b.root, b.bin))
+}
+
+/// The indices of the materials that some non-empty mesh or line set refers to, sorted and
+/// unique: only those are written, so the glTF holds no unused material.
+fn used_materials(scene: &Scene) -> Vec<usize> {
+    let mut used: Vec<usize> = scene
+        .walk()
+        .iter()
+        .flat_map(|n| {
+            let m = n.meshes.iter().filter(|m| !m.indices.is_empty()).filter_map(|m| m.material);
+            m.chain(n.lines.iter().filter(|l| !l.indices.is_empty()).filter_map(|l| l.material)).collect::<Vec<_>>()
+        })
+        .collect();
+    used.sort_unstable();
+    used.dedup();
+    used
 }
