@@ -154,7 +154,8 @@ fn readme_pipe_verifies_every_write_back() {
     let outcomes = par_map(&tiles, |tile| {
         let name = tile.file_stem().unwrap().to_string_lossy().to_string();
         let a = run(&["citygml2popa3d", "-q", s(tile)], None);
-        assert_eq!(code(&a), 0, "citygml2popa3d {name}: {}", String::from_utf8_lossy(&a.stderr));
+        // exit 1 names the buildings it rejects (open shells of the input) and converts the rest
+        assert!(matches!(code(&a), 0 | 1) && !a.stdout.is_empty(), "citygml2popa3d {name}: {}", String::from_utf8_lossy(&a.stderr));
         let b = run(&["adjust", "-q", "-"], Some(&a.stdout));
         assert_eq!(code(&b), 0, "adjust {name}: {}", String::from_utf8_lossy(&b.stderr));
         let out = dir.path().join(format!("{name}.gml"));
