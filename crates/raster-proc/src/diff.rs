@@ -47,9 +47,13 @@ impl DiffOptions {
         if self.class_bounds.is_empty() {
             return Err(ProcError::Input("at least one error-class bound is needed".into()));
         }
-        let ok = self.class_bounds.iter().all(|b| b.is_finite() && *b > 0.0) && self.class_bounds.windows(2).all(|w| w[0] < w[1]);
+        let ok = self.class_bounds.iter().all(|b| b.is_finite() && *b > 0.0)
+            && self.class_bounds.windows(2).all(|w| w[0] < w[1]);
         if !ok {
-            return Err(ProcError::Input(format!("class bounds {:?} must be positive and strictly increasing", self.class_bounds)));
+            return Err(ProcError::Input(format!(
+                "class bounds {:?} must be positive and strictly increasing",
+                self.class_bounds
+            )));
         }
         Ok(())
     }
@@ -189,27 +193,8 @@ pub fn compare_with_map(a: &Raster, b: &Raster, opts: &DiffOptions) -> Result<(D
     let nf = n as f64;
     let mean = sum / nf;
     let var = errs.iter().map(|e| (e - mean) * (e - mean)).sum::<f64>() / nf;
-    let median = {
-        let mid = n / 2;
-        let (lower, m, _) = errs.select_nth_unstable_by(mid, |x, y| x.total_cmp(y));
-        if n % 2 == 1 {
-            *m
-        } else {
-            // the lower half holds everything ≤ m: its largest is the other middle value
-            let lower_max = lower.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-            0.5 * (lower_max + *m)
-        }
-    };
-    let histogram = counts
-        .iter()
-        .enumerate()
-        .map(|(k, &c)| ErrorClass {
-            from: if k == 0 { 0.0 } else { opts.class_bounds[k - 1] },
-            to: opts.class_bounds.get(k).copied(),
-            count: c,
-            share: c as f64 / nf,
-        })
-        .collect();
+    let median = median_of(&mut errs);
+    let histogram = error_histogram(&counts, opts, nf);
     Ok((
         DiffReport {
             width: a.width,
@@ -232,6 +217,36 @@ pub fn compare_with_map(a: &Raster, b: &Raster, opts: &DiffOptions) -> Result<(D
         },
         classes,
     ))
+}
+
+/// The error classes with their counts and shares of the `nf` compared cells, bounded by
+/// `opts.class_bounds` (the last class is open above).
+fn error_histogram(counts: &[usize], opts: &DiffOptions, nf: f64) -> Vec<ErrorClass> {
+    counts
+        .iter()
+        .enumerate()
+        .map(|(k, &c)| ErrorClass {
+            from: if k == 0 { 0.0 } else { opts.class_bounds[k - 1] },
+            to: opts.class_bounds.get(k).copied(),
+            count: c,
+            share: c as f64 / nf,
+        })
+        .collect()
+}
+
+/// The median of the absolute errors (mean of the two middle values for an even count), by
+/// selection instead of a full sort; `errs` is reordered.
+fn median_of(errs: &mut [f64]) -> f64 {
+    let n = errs.len();
+    let mid = n / 2;
+    let (lower, m, _) = errs.select_nth_unstable_by(mid, |x, y| x.total_cmp(y));
+    if n % 2 == 1 {
+        *m
+    } else {
+        // the lower half holds everything ≤ m: its largest is the other middle value
+        let lower_max = lower.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        0.5 * (lower_max + *m)
+    }
 }
 
 /// Colour of error class `k` of `n` classes: green (small) → yellow → red (large).
@@ -263,7 +278,8 @@ mod tests {
     use super::*;
 
     fn r(vals: &[f64]) -> Raster {
-        Raster::from_values(vals.len(), 1, Raster::geotransform_from_centres(0.0, 0.0, 1.0, -1.0), None, vals.to_vec()).unwrap()
+        Raster::from_values(vals.len(), 1, Raster::geotransform_from_centres(0.0, 0.0, 1.0, -1.0), None, vals.to_vec())
+            .unwrap()
     }
 
     #[test]
