@@ -318,7 +318,11 @@ pub fn read_raster_band_typed(path: &Path, band: usize) -> Result<(Raster, Sampl
 /// band `band` through a GDAL windowed read: only the window's cells are read and held (a tile of
 /// a VRT or COG of any size costs the tile), the geotransform moved to the window's corner.
 /// `None`: the whole band.
-pub fn read_raster_window_typed(path: &Path, band: usize, window: Option<[usize; 4]>) -> Result<(Raster, SampleType), RasterError> {
+pub fn read_raster_window_typed(
+    path: &Path,
+    band: usize,
+    window: Option<[usize; 4]>,
+) -> Result<(Raster, SampleType), RasterError> {
     let open_err = |message: String| RasterError::Open { path: path.to_path_buf(), message };
     let content_err = |message: String| RasterError::Content { path: path.to_path_buf(), message };
     if !is_gdal_virtual_path(path) && !path.exists() {
@@ -335,17 +339,7 @@ pub fn read_raster_window_typed(path: &Path, band: usize, window: Option<[usize;
     };
     let count = ds.raster_count();
     if count == 0 {
-        let subs = ds.metadata_domain("SUBDATASETS").unwrap_or_default();
-        let names: Vec<&str> = subs
-            .iter()
-            .filter(|s| s.contains("_NAME="))
-            .filter_map(|s| s.split_once('=').map(|(_, v)| v))
-            .collect();
-        return Err(content_err(if names.is_empty() {
-            "no raster band (not a raster file?)".into()
-        } else {
-            format!("no raster band; open one of its subdatasets instead: {}", names.join(", "))
-        }));
+        return Err(content_err(no_band_message(&ds)));
     }
     if band == 0 || band > count {
         return Err(content_err(format!("band {band} requested but the file has {count} band(s)")));
@@ -355,7 +349,11 @@ pub fn read_raster_window_typed(path: &Path, band: usize, window: Option<[usize;
         return Err(content_err(format!("raster size {full_w}×{full_h} has no cells")));
     }
     let [xoff, yoff, width, height] = window.unwrap_or([0, 0, full_w, full_h]);
-    if width == 0 || height == 0 || xoff.checked_add(width).is_none_or(|e| e > full_w) || yoff.checked_add(height).is_none_or(|e| e > full_h) {
+    if width == 0
+        || height == 0
+        || xoff.checked_add(width).is_none_or(|e| e > full_w)
+        || yoff.checked_add(height).is_none_or(|e| e > full_h)
+    {
         return Err(content_err(format!("window {xoff} {yoff} {width} {height} (xoff yoff xsize ysize) is not inside the raster's {full_w}×{full_h} pixels")));
     }
     // The size is the header's claim: check it before GDAL or Vec allocate for it.
@@ -396,7 +394,8 @@ pub fn read_raster_window_typed(path: &Path, band: usize, window: Option<[usize;
     if let Ok(flags) = rb.mask_flags() {
         if !flags.is_all_valid() && !flags.is_nodata() {
             if let Ok(mb) = rb.open_mask_band() {
-                if let Ok(m) = mb.read_as::<u8>((xoff as isize, yoff as isize), (width, height), (width, height), None) {
+                if let Ok(m) = mb.read_as::<u8>((xoff as isize, yoff as isize), (width, height), (width, height), None)
+                {
                     mask = Some(m.into_shape_and_vec().1);
                 }
             }
@@ -432,6 +431,19 @@ pub fn read_raster_window_typed(path: &Path, band: usize, window: Option<[usize;
     Ok((Raster { width, height, geotransform, crs, data, nodata, metadata, z_unit }, SampleType::holding(band_type)))
 }
 
+/// Why a dataset without raster bands cannot be read: a container of subdatasets (NetCDF, HDF)
+/// names them, so the message can say which to open instead.
+fn no_band_message(ds: &gdal::Dataset) -> String {
+    let subs = ds.metadata_domain("SUBDATASETS").unwrap_or_default();
+    let names: Vec<&str> =
+        subs.iter().filter(|s| s.contains("_NAME=")).filter_map(|s| s.split_once('=').map(|(_, v)| v)).collect();
+    if names.is_empty() {
+        "no raster band (not a raster file?)".into()
+    } else {
+        format!("no raster band; open one of its subdatasets instead: {}", names.join(", "))
+    }
+}
+
 /// The uncertainty layer that goes with the elevation in band 1 (issue 19): the band whose
 /// description is `uncertainty` (GDAL's BAG driver names band 2 so), else band 2 of a file
 /// with two or more bands (e.g. a GeoTIFF of elevation + uncertainty). Read as any band (nodata,
@@ -440,11 +452,17 @@ pub fn read_uncertainty(path: &Path) -> Result<(Raster, usize), RasterError> {
     let content_err = |message: String| RasterError::Content { path: path.to_path_buf(), message };
     let ds = open_dataset(path, Default::default())?;
     let count = ds.raster_count();
-    let named = (1..=count).find(|&b| ds.rasterband(b).is_ok_and(|rb| rb.description().is_ok_and(|d| d.trim().eq_ignore_ascii_case("uncertainty"))));
+    let named = (1..=count).find(|&b| {
+        ds.rasterband(b).is_ok_and(|rb| rb.description().is_ok_and(|d| d.trim().eq_ignore_ascii_case("uncertainty")))
+    });
     let band = match named {
         Some(b) => b,
         None if count >= 2 => 2,
-        None => return Err(content_err(format!("no uncertainty layer: {count} band(s), none named \"uncertainty\" (expected as band 2)"))),
+        None => {
+            return Err(content_err(format!(
+                "no uncertainty layer: {count} band(s), none named \"uncertainty\" (expected as band 2)"
+            )))
+        }
     };
     drop(ds);
     Ok((read_raster_band(path, band)?, band))
@@ -524,7 +542,11 @@ pub fn choose_nodata_for(r: &Raster, t: SampleType) -> f64 {
 static TMP_COUNTER: AtomicU64 = AtomicU64::new(0);
 
 /// Builds the in-memory GDAL dataset for `r` with bands of type `T`.
-fn to_mem_dataset_as<T: gdal::raster::GdalType + Copy>(r: &Raster, nodata: f64, cast: impl Fn(f64) -> T) -> Result<Dataset, String> {
+fn to_mem_dataset_as<T: gdal::raster::GdalType + Copy>(
+    r: &Raster,
+    nodata: f64,
+    cast: impl Fn(f64) -> T,
+) -> Result<Dataset, String> {
     let mem = DriverManager::get_driver_by_name("MEM").map_err(|e| gdal_msg(&e))?;
     let mut ds = mem.create_with_band_type::<T, _>("", r.width, r.height, 1).map_err(|e| gdal_msg(&e))?;
     ds.set_geo_transform(&r.geotransform).map_err(|e| gdal_msg(&e))?;
@@ -574,13 +596,18 @@ pub fn check_write(path: Option<&Path>, opts: &WriteOptions) -> Result<RasterFor
     let target = path.map_or_else(|| "stdout".to_string(), |p| p.display().to_string());
     let ferr = |m: String| RasterError::Format(format!("-o {target}: {m}"));
     if path.is_some_and(is_gdal_virtual_path) {
-        return Err(ferr("writing to a GDAL virtual path is not supported; write a file and compress it afterwards".into()));
+        return Err(ferr(
+            "writing to a GDAL virtual path is not supported; write a file and compress it afterwards".into(),
+        ));
     }
     let format = match (&opts.format, path) {
         (Some(f), _) => f.clone(),
         (None, None) => RasterFormat::Cog,
         (None, Some(p)) => RasterFormat::from_path(p).ok_or_else(|| {
-            ferr("GDAL knows no raster format for this extension; use .tif, .asc or .nc, or name a driver with -of".into())
+            ferr(
+                "GDAL knows no raster format for this extension; use .tif, .asc or .nc, or name a driver with -of"
+                    .into(),
+            )
         })?,
     };
     let name = format.driver_name().to_string();
@@ -618,7 +645,9 @@ pub fn check_write(path: Option<&Path>, opts: &WriteOptions) -> Result<RasterFor
         };
         let known = list.contains(&format!("NAME='{key}'")) || list.contains(&format!("NAME=\"{key}\""));
         if !list.is_empty() && !known {
-            return Err(ferr(format!("-co {o}: {name} has no creation option {key} (`gdalinfo --format {name}` lists them)")));
+            return Err(ferr(format!(
+                "-co {o}: {name} has no creation option {key} (`gdalinfo --format {name}` lists them)"
+            )));
         }
     }
     if path.is_none() && driver_item(&driver, "DCAP_VIRTUALIO") != "YES" {
@@ -668,7 +697,10 @@ impl StagedRaster {
     fn copy_into_device(&self, target: &Path) -> Result<(), String> {
         let main = self.tmp_dir.join(&self.file_name);
         let mut from = std::fs::File::open(&main).map_err(|e| format!("cannot read {}: {e}", main.display()))?;
-        let mut to = std::fs::OpenOptions::new().write(true).open(target).map_err(|e| format!("cannot write {}: {e}", target.display()))?;
+        let mut to = std::fs::OpenOptions::new()
+            .write(true)
+            .open(target)
+            .map_err(|e| format!("cannot write {}: {e}", target.display()))?;
         std::io::copy(&mut from, &mut to).map(|_| ()).map_err(|e| format!("cannot write {}: {e}", target.display()))
     }
 }
