@@ -161,34 +161,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     let input = Input::from_arg(&args.input);
     let name = input.display_name();
     let output = Output::from_arg(args.output.as_deref());
-    let format = match (args.format, output.extension().as_deref()) {
-        (Some(f), _) => f,
-        (None, Some("glb")) => Format::Glb,
-        (None, Some("gltf")) => Format::Gltf,
-        (None, Some("obj")) => Format::Obj,
-        (None, Some(e)) => {
-            return Err(CliError::usage(format!("unknown output extension '.{e}': use .glb, .gltf or .obj, or --format")))
-        }
-        (None, None) => {
-            return Err(CliError::usage("writing to stdout: say which format with --format glb|gltf|obj"))
-        }
-    };
-    if args.gltf_bin && (format != Format::Gltf || output.path().is_none()) {
-        return Err(CliError::usage("--gltf-bin needs a .gltf output file (-o OUT.gltf)"));
-    }
-    let fixed_origin = parse_origin(&args.origin)?;
-    // A CRS string GDAL does not know is refused as gdalsrsinfo refuses it (PROJ alone read
-    // `--t-srs foo` as a Bessel longlat).
-    for (opt, crs) in [("--t-srs", args.t_srs.as_deref()), ("--s-srs", args.s_srs.as_deref().map(proj_crs).as_deref())] {
-        if let Some(c) = crs {
-            let parsed = raster_io::crs::Crs::parse(c).map_err(|e| CliError::usage(format!("{opt}: {e}")))?;
-            if opt == "--t-srs" && parsed.geographic {
-                return Err(CliError::usage(format!(
-                    "--t-srs {c} is geographic (degrees): mesh coordinates must be metres (heights are); use a projected CRS, e.g. the UTM zone EPSG:326zz / 327zz"
-                )));
-            }
-        }
-    }
+    let (format, fixed_origin) = checked_options(&args, &output)?;
 
     let src = input.read_all()?;
     if tspline::format::is_tmesh_document(&src) {
@@ -274,6 +247,40 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         crate::say!("{f}");
     }
     Ok(exit)
+}
+
+/// The output format (from --format or the extension) and the fixed origin, after the option
+/// checks that need no input: usage errors come before the input is read.
+fn checked_options(args: &Args, output: &Output) -> Result<(Format, Option<[f64; 3]>), CliError> {
+    let format = match (args.format, output.extension().as_deref()) {
+        (Some(f), _) => f,
+        (None, Some("glb")) => Format::Glb,
+        (None, Some("gltf")) => Format::Gltf,
+        (None, Some("obj")) => Format::Obj,
+        (None, Some(e)) => {
+            return Err(CliError::usage(format!("unknown output extension '.{e}': use .glb, .gltf or .obj, or --format")))
+        }
+        (None, None) => {
+            return Err(CliError::usage("writing to stdout: say which format with --format glb|gltf|obj"))
+        }
+    };
+    if args.gltf_bin && (format != Format::Gltf || output.path().is_none()) {
+        return Err(CliError::usage("--gltf-bin needs a .gltf output file (-o OUT.gltf)"));
+    }
+    let fixed_origin = parse_origin(&args.origin)?;
+    // A CRS string GDAL does not know is refused as gdalsrsinfo refuses it (PROJ alone read
+    // `--t-srs foo` as a Bessel longlat).
+    for (opt, crs) in [("--t-srs", args.t_srs.as_deref()), ("--s-srs", args.s_srs.as_deref().map(proj_crs).as_deref())] {
+        if let Some(c) = crs {
+            let parsed = raster_io::crs::Crs::parse(c).map_err(|e| CliError::usage(format!("{opt}: {e}")))?;
+            if opt == "--t-srs" && parsed.geographic {
+                return Err(CliError::usage(format!(
+                    "--t-srs {c} is geographic (degrees): mesh coordinates must be metres (heights are); use a projected CRS, e.g. the UTM zone EPSG:326zz / 327zz"
+                )));
+            }
+        }
+    }
+    Ok((format, fixed_origin))
 }
 
 #[cfg(test)]
