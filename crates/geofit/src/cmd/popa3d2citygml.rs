@@ -177,7 +177,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         }
         // --keep: named on stderr even with -q, the output is only right with them in mind
         for k in kept {
-            eprintln!("popa3d2citygml: kept {} as it was: {}", k.building, k.reason);
+            crate::say!("popa3d2citygml: kept {} as it was: {}", k.building, k.reason);
         }
     }
     output.write_bytes(&healed.document)?;
