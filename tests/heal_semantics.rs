@@ -120,9 +120,7 @@ fn heal_keeps_semantics_identity_and_bounds_on_every_fixture() {
         let h = run(&["heal", "-q", s(f), "-o", s(&out)], None);
         match code(&h) {
             0 => (f.clone(), Some(harms(f, &out, MAX_MOVE)), String::new()),
-            c @ (1 | 2 | 3) => {
-                (f.clone(), None, format!("refused ({c}): {}", String::from_utf8_lossy(&h.stderr).trim()))
-            }
+            c @ 1..=3 => (f.clone(), None, format!("refused ({c}): {}", String::from_utf8_lossy(&h.stderr).trim())),
             c => {
                 (f.clone(), Some(vec![format!("heal exit {c}: {}", String::from_utf8_lossy(&h.stderr))]), String::new())
             }
@@ -158,7 +156,11 @@ fn readme_pipe_verifies_every_write_back() {
         let name = tile.file_stem().unwrap().to_string_lossy().to_string();
         let a = run(&["citygml2popa3d", "-q", s(tile)], None);
         // exit 1 names the buildings it rejects (open shells of the input) and converts the rest
-        assert!(matches!(code(&a), 0 | 1) && !a.stdout.is_empty(), "citygml2popa3d {name}: {}", String::from_utf8_lossy(&a.stderr));
+        assert!(
+            matches!(code(&a), 0 | 1) && !a.stdout.is_empty(),
+            "citygml2popa3d {name}: {}",
+            String::from_utf8_lossy(&a.stderr)
+        );
         let b = run(&["adjust", "-q", "-"], Some(&a.stdout));
         assert_eq!(code(&b), 0, "adjust {name}: {}", String::from_utf8_lossy(&b.stderr));
         let out = dir.path().join(format!("{name}.gml"));

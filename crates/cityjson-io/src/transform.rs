@@ -29,7 +29,7 @@ impl Transform {
             }
         };
         let t = Transform { scale: three("scale")?, translate: three("translate")? };
-        if t.scale.iter().any(|s| *s == 0.0) {
+        if t.scale.contains(&0.0) {
             return Err("transform \"scale\" has a zero".into());
         }
         Ok(t)

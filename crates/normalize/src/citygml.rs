@@ -99,7 +99,7 @@ pub fn building_soup(b: &CityObject, max_lod: u8) -> Result<Soup, Rejection> {
         .geometries
         .iter()
         .filter(|g| matches!(g.kind, GeometryKind::Solid { .. } | GeometryKind::Solids(_)))
-        .filter(|g| g.lod.map_or(true, |l| l <= max_lod))
+        .filter(|g| g.lod.is_none_or(|l| l <= max_lod))
         .max_by_key(|g| g.lod.unwrap_or(0));
     let polys: Vec<&Polygon> = match solid_geom {
         Some(g) => match &g.kind {
@@ -109,12 +109,8 @@ pub fn building_soup(b: &CityObject, max_lod: u8) -> Result<Soup, Rejection> {
         },
         None => {
             // MultiSurface-only: every surface geometry of the building and its boundary surfaces.
-            let lod = objs
-                .iter()
-                .flat_map(|o| o.geometries.iter())
-                .filter_map(|g| g.lod)
-                .filter(|l| *l <= max_lod)
-                .max();
+            let lod =
+                objs.iter().flat_map(|o| o.geometries.iter()).filter_map(|g| g.lod).filter(|l| *l <= max_lod).max();
             let v: Vec<&Polygon> = objs
                 .iter()
                 .flat_map(|o| o.geometries.iter())

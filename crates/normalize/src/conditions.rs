@@ -1,7 +1,7 @@
 //! Conditions generated from geometry and semantics (spec §8.2 step 5), sketch priors (spec §4.6)
 //! and observation-induced angle constraints (spec §4.5).
 //!
-//! Decisions for the spec's [gap]s (§8.2, §10.2 items 10, 13):
+//! Decisions for the spec's \[gap\]s (§8.2, §10.2 items 10, 13):
 //! * Parallelism / orthogonality are generated once per pair of *distinct* normal objects (between
 //!   their largest faces), not per face pair: faces on one normal are parallel by construction, and a
 //!   per-face-pair list would be quadratic with no extra information.
@@ -16,8 +16,8 @@
 //! * Unit norm: one `NormNV` per normal, skipped for a normal whose parameters are a signed
 //!   permutation of an earlier one's (the same norm, spec §3.3).
 
-use popa3d_model::*;
 use popa3d_model::vec3::{dot, unit};
+use popa3d_model::*;
 use serde::Serialize;
 use std::collections::HashMap;
 
@@ -99,7 +99,12 @@ impl Ranges {
     /// Every element of `m`: for conditions over a whole model (one building in it) rather than
     /// over the part one object added to a shared model.
     pub fn whole(m: &Popa3d) -> Ranges {
-        Ranges { faces: 0..m.faces.len(), planes: 0..m.planes.len(), normals: 0..m.normals.len(), parameters: 0..m.parameters.len() }
+        Ranges {
+            faces: 0..m.faces.len(),
+            planes: 0..m.planes.len(),
+            normals: 0..m.normals.len(),
+            parameters: 0..m.parameters.len(),
+        }
     }
 
     /// What `m` gained since `before` (an earlier [`Ranges::whole`] of it): the elements one
@@ -135,7 +140,14 @@ fn face_areas(m: &Popa3d, inc: &Incidence, pos: &[[f64; 3]], faces: &std::ops::R
 }
 
 /// The unit-norm and soft-datum conditions shared by both use cases.
-fn norms_and_identities(m: &Popa3d, r: &Ranges, o: &ConditionOptions, out: &mut Vec<Observation>, c: &mut ConditionCounts, identities: bool) {
+fn norms_and_identities(
+    m: &Popa3d,
+    r: &Ranges,
+    o: &ConditionOptions,
+    out: &mut Vec<Observation>,
+    c: &mut ConditionCounts,
+    identities: bool,
+) {
     let mut seen: Vec<Vec<ParamId>> = Vec::new();
     for nv in r.normals.clone() {
         let mut key: Vec<ParamId> = m.normals[nv].comps.iter().map(|x| x.0).collect();
@@ -144,18 +156,27 @@ fn norms_and_identities(m: &Popa3d, r: &Ranges, o: &ConditionOptions, out: &mut 
             continue;
         }
         seen.push(key);
-        out.push(Observation::new(ObsKind::NormNV { normal: NormalId::from(nv), sigma: o.sigma_norm }, ObsOrigin::Consistency));
+        out.push(Observation::new(
+            ObsKind::NormNV { normal: NormalId::from(nv), sigma: o.sigma_norm },
+            ObsOrigin::Consistency,
+        ));
         c.norm += 1;
     }
     if identities {
         for p in r.planes.clone() {
             let l = Measured::new(m.planes[p].d, o.sigma_identity_d);
-            out.push(Observation::new(ObsKind::ParameterObs { unknown: Unknown::PlaneD(PlaneId::from(p)), l }, ObsOrigin::Datum));
+            out.push(Observation::new(
+                ObsKind::ParameterObs { unknown: Unknown::PlaneD(PlaneId::from(p)), l },
+                ObsOrigin::Datum,
+            ));
             c.identity += 1;
         }
         for p in r.parameters.clone() {
             let l = Measured::new(m.parameters[p].value, o.sigma_identity_param);
-            out.push(Observation::new(ObsKind::ParameterObs { unknown: Unknown::Param(ParamId::from(p)), l }, ObsOrigin::Datum));
+            out.push(Observation::new(
+                ObsKind::ParameterObs { unknown: Unknown::Param(ParamId::from(p)), l },
+                ObsOrigin::Datum,
+            ));
             c.identity += 1;
         }
     }
@@ -180,10 +201,14 @@ pub fn semantic(m: &mut Popa3d, r: &Ranges, o: &ConditionOptions) -> ConditionCo
 pub fn semantic_many(m: &mut Popa3d, rs: &[Ranges], o: &ConditionOptions) -> Vec<ConditionCounts> {
     let inc = Incidence::new(m);
     // NaN where a node's planes do not meet in a point
-    let pos: Vec<[f64; 3]> = (0..m.nodes.len()).map(|i| m.node_position(&inc, NodeId::from(i)).unwrap_or([f64::NAN; 3])).collect();
+    let pos: Vec<[f64; 3]> =
+        (0..m.nodes.len()).map(|i| m.node_position(&inc, NodeId::from(i)).unwrap_or([f64::NAN; 3])).collect();
     rs.iter()
         .map(|r| {
-            let computable = r.faces.clone().all(|f| inc.face_half_edges[f].iter().all(|&h| !pos[m.half_edge_start(h).idx()][0].is_nan()));
+            let computable = r
+                .faces
+                .clone()
+                .all(|f| inc.face_half_edges[f].iter().all(|&h| !pos[m.half_edge_start(h).idx()][0].is_nan()));
             if computable {
                 semantic_with(m, r, o, &inc, &pos)
             } else {
@@ -193,7 +218,13 @@ pub fn semantic_many(m: &mut Popa3d, rs: &[Ranges], o: &ConditionOptions) -> Vec
         .collect()
 }
 
-fn semantic_with(m: &mut Popa3d, r: &Ranges, o: &ConditionOptions, inc: &Incidence, pos: &[[f64; 3]]) -> ConditionCounts {
+fn semantic_with(
+    m: &mut Popa3d,
+    r: &Ranges,
+    o: &ConditionOptions,
+    inc: &Incidence,
+    pos: &[[f64; 3]],
+) -> ConditionCounts {
     let area = face_areas(m, inc, pos, &r.faces);
     let mut c = ConditionCounts::default();
     let mut out: Vec<Observation> = Vec::new();
@@ -201,7 +232,8 @@ fn semantic_with(m: &mut Popa3d, r: &Ranges, o: &ConditionOptions, inc: &Inciden
     let normals: Vec<usize> = r.normals.clone().filter(|n| normal_face.contains_key(n)).collect();
     // No squaring of the facets of a curved facade (docs/decisions.md#no-squaring-on-curved-facades).
     let curved_faces = crate::curved::curved_facets(m, inc, pos, r.faces.clone());
-    let curved: std::collections::HashSet<usize> = normals.iter().copied().filter(|n| curved_faces.contains(&normal_face[n])).collect();
+    let curved: std::collections::HashSet<usize> =
+        normals.iter().copied().filter(|n| curved_faces.contains(&normal_face[n])).collect();
     let groups = angle_conditions(m, &normals, &normal_face, &curved, o, &mut out, &mut c);
     // Coplanarity and wall–window distances within each parallel group.
     for (g, ns) in groups {
@@ -273,7 +305,11 @@ fn angle_conditions(
             };
             if let Some(v) = kind {
                 let ob = Observation::new(
-                    ObsKind::ConstraintFaceFace { a: FaceId::from(fa), b: FaceId::from(fb), l: Measured::new(v, o.sigma_angle) },
+                    ObsKind::ConstraintFaceFace {
+                        a: FaceId::from(fa),
+                        b: FaceId::from(fb),
+                        l: Measured::new(v, o.sigma_angle),
+                    },
                     ObsOrigin::Semantic,
                 );
                 out.push(ob.with_label(if v == 0.0 { "orthogonal" } else { "parallel" }));
@@ -304,7 +340,14 @@ fn group_root(g: &mut HashMap<usize, usize>, x: usize) -> usize {
 
 /// (signed offset along `refn`, face) for each face of the range whose normal is one of `ns`:
 /// the offset of the face's plane, measured at its first node.
-fn group_face_offsets(m: &Popa3d, r: &Ranges, inc: &Incidence, pos: &[[f64; 3]], ns: &[usize], refn: [f64; 3]) -> Vec<(f64, usize)> {
+fn group_face_offsets(
+    m: &Popa3d,
+    r: &Ranges,
+    inc: &Incidence,
+    pos: &[[f64; 3]],
+    ns: &[usize],
+    refn: [f64; 3],
+) -> Vec<(f64, usize)> {
     let mut faces: Vec<(f64, usize)> = Vec::new();
     for f in r.faces.clone() {
         let pl = m.faces[f].plane.idx();
@@ -320,7 +363,14 @@ fn group_face_offsets(m: &Popa3d, r: &Ranges, inc: &Incidence, pos: &[[f64; 3]],
 
 /// Coplanarity: per semantic type (openings aside), one representative (largest face) per
 /// plane, planes sorted by offset, consecutive pairs within ε get a distance-0 condition.
-fn coplanarity_conditions(m: &Popa3d, faces: &[(f64, usize)], area: &HashMap<usize, f64>, o: &ConditionOptions, out: &mut Vec<Observation>, c: &mut ConditionCounts) {
+fn coplanarity_conditions(
+    m: &Popa3d,
+    faces: &[(f64, usize)],
+    area: &HashMap<usize, f64>,
+    o: &ConditionOptions,
+    out: &mut Vec<Observation>,
+    c: &mut ConditionCounts,
+) {
     let sem = |f: usize| m.faces[f].source.as_ref().and_then(|s| s.semantic.clone());
     let mut by_sem: HashMap<Option<String>, Vec<(f64, usize)>> = HashMap::new();
     for &(t, f) in faces {
@@ -345,10 +395,16 @@ fn coplanarity_conditions(m: &Popa3d, faces: &[(f64, usize)], area: &HashMap<usi
             let dd = w[1].0 - w[0].0;
             if dd.abs() < o.epsilon {
                 let ob = Observation::new(
-                    ObsKind::DistanceFaceFace { a: FaceId::from(w[0].1), b: FaceId::from(w[1].1), l: Measured::new(0.0, o.sigma_distance) },
+                    ObsKind::DistanceFaceFace {
+                        a: FaceId::from(w[0].1),
+                        b: FaceId::from(w[1].1),
+                        l: Measured::new(0.0, o.sigma_distance),
+                    },
                     ObsOrigin::Semantic,
                 );
-                out.push(ob.with_label(format!("coplanar {} (source offset {dd:.4} m)", s.clone().unwrap_or_default())));
+                out.push(
+                    ob.with_label(format!("coplanar {} (source offset {dd:.4} m)", s.clone().unwrap_or_default())),
+                );
                 c.coplanarity += 1;
             }
         }
@@ -357,7 +413,13 @@ fn coplanarity_conditions(m: &Popa3d, faces: &[(f64, usize)], area: &HashMap<usi
 
 /// Wall–window: each opening face to the nearest parallel wall face on another plane, at its
 /// source distance (kept even below ε: the reveal depth is real).
-fn wall_window_conditions(m: &Popa3d, faces: &[(f64, usize)], o: &ConditionOptions, out: &mut Vec<Observation>, c: &mut ConditionCounts) {
+fn wall_window_conditions(
+    m: &Popa3d,
+    faces: &[(f64, usize)],
+    o: &ConditionOptions,
+    out: &mut Vec<Observation>,
+    c: &mut ConditionCounts,
+) {
     for &(t, f) in faces {
         let src = match &m.faces[f].source {
             Some(s) if is_opening(s.semantic.as_deref()) => s.clone(),
@@ -376,13 +438,17 @@ fn wall_window_conditions(m: &Popa3d, faces: &[(f64, usize)], o: &ConditionOptio
                 continue;
             }
             let dd = (t2 - t).abs();
-            if best.map_or(true, |(b, _)| dd < b) {
+            if best.is_none_or(|(b, _)| dd < b) {
                 best = Some((dd, f2));
             }
         }
         if let Some((dd, f2)) = best {
             let ob = Observation::new(
-                ObsKind::DistanceFaceFace { a: FaceId::from(f2), b: FaceId::from(f), l: Measured::new(dd, o.sigma_distance) },
+                ObsKind::DistanceFaceFace {
+                    a: FaceId::from(f2),
+                    b: FaceId::from(f),
+                    l: Measured::new(dd, o.sigma_distance),
+                },
                 ObsOrigin::Semantic,
             );
             out.push(ob.with_label(format!("wall-window {}", src.owner.clone().unwrap_or(src.polygon.clone()))));
@@ -440,7 +506,11 @@ pub fn sketch_priors(m: &mut Popa3d, r: &Ranges, o: &SketchOptions) -> (usize, u
         for &b in &nvs[i + 1..] {
             let v = dot(m.normal_value(NormalId::from(a)), m.normal_value(NormalId::from(b)));
             out.push(Observation::new(
-                ObsKind::RelativeAngleNormalNormal { a: NormalId::from(a), b: NormalId::from(b), l: Measured::new(v, o.sigma_relative_angle) },
+                ObsKind::RelativeAngleNormalNormal {
+                    a: NormalId::from(a),
+                    b: NormalId::from(b),
+                    l: Measured::new(v, o.sigma_relative_angle),
+                },
                 ObsOrigin::Sketch,
             ));
             na += 1;
@@ -486,7 +556,11 @@ pub fn add_distance(m: &mut Popa3d, obs: Observation, sigma_induced: f64) -> Vec
                 None
             } else {
                 let cs = dot(unit(m.face_plane_value(a).n), unit(m.face_plane_value(b).n));
-                Some(ObsKind::ConstraintFaceFace { a, b, l: Measured::new(if cs < 0.0 { -1.0 } else { 1.0 }, sigma_induced) })
+                Some(ObsKind::ConstraintFaceFace {
+                    a,
+                    b,
+                    l: Measured::new(if cs < 0.0 { -1.0 } else { 1.0 }, sigma_induced),
+                })
             }
         }
         ObsKind::DistanceFaceEdge { a, b, .. } => {
@@ -503,7 +577,11 @@ pub fn add_distance(m: &mut Popa3d, obs: Observation, sigma_induced: f64) -> Vec
                 let da = m.edge_line(&inc, a).map(|x| unit(x.1)).unwrap_or([0.0; 3]);
                 let db = m.edge_line(&inc, b).map(|x| unit(x.1)).unwrap_or([0.0; 3]);
                 let cs = dot(da, db);
-                Some(ObsKind::ConstraintEdgeEdge { a, b, l: Measured::new(if cs < 0.0 { -1.0 } else { 1.0 }, sigma_induced) })
+                Some(ObsKind::ConstraintEdgeEdge {
+                    a,
+                    b,
+                    l: Measured::new(if cs < 0.0 { -1.0 } else { 1.0 }, sigma_induced),
+                })
             }
         }
         _ => None,

@@ -17,7 +17,8 @@ pub struct UnknownBuilding(pub String);
 /// The Buildings and BuildingParts with geometry of their own, in document order; with `ids`
 /// only those, each of which must be there (a mistyped id is an error, not an empty result).
 pub fn select_buildings<'a>(city: &'a CityModel, ids: &[String]) -> Result<Vec<&'a CityObject>, UnknownBuilding> {
-    let mut units: Vec<&CityObject> = citygml::buildings(city).into_iter().filter(|b| citygml::has_own_geometry(b)).collect();
+    let mut units: Vec<&CityObject> =
+        citygml::buildings(city).into_iter().filter(|b| citygml::has_own_geometry(b)).collect();
     if !ids.is_empty() {
         if let Some(id) = ids.iter().find(|id| !units.iter().any(|b| b.id.as_deref() == Some(id.as_str()))) {
             return Err(UnknownBuilding(id.clone()));
@@ -67,7 +68,12 @@ pub struct Conversion {
 /// named by its gml:id, and the others still go in. Conditions are generated once all buildings
 /// are in, so the incidence and node positions are built once. `progress(i, id)` is called as
 /// building `i` starts.
-pub fn convert_buildings(model: &mut Popa3d, units: &[&CityObject], o: &BuildingOptions, progress: &dyn Fn(usize, &str)) -> Conversion {
+pub fn convert_buildings(
+    model: &mut Popa3d,
+    units: &[&CityObject],
+    o: &BuildingOptions,
+    progress: &dyn Fn(usize, &str),
+) -> Conversion {
     let mut conversion = Conversion { buildings: Vec::new(), rejected: Vec::new() };
     let mut ranges = Vec::new();
     for (i, b) in units.iter().enumerate() {
@@ -91,11 +97,21 @@ pub fn convert_buildings(model: &mut Popa3d, units: &[&CityObject], o: &Building
 
 /// One building normalized into the model: its report (conditions still to come) and the
 /// elements it added.
-fn convert_building(model: &mut Popa3d, b: &CityObject, id: &str, o: &BuildingOptions) -> Result<(BuildingReport, Ranges), Rejection> {
+fn convert_building(
+    model: &mut Popa3d,
+    b: &CityObject,
+    id: &str,
+    o: &BuildingOptions,
+) -> Result<(BuildingReport, Ranges), Rejection> {
     let soup = citygml::building_soup(b, o.lod).map_err(|r| with_building(r, id))?;
     let before = Ranges::whole(model);
     let n = crate::normalize_into(model, &soup, &o.tolerances).map_err(|r| with_building(r, id))?;
-    let report = BuildingReport { id: id.to_string(), counts: n.counts, conditions: ConditionCounts::default(), notices: n.notices };
+    let report = BuildingReport {
+        id: id.to_string(),
+        counts: n.counts,
+        conditions: ConditionCounts::default(),
+        notices: n.notices,
+    };
     Ok((report, Ranges::since(model, &before)))
 }
 
@@ -122,7 +138,8 @@ mod tests {
             let faces = [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [1, 3, 7, 5], [3, 2, 6, 7], [2, 0, 4, 6]];
             let mut shell = String::new();
             for f in faces {
-                let ring: Vec<String> = f.iter().chain(&f[..1]).map(|&k| c(k).map(|v| v.to_string()).join(" ")).collect();
+                let ring: Vec<String> =
+                    f.iter().chain(&f[..1]).map(|&k| c(k).map(|v| v.to_string()).join(" ")).collect();
                 shell += &format!("<gml:surfaceMember><gml:Polygon><gml:exterior><gml:LinearRing><gml:posList>{}</gml:posList></gml:LinearRing></gml:exterior></gml:Polygon></gml:surfaceMember>", ring.join(" "));
             }
             members += &format!(
@@ -136,7 +153,10 @@ mod tests {
 
     #[test]
     fn a_mistyped_id_is_an_error_and_ids_select_in_document_order() {
-        let city = citygml_io::parse(boxes(&[[0.0, 0.0, 4.0, 3.0, 2.5], [10.0, 0.0, 5.0, 5.0, 3.0], [20.0, 0.0, 2.0, 2.0, 6.0]]).as_bytes()).unwrap();
+        let city = citygml_io::parse(
+            boxes(&[[0.0, 0.0, 4.0, 3.0, 2.5], [10.0, 0.0, 5.0, 5.0, 3.0], [20.0, 0.0, 2.0, 2.0, 6.0]]).as_bytes(),
+        )
+        .unwrap();
         assert_eq!(select_buildings(&city, &["b7".into()]).err(), Some(UnknownBuilding("b7".into())));
         let picked = select_buildings(&city, &["b2".into(), "b0".into()]).unwrap();
         assert_eq!(picked.iter().map(|b| b.id.clone().unwrap()).collect::<Vec<_>>(), ["b0", "b2"]);
@@ -145,7 +165,8 @@ mod tests {
 
     #[test]
     fn every_box_becomes_eight_nodes_on_six_planes_of_its_own() {
-        let city = citygml_io::parse(boxes(&[[0.0, 0.0, 4.0, 3.0, 2.5], [10.0, 0.0, 5.0, 5.0, 3.0]]).as_bytes()).unwrap();
+        let city =
+            citygml_io::parse(boxes(&[[0.0, 0.0, 4.0, 3.0, 2.5], [10.0, 0.0, 5.0, 5.0, 3.0]]).as_bytes()).unwrap();
         let units = select_buildings(&city, &[]).unwrap();
         let mut model = model_for(&city, "boxes.gml");
         let seen = RefCell::new(Vec::new());

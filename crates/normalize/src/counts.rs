@@ -28,7 +28,15 @@ pub struct StageCounts {
 }
 
 impl StageCounts {
-    pub fn new(stage: &str, nodes: usize, edges: usize, faces: usize, planes: usize, normals: usize, parameters: usize) -> Self {
+    pub fn new(
+        stage: &str,
+        nodes: usize,
+        edges: usize,
+        faces: usize,
+        planes: usize,
+        normals: usize,
+        parameters: usize,
+    ) -> Self {
         let unknowns = if planes == 0 { 3 * nodes } else { planes + parameters };
         let pct = if nodes == 0 { 0.0 } else { 100.0 * unknowns as f64 / (3 * nodes) as f64 };
         StageCounts { stage: stage.into(), nodes, edges, faces, planes, normals, parameters, unknowns_percent: pct }
@@ -82,7 +90,13 @@ impl Counts {
                 }
             }
         }
-        out.unwrap_or(Counts { name: name.into(), source: SourceCounts::default(), stages: Vec::new(), half_edges: 0, max_node_shift: 0.0 })
+        out.unwrap_or(Counts {
+            name: name.into(),
+            source: SourceCounts::default(),
+            stages: Vec::new(),
+            half_edges: 0,
+            max_node_shift: 0.0,
+        })
     }
 
     /// The table as text, one row per quantity and one column per stage (like Table 7.1).

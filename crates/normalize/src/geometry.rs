@@ -1,12 +1,12 @@
 //! Geometric normalization (spec §3.2): points → planes → shared normals → shared parameters.
 //!
-//! Decisions for the spec's [gap]s (§3.2, §10.2 items 14, 15):
+//! Decisions for the spec's \[gap\]s (§3.2, §10.2 items 14, 15):
 //! * Plane fit: orthogonal least squares through all vertices of all rings (centroid + eigenvector of
 //!   the smallest eigenvalue of the scatter matrix), oriented like the outer ring's Newell normal.
 //! * Equal normals: greedy clustering in order of decreasing face area; a normal joins the first
 //!   cluster whose direction is within the angle tolerance of it or of its negation (spec §4.6 step 1
 //!   canonical direction, T 2.5, is applied to the cluster's mean). Merged values are area-weighted
-//!   means (spec [proposal]).
+//!   means (spec \[proposal\]).
 //! * Equal planes: per normal, faces sorted by d = ⟨n, centroid⟩; a plane collects faces within the
 //!   distance tolerance of its first face; d is the area-weighted mean.
 //! * Orthogonal parameter sharing: a normal whose component k is zero (within the angle tolerance,
@@ -107,10 +107,15 @@ impl PlaneNet {
         let (mut cnormal, fcluster) = cluster_normals(&fnormal, &farea, cos_tol);
 
         // 4 (before 3, since it changes the normals): orthogonal sharing.
-        let partner = if tol.share_orthogonal { share_orthogonal(&mut cnormal, cos_tol, tol.normal_angle_deg.to_radians().sin()) } else { vec![None; cnormal.len()] };
+        let partner = if tol.share_orthogonal {
+            share_orthogonal(&mut cnormal, cos_tol, tol.normal_angle_deg.to_radians().sin())
+        } else {
+            vec![None; cnormal.len()]
+        };
 
         // 3. Planes per normal (coplanar faces).
-        let fsign: Vec<f64> = (0..nf).map(|f| if cnormal[fcluster[f]].dot(&fnormal[f]) >= 0.0 { 1.0 } else { -1.0 }).collect();
+        let fsign: Vec<f64> =
+            (0..nf).map(|f| if cnormal[fcluster[f]].dot(&fnormal[f]) >= 0.0 { 1.0 } else { -1.0 }).collect();
         let fd: Vec<f64> = (0..nf).map(|f| cnormal[fcluster[f]].dot(&fcent[f])).collect();
         let (planes, fplane) = coplanar_planes(cnormal.len(), &fcluster, &fd, &farea, tol.plane_distance);
         Ok(PlaneNet { fnormal, fsign, fplane, cnormal, partner, planes })
@@ -160,7 +165,11 @@ impl PlaneNet {
         for &p in &porder {
             let (c, d, first) = self.planes[p];
             let s = self.fsign[first];
-            m.add_plane(Plane { normal: NormalId::from(c), sign: if s > 0.0 { Sign::Plus } else { Sign::Minus }, d: s * d });
+            m.add_plane(Plane {
+                normal: NormalId::from(c),
+                sign: if s > 0.0 { Sign::Plus } else { Sign::Minus },
+                d: s * d,
+            });
         }
         for (fi, f) in topo.faces.iter().enumerate() {
             let p = prank[self.fplane[fi]];
@@ -179,7 +188,11 @@ impl PlaneNet {
             });
         }
         for &(e, s, f) in &topo.half_edges {
-            m.add_half_edge(HalfEdge { edge: EdgeId::from(e), sign: if s > 0 { Sign::Plus } else { Sign::Minus }, face: FaceId::from(f) });
+            m.add_half_edge(HalfEdge {
+                edge: EdgeId::from(e),
+                sign: if s > 0 { Sign::Plus } else { Sign::Minus },
+                face: FaceId::from(f),
+            });
         }
         (m, zero_params)
     }
@@ -222,7 +235,13 @@ impl PlaneNet {
 /// Step 3: faces of one normal cluster whose d lie within `plane_distance` of the group's first
 /// (in order of d) share a plane at their area-weighted d. Returns the planes as (cluster, d,
 /// first face) and each face's plane.
-fn coplanar_planes(n_clusters: usize, fcluster: &[usize], fd: &[f64], farea: &[f64], plane_distance: f64) -> (Vec<(usize, f64, usize)>, Vec<usize>) {
+fn coplanar_planes(
+    n_clusters: usize,
+    fcluster: &[usize],
+    fd: &[f64],
+    farea: &[f64],
+    plane_distance: f64,
+) -> (Vec<(usize, f64, usize)>, Vec<usize>) {
     let nf = fcluster.len();
     let mut fplane = vec![0usize; nf];
     let mut planes: Vec<(usize, f64, usize)> = Vec::new();
@@ -256,7 +275,15 @@ fn coplanar_planes(n_clusters: usize, fcluster: &[usize], fd: &[f64], farea: &[f
 /// one of the model only, whatever the faces' thematic types: the write-back keeps every
 /// polygon's own ring (and type) on the shared plane
 /// (docs/decisions.md#merges-keep-semantics-and-identity).
-fn repaired(soup: &Soup, topo: &Topo, tol: &Tolerances, origin: [f64; 3], depth: usize, net: &PlaneNet, deficient: &[usize]) -> Result<Option<Part>, Rejection> {
+fn repaired(
+    soup: &Soup,
+    topo: &Topo,
+    tol: &Tolerances,
+    origin: [f64; 3],
+    depth: usize,
+    net: &PlaneNet,
+    deficient: &[usize],
+) -> Result<Option<Part>, Rejection> {
     let cos_merge = ILL_CONDITIONED_DEG.to_radians().cos();
     let fnormal = &net.fnormal;
     let mergeable = |f: usize, g: usize| {
@@ -319,7 +346,11 @@ fn part_counts(soup: &Soup, topo: &Topo, m: &Popa3d, net: &PlaneNet, max_shift: 
     let (n_nodes, n_edges, n_normals, n_planes) = (m.nodes.len(), m.edges.len(), net.cnormal.len(), net.planes.len());
     Counts {
         name: soup.name.clone(),
-        source: crate::counts::SourceCounts { polygons: soup.polygons.len(), rings: soup.source_rings, points: topo.soup_points },
+        source: crate::counts::SourceCounts {
+            polygons: soup.polygons.len(),
+            rings: soup.source_rings,
+            points: topo.soup_points,
+        },
         stages: vec![
             StageCounts::new("points", topo.soup_nodes, topo.soup_edges, topo.soup_faces, 0, 0, 0),
             StageCounts::new("planar", n_nodes, n_edges, nf, nf, nf, 3 * nf),
@@ -336,7 +367,12 @@ fn part_counts(soup: &Soup, topo: &Topo, m: &Popa3d, net: &PlaneNet, max_shift: 
 /// normal), its centroid and its area; refuses a face without area (TA05) or with a vertex
 /// farther than the planarity tolerance from its plane (GA-PLANAR).
 #[allow(clippy::type_complexity)]
-fn face_planes(soup: &Soup, topo: &Topo, pts: &[[f64; 3]], tol: &Tolerances) -> Result<(Vec<Vector3<f64>>, Vec<Vector3<f64>>, Vec<f64>), Rejection> {
+fn face_planes(
+    soup: &Soup,
+    topo: &Topo,
+    pts: &[[f64; 3]],
+    tol: &Tolerances,
+) -> Result<(Vec<Vector3<f64>>, Vec<Vector3<f64>>, Vec<f64>), Rejection> {
     let nf = topo.faces.len();
     let mut fnormal: Vec<Vector3<f64>> = Vec::with_capacity(nf);
     let mut fcent: Vec<Vector3<f64>> = Vec::with_capacity(nf);
@@ -370,7 +406,10 @@ fn face_planes(soup: &Soup, topo: &Topo, pts: &[[f64; 3]], tol: &Tolerances) -> 
             return Err(Rejection::new(
                 "GA-PLANAR",
                 &soup.polygons[f.polygon].locator,
-                format!("far from planar: a vertex lies {dev:.4} m from the best-fitting plane (tolerance {} m)", tol.planarity),
+                format!(
+                    "far from planar: a vertex lies {dev:.4} m from the best-fitting plane (tolerance {} m)",
+                    tol.planarity
+                ),
             ));
         }
         fnormal.push(n);
@@ -498,7 +537,14 @@ fn check_simple_cycles(m: &Popa3d, inc: &Incidence, soup: &Soup) -> Result<(), R
 /// GA01 and the largest distance of a node recomputed from its planes to its source point: a
 /// node that is not the intersection of 3 independent planes, or lies farther than the planarity
 /// tolerance from its point, is refused.
-fn max_node_shift(m: &Popa3d, inc: &Incidence, topo: &Topo, pts: &[[f64; 3]], tol: &Tolerances, soup: &Soup) -> Result<f64, Rejection> {
+fn max_node_shift(
+    m: &Popa3d,
+    inc: &Incidence,
+    topo: &Topo,
+    pts: &[[f64; 3]],
+    tol: &Tolerances,
+    soup: &Soup,
+) -> Result<f64, Rejection> {
     let mut max_shift: f64 = 0.0;
     for n in 0..m.nodes.len() {
         let id = NodeId::from(n);
@@ -513,13 +559,21 @@ fn max_node_shift(m: &Popa3d, inc: &Incidence, topo: &Topo, pts: &[[f64; 3]], to
             Rejection::new(
                 "GA01",
                 loc,
-                format!("the node at ({:.3} {:.3} {:.3}) is not the intersection of 3 independent planes: {e}", q[0], q[1], q[2]),
+                format!(
+                    "the node at ({:.3} {:.3} {:.3}) is not the intersection of 3 independent planes: {e}",
+                    q[0], q[1], q[2]
+                ),
             )
         })?;
         let d = ((p[0] - pts[n][0]).powi(2) + (p[1] - pts[n][1]).powi(2) + (p[2] - pts[n][2]).powi(2)).sqrt();
         if d > tol.planarity {
             let q = topo.points[n];
-            let loc = inc.node_faces(m, id).first().and_then(|f| m.faces[f.idx()].source.as_ref()).map(|s| s.polygon.clone()).unwrap_or_else(|| soup.name.clone());
+            let loc = inc
+                .node_faces(m, id)
+                .first()
+                .and_then(|f| m.faces[f.idx()].source.as_ref())
+                .map(|s| s.polygon.clone())
+                .unwrap_or_else(|| soup.name.clone());
             return Err(Rejection::new(
                 "GA01",
                 loc,
@@ -533,7 +587,13 @@ fn max_node_shift(m: &Popa3d, inc: &Incidence, topo: &Topo, pts: &[[f64; 3]], to
 
 /// Canonical direction of a normal (T 2.5): nx > 0; else ny > 0; else nz > 0.
 pub fn canonical(n: Vector3<f64>) -> Vector3<f64> {
-    let flip = if n.x != 0.0 { n.x < 0.0 } else if n.y != 0.0 { n.y < 0.0 } else { n.z < 0.0 };
+    let flip = if n.x != 0.0 {
+        n.x < 0.0
+    } else if n.y != 0.0 {
+        n.y < 0.0
+    } else {
+        n.z < 0.0
+    };
     if flip {
         -n
     } else {
@@ -565,8 +625,14 @@ pub fn append(model: &mut Popa3d, part: &mut Part) {
     let solid = |s: SolidId| if s.0 == 0 { SolidId::from(ext) } else { SolidId::from(s0 + s.idx() - 1) };
     model.solids.extend(p.solids.iter().skip(1).cloned());
     model.nodes.extend(p.nodes.iter().cloned());
-    model.edges.extend(p.edges.iter().map(|e| Edge { start: NodeId::from(n0 + e.start.idx()), end: NodeId::from(n0 + e.end.idx()) }));
-    model.edge_vertices.extend(p.edge_vertices.iter().map(|x| EdgeVertices { edge: EdgeId::from(e0 + x.edge.idx()), sources: x.sources.clone() }));
+    model.edges.extend(
+        p.edges.iter().map(|e| Edge { start: NodeId::from(n0 + e.start.idx()), end: NodeId::from(n0 + e.end.idx()) }),
+    );
+    model.edge_vertices.extend(
+        p.edge_vertices
+            .iter()
+            .map(|x| EdgeVertices { edge: EdgeId::from(e0 + x.edge.idx()), sources: x.sources.clone() }),
+    );
     model.half_edges.extend(p.half_edges.iter().map(|h| HalfEdge {
         edge: EdgeId::from(e0 + h.edge.idx()),
         sign: h.sign,
@@ -580,8 +646,14 @@ pub fn append(model: &mut Popa3d, part: &mut Part) {
         back: solid(f.back),
         source: f.source.clone(),
     }));
-    model.planes.extend(p.planes.iter().map(|q| Plane { normal: NormalId::from(nv0 + q.normal.idx()), sign: q.sign, d: q.d }));
-    model.normals.extend(p.normals.iter().map(|n| NormalVector { comps: n.comps.map(|(pid, s)| (ParamId::from(pa0 + pid.idx()), s)) }));
+    model.planes.extend(p.planes.iter().map(|q| Plane {
+        normal: NormalId::from(nv0 + q.normal.idx()),
+        sign: q.sign,
+        d: q.d,
+    }));
+    model.normals.extend(
+        p.normals.iter().map(|n| NormalVector { comps: n.comps.map(|(pid, s)| (ParamId::from(pa0 + pid.idx()), s)) }),
+    );
     model.parameters.extend(p.parameters.iter().cloned());
     for z in &part.zero_params {
         model.add_observation(Observation::new(

@@ -40,8 +40,8 @@ pub mod geometry;
 pub mod identity;
 pub mod obj;
 pub mod soup;
-pub mod topology;
 pub mod to_citygml;
+pub mod topology;
 
 pub use counts::{Counts, SourceCounts, StageCounts};
 pub use soup::{Soup, SoupPolygon, SoupSolid};
@@ -49,7 +49,7 @@ pub use soup::{Soup, SoupPolygon, SoupSolid};
 use popa3d_model::Popa3d;
 use serde::Serialize;
 
-/// Tolerances of normalization. Spec §3.1/§3.2 give none ([gap]); these defaults are decided here
+/// Tolerances of normalization. Spec §3.1/§3.2 give none (\[gap\]); these defaults are decided here
 /// for survey-grade building models in metres.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct Tolerances {
@@ -73,7 +73,13 @@ pub struct Tolerances {
 
 impl Default for Tolerances {
     fn default() -> Self {
-        Tolerances { snap: 0.001, planarity: 0.1, normal_angle_deg: 0.01, plane_distance: 0.001, share_orthogonal: false }
+        Tolerances {
+            snap: 0.001,
+            planarity: 0.1,
+            normal_angle_deg: 0.01,
+            plane_distance: 0.001,
+            share_orthogonal: false,
+        }
     }
 }
 
@@ -121,7 +127,10 @@ pub fn normalize_into(model: &mut Popa3d, soup: &Soup, tol: &Tolerances) -> Resu
             Rejection::new(
                 "NO-SOLID",
                 &soup.name,
-                format!("MultiSurface-only geometry (no lodNSolid) that does not close into a solid: {}: {}", r.element, r.message),
+                format!(
+                    "MultiSurface-only geometry (no lodNSolid) that does not close into a solid: {}: {}",
+                    r.element, r.message
+                ),
             )
         } else {
             r
@@ -129,7 +138,7 @@ pub fn normalize_into(model: &mut Popa3d, soup: &Soup, tol: &Tolerances) -> Resu
     })?;
     let mut part = geometry::build(soup, &topo, tol, model.origin)?;
     let counts = part.counts.clone();
-    notices.extend(part.notices.drain(..));
+    notices.append(&mut part.notices);
     geometry::append(model, &mut part);
     Ok(Normalized { counts, notices })
 }

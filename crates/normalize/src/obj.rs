@@ -35,14 +35,15 @@ pub fn read_sketch(bytes: &[u8], name: &str) -> Result<Soup, ObjError> {
             // the lines tobj resolves indices of (it skips `p` lines, so they are not checked)
             Some("f" | "l") => {
                 for reference in it {
-                    check_reference(reference, &seen, &totals).map_err(|why| ObjError(format!("{name}:{}: face vertex {reference:?}: {why}", ln + 1)))?;
+                    check_reference(reference, &seen, &totals)
+                        .map_err(|why| ObjError(format!("{name}:{}: face vertex {reference:?}: {why}", ln + 1)))?;
                 }
             }
             _ => {}
         }
         seen.count(line);
     }
-    let opts = tobj::LoadOptions { single_index: false, triangulate: false, ignore_points: true, ignore_lines: true, ..Default::default() };
+    let opts = tobj::LoadOptions { single_index: false, triangulate: false, ignore_points: true, ignore_lines: true };
     let mut rd = std::io::BufReader::new(bytes);
     let (models, _) = tobj::load_obj_buf(&mut rd, &opts, |_| Err(tobj::LoadError::OpenFileFailed))
         .map_err(|e| ObjError(format!("{name}: not a readable OBJ file: {e}")))?;
@@ -54,7 +55,8 @@ pub fn read_sketch(bytes: &[u8], name: &str) -> Result<Soup, ObjError> {
         let oname = if m.name.is_empty() { format!("object{}", si + 1) } else { m.name.clone() };
         soup.solids.push(SoupSolid { kind: SolidKind::Room, name: Some(oname.clone()) });
         let mesh = &m.mesh;
-        let arities: Vec<u32> = if mesh.face_arities.is_empty() { vec![3; mesh.indices.len() / 3] } else { mesh.face_arities.clone() };
+        let arities: Vec<u32> =
+            if mesh.face_arities.is_empty() { vec![3; mesh.indices.len() / 3] } else { mesh.face_arities.clone() };
         let mut off = 0usize;
         for (fi, &a) in arities.iter().enumerate() {
             let idx = &mesh.indices[off..off + a as usize];
@@ -115,7 +117,8 @@ impl ElementCounts {
 /// counting back from the elements `seen` before the line). tobj turns an index outside these
 /// into a wrapped offset (`f 1//-10` with one normal: an integer overflow, found by fuzzing).
 fn check_reference(reference: &str, seen: &ElementCounts, totals: &ElementCounts) -> Result<(), String> {
-    let kinds = [("position", seen.v, totals.v), ("texture coordinate", seen.vt, totals.vt), ("normal", seen.vn, totals.vn)];
+    let kinds =
+        [("position", seen.v, totals.v), ("texture coordinate", seen.vt, totals.vt), ("normal", seen.vn, totals.vn)];
     let parts: Vec<&str> = reference.split('/').collect();
     if parts.len() > 3 || parts[0].is_empty() {
         return Err("not v, v/vt, v//vn or v/vt/vn".into());
@@ -132,7 +135,10 @@ fn check_reference(reference: &str, seen: &ElementCounts, totals: &ElementCounts
         };
         if !fits {
             let declared = if i > 0 { total } else { before };
-            return Err(format!("{kind} index {i} is outside the {declared} declared{}", if i < 0 { " before it" } else { "" }));
+            return Err(format!(
+                "{kind} index {i} is outside the {declared} declared{}",
+                if i < 0 { " before it" } else { "" }
+            ));
         }
     }
     Ok(())

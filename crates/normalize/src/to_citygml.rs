@@ -25,8 +25,8 @@
 //! `gml:posList` rings.
 
 use citygml_io::{CityModel, CityObject, Edit, Polygon, Ring};
-use popa3d_model::{FaceId, Incidence, NodeId, PlaneId, Popa3d, VertexSource};
 use popa3d_model::vec3::sub;
+use popa3d_model::{FaceId, Incidence, NodeId, PlaneId, Popa3d, VertexSource};
 use serde::Serialize;
 use std::collections::{BTreeMap, BTreeSet, HashMap, HashSet};
 
@@ -49,7 +49,13 @@ pub struct BackOptions {
 
 impl Default for BackOptions {
     fn default() -> Self {
-        BackOptions { coplanar_tolerance: 1e-3, collapse_tolerance: 1e-6, area_tolerance: 1e-6, merge: true, precision: None }
+        BackOptions {
+            coplanar_tolerance: 1e-3,
+            collapse_tolerance: 1e-6,
+            area_tolerance: 1e-6,
+            merge: true,
+            precision: None,
+        }
     }
 }
 
@@ -80,7 +86,8 @@ impl BackReport {
     /// The buildings whose largest vertex move exceeds `limit` (m), worst first: a write-back
     /// that moved a building that far is not a correction, so the caller refuses it.
     pub fn moved_further_than(&self, limit: f64) -> Option<MovedTooFar> {
-        let mut far: Vec<(String, f64)> = self.max_move_by_building.iter().filter(|(_, &m)| m > limit).map(|(b, &m)| (b.clone(), m)).collect();
+        let mut far: Vec<(String, f64)> =
+            self.max_move_by_building.iter().filter(|(_, &m)| m > limit).map(|(b, &m)| (b.clone(), m)).collect();
         far.sort_by(|a, b| b.1.total_cmp(&a.1));
         (!far.is_empty()).then_some(MovedTooFar { limit, buildings: far })
     }
@@ -100,7 +107,13 @@ impl std::fmt::Display for MovedTooFar {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let named: Vec<String> = self.buildings.iter().take(5).map(|(b, m)| format!("{b} ({m:.3} m)")).collect();
         let more = if self.buildings.len() > 5 { ", ..." } else { "" };
-        write!(f, "{} building(s) would move further than --max-move {} m: {}{more}", self.buildings.len(), self.limit, named.join(", "))
+        write!(
+            f,
+            "{} building(s) would move further than --max-move {} m: {}{more}",
+            self.buildings.len(),
+            self.limit,
+            named.join(", ")
+        )
     }
 }
 
@@ -277,7 +290,8 @@ fn xlink_deletion(src: &[u8], r: std::ops::Range<usize>) -> std::ops::Range<usiz
 
 /// The qualified name of the element whose start tag begins at `at`.
 fn element_name(src: &[u8], at: usize) -> String {
-    let tag: Vec<u8> = src[at + 1..].iter().take_while(|c| !c.is_ascii_whitespace() && **c != b'>' && **c != b'/').copied().collect();
+    let tag: Vec<u8> =
+        src[at + 1..].iter().take_while(|c| !c.is_ascii_whitespace() && **c != b'>' && **c != b'/').copied().collect();
     String::from_utf8_lossy(&tag).into_owned()
 }
 
@@ -344,13 +358,22 @@ struct XLinkUse {
     building: Option<usize>,
 }
 
-fn collect_polys<'a>(o: &'a CityObject, surface: Option<&'a CityObject>, building: Option<&'a CityObject>, ix: &mut PolyIndex<'a>) {
+fn collect_polys<'a>(
+    o: &'a CityObject,
+    surface: Option<&'a CityObject>,
+    building: Option<&'a CityObject>,
+    ix: &mut PolyIndex<'a>,
+) {
     let surf = if citygml_io::SurfaceType::from_local_name(&o.kind).is_some() { Some(o) } else { surface };
     let building = if crate::citygml::is_building(o) { Some(o) } else { building };
     for g in &o.geometries {
         for p in g.polygons() {
             match (&p.via_xlink, &p.id) {
-                (Some(r), Some(id)) => ix.refs.entry(id.clone()).or_default().push(XLinkUse { bytes: r.bytes.clone(), building: building.map(|b| b.span.bytes.start) }),
+                (Some(r), Some(id)) => ix
+                    .refs
+                    .entry(id.clone())
+                    .or_default()
+                    .push(XLinkUse { bytes: r.bytes.clone(), building: building.map(|b| b.span.bytes.start) }),
                 (Some(_), None) => {}
                 (None, _) => {
                     let key = crate::citygml::polygon_key(p);
@@ -427,7 +450,10 @@ fn document_decimals<'a>(src: &[u8], polys: impl Iterator<Item = &'a Polygon>) -
 fn decimals(tok: &str) -> Option<usize> {
     let t = tok.strip_prefix(['-', '+']).unwrap_or(tok);
     let (int, frac) = t.split_once('.').unwrap_or((t, ""));
-    if int.bytes().all(|c| c.is_ascii_digit()) && frac.bytes().all(|c| c.is_ascii_digit()) && !(int.is_empty() && frac.is_empty()) {
+    if int.bytes().all(|c| c.is_ascii_digit())
+        && frac.bytes().all(|c| c.is_ascii_digit())
+        && !(int.is_empty() && frac.is_empty())
+    {
         Some(frac.len())
     } else {
         None
@@ -452,7 +478,9 @@ impl<'t> RingText<'t> {
     /// The text of value `c` of point `p` (an index into the input ring, `None` for a new
     /// point): the input's own token when the value is unchanged at the document's decimals.
     fn value(&self, p: Option<usize>, c: usize, v: f64) -> String {
-        if let (Some(tok), Some(d)) = (p.filter(|_| c < self.dim).and_then(|p| self.tokens.get(p * self.dim + c)), self.decimals) {
+        if let (Some(tok), Some(d)) =
+            (p.filter(|_| c < self.dim).and_then(|p| self.tokens.get(p * self.dim + c)), self.decimals)
+        {
             if let Ok(old) = tok.parse::<f64>() {
                 if format!("{:.*}", d, v).parse::<f64>().ok() == format!("{:.*}", d, old).parse::<f64>().ok() {
                     return tok.to_string();
@@ -462,7 +490,11 @@ impl<'t> RingText<'t> {
         match self.decimals {
             Some(d) => {
                 let t = format!("{:.*}", d, v);
-                if t.parse::<f64>().ok() == Some(0.0) { format!("{:.*}", d, 0.0) } else { t }
+                if t.parse::<f64>().ok() == Some(0.0) {
+                    format!("{:.*}", d, 0.0)
+                } else {
+                    t
+                }
             }
             None => format!("{}", v + 0.0),
         }
@@ -487,7 +519,12 @@ fn ring_len(r: &Ring) -> usize {
 }
 
 /// Write the adjusted model back into its template. Returns the new document and a report.
-pub fn to_citygml(model: &Popa3d, template: &[u8], city: &CityModel, opts: &BackOptions) -> Result<(Vec<u8>, BackReport), BackError> {
+pub fn to_citygml(
+    model: &Popa3d,
+    template: &[u8],
+    city: &CityModel,
+    opts: &BackOptions,
+) -> Result<(Vec<u8>, BackReport), BackError> {
     to_citygml_with(model, &Template::new(template, city), opts)
 }
 
@@ -560,7 +597,18 @@ pub fn back_edits(model: &Popa3d, tpl: &Template, opts: &BackOptions) -> Result<
     let dropped = dropped::Dropped::new(&mapped, &tpl.polys, &face_of_any);
     let new_rings = rewritten_rings(&mapped, &tpl.polys, &vmap, &pos, (&m, &dropped), opts, &mut report)?;
     let external = externally_referenced(tpl, &mapped);
-    let back = Back { tpl, opts, decimals: opts.precision.or(tpl.decimals), m: &m, plane_cluster, inc, pos, face_of, mapped: &mapped, external };
+    let back = Back {
+        tpl,
+        opts,
+        decimals: opts.precision.or(tpl.decimals),
+        m: &m,
+        plane_cluster,
+        inc,
+        pos,
+        face_of,
+        mapped: &mapped,
+        external,
+    };
     let mut fate = Fate::default();
     back.remove_degenerate(&new_rings, &mut fate, &mut report);
     back.write_changed_faces_whole(&vmap, &absorbed, &mut fate, &mut report);
@@ -600,7 +648,11 @@ fn absorbed_polygons(m: &Popa3d, polys: &HashMap<String, PolyInfo<'_>>) -> Vec<(
 /// The template's polygons the model maps to, in document order: those with a vertex on a node,
 /// and hosts and merged polygons too (a face can keep none of its polygon's own vertices: the
 /// middle one of three collinear wall segments).
-fn mapped_polygons(tpl: &Template, vmap: &HashMap<(String, u32, u32), NodeId>, absorbed: &[(String, Vec<String>)]) -> Vec<String> {
+fn mapped_polygons(
+    tpl: &Template,
+    vmap: &HashMap<(String, u32, u32), NodeId>,
+    absorbed: &[(String, Vec<String>)],
+) -> Vec<String> {
     let mut mapped_set: HashSet<&String> = vmap.keys().map(|k| &k.0).collect();
     mapped_set.extend(absorbed.iter().flat_map(|(h, g)| std::iter::once(h).chain(g.iter())));
     tpl.doc_order.iter().filter(|id| mapped_set.contains(id)).cloned().collect()
@@ -663,7 +715,12 @@ struct Back<'t, 'a> {
 
 impl Back<'_, '_> {
     /// 3. Polygons whose outer ring collapsed are removed.
-    fn remove_degenerate(&self, new_rings: &HashMap<String, Vec<Option<IndexedRing>>>, fate: &mut Fate, report: &mut BackReport) {
+    fn remove_degenerate(
+        &self,
+        new_rings: &HashMap<String, Vec<Option<IndexedRing>>>,
+        fate: &mut Fate,
+        report: &mut BackReport,
+    ) {
         for id in self.mapped {
             if new_rings[id][0].is_none() {
                 fate.removed.insert(id.clone());
@@ -679,7 +736,13 @@ impl Back<'_, '_> {
     /// but no face of their own. Writing them vertex by vertex would drop them as degenerate and
     /// lose their surface; instead the host face is written whole into its own polygon and they
     /// are merged away into it ([`Back::merge_absorbed`]).
-    fn write_changed_faces_whole(&self, vmap: &HashMap<(String, u32, u32), NodeId>, absorbed: &[(String, Vec<String>)], fate: &mut Fate, report: &mut BackReport) {
+    fn write_changed_faces_whole(
+        &self,
+        vmap: &HashMap<(String, u32, u32), NodeId>,
+        absorbed: &[(String, Vec<String>)],
+        fate: &mut Fate,
+        report: &mut BackReport,
+    ) {
         let mut nodes_of: HashMap<&String, BTreeSet<NodeId>> = HashMap::new();
         for ((p, _, _), n) in vmap {
             nodes_of.entry(p).or_default().insert(*n);
@@ -693,19 +756,25 @@ impl Back<'_, '_> {
             if nodes_of.get(id) == Some(&on_face) || hosts.contains(id) {
                 continue;
             }
-            let mut rings: Vec<Vec<P3>> = loops.iter().map(|l| collapse(l.iter().map(|n| self.pos[n.idx()]).collect(), self.opts.collapse_tolerance)).collect();
+            let mut rings: Vec<Vec<P3>> = loops
+                .iter()
+                .map(|l| collapse(l.iter().map(|n| self.pos[n.idx()]).collect(), self.opts.collapse_tolerance))
+                .collect();
             if rings.is_empty() || rings[0].len() < 3 || newell_area(&rings[0]) < self.opts.area_tolerance {
                 continue;
             }
             let outer = rings.remove(0);
             rings.retain(|r| r.len() >= 3 && newell_area(r) >= self.opts.area_tolerance);
-            fate.replaced.insert(id.clone(), polygon_text(self.tpl.bytes, self.tpl.polys[id].poly, &outer, &rings, self.decimals));
+            fate.replaced.insert(
+                id.clone(),
+                polygon_text(self.tpl.bytes, self.tpl.polys[id].poly, &outer, &rings, self.decimals),
+            );
             fate.removed.remove(id);
             report.removed_degenerate.retain(|r| r != id);
         }
     }
 
-    /// 4. Polygons on one plane cluster with the same semantic type, orientation and solids that
+    /// Step 4: polygons on one plane cluster with the same semantic type, orientation and solids that
     /// share edges become one polygon, written into the first of them.
     fn merge_coplanar(&self, fate: &mut Fate, report: &mut BackReport) {
         let canon = coincident_classes(&self.pos, self.opts.collapse_tolerance);
@@ -726,7 +795,8 @@ impl Back<'_, '_> {
     /// merged polygon; `None` when fewer than two members or more than one has an id (merging
     /// would delete an element with an identity).
     fn keeping_identity(&self, ids: &[String], mut members: Vec<usize>) -> Option<Vec<usize>> {
-        let with_id: Vec<usize> = members.iter().copied().filter(|&k| self.tpl.polys[&ids[k]].poly.id.is_some()).collect();
+        let with_id: Vec<usize> =
+            members.iter().copied().filter(|&k| self.tpl.polys[&ids[k]].poly.id.is_some()).collect();
         if members.len() < 2 || with_id.len() > 1 {
             return None;
         }
@@ -750,8 +820,18 @@ impl Back<'_, '_> {
             let solid = ((face.back.0.min(face.front.0) as usize) << 32) | face.back.0.max(face.front.0) as usize;
             // A surface with an id or attributes merges only its own polygons (its own group);
             // surfaces without identity may merge with each other (docs/decisions.md#merges-keep-semantics-and-identity).
-            let surface = polys[id].surface.filter(|s| crate::identity::must_stay(self.tpl.bytes, s)).map(|s| s.span.bytes.start.to_string()).unwrap_or_default();
-            let key = (self.plane_cluster[face.plane.idx()], sem.local_name().to_string(), surface, face.orientation.i8() * m.plane(face.plane).sign.i8(), Some(solid));
+            let surface = polys[id]
+                .surface
+                .filter(|s| crate::identity::must_stay(self.tpl.bytes, s))
+                .map(|s| s.span.bytes.start.to_string())
+                .unwrap_or_default();
+            let key = (
+                self.plane_cluster[face.plane.idx()],
+                sem.local_name().to_string(),
+                surface,
+                face.orientation.i8() * m.plane(face.plane).sign.i8(),
+                Some(solid),
+            );
             groups.entry(key).or_default().push(id.clone());
         }
         groups
@@ -775,8 +855,16 @@ impl Back<'_, '_> {
 
     /// Writes the union `loops` (largest first as outer ring) into the first member and merges
     /// the others away into it, also where earlier merges pointed at them.
-    fn merge_members(&self, ids: &[String], members: &[usize], mut loops: Vec<Vec<P3>>, fate: &mut Fate, report: &mut BackReport) {
-        let imax = (0..loops.len()).max_by(|&a, &b| newell_area(&loops[a]).total_cmp(&newell_area(&loops[b]))).unwrap_or(0);
+    fn merge_members(
+        &self,
+        ids: &[String],
+        members: &[usize],
+        mut loops: Vec<Vec<P3>>,
+        fate: &mut Fate,
+        report: &mut BackReport,
+    ) {
+        let imax =
+            (0..loops.len()).max_by(|&a, &b| newell_area(&loops[a]).total_cmp(&newell_area(&loops[b]))).unwrap_or(0);
         let outer = loops.remove(imax);
         let kept = ids[members[0]].clone();
         let t = polygon_text(self.tpl.bytes, self.tpl.polys[&kept].poly, &outer, &loops, self.decimals);
@@ -797,7 +885,10 @@ impl Back<'_, '_> {
     /// A polygon referenced from another building must keep its area.
     fn check_external_kept(&self, fate: &Fate) -> Result<(), BackError> {
         match self.mapped.iter().find(|id| fate.gone(id) && self.external.contains(*id)) {
-            Some(id) => Err(BackError::Geometry { element: format!("polygon `{id}` of {}", building_name(self.tpl.polys[id].building)), message: "would lose its area but is referenced (XLink) from another building".into() }),
+            Some(id) => Err(BackError::Geometry {
+                element: format!("polygon `{id}` of {}", building_name(self.tpl.polys[id].building)),
+                message: "would lose its area but is referenced (XLink) from another building".into(),
+            }),
             None => Ok(()),
         }
     }
@@ -805,22 +896,35 @@ impl Back<'_, '_> {
     /// Surfaces that lose every polygon (only a surface holding a polygon that went can) are
     /// removed, their openings moved to the surface keeping the merged polygon. Returns the
     /// emptied surfaces (by start byte) and the bytes to insert (by position).
-    fn surface_edits(&self, fate: &Fate, edits: &mut Vec<Edit>, report: &mut BackReport) -> (HashSet<usize>, BTreeMap<usize, Vec<u8>>) {
+    fn surface_edits(
+        &self,
+        fate: &Fate,
+        edits: &mut Vec<Edit>,
+        report: &mut BackReport,
+    ) -> (HashSet<usize>, BTreeMap<usize, Vec<u8>>) {
         let (template, polys) = (self.tpl.bytes, &self.tpl.polys);
         let gone = |id: &String| fate.gone(id);
         let mut emptied: HashSet<usize> = HashSet::new();
         let mut inserts: BTreeMap<usize, Vec<u8>> = BTreeMap::new();
-        let surf_keys: BTreeSet<usize> = self.mapped.iter().filter(|id| gone(id)).filter_map(|id| polys[id].surface.map(|s| s.span.bytes.start)).collect();
+        let surf_keys: BTreeSet<usize> = self
+            .mapped
+            .iter()
+            .filter(|id| gone(id))
+            .filter_map(|id| polys[id].surface.map(|s| s.span.bytes.start))
+            .collect();
         for k in &surf_keys {
             let (s, ids) = &self.tpl.surface_polys[k];
-            if ids.iter().all(gone) && !citygml_io::SurfaceType::from_local_name(&s.kind).is_some_and(|t| t.is_opening()) {
+            if ids.iter().all(gone)
+                && !citygml_io::SurfaceType::from_local_name(&s.kind).is_some_and(|t| t.is_opening())
+            {
                 let Some(r) = enclosing(template, s.span.bytes.start, s.span.bytes.end) else { continue };
                 emptied.insert(*k);
                 report.removed_surfaces.push(s.id.clone().unwrap_or_else(|| format!("{}@{}", s.kind, s.span.line)));
                 // Move openings to the surface keeping the merged polygon.
                 let target = ids.iter().find_map(|i| fate.merged_away.get(i)).and_then(|kept| polys[kept].surface);
                 if let Some(t) = target {
-                    let close = template[..t.span.bytes.end].iter().rposition(|&c| c == b'<').unwrap_or(t.span.bytes.end);
+                    let close =
+                        template[..t.span.bytes.end].iter().rposition(|&c| c == b'<').unwrap_or(t.span.bytes.end);
                     for c in &s.children {
                         if let Some(or) = enclosing(template, c.span.bytes.start, c.span.bytes.end) {
                             inserts.entry(close).or_default().extend_from_slice(&template[or.clone()]);
@@ -836,7 +940,14 @@ impl Back<'_, '_> {
 
     /// The edits of one mapped polygon: removed (with the XLinks to it) when gone, nothing when
     /// its surface went, its new text when written whole, else its rings rewritten.
-    fn polygon_edits(&self, id: &String, fate: &Fate, emptied: &HashSet<usize>, rings: &[Option<IndexedRing>], edits: &mut Vec<Edit>) -> Result<(), BackError> {
+    fn polygon_edits(
+        &self,
+        id: &String,
+        fate: &Fate,
+        emptied: &HashSet<usize>,
+        rings: &[Option<IndexedRing>],
+        edits: &mut Vec<Edit>,
+    ) -> Result<(), BackError> {
         let p = self.tpl.polys[id].poly;
         let in_emptied = self.tpl.polys[id].surface.is_some_and(|s| emptied.contains(&s.span.bytes.start));
         if fate.gone(id) {
@@ -879,14 +990,16 @@ impl Back<'_, '_> {
         let dim = r.srs_dimension.max(3);
         if r.encoding == citygml_io::CoordEncoding::Pos && pts.len() + 1 != r.pos_spans.len() {
             let px = prefix_at(template, r.span.bytes.start);
-            let t = citygml_io::writer::linear_ring_element(&px, r.id.as_deref(), &fmt_points(&xyz, &src, dim, &text), dim);
+            let t =
+                citygml_io::writer::linear_ring_element(&px, r.id.as_deref(), &fmt_points(&xyz, &src, dim, &text), dim);
             return Ok(vec![Edit { bytes: r.span.bytes.clone(), replacement: t.into_bytes() }]);
         }
         let mut closed = xyz.clone();
         closed.push(xyz[0]);
         let mut at = src.clone();
         at.push(src[0]);
-        citygml_io::writer::ring_edits_with(r, &closed, |i, c, v| text.value(at[i], c, v)).map_err(|e| BackError::Write(format!("polygon `{id}` ring {ri}: {e}")))
+        citygml_io::writer::ring_edits_with(r, &closed, |i, c, v| text.value(at[i], c, v))
+            .map_err(|e| BackError::Write(format!("polygon `{id}` ring {ri}: {e}")))
     }
 }
 
@@ -922,7 +1035,12 @@ fn edge_components(es: &[Vec<(usize, usize)>]) -> BTreeMap<usize, Vec<usize>> {
 /// The boundary of the union of polygons `members` (directed edges over canonical node ids):
 /// opposite edges cancel, the rest is walked into loops at `pos`, collapsed and kept where they
 /// have area. `None` when the edges do not close into loops or no loop is left.
-fn union_boundary(es: &[Vec<(usize, usize)>], members: &[usize], pos: &[P3], opts: &BackOptions) -> Option<Vec<Vec<P3>>> {
+fn union_boundary(
+    es: &[Vec<(usize, usize)>],
+    members: &[usize],
+    pos: &[P3],
+    opts: &BackOptions,
+) -> Option<Vec<Vec<P3>>> {
     let mut cnt: HashMap<(usize, usize), i32> = HashMap::new();
     for &k in members {
         for &(a, b) in &es[k] {
@@ -1011,7 +1129,12 @@ fn rewritten_rings(
                 };
                 let d = dist(q, r.points[k]);
                 if !d.is_finite() {
-                    return Err(BackError::Geometry { element: format!("polygon `{id}` of {bname}"), message: format!("vertex {k} of ring {ri} would move by {d} m (a coordinate is not finite or out of range)") });
+                    return Err(BackError::Geometry {
+                        element: format!("polygon `{id}` of {bname}"),
+                        message: format!(
+                            "vertex {k} of ring {ri} would move by {d} m (a coordinate is not finite or out of range)"
+                        ),
+                    });
                 }
                 moves += d;
                 nmoves += 1;
@@ -1021,7 +1144,8 @@ fn rewritten_rings(
                 pts.push((q, k));
             }
             let c = collapse_indexed(pts, opts.collapse_tolerance);
-            let area_ok = c.len() >= 3 && newell_area(&c.iter().map(|x| x.0).collect::<Vec<_>>()) >= opts.area_tolerance;
+            let area_ok =
+                c.len() >= 3 && newell_area(&c.iter().map(|x| x.0).collect::<Vec<_>>()) >= opts.area_tolerance;
             rings.push(if area_ok { Some(c) } else { None });
         }
         new_rings.insert(id.clone(), rings);
@@ -1070,8 +1194,9 @@ fn node_positions(m: &Popa3d, inc: &Incidence, polys: &HashMap<String, PolyInfo<
     (0..m.nodes.len())
         .map(|i| {
             let p0 = source_vertex(m, polys, i)?;
-            let p = anchored_intersection(m, &inc.node_planes(m, NodeId::from(i)), p0)
-                .ok_or_else(|| BackError::Geometry { element: format!("node {i}"), message: "position is not finite".into() })?;
+            let p = anchored_intersection(m, &inc.node_planes(m, NodeId::from(i)), p0).ok_or_else(|| {
+                BackError::Geometry { element: format!("node {i}"), message: "position is not finite".into() }
+            })?;
             Ok([p[0] + m.origin[0], p[1] + m.origin[1], p[2] + m.origin[2]])
         })
         .collect()
@@ -1093,7 +1218,9 @@ fn source_vertex(m: &Popa3d, polys: &HashMap<String, PolyInfo<'_>>, i: usize) ->
         .ok_or_else(|| BackError::Provenance {
             element: format!("node {i}"),
             message: match m.nodes[i].sources.first() {
-                Some(VertexSource::CityGml { polygon, ring, index }) => format!("its source vertex (polygon `{polygon}` ring {ring} vertex {index}) is not in the template"),
+                Some(VertexSource::CityGml { polygon, ring, index }) => {
+                    format!("its source vertex (polygon `{polygon}` ring {ring} vertex {index}) is not in the template")
+                }
                 Some(VertexSource::Obj { vertex }) => format!("comes from OBJ vertex {vertex}, not from CityGML"),
                 None => "has no source vertex".into(),
             },
@@ -1126,17 +1253,26 @@ fn anchored_intersection(m: &Popa3d, planes: &[PlaneId], p0: P3) -> Option<P3> {
 }
 
 /// Provenance → (polygon, ring, index) → node; every source vertex must be in the template.
-fn vertex_map(m: &Popa3d, polys: &HashMap<String, PolyInfo<'_>>) -> Result<HashMap<(String, u32, u32), NodeId>, BackError> {
+fn vertex_map(
+    m: &Popa3d,
+    polys: &HashMap<String, PolyInfo<'_>>,
+) -> Result<HashMap<(String, u32, u32), NodeId>, BackError> {
     let mut vmap: HashMap<(String, u32, u32), NodeId> = HashMap::new();
     for (i, n) in m.nodes.iter().enumerate() {
         for s in &n.sources {
             match s {
                 VertexSource::CityGml { polygon, ring, index } => {
                     let Some(pi) = polys.get(polygon) else {
-                        return Err(BackError::Provenance { element: format!("node {i}"), message: format!("polygon `{polygon}` is not in the template") });
+                        return Err(BackError::Provenance {
+                            element: format!("node {i}"),
+                            message: format!("polygon `{polygon}` is not in the template"),
+                        });
                     };
                     let Some(r) = ring_of(pi.poly, *ring) else {
-                        return Err(BackError::Provenance { element: format!("node {i}"), message: format!("polygon `{polygon}` has no ring {ring} in the template") });
+                        return Err(BackError::Provenance {
+                            element: format!("node {i}"),
+                            message: format!("polygon `{polygon}` has no ring {ring} in the template"),
+                        });
                     };
                     if *index as usize >= ring_len(r) {
                         return Err(BackError::Provenance { element: format!("node {i}"), message: format!("polygon `{polygon}` ring {ring} has {} vertices in the template, provenance names vertex {index}", ring_len(r)) });
@@ -1144,7 +1280,10 @@ fn vertex_map(m: &Popa3d, polys: &HashMap<String, PolyInfo<'_>>) -> Result<HashM
                     vmap.insert((polygon.clone(), *ring, *index), NodeId::from(i));
                 }
                 VertexSource::Obj { .. } => {
-                    return Err(BackError::Provenance { element: format!("node {i}"), message: "comes from an OBJ sketch, not from CityGML".into() });
+                    return Err(BackError::Provenance {
+                        element: format!("node {i}"),
+                        message: "comes from an OBJ sketch, not from CityGML".into(),
+                    });
                 }
             }
         }
@@ -1159,7 +1298,8 @@ mod tests {
     /// Two unit squares side by side, counter-clockwise, over the nodes
     /// 3 4 5 / 0 1 2 (y = 1 / y = 0).
     fn two_squares() -> (Vec<Vec<(usize, usize)>>, Vec<P3>) {
-        let pos: Vec<P3> = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 1.0, 0.0], [2.0, 1.0, 0.0]];
+        let pos: Vec<P3> =
+            vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 1.0, 0.0], [2.0, 1.0, 0.0]];
         let a = vec![(0, 1), (1, 4), (4, 3), (3, 0)];
         let b = vec![(1, 2), (2, 5), (5, 4), (4, 1)];
         (vec![a, b], pos)

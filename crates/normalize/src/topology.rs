@@ -1,9 +1,9 @@
 //! Topological normalization (spec §3.1): polygon soup → nodes, directed edges, half-edges, faces
-//! referencing solids. Snap tolerance: [`crate::Tolerances::snap`] (spec [gap], decided there).
+//! referencing solids. Snap tolerance: [`crate::Tolerances::snap`] (spec \[gap\], decided there).
 
-use popa3d_model::vec3::{cross, dot, sub};
 use crate::soup::Soup;
 use crate::{Notice, Rejection, Tolerances};
+use popa3d_model::vec3::{cross, dot, sub};
 use popa3d_model::VertexSource;
 use std::collections::HashMap;
 
@@ -60,7 +60,7 @@ impl Snapper {
                     if let Some(v) = self.cells.get(&[k[0] + dx, k[1] + dy, k[2] + dz]) {
                         for &i in v {
                             let d = dist(&points[i], &p);
-                            if d <= self.tol && best.map_or(true, |(_, b)| d < b) {
+                            if d <= self.tol && best.is_none_or(|(_, b)| d < b) {
                                 best = Some((i, d));
                             }
                         }
@@ -82,7 +82,6 @@ fn dist(a: &[f64; 3], b: &[f64; 3]) -> f64 {
     ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
 }
 
-
 /// Builds the topology of one soup. Rejects (naming the source polygon) rings with fewer than three
 /// distinct points (TA05), open shells (TA03) and shells that cannot be oriented consistently.
 /// Duplicate faces of one solid are removed with a notice (spec §3.1: duplicates are redundancy).
@@ -101,7 +100,8 @@ pub fn build(soup: &Soup, tol: &Tolerances, notices: &mut Vec<Notice>) -> Result
     // flip[f] for the face as seen from its back solid.
     let mut flip = vec![false; t.faces.len()];
     for s in 0..nsol {
-        let faces: Vec<usize> = (0..t.faces.len()).filter(|&f| t.faces[f].back == s || t.faces[f].front == Some(s)).collect();
+        let faces: Vec<usize> =
+            (0..t.faces.len()).filter(|&f| t.faces[f].back == s || t.faces[f].front == Some(s)).collect();
         if faces.is_empty() {
             continue;
         }
@@ -149,7 +149,11 @@ fn snap_rings(soup: &Soup, tol: &Tolerances, t: &mut Topo) -> Result<Vec<Vec<Vec
             let mut ids: Vec<usize> = Vec::with_capacity(ring.len());
             for (vi, p) in ring.iter().enumerate() {
                 if !p.iter().all(|x| x.is_finite()) {
-                    return Err(Rejection::new("TA05", &poly.locator, format!("ring {ri} point {vi} is not a finite coordinate")));
+                    return Err(Rejection::new(
+                        "TA05",
+                        &poly.locator,
+                        format!("ring {ri} point {vi} is not a finite coordinate"),
+                    ));
                 }
                 let n = snap.find_or_insert(*p, &mut t.points);
                 if t.node_sources.len() < t.points.len() {
@@ -253,7 +257,10 @@ fn merge_duplicate_faces(rings_nodes: &[Vec<Vec<usize>>], soup: &Soup, t: &mut T
                 notices.push(Notice {
                     rule: "DUPLICATE".into(),
                     element: soup.polygons[pi].locator.clone(),
-                    message: format!("duplicate of polygon {} (same boundary); removed", soup.polygons[f.polygon].locator),
+                    message: format!(
+                        "duplicate of polygon {} (same boundary); removed",
+                        soup.polygons[f.polygon].locator
+                    ),
                 });
             } else if f.front.is_none() {
                 f.front = Some(solid);
@@ -311,7 +318,12 @@ fn check_closed(uses: &HashMap<(usize, usize), Vec<(usize, bool)>>, t: &Topo, so
 /// the first face of its component (breadth-first over faces sharing a 2-manifold edge, which
 /// must run it in opposite directions; ORIENT when they cannot). Returns o and the components.
 #[allow(clippy::type_complexity)]
-fn orient_components(faces: &[usize], uses: &HashMap<(usize, usize), Vec<(usize, bool)>>, t: &Topo, soup: &Soup) -> Result<(HashMap<usize, bool>, Vec<Vec<usize>>), Rejection> {
+fn orient_components(
+    faces: &[usize],
+    uses: &HashMap<(usize, usize), Vec<(usize, bool)>>,
+    t: &Topo,
+    soup: &Soup,
+) -> Result<(HashMap<usize, bool>, Vec<Vec<usize>>), Rejection> {
     let mut o: HashMap<usize, bool> = HashMap::new();
     let mut edges_of: HashMap<usize, Vec<(usize, usize)>> = HashMap::new();
     for (k, v) in uses {
@@ -428,7 +440,12 @@ pub fn rebuild_edges(t: &mut Topo) {
 /// `deficient` are the nodes to repair; `mergeable(f, g)` says whether two faces may become one
 /// (nearly coplanar); merged pairs of source polygons are appended to `merged`. Returns whether anything changed. Removed nodes keep no popa3d node: their
 /// source vertices lie on the line of their neighbours.
-pub fn repair(t: &mut Topo, deficient: &[usize], mergeable: &dyn Fn(usize, usize) -> bool, merged: &mut Vec<(usize, usize)>) -> bool {
+pub fn repair(
+    t: &mut Topo,
+    deficient: &[usize],
+    mergeable: &dyn Fn(usize, usize) -> bool,
+    merged: &mut Vec<(usize, usize)>,
+) -> bool {
     let mut changed = merge_faces_at_deficient_nodes(t, deficient, mergeable, merged);
     changed |= remove_two_neighbour_nodes(t, deficient);
     if changed {

@@ -353,7 +353,7 @@ mod tests {
                         }
                     }
                     let f = fit_window(&tiles, t).unwrap();
-                    assert_eq!(f.s0 + f.ns as f64 * f.cell >= (f.pixels[2] - 1) as f64, true);
+                    assert!(f.s0 + f.ns as f64 * f.cell >= (f.pixels[2] - 1) as f64);
                     assert!(f.s0 <= 0.0 && f.t0 <= 0.0);
                     // interior seams: the window's first column is the core's, on the lattice
                     if p[0] > 0 {

@@ -7,7 +7,7 @@
 //! - [`eval`]: the rational T-spline through its PB-spline form, CPU (rayon) evaluation.
 //! - [`ocl_eval`]: the same evaluation and the knot derivation as OpenCL kernels.
 //! - [`rtree_pages`]: the thesis' Nearest-X int8 page encoding (Tables 5.2, 6.3).
-//! - [`format`]: the T-mesh file format (`xsd/tmesh.xsd`); [`tmb`]: its compact binary twin.
+//! - [`format`](mod@format): the T-mesh file format (`xsd/tmesh.xsd`); [`tmb`]: its compact binary twin.
 //! - [`sparse`]: the sparse Cholesky (and PCG fallback) of the least-squares solve.
 //! - [`fit`]: adaptive approximation (Alg. 3) with sparse least squares or dragging;
 //!   `coarsen`: merging back the splits the tolerance did not need; [`tolerance`]: what the
@@ -17,7 +17,7 @@
 //!
 //! Where the spec's ambiguities are decided (doc comments there): A1, A2, A15 in [`eval`];
 //! A7–A12, A17, A19 in [`fit`]; A13, A14, A22 in [`mesh`]; A16 (formats: GDAL rasters in, the
-//! documented `.tmesh` out) in [`format`]; A18 in `benches/tspline.sh`; A20 in the Table 5.2
+//! documented `.tmesh` out) in [`format`](mod@format); A18 in `benches/tspline.sh`; A20 in the Table 5.2
 //! test of [`rtree_pages`]; A21 below. A3–A6 (PCA mass, warp details, splat footprint,
 //! dilation weights) belong to the warp in `raster-proc`; `fit::mean_dilation_fill` follows A6's
 //! wave-front reading with equal weights over valued 8-neighbours.
@@ -64,12 +64,12 @@ pub mod ocl_eval;
 pub mod ocl_fit;
 pub mod rtree_pages;
 pub mod seams;
-pub mod tolerance;
 pub mod sparse;
 pub mod tessellate;
-pub mod tmb;
 #[cfg(test)]
 mod testing;
+pub mod tmb;
+pub mod tolerance;
 
 pub use eval::{GridSpec, PbSpline};
 pub use mesh::{CellId, ControlPoint, Degree, PointId, Rect, TMesh};

@@ -166,7 +166,14 @@ impl Cell {
     /// (s_max,t_min)) and no parent.
     fn leaf(corners: [PointId; 4], points: &[ControlPoint]) -> Cell {
         let [a, b, c, _] = corners.map(|i| points[i as usize]);
-        Cell { corners, rect: Rect::new(a.s, c.t, b.s, a.t), parent: None, children: None, split_as: SplitDir::Quad, alive: true }
+        Cell {
+            corners,
+            rect: Rect::new(a.s, c.t, b.s, a.t),
+            parent: None,
+            children: None,
+            split_as: SplitDir::Quad,
+            alive: true,
+        }
     }
 
     pub fn is_leaf(&self) -> bool {
@@ -216,24 +223,40 @@ impl TMesh {
     /// Builds a mesh from control points and leaf cells given by their four corner points;
     /// the R-tree is bulk loaded. Checks the T-mesh rules that the format can break: corners must
     /// form a rectangle of positive size, leaves must not overlap, no duplicate points.
-    pub fn from_cells(degree: Degree, points: Vec<ControlPoint>, corners: Vec<[PointId; 4]>) -> Result<TMesh, TsplineError> {
+    pub fn from_cells(
+        degree: Degree,
+        points: Vec<ControlPoint>,
+        corners: Vec<[PointId; 4]>,
+    ) -> Result<TMesh, TsplineError> {
         let mut point_at = HashMap::with_capacity(points.len());
         for (i, p) in points.iter().enumerate() {
-            if !(p.s.is_finite() && p.t.is_finite() && p.x.is_finite() && p.y.is_finite() && p.z.is_finite() && p.w.is_finite()) {
+            if !(p.s.is_finite()
+                && p.t.is_finite()
+                && p.x.is_finite()
+                && p.y.is_finite()
+                && p.z.is_finite()
+                && p.w.is_finite())
+            {
                 return Err(TsplineError::InvalidMesh(format!("control point {i} has a non-finite value")));
             }
             if p.w <= 0.0 {
                 return Err(TsplineError::InvalidMesh(format!("control point {i} has weight {} (must be > 0)", p.w)));
             }
             if point_at.insert(key(p.s, p.t), i as PointId).is_some() {
-                return Err(TsplineError::InvalidMesh(format!("control point {i} duplicates the parameter pair ({}, {})", p.s, p.t)));
+                return Err(TsplineError::InvalidMesh(format!(
+                    "control point {i} duplicates the parameter pair ({}, {})",
+                    p.s, p.t
+                )));
             }
         }
         let mut cells = Vec::with_capacity(corners.len());
         for (ci, c) in corners.iter().enumerate() {
             for &p in c {
                 if p as usize >= points.len() {
-                    return Err(TsplineError::InvalidMesh(format!("cell {ci} refers to control point {p}, but there are {}", points.len())));
+                    return Err(TsplineError::InvalidMesh(format!(
+                        "cell {ci} refers to control point {p}, but there are {}",
+                        points.len()
+                    )));
                 }
             }
             let [a, b, cc, d] = c.map(|i| points[i as usize]);
@@ -297,8 +320,14 @@ impl TMesh {
     }
 
     /// The mesh with its R-tree bulk loaded over `cells`.
-    fn with_tree(degree: Degree, points: Vec<ControlPoint>, cells: Vec<Cell>, point_at: HashMap<(u64, u64), PointId>) -> TMesh {
-        let entries = cells.iter().enumerate().map(|(i, c)| CellEntry { id: i as CellId, env: c.rect.aabb() }).collect();
+    fn with_tree(
+        degree: Degree,
+        points: Vec<ControlPoint>,
+        cells: Vec<Cell>,
+        point_at: HashMap<(u64, u64), PointId>,
+    ) -> TMesh {
+        let entries =
+            cells.iter().enumerate().map(|(i, c)| CellEntry { id: i as CellId, env: c.rect.aabb() }).collect();
         TMesh { degree, points, cells, tree: RTree::bulk_load(entries), point_at }
     }
 
@@ -356,20 +385,27 @@ impl TMesh {
 
     /// Point query: the leaves whose closed box holds (s, t).
     pub fn cells_at(&self, s: f64, t: f64) -> Vec<CellId> {
-        let mut v: Vec<CellId> = self.tree.locate_in_envelope_intersecting(&AABB::from_point([s, t])).map(|e| e.id).collect();
+        let mut v: Vec<CellId> =
+            self.tree.locate_in_envelope_intersecting(&AABB::from_point([s, t])).map(|e| e.id).collect();
         v.sort_unstable();
         v
     }
 
     /// Point-in-domain test (the domain is the union of leaf rectangles, closed).
     pub fn contains(&self, s: f64, t: f64) -> bool {
-        self.tree.locate_in_envelope_intersecting(&AABB::from_point([s, t])).any(|e| self.cells[e.id as usize].is_leaf())
+        self.tree
+            .locate_in_envelope_intersecting(&AABB::from_point([s, t]))
+            .any(|e| self.cells[e.id as usize].is_leaf())
     }
 
     /// Area query: leaf cells whose closed box intersects `r`.
     pub fn leaves_in(&self, r: Rect) -> Vec<CellId> {
-        let mut v: Vec<CellId> =
-            self.tree.locate_in_envelope_intersecting(&r.aabb()).map(|e| e.id).filter(|&id| self.cells[id as usize].is_leaf()).collect();
+        let mut v: Vec<CellId> = self
+            .tree
+            .locate_in_envelope_intersecting(&r.aabb())
+            .map(|e| e.id)
+            .filter(|&id| self.cells[id as usize].is_leaf())
+            .collect();
         v.sort_unstable();
         v
     }
@@ -436,7 +472,12 @@ impl TMesh {
     /// mid-point of one side: [`SplitDir::S`] cuts at the s mid-point (children west, east),
     /// [`SplitDir::T`] at the t mid-point (children south, north). The two new points of a
     /// 2-split are the mid-points of the two sides the cut crosses.
-    pub fn split_dir(&mut self, cell: CellId, dir: SplitDir, geom: &mut dyn FnMut(f64, f64) -> (f64, f64, f64)) -> Children {
+    pub fn split_dir(
+        &mut self,
+        cell: CellId,
+        dir: SplitDir,
+        geom: &mut dyn FnMut(f64, f64) -> (f64, f64, f64),
+    ) -> Children {
         let c = self.cells[cell as usize].clone();
         assert!(c.is_leaf(), "split of a non-leaf cell");
         let r = c.rect;
@@ -471,18 +512,31 @@ impl TMesh {
             SplitDir::S => {
                 let n = pt(self, sm, r.t_max);
                 let s_ = pt(self, sm, r.t_min);
-                vec![([nw, n, sw, s_], Rect::new(r.s_min, r.t_min, sm, r.t_max)), ([n, ne, s_, se], Rect::new(sm, r.t_min, r.s_max, r.t_max))]
+                vec![
+                    ([nw, n, sw, s_], Rect::new(r.s_min, r.t_min, sm, r.t_max)),
+                    ([n, ne, s_, se], Rect::new(sm, r.t_min, r.s_max, r.t_max)),
+                ]
             }
             SplitDir::T => {
                 let w = pt(self, r.s_min, tm);
                 let e = pt(self, r.s_max, tm);
-                vec![([w, e, sw, se], Rect::new(r.s_min, r.t_min, r.s_max, tm)), ([nw, ne, w, e], Rect::new(r.s_min, tm, r.s_max, r.t_max))]
+                vec![
+                    ([w, e, sw, se], Rect::new(r.s_min, r.t_min, r.s_max, tm)),
+                    ([nw, ne, w, e], Rect::new(r.s_min, tm, r.s_max, r.t_max)),
+                ]
             }
         };
         let mut ids = Children { ids: [0; 4], len: kids.len() as u8 };
         for (k, (corners, rect)) in kids.into_iter().enumerate() {
             let id = self.cells.len() as CellId;
-            self.cells.push(Cell { corners, rect, parent: Some(cell), children: None, split_as: SplitDir::Quad, alive: true });
+            self.cells.push(Cell {
+                corners,
+                rect,
+                parent: Some(cell),
+                children: None,
+                split_as: SplitDir::Quad,
+                alive: true,
+            });
             self.tree.insert(CellEntry { id, env: rect.aabb() });
             ids.ids[k] = id;
         }
@@ -563,8 +617,13 @@ impl TMesh {
 
     /// [`TMesh::repair`] under a split rule: [`SplitRule::Quad`] splits a violating leaf into
     /// four (A13); [`SplitRule::Anisotropic`] splits it only across the direction(s) whose rule
-    /// it violates ([`aniso_repair_split`]), never below `2·min_size` along the split side.
-    pub fn repair_with(&mut self, min_size: f64, rule: SplitRule, geom: &mut dyn FnMut(f64, f64) -> (f64, f64, f64)) -> usize {
+    /// it violates (`aniso_repair_split`), never below `2·min_size` along the split side.
+    pub fn repair_with(
+        &mut self,
+        min_size: f64,
+        rule: SplitRule,
+        geom: &mut dyn FnMut(f64, f64) -> (f64, f64, f64),
+    ) -> usize {
         let mut splits = 0;
         let mut todo: Vec<CellId> = self.leaves().collect();
         // Each round's checks are answered from one batch over the mesh as the round found it
@@ -585,7 +644,8 @@ impl TMesh {
                 if !self.cells[c as usize].is_leaf() {
                     continue;
                 }
-                let (dir, nbrs) = if touched[c as usize] { self.split_and_neighbours(c, rule, min_size) } else { (dir, nbrs) };
+                let (dir, nbrs) =
+                    if touched[c as usize] { self.split_and_neighbours(c, rule, min_size) } else { (dir, nbrs) };
                 let Some(dir) = dir else {
                     continue;
                 };
@@ -678,7 +738,10 @@ impl TMesh {
         }
         let corners = self.cells.iter().filter(|c| c.is_leaf()).map(|c| c.corners.map(|p| remap[p as usize])).collect();
         let c = TMesh::from_valid_cells(self.degree, points, corners);
-        debug_assert!(TMesh::from_cells(c.degree, c.points.clone(), c.cells.iter().map(|c| c.corners).collect()).is_ok(), "a valid mesh stays valid when compacted");
+        debug_assert!(
+            TMesh::from_cells(c.degree, c.points.clone(), c.cells.iter().map(|c| c.corners).collect()).is_ok(),
+            "a valid mesh stays valid when compacted"
+        );
         c
     }
 
@@ -686,7 +749,8 @@ impl TMesh {
     /// `at`, within the coordinate window [lo, hi] along the line (inclusive boxes).
     pub(crate) fn leaves_on_line(&self, horizontal: bool, at: f64, lo: f64, hi: f64, out: &mut Vec<Rect>) {
         out.clear();
-        let env = if horizontal { AABB::from_corners([lo, at], [hi, at]) } else { AABB::from_corners([at, lo], [at, hi]) };
+        let env =
+            if horizontal { AABB::from_corners([lo, at], [hi, at]) } else { AABB::from_corners([at, lo], [at, hi]) };
         for e in self.tree.locate_in_envelope_intersecting(&env) {
             let c = &self.cells[e.id as usize];
             if c.is_leaf() {
@@ -827,7 +891,11 @@ impl SideIndex {
             // `lo`, stepped back by one (the run's first may start before `lo`)
             let first = v.partition_point(|e| e.0.total_cmp(&line).then(e.1.total_cmp(&lo)).is_lt());
             let first = if first > 0 && v[first - 1].0 == line && v[first - 1].2 > lo { first - 1 } else { first };
-            v[first..].iter().take_while(move |e| e.0 == line && e.1 < hi).filter(move |e| e.2 > lo).map(move |e| (side, e.3))
+            v[first..]
+                .iter()
+                .take_while(move |e| e.0 == line && e.1 < hi)
+                .filter(move |e| e.2 > lo)
+                .map(move |e| (side, e.3))
         })
     }
 }
@@ -949,10 +1017,13 @@ mod tests {
     /// The side index gives every leaf the neighbours that the R-tree query gives.
     fn assert_side_index_finds_neighbours(m: &TMesh) {
         let sides = SideIndex::new(m);
-        let key = |(side, r): (Side, Rect)| (side as u8, r.s_min.to_bits(), r.t_min.to_bits(), r.s_max.to_bits(), r.t_max.to_bits());
+        let key = |(side, r): (Side, Rect)| {
+            (side as u8, r.s_min.to_bits(), r.t_min.to_bits(), r.s_max.to_bits(), r.t_max.to_bits())
+        };
         for c in m.leaves() {
             let mut got: Vec<_> = sides.neighbours(&m.cells[c as usize].rect).map(key).collect();
-            let mut want: Vec<_> = m.neighbours(c).into_iter().map(|(side, n)| key((side, m.cells[n as usize].rect))).collect();
+            let mut want: Vec<_> =
+                m.neighbours(c).into_iter().map(|(side, n)| key((side, m.cells[n as usize].rect))).collect();
             got.sort_unstable();
             want.sort_unstable();
             assert_eq!(got, want, "cell {c}");
@@ -975,7 +1046,9 @@ mod tests {
             seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
             (seed >> 11) as f64 / (1u64 << 53) as f64
         };
-        let base = TMesh::grid(Degree::Cubic, -16.0, 0.0, 16.0, 5, 4).merge(&TMesh::grid(Degree::Cubic, 96.0, 16.0, 16.0, 2, 2)).unwrap();
+        let base = TMesh::grid(Degree::Cubic, -16.0, 0.0, 16.0, 5, 4)
+            .merge(&TMesh::grid(Degree::Cubic, 96.0, 16.0, 16.0, 2, 2))
+            .unwrap();
         let mut g = |s: f64, t: f64| (s, t, s * t);
         let mut checked = 0;
         for trial in 0..6 {
@@ -1005,7 +1078,9 @@ mod tests {
             assert_eq!(n_got, n_want, "trial {trial}");
             assert!(n_want > 0);
             assert_eq!(m.points, want.points, "trial {trial}");
-            let cells = |m: &TMesh| m.cells.iter().map(|c| (c.corners, c.rect, c.parent, c.children, c.alive)).collect::<Vec<_>>();
+            let cells = |m: &TMesh| {
+                m.cells.iter().map(|c| (c.corners, c.rect, c.parent, c.children, c.alive)).collect::<Vec<_>>()
+            };
             assert_eq!(cells(&m), cells(&want), "trial {trial}");
         }
         assert!(checked > 10, "the meshes had leaves to repair");
@@ -1024,7 +1099,7 @@ mod tests {
         assert_eq!(m.cells[k.as_slice()[0] as usize].rect, Rect::new(0.0, 0.0, 4.0, 2.0));
         assert_eq!(m.cells[k.as_slice()[1] as usize].rect, Rect::new(0.0, 2.0, 4.0, 4.0));
         assert_eq!(m.points.len(), n0 + 2); // (0, 2) and (4, 2)
-        // the east cell across s: (6, 0) and (6, 4) are new, (4, 2) is a hanging vertex of it
+                                            // the east cell across s: (6, 0) and (6, 4) are new, (4, 2) is a hanging vertex of it
         let k2 = m.split_dir(1, SplitDir::S, &mut g);
         assert_eq!(m.points.len(), n0 + 4);
         assert_eq!(m.cells[k2.as_slice()[0] as usize].rect, Rect::new(4.0, 0.0, 6.0, 4.0));
@@ -1060,8 +1135,14 @@ mod tests {
                 let r = m.cells[c as usize].rect;
                 let need = m.repair_need(c);
                 // a side at the minimum (1: children would undercut the sample spacing) may keep its need
-                assert!(!((need.s && r.width() >= 2.0) || (need.t && r.height() >= 2.0)), "seed {seed}: cell {c} {r:?} still needs {need:?}");
-                assert!(r.width() <= MAX_ASPECT * r.height() && r.height() <= MAX_ASPECT * r.width(), "seed {seed}: {r:?}");
+                assert!(
+                    !((need.s && r.width() >= 2.0) || (need.t && r.height() >= 2.0)),
+                    "seed {seed}: cell {c} {r:?} still needs {need:?}"
+                );
+                assert!(
+                    r.width() <= MAX_ASPECT * r.height() && r.height() <= MAX_ASPECT * r.width(),
+                    "seed {seed}: {r:?}"
+                );
                 two += usize::from(r.width() != r.height());
             }
             assert!(two > 10, "seed {seed}: the mesh has rectangles ({two})");

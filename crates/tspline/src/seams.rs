@@ -18,7 +18,7 @@
 //! cells keep a_i equal in both directions at a tile corner, so one weight serves both seams
 //! through it. A seam vertex a tile adds later (refinement next to the seam) gets its height by
 //! knot insertion (Boehm) into the seam curve, which leaves the curve unchanged. Cells along a
-//! seam are refined to ¼ px (the seam strip, [`STRIP`]) so that the border vertices' influence
+//! seam are refined to ¼ px (the seam strip, `STRIP`) so that the border vertices' influence
 //! ends before the first data cell: with the border padding the rational blend cannot follow
 //! the data next to a border whose vertices are held (docs/decisions.md#raster-tiles-and-seams).
 

@@ -3,10 +3,10 @@
 
 use clap::{Args as ClapArgs, ValueEnum};
 
-use crate::cmd::args::{InputOutput, require_positive};
+use crate::cmd::args::{require_positive, InputOutput};
 use crate::config::{Config, Input, Output};
-use crate::report::{write_json_report, ReportKind};
 use crate::error::{CliError, CmdResult, Exit};
+use crate::report::{write_json_report, ReportKind};
 use adjust::popa3d::{adjust_model, DatumChoice, ModelError, ModelOptions, ObsReport, Report};
 use adjust::{GlobalTest, GlobalVerdict};
 
@@ -97,19 +97,27 @@ pub struct Args {
 }
 
 pub(crate) fn model_options(a: &Args) -> Result<ModelOptions, CliError> {
-    require_positive(&[("soft-sigma-d", a.soft_sigma_d), ("soft-sigma-param", a.soft_sigma_param), ("tolerance", a.tolerance), ("max-shift", a.max_shift)])?;
+    require_positive(&[
+        ("soft-sigma-d", a.soft_sigma_d),
+        ("soft-sigma-param", a.soft_sigma_param),
+        ("tolerance", a.tolerance),
+        ("max-shift", a.max_shift),
+    ])?;
     if !(a.alpha > 0.0 && a.alpha < 1.0) {
         return Err(CliError::usage(format!("--alpha must lie in (0, 1), got {}", a.alpha)));
     }
-    let mut mo = ModelOptions::default();
-    mo.datum = match a.datum {
+    let datum = match a.datum {
         DatumArg::Free => DatumChoice::Free,
         DatumArg::Soft => DatumChoice::Soft,
         DatumArg::Hard => DatumChoice::Hard,
     };
-    mo.soft_sigma_d = a.soft_sigma_d;
-    mo.soft_sigma_param = a.soft_sigma_param;
-    mo.polar_start = a.polar_start;
+    let mut mo = ModelOptions {
+        datum,
+        soft_sigma_d: a.soft_sigma_d,
+        soft_sigma_param: a.soft_sigma_param,
+        polar_start: a.polar_start,
+        ..Default::default()
+    };
     mo.engine.tolerance = a.tolerance;
     mo.engine.max_iterations = a.max_iterations;
     mo.engine.alpha = a.alpha;
@@ -148,7 +156,8 @@ fn row(o: &ObsReport) -> String {
 }
 
 /// Observation values, σ and residuals are in the units the popa3d model stores them.
-const OBSERVATION_UNIT: &str = "as stored in popa3d: m for lengths and distances, gon for Hz and V, cosine for angle conditions";
+const OBSERVATION_UNIT: &str =
+    "as stored in popa3d: m for lengths and distances, gon for Hz and V, cosine for angle conditions";
 
 /// `--report`: the adjustment's statistics (spec §6).
 const REPORT: ReportKind = ReportKind {
@@ -170,7 +179,10 @@ const REPORT: ReportKind = ReportKind {
 
 /// The global test in words: only vᵀPv above the upper bound is a failure.
 pub(crate) fn global_test_line(sigma0: f64, g: &GlobalTest) -> String {
-    let head = format!("σ̂0 = {sigma0:.4}; global test vᵀPv = {:.3} in [{:.3}, {:.3}] for {} dof", g.statistic, g.lower, g.upper, g.dof);
+    let head = format!(
+        "σ̂0 = {sigma0:.4}; global test vᵀPv = {:.3} in [{:.3}, {:.3}] for {} dof",
+        g.statistic, g.lower, g.upper, g.dof
+    );
     match g.verdict {
         GlobalVerdict::Passed => format!("{head}: passed"),
         GlobalVerdict::BelowLower => format!("{head}: below the lower bound: the observations fit better than their σ claim (σ too pessimistic, or the conditions are met exactly)"),
@@ -192,26 +204,57 @@ pub(crate) fn print_report(r: &Report, rows: usize, verbose: bool) {
     if verbose {
         crate::say!("{:<28} {:>6} {:>14} {:>14} {:>8}", "type", "count", "max misclosure", "max |v|", "mean EV");
         for (k, t) in &r.per_type {
-            crate::say!("{:<28} {:>6} {:>14.3e} {:>14.3e} {:>7.1}%", k, t.count, t.max_misclosure_before, t.max_abs_residual, 100.0 * t.mean_redundancy);
+            crate::say!(
+                "{:<28} {:>6} {:>14.3e} {:>14.3e} {:>7.1}%",
+                k,
+                t.count,
+                t.max_misclosure_before,
+                t.max_abs_residual,
+                100.0 * t.mean_redundancy
+            );
         }
         if rows > 0 {
-            crate::say!("{:>6} {:<28} {:<9} {:>3} {:>14} {:>11} {:>12} {:>6} {:>7}", "obs", "class", "origin", "", "value", "σ", "v", "EV %", "w");
+            crate::say!(
+                "{:>6} {:<28} {:<9} {:>3} {:>14} {:>11} {:>12} {:>6} {:>7}",
+                "obs",
+                "class",
+                "origin",
+                "",
+                "value",
+                "σ",
+                "v",
+                "EV %",
+                "w"
+            );
             for o in r.observations.iter().take(rows) {
                 crate::say!("{}", row(o));
             }
         }
     }
     if let Some(s) = &r.largest_suspect {
-        let obs = if s.observation == u32::MAX { "datum observation".to_string() } else { format!("observation {}", s.observation) };
+        let obs = if s.observation == u32::MAX {
+            "datum observation".to_string()
+        } else {
+            format!("observation {}", s.observation)
+        };
         let comp = if s.component.is_empty() { String::new() } else { format!(" {}", s.component) };
         let rejected = r.observations.iter().filter(|o| o.rejected).count();
-        crate::say!("largest suspect: {obs} ({}{comp}) w = {:.2} (critical {:.2}); {rejected} rejected", s.class, s.normalised, r.critical_w);
+        crate::say!(
+            "largest suspect: {obs} ({}{comp}) w = {:.2} (critical {:.2}); {rejected} rejected",
+            s.class,
+            s.normalised,
+            r.critical_w
+        );
     }
     if let Some(p) = &r.max_plane_shift_at {
         crate::say!("largest plane movement: {:.4} m, {p}", p.shift);
     }
     if !r.not_yet_measured.is_empty() {
-        crate::say!("not yet measured: {} sketch priors still control the geometry{}", r.not_yet_measured.len(), if verbose { ":" } else { " (--verbose lists them)" });
+        crate::say!(
+            "not yet measured: {} sketch priors still control the geometry{}",
+            r.not_yet_measured.len(),
+            if verbose { ":" } else { " (--verbose lists them)" }
+        );
         if verbose {
             for o in r.not_yet_measured.iter().take(rows.max(1)) {
                 crate::say!("  observation {} {} {}", o.observation, o.class, o.label.clone().unwrap_or_default());

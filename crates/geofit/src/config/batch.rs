@@ -3,8 +3,8 @@
 
 use std::io::Write;
 
-use super::{Config, Input};
 use super::Output;
+use super::{Config, Input};
 use crate::error::CliError;
 
 /// What a directory argument is searched for by the commands that take many CityGML files.
@@ -86,7 +86,13 @@ pub fn run_batch<R: Send>(
 /// The line a many-file run writes for an input it could not check: JSON
 /// `{"schema", "file", "error", "exit"}`, or text `FILE: UNREADABLE: message` (`ERROR` for
 /// other failures).
-pub fn write_batch_error(w: &mut dyn Write, json: bool, schema: &str, name: &str, e: &CliError) -> Result<(), CliError> {
+pub fn write_batch_error(
+    w: &mut dyn Write,
+    json: bool,
+    schema: &str,
+    name: &str,
+    e: &CliError,
+) -> Result<(), CliError> {
     if json {
         let line = serde_json::json!({ "schema": schema, "file": name, "error": e.message, "exit": e.exit as u8 });
         return write_json_line(w, &line);

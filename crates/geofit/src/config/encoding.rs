@@ -15,8 +15,9 @@ use serde_json::Value;
 use super::output::Output;
 use crate::error::CliError;
 
-/// The encodings of a buildings document.
+/// The encodings of a buildings document (named as their formats are, hence the shared prefix).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[allow(clippy::enum_variant_names)]
 pub enum Encoding {
     CityGml,
     CityJson,

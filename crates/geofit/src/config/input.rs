@@ -105,7 +105,13 @@ impl Input {
     }
 
     fn read_all_within(&self, budget: input_limits::budget::ByteBudget) -> Result<Vec<u8>, CliError> {
-        let too_big = || CliError::unreadable(format!("{}: too large to read whole (more than {})", self.display_name(), budget.describe()));
+        let too_big = || {
+            CliError::unreadable(format!(
+                "{}: too large to read whole (more than {})",
+                self.display_name(),
+                budget.describe()
+            ))
+        };
         let known_len = self.path().and_then(|p| std::fs::metadata(p).ok()).filter(|m| m.is_file()).map(|m| m.len());
         if known_len.is_some_and(|len| !budget.allows(len)) {
             return Err(too_big());

@@ -9,6 +9,7 @@ mod input;
 mod output;
 mod paths;
 mod progress;
+mod stale;
 
 use std::io::{self, Write};
 
@@ -17,7 +18,8 @@ use crate::error::Exit;
 pub use batch::{batch_inputs, run_batch, worse_exit, write_batch_error, write_json_line, CITYGML_EXTENSIONS};
 pub use input::Input;
 pub(crate) use output::write_atomic;
-pub use output::{check_output_args, check_report_target, clean_stale_temps, commit_outputs, discard_outputs, Output};
+pub use output::{check_output_args, check_report_target, commit_outputs, discard_outputs, Output};
+pub use stale::clean_stale_temps;
 
 /// Options shared by every subcommand.
 #[derive(Debug, Clone, Default)]
@@ -37,7 +39,11 @@ impl Config {
         if exit == Exit::Ok || self.keep_partial {
             return true;
         }
-        crate::say!("geofit: {} not written: the step failed (exit {}); --keep-partial writes it anyway", output.unwrap_or("stdout"), exit as u8);
+        crate::say!(
+            "geofit: {} not written: the step failed (exit {}); --keep-partial writes it anyway",
+            output.unwrap_or("stdout"),
+            exit as u8
+        );
         false
     }
 

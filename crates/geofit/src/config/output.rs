@@ -4,6 +4,7 @@
 use std::io::{self, Write};
 use std::path::{Path, PathBuf};
 
+use super::stale::clean_stale_temps;
 use crate::error::CliError;
 
 /// Whether file descriptor 1 was closed when the process started (`geofit info x.gml >&-`).
@@ -64,7 +65,11 @@ impl Output {
             _ => Path::new("."),
         };
         if !dir.is_dir() {
-            return Err(CliError::usage(format!("{flag} {}: the directory {} does not exist", p.display(), dir.display())));
+            return Err(CliError::usage(format!(
+                "{flag} {}: the directory {} does not exist",
+                p.display(),
+                dir.display()
+            )));
         }
         if p.is_dir() {
             return Err(CliError::usage(format!("{flag} {}: is a directory", p.display())));
@@ -74,9 +79,7 @@ impl Output {
 
     /// The lower-case file extension, used to pick a format (`out.glb` → `glb`).
     pub fn extension(&self) -> Option<String> {
-        self.path()
-            .and_then(|p| p.extension())
-            .map(|e| e.to_string_lossy().to_ascii_lowercase())
+        self.path().and_then(|p| p.extension()).map(|e| e.to_string_lossy().to_ascii_lowercase())
     }
 
     /// Writes through `f`; for a file, into a temporary file beside the target that is renamed
@@ -106,8 +109,14 @@ impl Output {
 }
 
 /// The file outputs every subcommand names the same way (argument id, option as typed).
-const OUTPUT_OPTIONS: &[(&str, &str)] =
-    &[("output", "-o"), ("report", "--report"), ("png", "--png"), ("hist", "--hist"), ("outliers_csv", "--outliers-csv"), ("vtk", "--vtk")];
+const OUTPUT_OPTIONS: &[(&str, &str)] = &[
+    ("output", "-o"),
+    ("report", "--report"),
+    ("png", "--png"),
+    ("hist", "--hist"),
+    ("outliers_csv", "--outliers-csv"),
+    ("vtk", "--vtk"),
+];
 
 /// Checks every path of the parsed command line before any work starts, so a typo in an output
 /// directory is a usage error (exit 2) at once, not a failure after a long fit, an output that
@@ -120,7 +129,9 @@ pub fn check_output_args(matches: &clap::ArgMatches) -> Result<(), CliError> {
     }
     for (id, flag) in OUTPUT_OPTIONS {
         // GDAL virtual paths (/vsi…) are the raster writer's to accept or refuse
-        if let Ok(Some(path)) = m.try_get_one::<String>(id).map(|p| p.filter(|p| !raster_io::gdal_io::is_gdal_virtual_path(Path::new(p)))) {
+        if let Ok(Some(path)) =
+            m.try_get_one::<String>(id).map(|p| p.filter(|p| !raster_io::gdal_io::is_gdal_virtual_path(Path::new(p))))
+        {
             Output::from_arg(Some(path)).check_target_of(flag)?;
         }
     }
@@ -177,7 +188,8 @@ where
     #[cfg(unix)]
     {
         use std::os::unix::fs::PermissionsExt;
-        let mode = std::fs::metadata(path).map(|m| m.permissions().mode() & 0o7777).unwrap_or_else(|_| 0o666 & !umask());
+        let mode =
+            std::fs::metadata(path).map(|m| m.permissions().mode() & 0o7777).unwrap_or_else(|_| 0o666 & !umask());
         std::fs::set_permissions(tmp.path(), std::fs::Permissions::from_mode(mode)).map_err(CliError::io_out)?;
     }
     PENDING.lock().unwrap_or_else(|e| e.into_inner()).push((tmp.into_temp_path(), path.to_path_buf()));
@@ -211,7 +223,9 @@ pub fn discard_outputs() {
 fn umask() -> u32 {
     std::fs::read_to_string("/proc/self/status")
         .ok()
-        .and_then(|s| s.lines().find_map(|l| l.strip_prefix("Umask:").and_then(|v| u32::from_str_radix(v.trim(), 8).ok())))
+        .and_then(|s| {
+            s.lines().find_map(|l| l.strip_prefix("Umask:").and_then(|v| u32::from_str_radix(v.trim(), 8).ok()))
+        })
         .unwrap_or(0o022)
 }
 
@@ -219,7 +233,8 @@ fn umask() -> u32 {
 /// was handed, which may lead to a regular file; the link itself must not be replaced. Files
 /// in directories there (`/dev/shm/x.tmesh`) are ordinary outputs.
 fn is_system_path(path: &Path) -> bool {
-    (path.starts_with("/dev") || path.starts_with("/proc")) && std::fs::symlink_metadata(path).is_ok_and(|m| m.file_type().is_symlink())
+    (path.starts_with("/dev") || path.starts_with("/proc"))
+        && std::fs::symlink_metadata(path).is_ok_and(|m| m.file_type().is_symlink())
 }
 
 /// Writes into an existing device, FIFO or stream as it is (opened for writing, never created,
@@ -234,64 +249,4 @@ where
     let mut w = io::BufWriter::with_capacity(1 << 16, file);
     f(&mut w)?;
     w.flush().map_err(named)
-}
-
-/// The process id in the name of a geofit temporary file or directory:
-/// `.geofit-[TAG-]PID-REST.tmp` (the atomic writer's `.geofit-PID-XXXXXX.tmp`, raster-io's
-/// staging directory `.geofit-raster-PID-N.tmp`). `None` for any other name.
-pub fn temp_owner(name: &str) -> Option<u32> {
-    let rest = name.strip_prefix(".geofit-")?.strip_suffix(".tmp")?;
-    let rest = rest.strip_prefix("raster-").unwrap_or(rest);
-    let (pid, tail) = rest.split_once('-')?;
-    if tail.is_empty() || pid.is_empty() || !pid.bytes().all(|b| b.is_ascii_digit()) {
-        return None;
-    }
-    pid.parse().ok()
-}
-
-/// How long a temporary of a process this host cannot see must have gone unwritten before it
-/// is taken for stale: a run in another PID namespace (another container on the same volume,
-/// another node of a shared file system) writes its temporary now.
-const STALE_AFTER: std::time::Duration = std::time::Duration::from_secs(3600);
-
-/// Removes the geofit temporaries in `dir` whose process is gone (no `/proc/PID`) and that
-/// nothing wrote for [`STALE_AFTER`]: what a `kill -9`, a power cut or `ulimit -f` left behind
-/// (docs/decisions.md#stale-temporaries). A temporary of a running process — any process with
-/// that id — is left alone, and so is a fresh one of a process this host cannot see (its PID
-/// is another namespace's), as is everything where `/proc` is not mounted. Errors are
-/// ignored: cleaning is a courtesy, and the write that follows reports a directory it cannot use.
-pub fn clean_stale_temps(dir: &Path) {
-    if !Path::new("/proc/self").exists() {
-        return;
-    }
-    let Ok(entries) = std::fs::read_dir(dir) else { return };
-    for e in entries.flatten() {
-        let name = e.file_name();
-        let Some(pid) = name.to_str().and_then(temp_owner) else { continue };
-        if pid == std::process::id() || Path::new(&format!("/proc/{pid}")).exists() {
-            continue;
-        }
-        let p = e.path();
-        if written_within(&p, STALE_AFTER) {
-            continue;
-        }
-        let _ = match e.file_type() {
-            Ok(t) if t.is_dir() => std::fs::remove_dir_all(&p),
-            Ok(_) => std::fs::remove_file(&p),
-            Err(_) => continue,
-        };
-    }
-}
-
-/// Whether `path` (or, for a directory, anything directly in it) was modified within `age`.
-/// An unreadable time counts as recent: nothing is removed on a guess.
-fn written_within(path: &Path, age: std::time::Duration) -> bool {
-    let recent = |p: &Path| std::fs::metadata(p).and_then(|m| m.modified()).map_or(true, |t| t.elapsed().map_or(true, |e| e < age));
-    if recent(path) {
-        return true;
-    }
-    match std::fs::read_dir(path) {
-        Ok(entries) => entries.flatten().any(|e| recent(&e.path())),
-        Err(_) => false,
-    }
 }

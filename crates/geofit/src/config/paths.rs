@@ -68,7 +68,9 @@ fn check_outputs_are_distinct(command: &str, m: &clap::ArgMatches, outputs: &[(&
             let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
             let Some(key) = dir.canonicalize().ok().zip(path.file_name()).map(|(d, n)| d.join(n)) else { continue };
             if let Some((_, other_flag, other)) = seen.iter().find(|(k, _, _)| *k == key) {
-                return Err(CliError::usage(format!("{command}: {other_flag} {other} and {flag} {out} name one file: give each output its own")));
+                return Err(CliError::usage(format!(
+                    "{command}: {other_flag} {other} and {flag} {out} name one file: give each output its own"
+                )));
             }
             seen.push((key, flag, out));
         }
@@ -263,7 +265,11 @@ fn hint(kind: &FileKind, value: &str) -> String {
         K::Las | K::PointText => "rasterize, info, implicit",
         K::Obj => "obj2popa3d",
         K::Gltf => return " (glTF is what export and surface write; geofit does not read it)".into(),
-        K::Gzip => return format!(" (decompress it first: gunzip -c {value} | geofit ... -, or for a raster give GDAL's /vsigzip/{value})"),
+        K::Gzip => {
+            return format!(
+            " (decompress it first: gunzip -c {value} | geofit ... -, or for a raster give GDAL's /vsigzip/{value})"
+        )
+        }
         K::Zip => return format!(" (unzip it first, or for a raster give GDAL's /vsizip/{value}/NAME)"),
         K::Empty => return " (the file holds nothing: did an earlier step fail?)".into(),
         K::Directory => return " (give a file in it)".into(),
@@ -273,28 +279,5 @@ fn hint(kind: &FileKind, value: &str) -> String {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn every_kind_that_is_refused_names_a_way_out_or_what_it_is() {
-        let kinds = [FileKind::CityGml, FileKind::Popa3d, FileKind::TMesh, FileKind::Raster("PNG"), FileKind::Las, FileKind::Obj];
-        for k in kinds {
-            assert!(hint(&k, "x").starts_with(" (read it with geofit "), "{k:?}");
-        }
-        assert!(hint(&FileKind::CityJson, "x").contains("convert"));
-    }
-
-    #[test]
-    fn readers_keep_what_they_judge_themselves() {
-        let p = Path::new("x");
-        assert!(accepts(Takes::Raster, &FileKind::Xml("VRTDataset".into()), p));
-        assert!(accepts(Takes::Raster, &FileKind::PointText, p));
-        assert!(accepts(Takes::CityGml, &FileKind::Unknown, p));
-        assert!(!accepts(Takes::Raster, &FileKind::CityGml, p));
-        assert!(!accepts(Takes::Points, &FileKind::CityGml, p));
-        assert!(!accepts(Takes::TMesh, &FileKind::Raster("TIFF/GeoTIFF"), p));
-        assert!(accepts(Takes::CityGml, &FileKind::CityJson, p));
-        assert!(!accepts(Takes::Popa3d, &FileKind::CityJson, p));
-    }
-}
+#[path = "paths_tests.rs"]
+mod tests;

@@ -25,11 +25,8 @@ impl Config {
         let mode = if self.quiet {
             ProgressMode::Silent
         } else if io::stderr().is_terminal() {
-            let bar = if total > 0 {
-                indicatif::ProgressBar::new(total)
-            } else {
-                indicatif::ProgressBar::new_spinner()
-            };
+            let bar =
+                if total > 0 { indicatif::ProgressBar::new(total) } else { indicatif::ProgressBar::new_spinner() };
             // a known total gets a bar and an ETA; an unknown one a spinner and the count so far
             let template = if total > 0 {
                 "{prefix:>12} {elapsed_precise} [{bar:30}] {pos}/{len} ETA {eta} {msg}"
@@ -74,7 +71,9 @@ impl Progress {
         let took = format_elapsed(self.started.elapsed());
         match self.mode {
             ProgressMode::Silent => {}
-            ProgressMode::Lines => crate::say!("geofit:   {}{took}", if msg.is_empty() { String::new() } else { format!("{msg}; ") }),
+            ProgressMode::Lines => {
+                crate::say!("geofit:   {}{took}", if msg.is_empty() { String::new() } else { format!("{msg}; ") })
+            }
             ProgressMode::Bar(b) => b.finish_with_message(msg.to_string()),
         }
     }

@@ -59,7 +59,13 @@ pub fn eval_errors(pb: &PbSpline, samples: &Samples, backend: &Backend, errs: &m
 /// buffer instead of a per-cell array: the same errors, so the same verdict. Coarsening's global
 /// tries ask this first, so a failed try leaves the kept errors as they are and needs no copy
 /// of them to undo (docs/decisions.md#float32-samples).
-pub(crate) fn over_tolerance(mesh: &TMesh, pb: &PbSpline, samples: &Samples, backend: &Backend, tol: &Tolerance) -> Result<(usize, Vec<CellId>), TsplineError> {
+pub(crate) fn over_tolerance(
+    mesh: &TMesh,
+    pb: &PbSpline,
+    samples: &Samples,
+    backend: &Backend,
+    tol: &Tolerance,
+) -> Result<(usize, Vec<CellId>), TsplineError> {
     let pass = ErrorPass::new(pb, samples, backend)?;
     let w = samples.width;
     let n = samples.z.len();
@@ -147,7 +153,13 @@ fn errors_in_place<T: Height>(z: &mut [f64], d: &[T], chunk: usize) {
     z.par_chunks_mut(chunk).zip(d.par_chunks(chunk)).for_each(|(zc, dc)| {
         for (e, &dk) in zc.iter_mut().zip(dc) {
             let (zk, dk) = (*e, dk.f64());
-            *e = if dk.is_nan() { f64::NAN } else if zk.is_nan() { f64::INFINITY } else { (zk - dk).abs() };
+            *e = if dk.is_nan() {
+                f64::NAN
+            } else if zk.is_nan() {
+                f64::INFINITY
+            } else {
+                (zk - dk).abs()
+            };
         }
     });
 }
@@ -158,7 +170,13 @@ pub(super) fn errors_into<T: Height>(out: &mut [f64], z: &[f64], d: &[T], chunk:
     out.par_chunks_mut(chunk).zip(z.par_chunks(chunk)).zip(d.par_chunks(chunk)).for_each(|((o, zc), dc)| {
         for ((e, &zk), &dk) in o.iter_mut().zip(zc).zip(dc) {
             let dk = dk.f64();
-            *e = if dk.is_nan() { f64::NAN } else if zk.is_nan() { f64::INFINITY } else { (zk - dk).abs() };
+            *e = if dk.is_nan() {
+                f64::NAN
+            } else if zk.is_nan() {
+                f64::INFINITY
+            } else {
+                (zk - dk).abs()
+            };
         }
     });
 }
@@ -185,7 +203,11 @@ pub(super) fn region_error(pb: &PbSpline, samples: &Samples, q: usize, row: &mut
         f64::NAN
     } else {
         let zk = pb.point_z_cached((q % w) as f64, (q / w) as f64, row);
-        if zk.is_nan() { f64::INFINITY } else { (zk - dk).abs() }
+        if zk.is_nan() {
+            f64::INFINITY
+        } else {
+            (zk - dk).abs()
+        }
     }
 }
 
@@ -199,7 +221,13 @@ pub(super) fn region_error(pb: &PbSpline, samples: &Samples, q: usize, row: &mut
 /// On a raster of at most [`KEEP_VERDICT_CELLS`] cells the blocks are kept, for
 /// [`RegionErrors::write`] to put into `errs` when the try passes, instead of evaluating them
 /// again.
-pub(crate) fn over_tolerance_region(mesh: &TMesh, pb: &PbSpline, samples: &Samples, region: &Region, tol: &Tolerance) -> (usize, Vec<CellId>, RegionErrors) {
+pub(crate) fn over_tolerance_region(
+    mesh: &TMesh,
+    pb: &PbSpline,
+    samples: &Samples,
+    region: &Region,
+    tol: &Tolerance,
+) -> (usize, Vec<CellId>, RegionErrors) {
     let w = samples.width;
     let sub = (PASS_BLOCK / w.max(1)).max(1);
     let blocks = samples.height.div_ceil(sub);
@@ -208,22 +236,25 @@ pub(crate) fn over_tolerance_region(mesh: &TMesh, pb: &PbSpline, samples: &Sampl
     let scan = OverScan::new(mesh, pb, &pos, tol);
     let parts: Vec<(usize, Vec<CellId>, Option<Vec<f64>>)> = (0..blocks)
         .into_par_iter()
-        .map_init(|| (Vec::new(), crate::eval::RowCache::default()), |(buf, row): &mut (Vec<f64>, crate::eval::RowCache), b| {
-            let j0 = b * sub;
-            let j1 = (j0 + sub).min(samples.height);
-            buf.clear();
-            buf.resize((j1 - j0) * w, f64::NAN);
-            let mut any = false;
-            region.for_rows(j0, j1, |q| {
-                buf[q - j0 * w] = region_error(pb, samples, q, row);
-                any = true;
-            });
-            if !any {
-                return (0, Vec::new(), None);
-            }
-            let (acc, over) = scan.chunk(buf, j0 * w);
-            (acc.over, over, keep.then(|| std::mem::take(buf)))
-        })
+        .map_init(
+            || (Vec::new(), crate::eval::RowCache::default()),
+            |(buf, row): &mut (Vec<f64>, crate::eval::RowCache), b| {
+                let j0 = b * sub;
+                let j1 = (j0 + sub).min(samples.height);
+                buf.clear();
+                buf.resize((j1 - j0) * w, f64::NAN);
+                let mut any = false;
+                region.for_rows(j0, j1, |q| {
+                    buf[q - j0 * w] = region_error(pb, samples, q, row);
+                    any = true;
+                });
+                if !any {
+                    return (0, Vec::new(), None);
+                }
+                let (acc, over) = scan.chunk(buf, j0 * w);
+                (acc.over, over, keep.then(|| std::mem::take(buf)))
+            },
+        )
         .collect();
     let mut count = 0;
     let mut over = Vec::new();
@@ -274,14 +305,20 @@ impl RegionErrors {
 
 /// Statistics of `errs` over the valid cells (summed over fixed blocks in order: independent of
 /// the thread count) and the leaf cells whose closed box holds a cell over the tolerance.
-/// The median is that of the errors rounded to f32 ([`nth_smallest_f32`], no copy of the
+/// The median is that of the errors rounded to f32 (`nth_smallest_f32`, no copy of the
 /// errors); the maximum and the tolerance test use the f64 errors.
 pub fn summarize(mesh: &TMesh, pb: &PbSpline, w: usize, errs: &[f64], tol: &Tolerance) -> (ErrorStats, Vec<CellId>) {
     summarize_at(mesh, pb, &|q| ((q % w) as f64, (q / w) as f64), errs, tol)
 }
 
 /// [`summarize`] with the parameter position of error `q` given by `pos`.
-pub(crate) fn summarize_at(mesh: &TMesh, pb: &PbSpline, pos: &(dyn Fn(usize) -> (f64, f64) + Sync), errs: &[f64], tol: &Tolerance) -> (ErrorStats, Vec<CellId>) {
+pub(crate) fn summarize_at(
+    mesh: &TMesh,
+    pb: &PbSpline,
+    pos: &(dyn Fn(usize) -> (f64, f64) + Sync),
+    errs: &[f64],
+    tol: &Tolerance,
+) -> (ErrorStats, Vec<CellId>) {
     let (acc, over) = over_in(mesh, pb, pos, errs, 0, tol);
     let n = acc.n;
     if n == 0 {
@@ -296,15 +333,34 @@ pub(crate) fn summarize_at(mesh: &TMesh, pb: &PbSpline, pos: &(dyn Fn(usize) -> 
     } else {
         nth_smallest_f32(errs, [mid])[0] as f64
     };
-    (ErrorStats { count: n, mean, sigma, median, max: acc.max, rms: (acc.sumsq / n as f64).sqrt(), over_tolerance: acc.over }, over)
+    (
+        ErrorStats {
+            count: n,
+            mean,
+            sigma,
+            median,
+            max: acc.max,
+            rms: (acc.sumsq / n as f64).sqrt(),
+            over_tolerance: acc.over,
+        },
+        over,
+    )
 }
 
 /// The statistics of `errs` (errors `offset..` of the raster or point list) and the leaf cells
 /// whose closed box holds one over the tolerance (sorted, each once): the scan of [`summarize_at`]
 /// without the median, summed over fixed blocks in order.
-pub(super) fn over_in(mesh: &TMesh, pb: &PbSpline, pos: &(dyn Fn(usize) -> (f64, f64) + Sync), errs: &[f64], offset: usize, tol: &Tolerance) -> (ErrAcc, Vec<CellId>) {
+pub(super) fn over_in(
+    mesh: &TMesh,
+    pb: &PbSpline,
+    pos: &(dyn Fn(usize) -> (f64, f64) + Sync),
+    errs: &[f64],
+    offset: usize,
+    tol: &Tolerance,
+) -> (ErrAcc, Vec<CellId>) {
     let scan = OverScan::new(mesh, pb, pos, tol);
-    let parts: Vec<(ErrAcc, Vec<CellId>)> = errs.par_chunks(PASS_BLOCK).enumerate().map(|(b, ch)| scan.chunk(ch, offset + b * PASS_BLOCK)).collect();
+    let parts: Vec<(ErrAcc, Vec<CellId>)> =
+        errs.par_chunks(PASS_BLOCK).enumerate().map(|(b, ch)| scan.chunk(ch, offset + b * PASS_BLOCK)).collect();
     let mut acc = ErrAcc::default();
     let mut over = Vec::new();
     for (a, o) in parts {
@@ -328,7 +384,12 @@ pub(super) struct OverScan<'a> {
 }
 
 impl<'a> OverScan<'a> {
-    fn new(mesh: &'a TMesh, pb: &'a PbSpline, pos: &'a (dyn Fn(usize) -> (f64, f64) + Sync), tol: &'a Tolerance) -> OverScan<'a> {
+    fn new(
+        mesh: &'a TMesh,
+        pb: &'a PbSpline,
+        pos: &'a (dyn Fn(usize) -> (f64, f64) + Sync),
+        tol: &'a Tolerance,
+    ) -> OverScan<'a> {
         let leaf_ids: Vec<CellId> = mesh.leaves().collect();
         let same_order = leaf_ids.len() == pb.cells.len();
         OverScan { mesh, pb, pos, tol, leaf_ids, same_order }
@@ -435,7 +496,11 @@ impl<'a> OverScan<'a> {
 pub(crate) fn nth_smallest_f32<const N: usize>(errs: &[f64], ranks: [usize; N]) -> [f32; N] {
     fn key(e: f64) -> u32 {
         let b = (e as f32).to_bits();
-        if b >> 31 == 1 { !b } else { b | 0x8000_0000 }
+        if b >> 31 == 1 {
+            !b
+        } else {
+            b | 0x8000_0000
+        }
     }
     fn from_key(k: u32) -> f32 {
         f32::from_bits(if k >> 31 == 1 { k & 0x7fff_ffff } else { !k })

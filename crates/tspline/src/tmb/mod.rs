@@ -64,7 +64,7 @@ pub const W: u8 = 4;
 pub const MASK: u8 = 8;
 pub const WARP: u8 = 16;
 /// Structure flag: leaf cells as a forest of 2-/4-split trees (anisotropic refinement, see
-/// [`kdtree`]); only when the quadtree form does not fit.
+/// `kdtree`); only when the quadtree form does not fit.
 pub const KDTREE: u8 = 32;
 /// Heights quantised to a step (version 2; [`heights`]).
 pub const QUANT: u8 = 64;

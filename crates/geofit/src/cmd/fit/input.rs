@@ -8,17 +8,16 @@ use tspline::fit::{Domain, Samples, Scattered};
 use tspline::format::Georef;
 use tspline::tolerance::CellTolerance;
 use tspline_raster::indirect::{self, WarpChoice};
-use tspline_raster::screening::{self, RasterTolerance, ScreenError, Screening};
+use tspline_raster::screening::{self, RasterTolerance, ScreenError};
 
+use super::blunders::report_blunders;
 use super::{Args, WarpMode};
-use crate::config::{Config, Output};
+use crate::config::Config;
 use crate::error::CliError;
 use crate::terrain_io::{choose_band, raster_layout, read_raster_arg_band, tspline_err, Band};
 
 /// Blunders are reported at this K when `--reject-outliers` does not give one.
 const REPORT_OUTLIERS_K: f64 = 10.0;
-/// Blunders listed by position on stderr (all of them go to `--outliers-csv`).
-const LISTED_OUTLIERS: usize = 5;
 
 /// `--report`'s account of the blunder screen.
 #[derive(serde::Serialize)]
@@ -93,7 +92,9 @@ fn tile_window(args: &Args) -> Result<Option<([usize; 4], TileDomain)>, CliError
     }
     let Some(w) = &args.srcwin else { return Ok(None) };
     let win = [w[0], w[1], w[2], w[3]];
-    let cell = args.tile_cell.ok_or_else(|| CliError::usage("--srcwin needs --tile-cell PIXELS (the same for every tile of a plan)"))?;
+    let cell = args
+        .tile_cell
+        .ok_or_else(|| CliError::usage("--srcwin needs --tile-cell PIXELS (the same for every tile of a plan)"))?;
     if !(cell >= 1.0 && cell.is_finite()) {
         return Err(CliError::usage(format!("--tile-cell must be at least 1 pixel, got {cell}")));
     }
@@ -116,13 +117,15 @@ fn read_input(args: &Args) -> Result<(Raster, String, Option<Domain>), CliError>
     }
     let (raster, name) = match &window {
         _ if args.terrain_rgb => {
-            let r = raster_io::read_terrain_rgb(std::path::Path::new(&args.input)).map_err(crate::terrain_io::raster_err)?;
+            let r = raster_io::read_terrain_rgb(std::path::Path::new(&args.input))
+                .map_err(crate::terrain_io::raster_err)?;
             (r, args.input.clone())
         }
         Some((win, _)) => {
             let path = std::path::Path::new(&args.input);
             let band = choose_band(path, &args.input, choice)?;
-            let (r, _) = raster_io::read_raster_window_typed(path, band, Some(*win)).map_err(crate::terrain_io::raster_err)?;
+            let (r, _) =
+                raster_io::read_raster_window_typed(path, band, Some(*win)).map_err(crate::terrain_io::raster_err)?;
             (r, format!("{} (window {} {} {} {})", args.input, win[0], win[1], win[2], win[3]))
         }
         None => read_raster_arg_band(&args.input, choice).map(|(r, name, _)| (r, name))?,
@@ -136,9 +139,12 @@ fn read_input(args: &Args) -> Result<(Raster, String, Option<Domain>), CliError>
 
 /// The uncertainty layer of the input file, on the elevation's grid.
 fn read_uncertainty(input: &str, elevation: &Raster, name: &str) -> Result<Raster, CliError> {
-    let (u, band) = raster_io::read_uncertainty(std::path::Path::new(input)).map_err(|e| CliError::unreadable(e.to_string()))?;
+    let (u, band) =
+        raster_io::read_uncertainty(std::path::Path::new(input)).map_err(|e| CliError::unreadable(e.to_string()))?;
     if (u.width, u.height, u.geotransform) != (elevation.width, elevation.height, elevation.geotransform) {
-        return Err(CliError::unreadable(format!("{name}: the uncertainty layer (band {band}) is not on the elevation's grid")));
+        return Err(CliError::unreadable(format!(
+            "{name}: the uncertainty layer (band {band}) is not on the elevation's grid"
+        )));
     }
     Ok(u)
 }
@@ -182,44 +188,14 @@ fn screen(r: &mut Raster, name: &str, args: &Args, tol: &RasterTolerance) -> Res
     }
 }
 
-fn report_blunders(s: &Screening, name: &str, k: f64, csv: Option<&str>) -> Result<(), CliError> {
-    let reject = s.rejected;
-    if let Some(path) = csv {
-        Output::from_arg(Some(path)).write_with(|w| {
-            let mut text = String::from("row,col,x,y,value,predicted,deviation,rejected\n");
-            for (b, n) in s.found.iter().zip(&s.nearest) {
-                let p = s.position(b.index);
-                text.push_str(&format!("{},{},{},{},{},{n},{},{reject}\n", p.row, p.col, p.x, p.y, b.value, (b.value - n).abs()));
-            }
-            w.write_all(text.as_bytes()).map_err(CliError::io_out)
-        })?;
-    }
-    if s.found.is_empty() {
-        return Ok(());
-    }
-    let list: Vec<String> = s
-        .found
-        .iter()
-        .zip(&s.nearest)
-        .take(LISTED_OUTLIERS)
-        .map(|(b, n)| {
-            let p = s.position(b.index);
-            format!("row {}, col {} (x {}, y {}): {} where the nearest local prediction is {n:.6}", p.row, p.col, p.x, p.y, b.value)
-        })
-        .collect();
-    let more = if s.found.len() > LISTED_OUTLIERS { format!("; {} more", s.found.len() - LISTED_OUTLIERS) } else { String::new() };
-    let what = if reject { "excluded from the fit and the data mask (--reject-outliers)" } else { "fitted as data; --reject-outliers K excludes them" };
-    crate::say!(
-        "geofit: {name}: {} blunder(s) (isolated cells more than {k} × the tolerance off their neighbourhood: blunders or single-cell features), {what}: {}{more}",
-        s.found.len(),
-        list.join("; ")
-    );
-    Ok(())
-}
-
 /// `--indirect` (spec §1, §2.3): the raster the fit works on, its warp field and the original
 /// raster whose cells it follows (docs in `tspline_raster::indirect`).
-fn warp(raster: Raster, name: &str, args: &Args, config: &Config) -> Result<(Raster, Option<WarpField>, Option<Raster>), CliError> {
+fn warp(
+    raster: Raster,
+    name: &str,
+    args: &Args,
+    config: &Config,
+) -> Result<(Raster, Option<WarpField>, Option<Raster>), CliError> {
     if !args.indirect {
         return Ok((raster, None, None));
     }
@@ -255,7 +231,11 @@ pub(super) fn prepare(args: &Args, config: &Config) -> Result<Prepared, CliError
     // --max-error in the heights' unit (a band in km: 10 m is 0.01)
     let units = super::zunit::resolve(&raster, &name, args, config)?;
     let floor = args.max_error.map(|e| units.to_data(e));
-    let tol = RasterTolerance { floor, k: args.max_error_from_uncertainty, uncertainty: uncertainty.as_ref().map(|u| &u.data[..]) };
+    let tol = RasterTolerance {
+        floor,
+        k: args.max_error_from_uncertainty,
+        uncertainty: uncertainty.as_ref().map(|u| &u.data[..]),
+    };
     check_coverage(&tol, &raster, &name)?;
     let outliers = screen(&mut raster, &name, args, &tol)?;
     let e_min = tol.min_over(&raster);

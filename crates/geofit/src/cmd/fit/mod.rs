@@ -3,6 +3,7 @@
 //! raster (a window of it for a tile) and screens it, `output.rs` writes the mesh and the report.
 //! The algorithms are in `tspline` (the fit) and `tspline_raster` (layout, screening, warp).
 
+mod blunders;
 mod input;
 mod lerc;
 mod output;
@@ -208,34 +209,42 @@ pub struct Args {
     pub plan: Option<String>,
 }
 
-
 /// Refusals of option combinations, before anything is read.
 fn check_args(args: &Args) -> Result<Degree, CliError> {
     crate::config::check_report_target(args.report.as_deref(), args.output.as_deref())?;
     input::check_tolerance_args(args)?;
     storage::check_share(args)?;
-    let degree = Degree::from_u32(args.degree).ok_or_else(|| CliError::usage(format!("--degree must be 1 or 3, got {}", args.degree)))?;
+    let degree = Degree::from_u32(args.degree)
+        .ok_or_else(|| CliError::usage(format!("--degree must be 1 or 3, got {}", args.degree)))?;
     if !(args.overhang >= 0.0 && args.overhang <= 4.0) {
         return Err(CliError::usage(format!("--overhang must be within 0..4, got {}", args.overhang)));
     }
     // The warp options shape the warp `--indirect` builds: say so instead of ignoring them.
     if args.warp_spacing.is_some() && !(args.indirect && args.warp == WarpMode::Full) {
-        return Err(CliError::usage("--warp-spacing sets the landmark spacing of the local warp: it needs --indirect --warp full"));
+        return Err(CliError::usage(
+            "--warp-spacing sets the landmark spacing of the local warp: it needs --indirect --warp full",
+        ));
     }
     if args.warp == WarpMode::Full && !args.indirect {
         return Err(CliError::usage("--warp full chooses the warp of the indirect reduction: it needs --indirect"));
     }
     if args.split == SplitArg::Aniso && (args.srcwin.is_some() || args.tile.is_some()) {
-        return Err(CliError::usage("--split aniso is not available for tiles of a plan (--tile, --srcwin): their seams need square cells"));
+        return Err(CliError::usage(
+            "--split aniso is not available for tiles of a plan (--tile, --srcwin): their seams need square cells",
+        ));
     }
     if args.assembly == Assembly::Opencl {
         // The T29 kernel serves the direct least-squares fit only: say so instead of ignoring it,
         // and fail before reading (and warping) the raster when there is no OpenCL at all.
         if args.method == MethodArg::Drag || args.indirect {
-            return Err(CliError::usage("--assembly opencl applies to the direct least-squares fit (not --method drag or --indirect)"));
+            return Err(CliError::usage(
+                "--assembly opencl applies to the direct least-squares fit (not --method drag or --indirect)",
+            ));
         }
         if !ocl::core::get_platform_ids().map(|v| !v.is_empty()).unwrap_or(false) {
-            return Err(CliError::internal("--assembly opencl: no OpenCL platform found (install pocl-opencl-icd, or use --assembly cpu)"));
+            return Err(CliError::internal(
+                "--assembly opencl: no OpenCL platform found (install pocl-opencl-icd, or use --assembly cpu)",
+            ));
         }
     }
     Ok(degree)
@@ -251,7 +260,8 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         Some(o) => Backend::OpenCl(o),
         None => Backend::Cpu,
     };
-    let device_name = ocl.as_ref().map(|o| format!("opencl: {}", o.device_name())).unwrap_or_else(|| "cpu (rayon)".into());
+    let device_name =
+        ocl.as_ref().map(|o| format!("opencl: {}", o.device_name())).unwrap_or_else(|| "cpu (rayon)".into());
     let mut opts = FitOptions::new(degree, prepared.e_min);
     opts.cell_tolerance = prepared.cell_tolerance.clone();
     storage::fit_share(&args, &prepared, &mut opts);
@@ -273,7 +283,9 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     // (iterations run to no fixed count, so counting them would jump to the end).
     let valid = prepared.valid;
     let progress = config.progress("fit", valid as u64);
-    let mut on_iteration = |st: &IterationStats| progress.set((valid - st.error.over_tolerance.min(valid)) as u64, &output::iteration_line(st, &prepared.e_text));
+    let mut on_iteration = |st: &IterationStats| {
+        progress.set((valid - st.error.over_tolerance.min(valid)) as u64, &output::iteration_line(st, &prepared.e_text))
+    };
     let result = match &prepared.points {
         Some(p) => tspline::fit::fit_points(&prepared.samples, p, &opts, &backend, &mut on_iteration),
         None => tspline::fit::fit(&prepared.samples, &opts, &backend, &mut on_iteration),

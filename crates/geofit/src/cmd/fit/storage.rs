@@ -47,7 +47,7 @@ pub(super) fn share(args: &Args, p: &Prepared) -> Option<f64> {
     }))
 }
 
-/// The fraction of the raster's second differences (|z[i−1] − 2 z[i] + z[i+1]| along rows and
+/// The fraction of the raster's second differences (|z[i−1] − 2 z\[i\] + z[i+1]| along rows and
 /// columns, over valid cells) above `e`: how much of the data a smooth surface cannot follow
 /// within E between neighbouring cells.
 pub(super) fn roughness(s: &Samples, e: f64) -> f64 {
@@ -130,7 +130,7 @@ pub(super) fn encode(file: &TMeshFile, args: &Args, p: &Prepared, fit_ok: bool) 
         }
         // lossless heights are the fit's own, checked as written by the fit
         let checked = if fit_ok && q.is_some() { Some(decoded_errors(&bytes, p)?) } else { None };
-        if checked.map_or(true, |(_, over)| over == 0) {
+        if checked.is_none_or(|(_, over)| over == 0) {
             let stored = Stored { quantum: q, decoded_max_abs_error: checked.map(|c| c.0), bytes: bytes.len() };
             return Ok((bytes, stored));
         }

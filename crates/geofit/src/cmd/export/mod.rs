@@ -5,16 +5,19 @@
 //! The CityGML → scene mapping lives here (which polygons, which node, which material); the
 //! triangulation and the file formats are `mesh_export`'s.
 
-use citygml_io::crs::proj_crs;
 use city_scene::{build_scene, Reproject, SceneOptions};
+use citygml_io::crs::proj_crs;
 use clap::Args as ClapArgs;
 use mesh_export::Scene;
 use serde::Serialize;
 
 use crate::config::{Config, Input, Output};
+use crate::error::{CliError, CmdResult, Exit};
 use crate::mesh_output::{tessellate, write_scene, Format, SurfaceOptions};
 use crate::report::{write_json_report, ReportKind};
-use crate::error::{CliError, CmdResult, Exit};
+
+mod options;
+use options::checked_options;
 
 const EXAMPLE: &str = "\
 Example:
@@ -117,7 +120,10 @@ fn export_tmesh(args: &Args, src: &[u8], name: &str, output: &Output, format: Fo
 /// `--report`: what went into the mesh file.
 const REPORT: ReportKind = ReportKind {
     schema: "geofit-export-report/1",
-    units: &[("origin", "CRS units (subtracted from every vertex)"), ("area", "CRS units squared (m2 in a metric CRS)")],
+    units: &[
+        ("origin", "CRS units (subtracted from every vertex)"),
+        ("area", "CRS units squared (m2 in a metric CRS)"),
+    ],
 };
 
 #[derive(Debug, Serialize)]
@@ -136,24 +142,6 @@ pub struct ExportReport {
     pub area: f64,
     /// Polygons left out, each `FILE:LINE:COL: what`.
     pub skipped: Vec<String>,
-}
-
-fn parse_origin(s: &str) -> Result<Option<[f64; 3]>, CliError> {
-    match s {
-        "auto" => Ok(None),
-        "none" => Ok(Some([0.0; 3])),
-        _ => {
-            let v: Vec<f64> = s
-                .split(',')
-                .map(|t| t.trim().parse::<f64>())
-                .collect::<Result<_, _>>()
-                .map_err(|_| CliError::usage(format!("--origin '{s}': expected auto, none or x,y,z")))?;
-            if v.len() != 3 || v.iter().any(|x| !x.is_finite()) {
-                return Err(CliError::usage(format!("--origin '{s}': expected auto, none or three finite numbers x,y,z")));
-            }
-            Ok(Some([v[0], v[1], v[2]]))
-        }
-    }
 }
 
 pub fn run(args: Args, config: &Config) -> CmdResult {
@@ -177,21 +165,24 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
 
     let source_crs = args.s_srs.clone().or_else(|| model.srs_name.clone());
     // docs/decisions.md#geographic-crss-and-vertical-datums-of-buildings-issue-41
-    let plan = city_scene::crs::export_crs(&model, &name, args.s_srs.as_deref(), args.t_srs.as_deref()).map_err(|e| match e {
-        city_scene::crs::ExportCrsError::Usage(m) => CliError::usage(m),
-        city_scene::crs::ExportCrsError::Unreadable(m) => CliError::unreadable(m),
-    })?;
+    let plan = city_scene::crs::export_crs(&model, &name, args.s_srs.as_deref(), args.t_srs.as_deref()).map_err(
+        |e| match e {
+            city_scene::crs::ExportCrsError::Usage(m) => CliError::usage(m),
+            city_scene::crs::ExportCrsError::Unreadable(m) => CliError::unreadable(m),
+        },
+    )?;
     let swap = plan.swap_axes;
     let transform = match &args.t_srs {
         None => None,
         Some(t) => {
             let Some(s) = &source_crs else {
-                return Err(CliError::usage(format!("{name} names no CRS (srsName); give the source CRS with --s-srs")));
+                return Err(CliError::usage(format!(
+                    "{name} names no CRS (srsName); give the source CRS with --s-srs"
+                )));
             };
             let from = proj_crs(s);
-            let p = proj::Proj::new_known_crs(&from, t, None).map_err(|e| {
-                CliError::usage(format!("cannot transform from '{s}' (as '{from}') to '{t}': {e}"))
-            })?;
+            let p = proj::Proj::new_known_crs(&from, t, None)
+                .map_err(|e| CliError::usage(format!("cannot transform from '{s}' (as '{from}') to '{t}': {e}")))?;
             Some(p)
         }
     };
@@ -203,12 +194,11 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     };
     let progress = config.progress("export: triangulate", model.objects.len() as u64);
     let options = SceneOptions { lod: args.lod, planar: args.planar };
-    let built = build_scene(&model, &name, &options, transform.is_some().then_some(&reproject as Reproject), &|n| progress.set(n as u64, ""));
-    let mut scene = Scene {
-        crs: plan.recorded,
-        generator: Some(format!("geofit {}", env!("CARGO_PKG_VERSION"))),
-        ..built.scene
-    };
+    let built = build_scene(&model, &name, &options, transform.is_some().then_some(&reproject as Reproject), &|n| {
+        progress.set(n as u64, "")
+    });
+    let mut scene =
+        Scene { crs: plan.recorded, generator: Some(format!("geofit {}", env!("CARGO_PKG_VERSION"))), ..built.scene };
     progress.finish(&format!("{} polygons, {} triangles", built.polygons, scene.triangle_count()));
     scene.origin = fixed_origin.unwrap_or_else(|| scene.auto_origin());
 
@@ -247,52 +237,4 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         crate::say!("{f}");
     }
     Ok(exit)
-}
-
-/// The output format (from --format or the extension) and the fixed origin, after the option
-/// checks that need no input: usage errors come before the input is read.
-fn checked_options(args: &Args, output: &Output) -> Result<(Format, Option<[f64; 3]>), CliError> {
-    let format = match (args.format, output.extension().as_deref()) {
-        (Some(f), _) => f,
-        (None, Some("glb")) => Format::Glb,
-        (None, Some("gltf")) => Format::Gltf,
-        (None, Some("obj")) => Format::Obj,
-        (None, Some(e)) => {
-            return Err(CliError::usage(format!("unknown output extension '.{e}': use .glb, .gltf or .obj, or --format")))
-        }
-        (None, None) => {
-            return Err(CliError::usage("writing to stdout: say which format with --format glb|gltf|obj"))
-        }
-    };
-    if args.gltf_bin && (format != Format::Gltf || output.path().is_none()) {
-        return Err(CliError::usage("--gltf-bin needs a .gltf output file (-o OUT.gltf)"));
-    }
-    let fixed_origin = parse_origin(&args.origin)?;
-    // A CRS string GDAL does not know is refused as gdalsrsinfo refuses it (PROJ alone read
-    // `--t-srs foo` as a Bessel longlat).
-    for (opt, crs) in [("--t-srs", args.t_srs.as_deref()), ("--s-srs", args.s_srs.as_deref().map(proj_crs).as_deref())] {
-        if let Some(c) = crs {
-            let parsed = raster_io::crs::Crs::parse(c).map_err(|e| CliError::usage(format!("{opt}: {e}")))?;
-            if opt == "--t-srs" && parsed.geographic {
-                return Err(CliError::usage(format!(
-                    "--t-srs {c} is geographic (degrees): mesh coordinates must be metres (heights are); use a projected CRS, e.g. the UTM zone EPSG:326zz / 327zz"
-                )));
-            }
-        }
-    }
-    Ok((format, fixed_origin))
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn origin_option() {
-        assert_eq!(parse_origin("auto").unwrap(), None);
-        assert_eq!(parse_origin("none").unwrap(), Some([0.0; 3]));
-        assert_eq!(parse_origin("1,2.5,-3").unwrap(), Some([1.0, 2.5, -3.0]));
-        assert!(parse_origin("1,2").is_err());
-        assert!(parse_origin("1,2,nan").is_err());
-    }
 }

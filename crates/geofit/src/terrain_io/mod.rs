@@ -6,12 +6,12 @@
 use clap::{Args as ClapArgs, ValueEnum};
 use raster_io::{read_xyz, PointCloud, PointsError, Raster, RasterError, RasterFormat, SampleType, WriteOptions};
 use raster_proc::ProcError;
-use tspline::format::TMeshFile;
-use tspline::ocl_eval::OclEvaluator;
-use tspline::TsplineError;
 
 use crate::config::{Config, Input, Output};
 use crate::error::CliError;
+
+mod tmesh;
+pub use tmesh::{read_tmesh_arg, select_device, tspline_err};
 
 /// `--device`: where dense evaluations run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -75,7 +75,9 @@ impl RasterOutArgs {
 pub fn raster_err(e: RasterError) -> CliError {
     match e {
         RasterError::Format(_) => CliError::usage(e.to_string()),
-        RasterError::Open { .. } | RasterError::Content { .. } | RasterError::TooLarge { .. } => CliError::unreadable(e.to_string()),
+        RasterError::Open { .. } | RasterError::Content { .. } | RasterError::TooLarge { .. } => {
+            CliError::unreadable(e.to_string())
+        }
         RasterError::Write { .. } => CliError::output(e.to_string()),
         RasterError::Invalid(_) => CliError::findings(e.to_string()),
     }
@@ -147,8 +149,14 @@ pub fn choose_band(path: &std::path::Path, name: &str, choice: Band) -> Result<u
         Band::First => Ok(1),
         _ if n <= 1 || survey || (choice == Band::ElevationOfSurvey && n == 2) => Ok(1),
         _ => {
-            let what: Vec<String> = bands.iter().map(|b| if b.description.is_empty() { b.color.clone() } else { b.description.clone() }).collect();
-            Err(CliError::usage(format!("{name} has {n} bands ({}): choose the heights with -b N (GDAL's band number)", what.join(", "))))
+            let what: Vec<String> = bands
+                .iter()
+                .map(|b| if b.description.is_empty() { b.color.clone() } else { b.description.clone() })
+                .collect();
+            Err(CliError::usage(format!(
+                "{name} has {n} bands ({}): choose the heights with -b N (GDAL's band number)",
+                what.join(", ")
+            )))
         }
     }
 }
@@ -195,7 +203,8 @@ fn raster_from_stdin_bytes_typed(bytes: &[u8], choice: Band) -> Result<(Raster, 
         e.message = e.message.replace(&spool, "<stdin>");
         e
     })?;
-    raster_io::read_raster_band_typed(&p, band).map_err(|e| CliError::unreadable(e.to_string().replace(&spool, "<stdin>")))
+    raster_io::read_raster_band_typed(&p, band)
+        .map_err(|e| CliError::unreadable(e.to_string().replace(&spool, "<stdin>")))
 }
 
 /// Writes a raster to `-o` as `opts` says (stdout: the format's bytes, COG by default).
@@ -204,7 +213,9 @@ pub fn write_raster_arg(r: &Raster, output: Option<&str>, opts: &WriteOptions) -
     match out.path() {
         Some(p) => {
             // raster-io stages into `.geofit-raster-PID-N.tmp` beside the target
-            crate::config::clean_stale_temps(p.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(std::path::Path::new(".")));
+            crate::config::clean_stale_temps(
+                p.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(std::path::Path::new(".")),
+            );
             raster_io::write_raster(r, p, opts).map_err(raster_err)
         }
         None => {
@@ -225,71 +236,6 @@ pub fn read_cloud(arg: &str, class: Option<u8>) -> Result<PointCloud, CliError> 
             }
             read_xyz(input.open()?, "<stdin>").map_err(points_err)
         }
-    }
-}
-
-/// One line per T-spline library error.
-pub fn tspline_err(what: &str, e: TsplineError) -> CliError {
-    match e {
-        TsplineError::Format { .. } | TsplineError::InvalidMesh(_) | TsplineError::ValueRange { .. } => CliError::unreadable(format!("{what}: {e}")),
-        TsplineError::Fit(_) => CliError::findings(format!("{what}: {e}")),
-        TsplineError::OpenCl(_) | TsplineError::Io(_) => CliError::internal(format!("{what}: {e}")),
-    }
-}
-
-/// The OpenCL evaluator per `--device`: `auto` falls back to the CPU with one notice when no
-/// platform exists (checked first, never a panic) or the kernels do not build.
-pub fn select_device(device: Device, config: &Config) -> Result<Option<OclEvaluator>, CliError> {
-    match device {
-        Device::Cpu => Ok(None),
-        Device::Opencl => OclEvaluator::new().map(Some).map_err(|e| CliError::internal(format!("--device opencl: {e}"))),
-        Device::Auto => {
-            let has_platform = ocl::core::get_platform_ids().map(|v| !v.is_empty()).unwrap_or(false);
-            if !has_platform {
-                config.notice("notice: no OpenCL platform found; evaluating on the CPU");
-                return Ok(None);
-            }
-            match OclEvaluator::new() {
-                Ok(o) => Ok(Some(o)),
-                Err(e) => {
-                    config.notice(&format!("notice: {e}; evaluating on the CPU"));
-                    Ok(None)
-                }
-            }
-        }
-    }
-}
-
-/// Reads a `.tmesh` argument.
-pub fn read_tmesh_arg(arg: &str) -> Result<TMeshFile, CliError> {
-    let input = Input::from_arg(arg);
-    let bytes = input.read_all()?;
-    let name = input.display_name();
-    if !tspline::format::is_tmesh_document(&bytes) {
-        if let Some(what) = input.path().and_then(not_a_tmesh) {
-            return Err(CliError::unreadable(format!("{name}: {what}")));
-        }
-    }
-    let file = tspline::format::read(&bytes).map_err(|e| CliError::unreadable(format!("{name}: {e}")))?;
-    // The CRS goes to GDAL as a C string: a NUL byte in it (a binary T-mesh can hold one) is the
-    // input's fault, not an internal error ("FfiNulError", exit 4).
-    if file.georef.crs.contains('\0') {
-        return Err(CliError::unreadable(format!("{name}: the CRS \"{}\" holds a NUL byte", input_limits::quote(&file.georef.crs.replace('\0', "\\0")))));
-    }
-    Ok(file)
-}
-
-/// What a file given as a T-mesh is instead, when it is a kind geofit reads elsewhere (a raster:
-/// `fit` makes a T-mesh of it; points: `rasterize`; CityGML), with the command that takes it.
-fn not_a_tmesh(path: &std::path::Path) -> Option<String> {
-    use file_kind::FileKind as K;
-    match file_kind::sniff_path(path).ok()? {
-        K::TMesh | K::Xml(_) | K::Empty => None,
-        K::Raster(_) | K::Unknown | K::Binary if raster_io::bands(path).is_ok_and(|b| !b.is_empty()) => Some(
-            "is a raster, not a T-mesh: `geofit fit RASTER --max-error E -o MESH.tmesh` makes the T-mesh this command takes".to_string(),
-        ),
-        K::Unknown | K::Binary => None,
-        k => Some(format!("is {}, not a T-mesh", k.describe())),
     }
 }
 
