@@ -107,6 +107,7 @@ MSRV := $(shell sed -n 's/^rust-version = "\(.*\)"/\1/p' Cargo.toml)
 lint:
 	python3 docs/index_decisions.py --check
 	python3 benches/summary.py --check
+	python3 tests/scripts/code_shape.py
 	$(CARGO) fmt --all -- --check
 	$(CARGO) clippy --workspace --all-targets -- -D warnings $(CLIPPY_ALLOW)
 	RUSTDOCFLAGS="-D warnings" $(CARGO) doc --workspace --no-deps -q
