@@ -38,7 +38,22 @@ fn pipe_removes_storey_offset_and_merges_walls() {
     assert!(!String::from_utf8_lossy(&b.stdout).contains("NaN"));
     // The storey offsets are removed on purpose: moves of up to 20 cm are the point here.
     // The removed strips had area: the write-back's verification needs --max-area-change for them.
-    let c = run(&["popa3d2citygml", "-q", "-", "--template", gml.to_str().unwrap(), "-o", out.to_str().unwrap(), "--max-move", "1", "--max-area-change", "1"], Some(&b.stdout));
+    let c = run(
+        &[
+            "popa3d2citygml",
+            "-q",
+            "-",
+            "--template",
+            gml.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "--max-move",
+            "1",
+            "--max-area-change",
+            "1",
+        ],
+        Some(&b.stdout),
+    );
     ok(&c);
     let before = gml_check(&gml);
     let after = gml_check(&out);
@@ -99,7 +114,10 @@ fn adjust_report_statistics() {
     ok(&a);
     let dir = common::tempdir();
     let rep = dir.path().join("r.json");
-    let b = run(&["adjust", "-", "-o", dir.path().join("x.popa3d").to_str().unwrap(), "--report", rep.to_str().unwrap()], Some(&a.stdout));
+    let b = run(
+        &["adjust", "-", "-o", dir.path().join("x.popa3d").to_str().unwrap(), "--report", rep.to_str().unwrap()],
+        Some(&a.stdout),
+    );
     ok(&b);
     let err = String::from_utf8_lossy(&b.stderr);
     assert!(err.contains("σ̂0") && err.contains("largest suspect") && err.contains("largest plane movement"), "{err}");
@@ -117,7 +135,10 @@ fn adjust_report_statistics() {
     assert!(w.windows(2).all(|p| p[0] >= p[1]));
     assert!(r["sigma0"].as_f64().unwrap().is_finite());
     // --verbose: the per-type statistics and the observation table.
-    let v = run(&["adjust", "-", "-o", dir.path().join("y.popa3d").to_str().unwrap(), "--verbose", "--rows", "5"], Some(&a.stdout));
+    let v = run(
+        &["adjust", "-", "-o", dir.path().join("y.popa3d").to_str().unwrap(), "--verbose", "--rows", "5"],
+        Some(&a.stdout),
+    );
     ok(&v);
     let err = String::from_utf8_lossy(&v.stderr);
     assert!(err.contains("EV %") && err.contains("mean EV") && err.contains("PlaneOffsetObs"), "{err}");
@@ -134,7 +155,10 @@ fn max_shift_refuses_to_write() {
     let b = run(&["adjust", "-q", "-", "-o", out.to_str().unwrap(), "--max-shift", "0.001"], Some(&a.stdout));
     assert_eq!(code(&b), 1);
     let err = String::from_utf8_lossy(&b.stderr);
-    assert!(err.contains("--max-shift") && err.contains("plane") && err.contains("face") && err.contains("polygon"), "{err}");
+    assert!(
+        err.contains("--max-shift") && err.contains("plane") && err.contains("face") && err.contains("polygon"),
+        "{err}"
+    );
     assert_eq!(err.lines().count(), 1, "{err}");
     assert!(!out.exists() && b.stdout.is_empty());
     // The storey offsets are 6 cm: the default (1 m) lets them through.
@@ -156,13 +180,33 @@ fn nrw_tile_pipe_moves_little() {
     ok(&a);
     let b = run(&["adjust", "-q", "-", "--report", rep.to_str().unwrap()], Some(&a.stdout));
     ok(&b);
-    let c = run(&["popa3d2citygml", "-q", "-", "--template", tile.to_str().unwrap(), "-o", dir.path().join("out.gml").to_str().unwrap(), "--report", back.to_str().unwrap(), "--max-move", "1", "--keep"], Some(&b.stdout));
+    let c = run(
+        &[
+            "popa3d2citygml",
+            "-q",
+            "-",
+            "--template",
+            tile.to_str().unwrap(),
+            "-o",
+            dir.path().join("out.gml").to_str().unwrap(),
+            "--report",
+            back.to_str().unwrap(),
+            "--max-move",
+            "1",
+            "--keep",
+        ],
+        Some(&b.stdout),
+    );
     ok(&c);
     let r: Value = serde_json::from_slice(&std::fs::read(&rep).unwrap()).unwrap();
     let k: Value = serde_json::from_slice(&std::fs::read(&back).unwrap()).unwrap();
-    let (sigma0, shift, moved) = (r["sigma0"].as_f64().unwrap(), r["max_plane_shift"].as_f64().unwrap(), k["max_move"].as_f64().unwrap());
+    let (sigma0, shift, moved) =
+        (r["sigma0"].as_f64().unwrap(), r["max_plane_shift"].as_f64().unwrap(), k["max_move"].as_f64().unwrap());
     eprintln!("σ̂0 {sigma0:.4}, max plane shift {shift:.4} m, largest vertex move {moved:.4} m");
-    assert!(sigma0 < 1.0 && shift < 1.0 && moved < 1.0, "σ̂0 {sigma0}, max plane shift {shift} m, largest vertex move {moved} m");
+    assert!(
+        sigma0 < 1.0 && shift < 1.0 && moved < 1.0,
+        "σ̂0 {sigma0}, max plane shift {shift} m, largest vertex move {moved} m"
+    );
 }
 
 /// Incremental work (spec P20): sketch → adjust (priors control) → observe → adjust again: fewer
@@ -177,13 +221,19 @@ fn observe_then_readjust_reduces_unmeasured_priors() {
     ok(&run(&["obj2popa3d", "-q", obj.to_str().unwrap(), "-o", m0.to_str().unwrap()], None));
     let r1 = dir.path().join("r1.json");
     let m1 = dir.path().join("m1.popa3d");
-    ok(&run(&["adjust", "-q", m0.to_str().unwrap(), "-o", m1.to_str().unwrap(), "--report", r1.to_str().unwrap()], None));
+    ok(&run(
+        &["adjust", "-q", m0.to_str().unwrap(), "-o", m1.to_str().unwrap(), "--report", r1.to_str().unwrap()],
+        None,
+    ));
     let m2 = dir.path().join("m2.popa3d");
     let o = run(&["observe", m1.to_str().unwrap(), "--add", csv.to_str().unwrap(), "-o", m2.to_str().unwrap()], None);
     ok(&o);
     let r2 = dir.path().join("r2.json");
     let m3 = dir.path().join("m3.popa3d");
-    ok(&run(&["adjust", "-q", m2.to_str().unwrap(), "-o", m3.to_str().unwrap(), "--report", r2.to_str().unwrap()], None));
+    ok(&run(
+        &["adjust", "-q", m2.to_str().unwrap(), "-o", m3.to_str().unwrap(), "--report", r2.to_str().unwrap()],
+        None,
+    ));
     let j1: Value = serde_json::from_slice(&std::fs::read(&r1).unwrap()).unwrap();
     let j2: Value = serde_json::from_slice(&std::fs::read(&r2).unwrap()).unwrap();
     let n1 = j1["not_yet_measured"].as_array().unwrap().len();
@@ -192,7 +242,18 @@ fn observe_then_readjust_reduces_unmeasured_priors() {
     assert!(n2 < n1, "measurements take over: {n1} → {n2}");
     // Re-adjusting the adjusted model changes nothing (it starts from the last solution).
     let r3 = dir.path().join("r3.json");
-    ok(&run(&["adjust", "-q", m3.to_str().unwrap(), "-o", dir.path().join("m4.popa3d").to_str().unwrap(), "--report", r3.to_str().unwrap()], None));
+    ok(&run(
+        &[
+            "adjust",
+            "-q",
+            m3.to_str().unwrap(),
+            "-o",
+            dir.path().join("m4.popa3d").to_str().unwrap(),
+            "--report",
+            r3.to_str().unwrap(),
+        ],
+        None,
+    ));
     let j3: Value = serde_json::from_slice(&std::fs::read(&r3).unwrap()).unwrap();
     assert!(j3["max_plane_shift"].as_f64().unwrap() < 1e-8, "{}", j3["max_plane_shift"]);
 }

@@ -156,10 +156,16 @@ fn expect_error_code(
         None => {
             let lines: Vec<&str> = err.lines().collect();
             assert_eq!(lines.len(), 1, "validate {name}: one line expected: {err}");
-            assert!(lines[0].contains(&at) && lines[0].contains(what), "validate {name}: expected {at}…{what} in: {err}");
+            assert!(
+                lines[0].contains(&at) && lines[0].contains(what),
+                "validate {name}: expected {at}…{what} in: {err}"
+            );
         }
         Some(code) => {
-            let hit = out.lines().find(|l| l.contains(&at)).unwrap_or_else(|| panic!("validate {name}: no finding at {at}: {out}"));
+            let hit = out
+                .lines()
+                .find(|l| l.contains(&at))
+                .unwrap_or_else(|| panic!("validate {name}: no finding at {at}: {out}"));
             assert!(hit.contains(code), "validate {name}: expected {code} in: {hit}");
         }
     }
@@ -240,7 +246,16 @@ fn bad_input_gives_one_line_with_position() {
     expect_error_code(d, "two.gml", two.as_bytes(), 1, rline, rcol, "has 2 positions", Some("103 RING_NOT_CLOSED"));
     // two points, closed (3 positions): 101
     let two_closed = format!("{}0 0 0 1 1 1 0 0 0{}", &good[..text_start], &good[text_end..]);
-    expect_error_code(d, "two_closed.gml", two_closed.as_bytes(), 1, rline, rcol, "has 3 positions", Some("101 TOO_FEW_POINTS"));
+    expect_error_code(
+        d,
+        "two_closed.gml",
+        two_closed.as_bytes(),
+        1,
+        rline,
+        rcol,
+        "has 3 positions",
+        Some("101 TOO_FEW_POINTS"),
+    );
 
     // Not a number.
     let nan = format!("{}0 0 zero{}", &good[..text_start], &good[text_end..]);
@@ -271,7 +286,11 @@ fn info_counts_a_referenced_solid_once() {
     let (code, v, stderr) = info_json(&p);
     assert_eq!((v["solids"].as_u64(), v["polygons"].as_u64()), (Some(1), Some(1)), "{v}");
     assert_eq!(code, 1, "the reference to a building is a finding: {stderr}");
-    assert!(stderr.contains(&format!("{}:5:", p.display())) && stderr.contains("xlink:href=\"#a\" points to <bldg:Building>, not a geometry"), "{stderr}");
+    assert!(
+        stderr.contains(&format!("{}:5:", p.display()))
+            && stderr.contains("xlink:href=\"#a\" points to <bldg:Building>, not a geometry"),
+        "{stderr}"
+    );
 }
 
 /// `geofit info --json DIR` (issue 14): one JSON line per file, equal to the one-file report
@@ -314,7 +333,13 @@ fn info_on_a_directory_equals_the_single_file_runs() {
     let text = String::from_utf8(o.stdout).unwrap();
     let (body, last) = text.trim_end().rsplit_once('\n').unwrap();
     assert_eq!(format!("{body}\n"), text_want);
-    assert!(last.starts_with(&format!("summary: {} files: {clean} without findings, {with_findings} with findings, 0 unreadable;", files.len())), "{last}");
+    assert!(
+        last.starts_with(&format!(
+            "summary: {} files: {clean} without findings, {with_findings} with findings, 0 unreadable;",
+            files.len()
+        )),
+        "{last}"
+    );
 }
 
 /// A file that cannot be read among good ones: its own error line (exit 3), the others summarised.
@@ -327,7 +352,8 @@ fn info_reports_a_bad_file_in_its_place() {
     let args = ["-q", "info", "--json", bad.to_str().unwrap(), good.to_str().unwrap()];
     let o = common::run(&args, None);
     assert_eq!(common::code(&o), 3, "{}", String::from_utf8_lossy(&o.stderr));
-    let lines: Vec<Value> = String::from_utf8(o.stdout).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    let lines: Vec<Value> =
+        String::from_utf8(o.stdout).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
     assert_eq!(lines.len(), 3);
     assert_eq!(lines[0]["exit"], 3);
     assert!(lines[0]["error"].as_str().unwrap().contains("bad.gml"), "{}", lines[0]);

@@ -46,7 +46,8 @@ fn every_citygml_fixture_round_trips_through_cityjson() {
         let json = tmp.path().join(format!("{i}.city.json"));
         let back = tmp.path().join(format!("{i}.gml"));
         let report = tmp.path().join(format!("{i}.report.json"));
-        let (f_s, j_s, b_s, r_s) = (f.to_str().unwrap(), json.to_str().unwrap(), back.to_str().unwrap(), report.to_str().unwrap());
+        let (f_s, j_s, b_s, r_s) =
+            (f.to_str().unwrap(), json.to_str().unwrap(), back.to_str().unwrap(), report.to_str().unwrap());
         run_ok(&["-q", "convert", f_s, "-o", j_s, "--report", r_s]);
         run_ok(&["-q", "convert", j_s, "-o", b_s]);
         args.extend([f_s.to_string(), j_s.to_string(), b_s.to_string(), r_s.to_string()]);
@@ -81,7 +82,15 @@ fn the_checker_sees_a_lost_attribute_and_a_moved_vertex() {
     let back = tmp.path().join("b.gml");
     run_ok(&["-q", "convert", json.to_str().unwrap(), "-o", back.to_str().unwrap()]);
     let o = python()
-        .args(["-c", CHECK_ROUNDTRIP, schema_dir().to_str().unwrap(), f.to_str().unwrap(), json.to_str().unwrap(), back.to_str().unwrap(), report.to_str().unwrap()])
+        .args([
+            "-c",
+            CHECK_ROUNDTRIP,
+            schema_dir().to_str().unwrap(),
+            f.to_str().unwrap(),
+            json.to_str().unwrap(),
+            back.to_str().unwrap(),
+            report.to_str().unwrap(),
+        ])
         .output()
         .unwrap();
     let problems = String::from_utf8_lossy(&o.stdout);
@@ -91,7 +100,11 @@ fn the_checker_sees_a_lost_attribute_and_a_moved_vertex() {
 
 fn publisher_files() -> Vec<PathBuf> {
     let dir = repo_root().join("fixtures/cityjson");
-    let mut v: Vec<PathBuf> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().path()).filter(|p| p.to_string_lossy().ends_with(".city.json")).collect();
+    let mut v: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.to_string_lossy().ends_with(".city.json"))
+        .collect();
     v.sort();
     v
 }
@@ -144,7 +157,8 @@ fn publisher_files_read_and_round_trip_through_cjio_unchanged() {
         let info = run_ok(&["info", "--json", fs]);
         let v: serde_json::Value = serde_json::from_slice(&info.stdout).expect("info --json");
         let original: serde_json::Value = serde_json::from_slice(&std::fs::read(f).unwrap()).unwrap();
-        let buildings = original["CityObjects"].as_object().unwrap().values().filter(|o| o["type"] == "Building").count();
+        let buildings =
+            original["CityObjects"].as_object().unwrap().values().filter(|o| o["type"] == "Building").count();
         assert_eq!(v.to_string().matches("\"Building\"").count().min(1), 1, "{fs}: info names buildings: {v}");
         assert!(buildings > 0);
         let gml = tmp.path().join("x.gml");
@@ -156,9 +170,17 @@ fn publisher_files_read_and_round_trip_through_cjio_unchanged() {
         let healed = tmp.path().join("healed.city.json");
         let h = run_ok(&["heal", fs, "-o", healed.to_str().unwrap()]);
         let summary = String::from_utf8_lossy(&h.stderr);
-        let moved: f64 = summary.split("largest move ").nth(1).and_then(|r| r.split(' ').next()).and_then(|v| v.parse().ok()).expect("heal names its largest move");
+        let moved: f64 = summary
+            .split("largest move ")
+            .nth(1)
+            .and_then(|r| r.split(' ').next())
+            .and_then(|v| v.parse().ok())
+            .expect("heal names its largest move");
         assert!(moved <= 0.05, "{fs}: heal moved a vertex {moved} m");
-        assert!(std::fs::read(&healed).unwrap().starts_with(b"{\"type\":\"CityJSON\""), "{fs}: heal wrote CityJSON back");
+        assert!(
+            std::fs::read(&healed).unwrap().starts_with(b"{\"type\":\"CityJSON\""),
+            "{fs}: heal wrote CityJSON back"
+        );
         if cjio {
             for (out, mode) in [(&back, None), (&healed, Some("no-coords"))] {
                 let mut a = vec!["-c", CJIO_DIGEST, fs, out.to_str().unwrap()];
@@ -178,7 +200,8 @@ fn validate_findings_on_cityjson_equal_those_on_citygml() {
     let tmp = tempdir();
     let codes = |p: &Path| -> Vec<(String, String)> {
         let o = geofit().args(["validate", "--json", "--no-xsd", p.to_str().unwrap()]).output().unwrap();
-        let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap_or_else(|_| panic!("{}: {}", p.display(), String::from_utf8_lossy(&o.stderr)));
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout)
+            .unwrap_or_else(|_| panic!("{}: {}", p.display(), String::from_utf8_lossy(&o.stderr)));
         let mut c: Vec<(String, String)> = v["geometry"]["findings"]
             .as_array()
             .into_iter()
@@ -187,7 +210,12 @@ fn validate_findings_on_cityjson_equal_those_on_citygml() {
             // 103 (ring not closed): CityJSON rings are closed implicitly, so the defect has no
             // CityJSON form (docs/decisions.md#cityjson-semantics-as-boundary-surfaces).
             .filter(|f| f["code"].to_string().trim_matches('"') != "103")
-            .map(|f| (f["code"].to_string(), f["feature"].as_str().filter(|id| !id.starts_with("geofit-")).unwrap_or("").to_string()))
+            .map(|f| {
+                (
+                    f["code"].to_string(),
+                    f["feature"].as_str().filter(|id| !id.starts_with("geofit-")).unwrap_or("").to_string(),
+                )
+            })
             .collect();
         c.sort();
         c
@@ -229,10 +257,18 @@ fn peak_rss_kib(args: &[&str]) -> Option<(u64, Vec<u8>)> {
         assert!(!in_ci(), "/usr/bin/time missing in CI");
         return None;
     }
-    let o = std::process::Command::new("/usr/bin/time").arg("-v").arg(env!("CARGO_BIN_EXE_geofit")).args(args).output().unwrap();
+    let o = std::process::Command::new("/usr/bin/time")
+        .arg("-v")
+        .arg(env!("CARGO_BIN_EXE_geofit"))
+        .args(args)
+        .output()
+        .unwrap();
     assert!(o.status.code().is_some_and(|c| c <= 1), "geofit {args:?}: {}", String::from_utf8_lossy(&o.stderr));
     let err = String::from_utf8_lossy(&o.stderr);
-    let rss = err.lines().find_map(|l| l.trim().strip_prefix("Maximum resident set size (kbytes): ")).and_then(|v| v.parse().ok())?;
+    let rss = err
+        .lines()
+        .find_map(|l| l.trim().strip_prefix("Maximum resident set size (kbytes): "))
+        .and_then(|v| v.parse().ok())?;
     Some((rss, o.stdout))
 }
 
@@ -268,12 +304,22 @@ fn a_cityjsonseq_of_100000_features_streams_in_bounded_memory() {
     let Some((info_small, _)) = peak_rss_kib(&["info", "--json", small.to_str().unwrap()]) else { return };
     let Some((info_big, out)) = peak_rss_kib(&["info", "--json", big.to_str().unwrap()]) else { return };
     let v: serde_json::Value = serde_json::from_slice(&out).unwrap();
-    assert!(v.to_string().contains("100000"), "info counts 100000 buildings: {}", &v.to_string()[..v.to_string().len().min(600)]);
+    assert!(
+        v.to_string().contains("100000"),
+        "info counts 100000 buildings: {}",
+        &v.to_string()[..v.to_string().len().min(600)]
+    );
     let Some((validate_big, out)) = peak_rss_kib(&["validate", "--no-xsd", big.to_str().unwrap()]) else { return };
     assert!(String::from_utf8_lossy(&out).contains("VALID"), "validate reports on the 10^5 buildings");
     eprintln!("peak RSS: info {info_small} KiB for 10^4 features, {info_big} KiB for 10^5; validate {validate_big} KiB for 10^5 ({size} KiB of CityJSONSeq)");
     // Ten times the features may not take anywhere near ten times the memory.
-    assert!(info_big < info_small * 2 + 20_000, "info: peak RSS grows with the file: {info_small} KiB → {info_big} KiB");
-    assert!(info_big < size && validate_big < size, "peak RSS ({info_big}, {validate_big} KiB) is not below the file size {size} KiB");
+    assert!(
+        info_big < info_small * 2 + 20_000,
+        "info: peak RSS grows with the file: {info_small} KiB → {info_big} KiB"
+    );
+    assert!(
+        info_big < size && validate_big < size,
+        "peak RSS ({info_big}, {validate_big} KiB) is not below the file size {size} KiB"
+    );
     assert!(validate_big < info_small * 3 + 40_000, "validate: peak RSS {validate_big} KiB grows with the file");
 }

@@ -30,7 +30,10 @@ fn every_subcommand_has_a_summary_in_the_top_level_help() {
                 assert_eq!(common::code(&sub), 0, "{name} --help");
                 let first = String::from_utf8_lossy(&sub.stdout).lines().next().unwrap_or("").to_string();
                 let head: String = summary.chars().take(30).collect();
-                assert!(first.starts_with(&head), "`geofit {name} --help` starts with '{first}', the list says '{summary}'");
+                assert!(
+                    first.starts_with(&head),
+                    "`geofit {name} --help` starts with '{first}', the list says '{summary}'"
+                );
             }
         }
     }
@@ -74,7 +77,11 @@ fn a_full_or_closed_stderr_does_not_stop_the_work() {
     let dir = common::tempdir();
     let d = dir.path();
     let p = |n: &str| d.join(n).to_str().unwrap().to_string();
-    std::fs::write(d.join("r.asc"), "ncols 3\nnrows 3\nxllcorner 0\nyllcorner 0\ncellsize 1\nNODATA_value -9999\n1 2 3\n4 5 6\n7 8 10\n").unwrap();
+    std::fs::write(
+        d.join("r.asc"),
+        "ncols 3\nnrows 3\nxllcorner 0\nyllcorner 0\ncellsize 1\nNODATA_value -9999\n1 2 3\n4 5 6\n7 8 10\n",
+    )
+    .unwrap();
     std::fs::write(d.join("p.xyz"), "0 0 1\n4 0 2\n0 4 3\n4 4 5\n2 2 2\n").unwrap();
     let gml = common::repo_root().join("fixtures/citygml/three_storey.gml");
     let model = common::run(&["citygml2popa3d", "-q", gml.to_str().unwrap()], None);
@@ -82,10 +89,40 @@ fn a_full_or_closed_stderr_does_not_stop_the_work() {
     for full in [true, false] {
         let tag = if full { "full" } else { "pipe" };
         let cases: Vec<(Vec<String>, Option<&[u8]>, String)> = vec![
-            (vec!["fit".into(), p("r.asc"), "--max-error".into(), "0.01".into(), "-o".into(), p(&format!("fit-{tag}.tmesh"))], None, p(&format!("fit-{tag}.tmesh"))),
-            (vec!["rasterize".into(), p("p.xyz"), "--cell".into(), "1".into(), "-o".into(), p(&format!("r-{tag}.tif"))], None, p(&format!("r-{tag}.tif"))),
-            (vec!["heal".into(), gml.to_str().unwrap().into(), "-o".into(), p(&format!("h-{tag}.gml"))], None, p(&format!("h-{tag}.gml"))),
-            (vec!["adjust".into(), "-".into(), "-o".into(), p(&format!("a-{tag}.popa3d"))], Some(&model.stdout[..]), p(&format!("a-{tag}.popa3d"))),
+            (
+                vec![
+                    "fit".into(),
+                    p("r.asc"),
+                    "--max-error".into(),
+                    "0.01".into(),
+                    "-o".into(),
+                    p(&format!("fit-{tag}.tmesh")),
+                ],
+                None,
+                p(&format!("fit-{tag}.tmesh")),
+            ),
+            (
+                vec![
+                    "rasterize".into(),
+                    p("p.xyz"),
+                    "--cell".into(),
+                    "1".into(),
+                    "-o".into(),
+                    p(&format!("r-{tag}.tif")),
+                ],
+                None,
+                p(&format!("r-{tag}.tif")),
+            ),
+            (
+                vec!["heal".into(), gml.to_str().unwrap().into(), "-o".into(), p(&format!("h-{tag}.gml"))],
+                None,
+                p(&format!("h-{tag}.gml")),
+            ),
+            (
+                vec!["adjust".into(), "-".into(), "-o".into(), p(&format!("a-{tag}.popa3d"))],
+                Some(&model.stdout[..]),
+                p(&format!("a-{tag}.popa3d")),
+            ),
         ];
         for (args, stdin, out) in cases {
             let a: Vec<&str> = args.iter().map(String::as_str).collect();
@@ -106,7 +143,12 @@ fn the_cli_has_no_eprintln() {
     for f in files {
         let text = std::fs::read_to_string(&f).unwrap();
         for (i, line) in text.lines().enumerate() {
-            assert!(!line.contains("eprintln!(") && !line.contains("eprint!("), "{}:{}: use crate::say! (stderr errors ignored)", f.display(), i + 1);
+            assert!(
+                !line.contains("eprintln!(") && !line.contains("eprint!("),
+                "{}:{}: use crate::say! (stderr errors ignored)",
+                f.display(),
+                i + 1
+            );
         }
     }
 }
@@ -129,9 +171,15 @@ fn closed_stdout_is_a_write_failure_and_empty_input_is_named() {
         assert!(e.contains("stdout is closed"), "{e}");
     }
     // stdout on /dev/null is not closed: still a success
-    let o = std::process::Command::new(bin).args(["info", gml.to_str().unwrap()]).stdout(std::process::Stdio::null()).output().unwrap();
+    let o = std::process::Command::new(bin)
+        .args(["info", gml.to_str().unwrap()])
+        .stdout(std::process::Stdio::null())
+        .output()
+        .unwrap();
     assert_eq!(o.status.code(), Some(0));
-    for (input, says) in [(&b""[..], "<stdin>: no input (the previous stage wrote nothing)"), (b"\n  \n", "<stdin>: the input is empty")] {
+    for (input, says) in
+        [(&b""[..], "<stdin>: no input (the previous stage wrote nothing)"), (b"\n  \n", "<stdin>: the input is empty")]
+    {
         let o = common::run(&["info", "-"], Some(input));
         let e = String::from_utf8_lossy(&o.stderr);
         assert_eq!(common::code(&o), 3, "{e}");
@@ -231,7 +279,20 @@ fn help_texts_cite_no_spec_sections_or_decision_numbers() {
     let top = common::run(&["--help"], None);
     let top = String::from_utf8_lossy(&top.stdout).to_string();
     let commands = common::subcommands();
-    let subs = ["interpolate", "update", "iso", "section", "csg", "run", "plan", "extract", "tileset", "report", "stitch", "seams"];
+    let subs = [
+        "interpolate",
+        "update",
+        "iso",
+        "section",
+        "csg",
+        "run",
+        "plan",
+        "extract",
+        "tileset",
+        "report",
+        "stitch",
+        "seams",
+    ];
     let mut texts = vec![("geofit".to_string(), top.clone())];
     for c in &commands {
         for sub in std::iter::once(None).chain(subs.iter().map(Some)) {
@@ -247,11 +308,18 @@ fn help_texts_cite_no_spec_sections_or_decision_numbers() {
     assert!(texts.len() > 25, "help texts read: {}", texts.len());
     let decision = |w: &str| {
         let w = w.trim_matches(|c: char| !c.is_ascii_alphanumeric());
-        w.len() >= 2 && w.len() <= 3 && (w.starts_with('A') || w.starts_with('T')) && w[1..].chars().all(|c| c.is_ascii_digit())
+        w.len() >= 2
+            && w.len() <= 3
+            && (w.starts_with('A') || w.starts_with('T'))
+            && w[1..].chars().all(|c| c.is_ascii_digit())
     };
     for (cmd, text) in &texts {
         for line in text.lines() {
-            let bad = line.contains('§') || line.contains("the spec") || line.contains("Table B") || line.contains(" eq. ") || line.split_whitespace().any(decision);
+            let bad = line.contains('§')
+                || line.contains("the spec")
+                || line.contains("Table B")
+                || line.contains(" eq. ")
+                || line.split_whitespace().any(decision);
             assert!(!bad, "`geofit {cmd} --help` cites a research document: {line}");
         }
     }
@@ -280,7 +348,9 @@ fn the_cli_is_small_files_that_do_not_import_each_other() {
         let own = rel.components().next().unwrap().as_os_str().to_string_lossy().trim_end_matches(".rs").to_string();
         for (i, line) in text.lines().enumerate() {
             for other in subcommands.iter().filter(|s| **s != own) {
-                let imports = line.contains(&format!("cmd::{other}::")) || line.contains(&format!("cmd::{other};")) || line.contains(&format!("super::{other}::"));
+                let imports = line.contains(&format!("cmd::{other}::"))
+                    || line.contains(&format!("cmd::{other};"))
+                    || line.contains(&format!("super::{other}::"));
                 assert!(!imports, "{}:{}: subcommand `{own}` uses subcommand `{other}`; move the shared part to a library or the CLI's utility modules", f.display(), i + 1);
             }
         }
@@ -299,7 +369,8 @@ fn every_library_crate_opens_with_a_runnable_example() {
         let lib = e.unwrap().path().join("src/lib.rs");
         let Ok(text) = std::fs::read_to_string(&lib) else { continue };
         seen += 1;
-        let docs: Vec<&str> = text.lines().filter(|l| l.starts_with("//!")).map(|l| l.trim_start_matches("//!").trim()).collect();
+        let docs: Vec<&str> =
+            text.lines().filter(|l| l.starts_with("//!")).map(|l| l.trim_start_matches("//!").trim()).collect();
         let runnable = docs.iter().any(|l| *l == "```" || *l == "```rust" || *l == "```no_run");
         if !(docs.contains(&"# Examples") && runnable) {
             missing.push(lib.display().to_string());

@@ -92,7 +92,13 @@ fn laz_item_size_of_one_is_refused() {
     let bad = d.path().join("item.laz");
     std::fs::write(&bad, &b).unwrap();
     let out = d.path().join("out.tif");
-    refused(&["-q", "rasterize", s(&bad), "--cell", "1", "-o", s(&out)], 3, &["item.laz", "POINT10", "size of 1"], &out, &bad);
+    refused(
+        &["-q", "rasterize", s(&bad), "--cell", "1", "-o", s(&out)],
+        3,
+        &["item.laz", "POINT10", "size of 1"],
+        &out,
+        &bad,
+    );
     let out = d.path().join("out.obj");
     refused(&["-q", "implicit", s(&bad), "-o", s(&out)], 3, &["item.laz", "POINT10"], &out, &bad);
 }
@@ -119,7 +125,14 @@ fn laz_layer_sizes_beyond_the_file_are_refused_within_a_memory_limit() {
     // 1.5 GB of address space: the 9 × 4 GB the layers claim cannot be allocated
     let mut cmd = Command::new("bash");
     cmd.arg("-c").arg("ulimit -v 1500000 && exec \"$0\" \"$@\"").arg(env!("CARGO_BIN_EXE_geofit"));
-    refused_cmd(cmd, &["-q", "rasterize", s(&bad), "--cell", "1", "-o", s(&out)], 3, &["layers.laz", "LAZ chunk 0", "claims layers of"], &out, &bad);
+    refused_cmd(
+        cmd,
+        &["-q", "rasterize", s(&bad), "--cell", "1", "-o", s(&out)],
+        3,
+        &["layers.laz", "LAZ chunk 0", "claims layers of"],
+        &out,
+        &bad,
+    );
     // the unmutated file reads under the same limit
     let good = d.path().join("good.laz");
     std::fs::copy(&seed, &good).unwrap();
@@ -156,13 +169,21 @@ fn gfim_with_a_nan_or_huge_value_weight_is_refused() {
     let good = std::fs::read(&model).unwrap();
     let at = 16 + 4 + 24 + 8; // magic, version, origin, cell: then ϖ_value
     assert_eq!(f64::from_le_bytes(good[at..at + 8].try_into().unwrap()), 1.0, "the default value weight");
-    for (v, says) in [(f64::NAN, "value weight NaN"), (1e300, "value weight 1e300"), (f64::INFINITY, "value weight inf")] {
+    for (v, says) in
+        [(f64::NAN, "value weight NaN"), (1e300, "value weight 1e300"), (f64::INFINITY, "value weight inf")]
+    {
         let mut b = good.clone();
         b[at..at + 8].copy_from_slice(&v.to_le_bytes());
         let bad = d.path().join("bad.gfim");
         std::fs::write(&bad, &b).unwrap();
         let out = d.path().join("out.gfim");
-        refused(&["-q", "implicit", "update", s(&bad), "--move", "0,0,0,0.5", "-o", s(&out)], 3, &["bad.gfim", says], &out, &bad);
+        refused(
+            &["-q", "implicit", "update", s(&bad), "--move", "0,0,0,0.5", "-o", s(&out)],
+            3,
+            &["bad.gfim", says],
+            &out,
+            &bad,
+        );
     }
     // the CG iteration cap of a model is bounded too
     let mut b = good.clone();
@@ -170,7 +191,13 @@ fn gfim_with_a_nan_or_huge_value_weight_is_refused() {
     let bad = d.path().join("cap.gfim");
     std::fs::write(&bad, &b).unwrap();
     let out = d.path().join("out.gfim");
-    refused(&["-q", "implicit", "update", s(&bad), "--move", "0,0,0,0.5", "-o", s(&out)], 3, &["cap.gfim", "iteration cap"], &out, &bad);
+    refused(
+        &["-q", "implicit", "update", s(&bad), "--move", "0,0,0,0.5", "-o", s(&out)],
+        3,
+        &["cap.gfim", "iteration cap"],
+        &out,
+        &bad,
+    );
 }
 
 #[test]
@@ -179,7 +206,13 @@ fn huge_weights_on_the_command_line_are_usage_errors() {
     let (pts, _) = small_model(d.path());
     let out = d.path().join("out.gfim");
     for (opt, v) in [("--w-value", "1e300"), ("--w-normal", "1e308"), ("--w-rough", "1e11")] {
-        refused(&["-q", "implicit", "interpolate", s(&pts), opt, v, "-o", s(&out)], 2, &[opt, "largest weight"], &out, &pts);
+        refused(
+            &["-q", "implicit", "interpolate", s(&pts), opt, v, "-o", s(&out)],
+            2,
+            &[opt, "largest weight"],
+            &out,
+            &pts,
+        );
     }
 }
 
@@ -230,7 +263,11 @@ fn tile_plan_refuses_misplaced_vertices_naming_the_building() {
         ("null.gml", "0 0 0", vec!["null.gml", "building B_odd", "0 0 0"]),
     ] {
         let gml = d.path().join(file);
-        let text = city(&(building("B_a", x, y, None) + &building("B_odd", x + 20.0, y, Some(odd)) + &building("B_b", x + 40.0, y, None)));
+        let text = city(
+            &(building("B_a", x, y, None)
+                + &building("B_odd", x + 20.0, y, Some(odd))
+                + &building("B_b", x + 40.0, y, None)),
+        );
         std::fs::write(&gml, text).unwrap();
         let out = d.path().join("plan.jsonl");
         for size in [vec![], vec!["--tile-size", "1"]] {
@@ -247,7 +284,11 @@ fn tile_plan_over_a_huge_extent_does_not_walk_empty_cells() {
     let d = common::tempdir();
     // two buildings 4000 km apart, 1 m tiles: 4·10¹² empty cells between them
     let gml = d.path().join("far_apart.gml");
-    std::fs::write(&gml, city(&(building("B_w", 100_000.0, 1_000_000.0, None) + &building("B_e", 4_100_000.0, 1_000_000.0, None)))).unwrap();
+    std::fs::write(
+        &gml,
+        city(&(building("B_w", 100_000.0, 1_000_000.0, None) + &building("B_e", 4_100_000.0, 1_000_000.0, None))),
+    )
+    .unwrap();
     let out = d.path().join("plan.jsonl");
     let mut cmd = common::geofit();
     cmd.args(["-q", "tile", "plan", "--tile-size", "1", s(&gml), "-o", s(&out)]);

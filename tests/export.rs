@@ -220,7 +220,10 @@ fn nrw_largest_tile_against_truth() {
     let (tris, area, _) = tobj_stats(&kept);
     let newell = t["area"].as_f64().unwrap();
     assert_eq!(tris as u64, t["triangles"].as_u64().unwrap());
-    assert!(area >= newell * (1.0 - 1e-9) && area < newell * (1.0 + 1e-5), "kept-vertex area {area} vs Newell {newell}");
+    assert!(
+        area >= newell * (1.0 - 1e-9) && area < newell * (1.0 + 1e-5),
+        "kept-vertex area {area} vs Newell {newell}"
+    );
     if let Some(mut py) = freecad_python() {
         py.arg(script("export_freecad.py")).arg(&obj);
         let fc = json_of(py, "export_freecad.py");
@@ -303,13 +306,15 @@ fn reprojection_with_proj_adds_the_zone_prefix() {
     let Some(gml) = common::fixture(NRW_SMALL) else { return };
     let g = gml.to_str().unwrap();
     let plain = String::from_utf8(export(&["export", g, "--format", "obj", "--origin", "none"]).stdout).unwrap();
-    let moved = String::from_utf8(
-        export(&["export", g, "--format", "obj", "--origin", "none", "--t-srs", "EPSG:4647"]).stdout,
-    )
-    .unwrap();
+    let moved =
+        String::from_utf8(export(&["export", g, "--format", "obj", "--origin", "none", "--t-srs", "EPSG:4647"]).stdout)
+            .unwrap();
     assert!(moved.contains("# crs: EPSG:4647"));
     let verts = |s: &str| -> Vec<Vec<f64>> {
-        s.lines().filter(|l| l.starts_with("v ")).map(|l| l[2..].split_whitespace().map(|t| t.parse().unwrap()).collect()).collect()
+        s.lines()
+            .filter(|l| l.starts_with("v "))
+            .map(|l| l[2..].split_whitespace().map(|t| t.parse().unwrap()).collect())
+            .collect()
     };
     let (a, b) = (verts(&plain), verts(&moved));
     assert_eq!(a.len(), b.len());
@@ -401,7 +406,10 @@ fn every_fixture_exports_to_a_valid_glb() {
         if expected == 1 {
             assert!(err.contains("skipped: exterior ring has 2 distinct points"), "{err}");
             assert!(!out.exists(), "{}: a mesh written with exit 1", f.display());
-            let o = common::run(&["export", "-q", "--keep-partial", f.to_str().unwrap(), "-o", out.to_str().unwrap()], None);
+            let o = common::run(
+                &["export", "-q", "--keep-partial", f.to_str().unwrap(), "-o", out.to_str().unwrap()],
+                None,
+            );
             assert_eq!(common::code(&o), 1);
         }
         if validate {

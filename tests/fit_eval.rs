@@ -43,7 +43,18 @@ fn fit_and_check(fixture: &str, e: &str, degree: &str, dir: &Path) -> serde_json
     let mesh = dir.join(format!("fit{degree}.tmesh"));
     let report = dir.join(format!("fit{degree}.json"));
     let out = common::run(
-        &["fit", input.to_str().unwrap(), "-o", mesh.to_str().unwrap(), "--max-error", e, "--degree", degree, "--report", report.to_str().unwrap()],
+        &[
+            "fit",
+            input.to_str().unwrap(),
+            "-o",
+            mesh.to_str().unwrap(),
+            "--max-error",
+            e,
+            "--degree",
+            degree,
+            "--report",
+            report.to_str().unwrap(),
+        ],
         None,
     );
     let stderr = String::from_utf8_lossy(&out.stderr).to_string();
@@ -54,7 +65,10 @@ fn fit_and_check(fixture: &str, e: &str, degree: &str, dir: &Path) -> serde_json
     assert!(o2.status.success(), "{}", String::from_utf8_lossy(&o2.stderr));
     if out.status.code() == Some(0) {
         assert_eq!(rep["stop"]["reason"], "tolerance_reached");
-        let chk = Command::new("python3").args([&script("tspline_maxerror.py"), input.to_str().unwrap(), eval.to_str().unwrap(), e]).output().unwrap();
+        let chk = Command::new("python3")
+            .args([&script("tspline_maxerror.py"), input.to_str().unwrap(), eval.to_str().unwrap(), e])
+            .output()
+            .unwrap();
         assert!(
             chk.status.success(),
             "{fixture} degree {degree}: independent check failed: {}{}",
@@ -84,7 +98,10 @@ fn max_error_honoured_on_tut_bathy() {
         return;
     }
     let r3 = fit_and_check("terrain/gmt_tut_bathy.nc", "10", "3", dir.path());
-    eprintln!("tut_bathy E=10: degree 1 {} control points, degree 3 {} ({})", r1["control_points"], r3["control_points"], r3["stop"]);
+    eprintln!(
+        "tut_bathy E=10: degree 1 {} control points, degree 3 {} ({})",
+        r1["control_points"], r3["control_points"], r3["stop"]
+    );
 }
 
 #[test]
@@ -109,7 +126,22 @@ fn fit_is_deterministic_and_device_independent() {
     let mut files = Vec::new();
     for (i, dev) in ["cpu", "cpu", "opencl"].iter().enumerate() {
         let out = dir.path().join(format!("g{i}.tmesh"));
-        let o = common::run(&["-q", "fit", input.to_str().unwrap(), "-o", out.to_str().unwrap(), "--max-error", "50", "--degree", "3", "--device", dev], None);
+        let o = common::run(
+            &[
+                "-q",
+                "fit",
+                input.to_str().unwrap(),
+                "-o",
+                out.to_str().unwrap(),
+                "--max-error",
+                "50",
+                "--degree",
+                "3",
+                "--device",
+                dev,
+            ],
+            None,
+        );
         assert!(o.status.code() == Some(0) || o.status.code() == Some(1), "{}", String::from_utf8_lossy(&o.stderr));
         files.push(std::fs::read(&out).unwrap());
     }
@@ -126,15 +158,37 @@ fn eval_device_opencl_matches_cpu() {
     let Some(input) = common::fixture("terrain/gmt_guinea_bay.nc") else { return };
     let dir = tempfile::tempdir().unwrap();
     let mesh = dir.path().join("m.tmesh");
-    let o = common::run(&["-q", "fit", input.to_str().unwrap(), "-o", mesh.to_str().unwrap(), "--max-error", "100", "--degree", "3", "--device", "cpu"], None);
+    let o = common::run(
+        &[
+            "-q",
+            "fit",
+            input.to_str().unwrap(),
+            "-o",
+            mesh.to_str().unwrap(),
+            "--max-error",
+            "100",
+            "--degree",
+            "3",
+            "--device",
+            "cpu",
+        ],
+        None,
+    );
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let mut outs = Vec::new();
     for dev in ["cpu", "opencl"] {
         let p = dir.path().join(format!("e-{dev}.asc"));
-        let o = common::run(&["eval", mesh.to_str().unwrap(), "-o", p.to_str().unwrap(), "--device", dev, "--no-mask"], None);
+        let o = common::run(
+            &["eval", mesh.to_str().unwrap(), "-o", p.to_str().unwrap(), "--device", dev, "--no-mask"],
+            None,
+        );
         assert!(o.status.success(), "--device {dev}: {}", String::from_utf8_lossy(&o.stderr));
         let text = std::fs::read_to_string(&p).unwrap();
-        let vals: Vec<f64> = text.lines().skip(6).flat_map(|l| l.split_whitespace().map(|v| v.parse::<f64>().unwrap()).collect::<Vec<_>>()).collect();
+        let vals: Vec<f64> = text
+            .lines()
+            .skip(6)
+            .flat_map(|l| l.split_whitespace().map(|v| v.parse::<f64>().unwrap()).collect::<Vec<_>>())
+            .collect();
         outs.push(vals);
     }
     assert_eq!(outs[0].len(), outs[1].len());
@@ -148,7 +202,8 @@ fn bad_inputs_get_clear_messages() {
     let dir = tempfile::tempdir().unwrap();
     // --max-error must be positive
     let asc = dir.path().join("r.asc");
-    std::fs::write(&asc, "ncols 3\nnrows 2\nxllcorner 0\nyllcorner 0\ncellsize 1\nNODATA_value -9999\n1 2 3\n4 5 6\n").unwrap();
+    std::fs::write(&asc, "ncols 3\nnrows 2\nxllcorner 0\nyllcorner 0\ncellsize 1\nNODATA_value -9999\n1 2 3\n4 5 6\n")
+        .unwrap();
     let o = common::run(&["fit", asc.to_str().unwrap(), "--max-error", "0"], None);
     assert_eq!(o.status.code(), Some(2), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(String::from_utf8_lossy(&o.stderr).contains("--max-error"));
@@ -174,7 +229,11 @@ fn bad_inputs_get_clear_messages() {
     }
     // all nodata
     let nod = dir.path().join("n.asc");
-    std::fs::write(&nod, "ncols 2\nnrows 2\nxllcorner 0\nyllcorner 0\ncellsize 1\nNODATA_value -9999\n-9999 -9999\n-9999 -9999\n").unwrap();
+    std::fs::write(
+        &nod,
+        "ncols 2\nnrows 2\nxllcorner 0\nyllcorner 0\ncellsize 1\nNODATA_value -9999\n-9999 -9999\n-9999 -9999\n",
+    )
+    .unwrap();
     let o = common::run(&["fit", nod.to_str().unwrap(), "--max-error", "1"], None);
     assert_eq!(o.status.code(), Some(1), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(String::from_utf8_lossy(&o.stderr).contains("no valid cell"));
@@ -186,12 +245,18 @@ fn bad_inputs_get_clear_messages() {
     assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
     // control-point cap reached first: exit 1, error reached reported
     let Some(k) = common::fixture("terrain/gmt_guinea_bay.nc") else { return };
-    let o = common::run(&["-q", "fit", k.to_str().unwrap(), "--max-error", "1", "--max-points", "100", "-o", m.to_str().unwrap()], None);
+    let o = common::run(
+        &["-q", "fit", k.to_str().unwrap(), "--max-error", "1", "--max-points", "100", "-o", m.to_str().unwrap()],
+        None,
+    );
     assert_eq!(o.status.code(), Some(1));
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("control-point cap 100") && err.contains("max error"), "{err}");
     // integer data below its precision: a warning
-    let o = common::run(&["fit", k.to_str().unwrap(), "--max-error", "0.1", "--max-points", "50", "-o", m.to_str().unwrap()], None);
+    let o = common::run(
+        &["fit", k.to_str().unwrap(), "--max-error", "0.1", "--max-points", "50", "-o", m.to_str().unwrap()],
+        None,
+    );
     assert!(String::from_utf8_lossy(&o.stderr).contains("precision"));
     // corrupt T-mesh
     let bad = dir.path().join("bad.tmesh");
@@ -238,12 +303,18 @@ fn fitted_tmesh_validates_against_the_schema() {
     }
     let dir = tempfile::tempdir().unwrap();
     let m = dir.path().join("k.tmesh");
-    let o = common::run(&["-q", "fit", input.to_str().unwrap(), "--max-error", "100", "--degree", "3", "-o", m.to_str().unwrap()], None);
+    let o = common::run(
+        &["-q", "fit", input.to_str().unwrap(), "--max-error", "100", "--degree", "3", "-o", m.to_str().unwrap()],
+        None,
+    );
     assert!(o.status.code() == Some(0), "{}", String::from_utf8_lossy(&o.stderr));
     let text = std::fs::read_to_string(&m).unwrap();
     assert!(text.contains("<mask ") && text.contains("<crs>"));
     let xsd = common::repo_root().join("xsd/tmesh.xsd");
-    let v = Command::new("xmllint").args(["--noout", "--schema", xsd.to_str().unwrap(), m.to_str().unwrap()]).output().unwrap();
+    let v = Command::new("xmllint")
+        .args(["--noout", "--schema", xsd.to_str().unwrap(), m.to_str().unwrap()])
+        .output()
+        .unwrap();
     assert!(v.status.success(), "{}", String::from_utf8_lossy(&v.stderr));
 }
 
@@ -255,7 +326,10 @@ fn info_reads_tmesh_and_point_files() {
     let Some(input) = common::fixture("terrain/gmt_guinea_bay.nc") else { return };
     let dir = tempfile::tempdir().unwrap();
     let m = dir.path().join("g.tmesh");
-    let o = common::run(&["-q", "fit", input.to_str().unwrap(), "--max-error", "100", "--degree", "3", "-o", m.to_str().unwrap()], None);
+    let o = common::run(
+        &["-q", "fit", input.to_str().unwrap(), "--max-error", "100", "--degree", "3", "-o", m.to_str().unwrap()],
+        None,
+    );
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let text = std::fs::read_to_string(&m).unwrap();
     let block = |tag: &str| -> usize {
@@ -280,7 +354,10 @@ fn info_reads_tmesh_and_point_files() {
     }
     let Some(ship) = common::fixture("terrain/gmt_ship_03.txt") else { return };
     let lines = std::fs::read_to_string(&ship).unwrap();
-    let data = lines.lines().filter(|l| l.split_whitespace().count() >= 3 && l.split_whitespace().all(|t| t.parse::<f64>().is_ok())).count();
+    let data = lines
+        .lines()
+        .filter(|l| l.split_whitespace().count() >= 3 && l.split_whitespace().all(|t| t.parse::<f64>().is_ok()))
+        .count();
     let o = common::run(&["info", "--json", ship.to_str().unwrap()], None);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
@@ -297,7 +374,10 @@ fn surface_export_validates() {
     let o = common::run(&["-q", "fit", input.to_str().unwrap(), "--max-error", "100", "-o", m.to_str().unwrap()], None);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let glb = dir.path().join("g.glb");
-    let o = common::run(&["surface", m.to_str().unwrap(), "-o", glb.to_str().unwrap(), "--reference", input.to_str().unwrap()], None);
+    let o = common::run(
+        &["surface", m.to_str().unwrap(), "-o", glb.to_str().unwrap(), "--reference", input.to_str().unwrap()],
+        None,
+    );
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let obj = dir.path().join("g.obj");
     let o = common::run(&["surface", m.to_str().unwrap(), "-o", obj.to_str().unwrap(), "--step", "1"], None);
@@ -308,7 +388,12 @@ fn surface_export_validates() {
     assert!(dir.path().join("g.mtl").exists());
     // MeshLab's importers read both files with the same triangle count (its glTF importer makes
     // a second mesh of the T-mesh line node: only the first, the surface, has triangles to count).
-    if python_ok() && std::process::Command::new("python3").args(["-c", "import pymeshlab"]).output().is_ok_and(|o| o.status.success()) {
+    if python_ok()
+        && std::process::Command::new("python3")
+            .args(["-c", "import pymeshlab"])
+            .output()
+            .is_ok_and(|o| o.status.success())
+    {
         let glb1 = dir.path().join("g1.glb");
         let o = common::run(&["surface", m.to_str().unwrap(), "-o", glb1.to_str().unwrap(), "--step", "1"], None);
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
@@ -322,19 +407,26 @@ fn surface_export_validates() {
     // `geofit export MESH` (the issue's spelling) is the same tessellation, byte for byte; the
     // options of the other input kind are usage errors, not silently ignored.
     let eglb = dir.path().join("e.glb");
-    let o = common::run(&["export", m.to_str().unwrap(), "-o", eglb.to_str().unwrap(), "--reference", input.to_str().unwrap()], None);
+    let o = common::run(
+        &["export", m.to_str().unwrap(), "-o", eglb.to_str().unwrap(), "--reference", input.to_str().unwrap()],
+        None,
+    );
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert_eq!(std::fs::read(&eglb).unwrap(), std::fs::read(&glb).unwrap(), "export MESH differs from surface MESH");
     let o = common::run(&["export", m.to_str().unwrap(), "-o", eglb.to_str().unwrap(), "--lod", "2"], None);
     assert_eq!(o.status.code(), Some(2));
     for range in [["5", "1"], ["1", "inf"]] {
-        let o = common::run(&["surface", m.to_str().unwrap(), "-o", eglb.to_str().unwrap(), "--height-range", range[0], range[1]], None);
+        let o = common::run(
+            &["surface", m.to_str().unwrap(), "-o", eglb.to_str().unwrap(), "--height-range", range[0], range[1]],
+            None,
+        );
         assert_eq!(o.status.code(), Some(2), "--height-range {range:?}");
         assert!(String::from_utf8_lossy(&o.stderr).contains("--height-range needs MIN < MAX"));
     }
     assert!(String::from_utf8_lossy(&o.stderr).contains("--lod applies to CityGML input only"));
     if common::tool("node") {
-        let v = Command::new("node").args([script("gltf_validator.js").as_str(), glb.to_str().unwrap()]).output().unwrap();
+        let v =
+            Command::new("node").args([script("gltf_validator.js").as_str(), glb.to_str().unwrap()]).output().unwrap();
         let rep = String::from_utf8_lossy(&v.stdout);
         assert!(v.status.success() && rep.contains("\"numErrors\": 0"), "{rep}{}", String::from_utf8_lossy(&v.stderr));
     }
@@ -367,7 +459,21 @@ fn indirect_fit_round_trips_to_the_original_grid() {
     }
     std::fs::write(&asc, text).unwrap();
     let m = dir.path().join("i.tmesh");
-    let o = common::run(&["-q", "fit", asc.to_str().unwrap(), "--indirect", "--max-error", "0.5", "--degree", "1", "-o", m.to_str().unwrap()], None);
+    let o = common::run(
+        &[
+            "-q",
+            "fit",
+            asc.to_str().unwrap(),
+            "--indirect",
+            "--max-error",
+            "0.5",
+            "--degree",
+            "1",
+            "-o",
+            m.to_str().unwrap(),
+        ],
+        None,
+    );
     assert!(o.status.code() == Some(0) || o.status.code() == Some(1), "{}", String::from_utf8_lossy(&o.stderr));
     let mesh = std::fs::read_to_string(&m).unwrap();
     assert!(mesh.contains("<warp encoding=\"json\">"));
@@ -375,8 +481,18 @@ fn indirect_fit_round_trips_to_the_original_grid() {
     let o = common::run(&["eval", m.to_str().unwrap(), "-o", out.to_str().unwrap()], None);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let t = std::fs::read_to_string(&out).unwrap();
-    assert!(t.starts_with(&format!("ncols        {w}")) || t.contains(&format!("ncols {w}")) || t.lines().next().unwrap().ends_with(&w.to_string()), "{}", &t[..80]);
-    let vals: Vec<f64> = t.lines().skip(6).flat_map(|l| l.split_whitespace().map(|v| v.parse::<f64>().unwrap()).collect::<Vec<_>>()).collect();
+    assert!(
+        t.starts_with(&format!("ncols        {w}"))
+            || t.contains(&format!("ncols {w}"))
+            || t.lines().next().unwrap().ends_with(&w.to_string()),
+        "{}",
+        &t[..80]
+    );
+    let vals: Vec<f64> = t
+        .lines()
+        .skip(6)
+        .flat_map(|l| l.split_whitespace().map(|v| v.parse::<f64>().unwrap()).collect::<Vec<_>>())
+        .collect();
     assert_eq!(vals.len(), w * h);
     let got = vals.iter().filter(|&&v| v != -9999.0 && v > -1e30).count();
     assert!(got as f64 >= 0.95 * valid as f64 && got <= valid, "{got} of {valid} footprint cells evaluated");
@@ -395,12 +511,18 @@ fn indirect_needs_fewer_points_than_direct_on_rotated_channels() {
     }
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let o = Command::new("python3").args([&script("raster_make_synthetic.py"), "channel", d.to_str().unwrap()]).output().unwrap();
+    let o = Command::new("python3")
+        .args([&script("raster_make_synthetic.py"), "channel", d.to_str().unwrap()])
+        .output()
+        .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let mut cases = vec![(d.join("channel.asc"), "0.1")];
     if let Some(tb) = common::fixture("terrain/gmt_tut_bathy.nc") {
         let rot = d.join("tb30.asc");
-        let o = Command::new("python3").args([&script("tspline_rotate.py"), tb.to_str().unwrap(), "30", rot.to_str().unwrap()]).output().unwrap();
+        let o = Command::new("python3")
+            .args([&script("tspline_rotate.py"), tb.to_str().unwrap(), "30", rot.to_str().unwrap()])
+            .output()
+            .unwrap();
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         cases.push((rot, "10"));
     }
@@ -410,7 +532,19 @@ fn indirect_needs_fewer_points_than_direct_on_rotated_channels() {
         for mode in ["direct", "indirect"] {
             let mesh = d.join(format!("{name}.{mode}.tmesh"));
             let rep = d.join(format!("{name}.{mode}.json"));
-            let mut a = vec!["-q", "fit", input.to_str().unwrap(), "--max-error", e, "--degree", "1", "-o", mesh.to_str().unwrap(), "--report", rep.to_str().unwrap()];
+            let mut a = vec![
+                "-q",
+                "fit",
+                input.to_str().unwrap(),
+                "--max-error",
+                e,
+                "--degree",
+                "1",
+                "-o",
+                mesh.to_str().unwrap(),
+                "--report",
+                rep.to_str().unwrap(),
+            ];
             if mode == "indirect" {
                 a.push("--indirect");
             }
@@ -420,9 +554,15 @@ fn indirect_needs_fewer_points_than_direct_on_rotated_channels() {
             cps.push(r["control_points"].as_u64().unwrap());
             // evaluated on the original grid (the indirect mesh maps through its stored field)
             let ev = d.join(format!("{name}.{mode}.eval.tif"));
-            let o = common::run(&["eval", mesh.to_str().unwrap(), "--like", input.to_str().unwrap(), "-o", ev.to_str().unwrap()], None);
+            let o = common::run(
+                &["eval", mesh.to_str().unwrap(), "--like", input.to_str().unwrap(), "-o", ev.to_str().unwrap()],
+                None,
+            );
             assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-            let chk = Command::new("python3").args([&script("tspline_maxerror.py"), input.to_str().unwrap(), ev.to_str().unwrap(), e]).output().unwrap();
+            let chk = Command::new("python3")
+                .args([&script("tspline_maxerror.py"), input.to_str().unwrap(), ev.to_str().unwrap(), e])
+                .output()
+                .unwrap();
             assert!(chk.status.success(), "{name} {mode}: independent check: {}", String::from_utf8_lossy(&chk.stdout));
         }
         assert!(cps[1] < cps[0], "{name} E={e}: indirect {} control points, direct {}", cps[1], cps[0]);
@@ -435,11 +575,18 @@ fn indirect_needs_fewer_points_than_direct_on_rotated_channels() {
 #[test]
 fn huge_finite_values_are_refused_not_a_panic() {
     let dir = tempfile::tempdir().unwrap();
-    for (name, cells) in [("same.asc", "1.797e308 1.797e308"), ("mixed.asc", "1 1.797e308"), ("neg.asc", "-1.797e308 0")] {
+    for (name, cells) in
+        [("same.asc", "1.797e308 1.797e308"), ("mixed.asc", "1 1.797e308"), ("neg.asc", "-1.797e308 0")]
+    {
         let asc = dir.path().join(name);
-        std::fs::write(&asc, format!("ncols 2\nnrows 1\nxllcorner 0\nyllcorner 0\ncellsize 1\nNODATA_value -9999\n{cells}\n")).unwrap();
+        std::fs::write(
+            &asc,
+            format!("ncols 2\nnrows 1\nxllcorner 0\nyllcorner 0\ncellsize 1\nNODATA_value -9999\n{cells}\n"),
+        )
+        .unwrap();
         let out = dir.path().join("h.tmesh");
-        let o = common::run(&["-q", "fit", asc.to_str().unwrap(), "--max-error", "1", "-o", out.to_str().unwrap()], None);
+        let o =
+            common::run(&["-q", "fit", asc.to_str().unwrap(), "--max-error", "1", "-o", out.to_str().unwrap()], None);
         let e = String::from_utf8_lossy(&o.stderr);
         assert_eq!(o.status.code(), Some(3), "{name}: {e}");
         assert!(e.contains(name) && e.contains("too large to fit") && e.lines().count() == 1, "{name}: {e}");
@@ -498,7 +645,12 @@ fn eval_of_every_fit_passes_diff_check_on_every_terrain_fixture() {
             run_expect(&["-q", "eval", m.to_str().unwrap(), "-o", ev.to_str().unwrap()], 0);
             let o = common::run(&["diff", input, ev.to_str().unwrap(), "--tolerance", e, "--check", "--json"], None);
             let rep = String::from_utf8_lossy(&o.stdout);
-            assert_eq!(o.status.code(), Some(0), "{fixture} {method} E={e}: diff --check: {rep}{}", String::from_utf8_lossy(&o.stderr));
+            assert_eq!(
+                o.status.code(),
+                Some(0),
+                "{fixture} {method} E={e}: diff --check: {rep}{}",
+                String::from_utf8_lossy(&o.stderr)
+            );
             let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
             assert_eq!(v["only_in_a"].as_u64(), Some(0), "{fixture} {method}: every valid cell evaluated: {rep}");
             eprintln!("{fixture} {method} E={e}: max |dz| {} ({:.1} s)", v["max_abs"], t0.elapsed().as_secs_f64());
@@ -509,10 +661,14 @@ fn eval_of_every_fit_passes_diff_check_on_every_terrain_fixture() {
 /// (row, col) pairs of a CSV with those two leading columns (header skipped).
 fn csv_positions(path: &Path) -> Vec<(u64, u64)> {
     let text = std::fs::read_to_string(path).unwrap();
-    let mut v: Vec<(u64, u64)> = text.lines().skip(1).map(|l| {
-        let mut f = l.split(',');
-        (f.next().unwrap().parse().unwrap(), f.next().unwrap().parse().unwrap())
-    }).collect();
+    let mut v: Vec<(u64, u64)> = text
+        .lines()
+        .skip(1)
+        .map(|l| {
+            let mut f = l.split(',');
+            (f.next().unwrap().parse().unwrap(), f.next().unwrap().parse().unwrap())
+        })
+        .collect();
     v.sort_unstable();
     v
 }
@@ -530,7 +686,10 @@ fn injected_spikes_are_reported_and_rejected() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let (e, k, amp) = ("0.5", "10", "8");
-    let o = Command::new("python3").args([&script("tspline_spikes.py"), dem.to_str().unwrap(), d.to_str().unwrap(), "25", amp, "19"]).output().unwrap();
+    let o = Command::new("python3")
+        .args([&script("tspline_spikes.py"), dem.to_str().unwrap(), d.to_str().unwrap(), "25", amp, "19"])
+        .output()
+        .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let p = |n: &str| d.join(n).to_str().unwrap().to_string();
     let points = |rep: &str| -> u64 {
@@ -538,19 +697,59 @@ fn injected_spikes_are_reported_and_rejected() {
         v["control_points"].as_u64().unwrap()
     };
     // the clean DEM: no blunder at this K (no false positives), fitted
-    let err = run_expect(&["-q", "fit", &p("clean.asc"), "-o", &p("clean.tmesh"), "--max-error", e, "--reject-outliers", k, "--outliers-csv", &p("clean.csv"), "--report", &p("clean.json")], 0);
+    let err = run_expect(
+        &[
+            "-q",
+            "fit",
+            &p("clean.asc"),
+            "-o",
+            &p("clean.tmesh"),
+            "--max-error",
+            e,
+            "--reject-outliers",
+            k,
+            "--outliers-csv",
+            &p("clean.csv"),
+            "--report",
+            &p("clean.json"),
+        ],
+        0,
+    );
     assert!(csv_positions(&d.join("clean.csv")).is_empty(), "false positives on the clean DEM: {err}");
     assert!(!err.contains("blunder"), "{err}");
     // the spiked DEM: every spike reported where it was put, and nothing else
-    let err = run_expect(&["-q", "fit", &p("spiked.asc"), "-o", &p("spiked.tmesh"), "--max-error", e, "--reject-outliers", k, "--outliers-csv", &p("found.csv"), "--report", &p("spiked.json")], 0);
+    let err = run_expect(
+        &[
+            "-q",
+            "fit",
+            &p("spiked.asc"),
+            "-o",
+            &p("spiked.tmesh"),
+            "--max-error",
+            e,
+            "--reject-outliers",
+            k,
+            "--outliers-csv",
+            &p("found.csv"),
+            "--report",
+            &p("spiked.json"),
+        ],
+        0,
+    );
     assert!(err.contains("25 blunder(s)") && err.contains("excluded"), "{err}");
     assert_eq!(csv_positions(&d.join("found.csv")), csv_positions(&d.join("spikes.csv")));
     // E holds at every other cell of the DEM (the spikes are no data in the reference)
     run_expect(&["-q", "eval", &p("spiked.tmesh"), "-o", &p("spiked-eval.tif")], 0);
-    let chk = Command::new("python3").args([&script("tspline_maxerror.py"), &p("holes.asc"), &p("spiked-eval.tif"), e]).output().unwrap();
+    let chk = Command::new("python3")
+        .args([&script("tspline_maxerror.py"), &p("holes.asc"), &p("spiked-eval.tif"), e])
+        .output()
+        .unwrap();
     assert!(chk.status.success(), "independent check: {}", String::from_utf8_lossy(&chk.stdout));
     let (clean, spiked) = (points(&p("clean.json")), points(&p("spiked.json")));
-    assert!((spiked as f64 - clean as f64).abs() <= 0.1 * clean as f64, "{spiked} control points with the spikes rejected, {clean} on the clean DEM");
+    assert!(
+        (spiked as f64 - clean as f64).abs() <= 0.1 * clean as f64,
+        "{spiked} control points with the spikes rejected, {clean} on the clean DEM"
+    );
     // without --reject-outliers they are reported (at the default K) and fitted
     let err = run_expect(&["-q", "fit", &p("spiked.asc"), "-o", &p("kept.tmesh"), "--max-error", e], 0);
     assert!(err.contains("25 blunder(s)") && err.contains("--reject-outliers K excludes them"), "{err}");
@@ -567,7 +766,13 @@ fn undeclared_nodata_cell_is_named_not_fitted() {
     let mut text = format!("ncols {w}\nnrows {h}\nxllcorner 1000\nyllcorner 2000\ncellsize 1\nNODATA_value -9999\n");
     for r in 0..h {
         let row: Vec<String> = (0..w)
-            .map(|c| if (r, c) == (17, 23) { "1e30".into() } else { format!("{:.3}", 50.0 + 3.0 * (c as f64 / 9.0).sin() + 0.05 * r as f64) })
+            .map(|c| {
+                if (r, c) == (17, 23) {
+                    "1e30".into()
+                } else {
+                    format!("{:.3}", 50.0 + 3.0 * (c as f64 / 9.0).sin() + 0.05 * r as f64)
+                }
+            })
             .collect();
         text.push_str(&row.join(" "));
         text.push('\n');
@@ -576,10 +781,20 @@ fn undeclared_nodata_cell_is_named_not_fitted() {
     let out = dir.path().join("h.tmesh");
     let (a, o) = (asc.to_str().unwrap(), out.to_str().unwrap());
     let err = run_expect(&["-q", "fit", a, "-o", o, "--max-error", "0.1"], 3);
-    assert!(err.contains("row 17, col 23") && err.contains("1e30") && err.contains("--nodata 1e30") && err.contains("--reject-outliers"), "{err}");
+    assert!(
+        err.contains("row 17, col 23")
+            && err.contains("1e30")
+            && err.contains("--nodata 1e30")
+            && err.contains("--reject-outliers"),
+        "{err}"
+    );
     assert!(!out.exists());
     let err = run_expect(&["-q", "fit", a, "-o", o, "--max-error", "0.1", "--reject-outliers", "10"], 0);
-    assert!(err.contains("1 blunder(s)") && err.contains("row 17, col 23 (x 1023.5, y 2032.5): 1000000000000000000000000000000"), "{err}");
+    assert!(
+        err.contains("1 blunder(s)")
+            && err.contains("row 17, col 23 (x 1023.5, y 2032.5): 1000000000000000000000000000000"),
+        "{err}"
+    );
     let err = run_expect(&["-q", "fit", a, "--max-error", "0.1", "--outliers-csv", "-"], 2);
     assert!(err.contains("--outliers-csv -"), "{err}");
     let err = run_expect(&["-q", "fit", a, "-o", o, "--max-error", "0.1", "--nodata", "1e30"], 0);
@@ -606,27 +821,80 @@ fn per_cell_tolerance_from_uncertainty() {
     }
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let o = Command::new("python3").args([&script("tspline_cell_tolerance.py"), "make", d.to_str().unwrap()]).output().unwrap();
+    let o = Command::new("python3")
+        .args([&script("tspline_cell_tolerance.py"), "make", d.to_str().unwrap()])
+        .output()
+        .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let p = |n: &str| d.join(n).to_str().unwrap().to_string();
     let err = run_expect(&["-q", "fit", &p("survey.tif"), "-o", &p("u.tmesh"), "--max-error-from-uncertainty", "1"], 3);
-    assert!(err.contains("36 valid cells have no usable uncertainty") && err.contains("row 30, col 20") && err.contains("--max-error"), "{err}");
-    run_expect(&["-q", "fit", &p("survey.tif"), "-o", &p("u.tmesh"), "--max-error-from-uncertainty", "1", "--max-error", "0.02", "--report", &p("u.json")], 0);
+    assert!(
+        err.contains("36 valid cells have no usable uncertainty")
+            && err.contains("row 30, col 20")
+            && err.contains("--max-error"),
+        "{err}"
+    );
+    run_expect(
+        &[
+            "-q",
+            "fit",
+            &p("survey.tif"),
+            "-o",
+            &p("u.tmesh"),
+            "--max-error-from-uncertainty",
+            "1",
+            "--max-error",
+            "0.02",
+            "--report",
+            &p("u.json"),
+        ],
+        0,
+    );
     run_expect(&["-q", "eval", &p("u.tmesh"), "-o", &p("u.tif")], 0);
-    let chk = Command::new("python3").args([&script("tspline_cell_tolerance.py"), "check", &p("survey.tif"), &p("u.tif"), "1", "0.02"]).output().unwrap();
+    let chk = Command::new("python3")
+        .args([&script("tspline_cell_tolerance.py"), "check", &p("survey.tif"), &p("u.tif"), "1", "0.02"])
+        .output()
+        .unwrap();
     let out = String::from_utf8_lossy(&chk.stdout).to_string();
     assert!(chk.status.success(), "independent check: {out}{}", String::from_utf8_lossy(&chk.stderr));
     let v: serde_json::Value = serde_json::from_str(&out).unwrap();
     let classes = v["classes"].as_array().unwrap();
-    let class = |t: f64| classes.iter().find(|c| (c["tolerance"].as_f64().unwrap() - t).abs() < 1e-7).unwrap_or_else(|| panic!("no class {t}: {out}"));
+    let class = |t: f64| {
+        classes
+            .iter()
+            .find(|c| (c["tolerance"].as_f64().unwrap() - t).abs() < 1e-7)
+            .unwrap_or_else(|| panic!("no class {t}: {out}"))
+    };
     assert_eq!(class(0.02)["cells"].as_u64(), Some(36), "{out}");
     assert!(class(0.05)["max"].as_f64().unwrap() <= 0.05, "{out}");
     assert!(class(1.0)["max"].as_f64().unwrap() > 0.2, "the east's slack is not used: {out}");
     // the uniform tolerance of the west needs more control points
     // two bands of no declared meaning: band 1 is chosen explicitly (issue 41)
-    run_expect(&["-q", "fit", &p("survey.tif"), "-o", &p("e.tmesh"), "--max-error", "0.05", "--report", &p("e.json")], 2);
-    run_expect(&["-q", "fit", &p("survey.tif"), "-b", "1", "-o", &p("e.tmesh"), "--max-error", "0.05", "--report", &p("e.json")], 0);
-    let cp = |f: &str| serde_json::from_slice::<serde_json::Value>(&std::fs::read(p(f)).unwrap()).unwrap()["control_points"].as_u64().unwrap();
+    run_expect(
+        &["-q", "fit", &p("survey.tif"), "-o", &p("e.tmesh"), "--max-error", "0.05", "--report", &p("e.json")],
+        2,
+    );
+    run_expect(
+        &[
+            "-q",
+            "fit",
+            &p("survey.tif"),
+            "-b",
+            "1",
+            "-o",
+            &p("e.tmesh"),
+            "--max-error",
+            "0.05",
+            "--report",
+            &p("e.json"),
+        ],
+        0,
+    );
+    let cp = |f: &str| {
+        serde_json::from_slice::<serde_json::Value>(&std::fs::read(p(f)).unwrap()).unwrap()["control_points"]
+            .as_u64()
+            .unwrap()
+    };
     assert!(cp("u.json") < cp("e.json"), "per cell {} control points, uniform {}", cp("u.json"), cp("e.json"));
 }
 
@@ -645,17 +913,27 @@ fn binary_tmesh_round_trip_and_size() {
     let (xml, bin_) = (d.join("l.tmesh"), d.join("l.tmb"));
     for out in [&xml, &bin_] {
         // --lossless: exact f64 heights (a .tmb's default rounds them to the error budget, issue 37)
-        let o = common::run(&["-q", "fit", input.to_str().unwrap(), "--max-error", "0.5", "--lossless", "-o", out.to_str().unwrap()], None);
+        let o = common::run(
+            &["-q", "fit", input.to_str().unwrap(), "--max-error", "0.5", "--lossless", "-o", out.to_str().unwrap()],
+            None,
+        );
         assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
     }
-    let (nx, nb, ni) = (std::fs::metadata(&xml).unwrap().len(), std::fs::metadata(&bin_).unwrap().len(), std::fs::metadata(&input).unwrap().len());
+    let (nx, nb, ni) = (
+        std::fs::metadata(&xml).unwrap().len(),
+        std::fs::metadata(&bin_).unwrap().len(),
+        std::fs::metadata(&input).unwrap().len(),
+    );
     assert!(nb < ni, ".tmb {nb} bytes, input GeoTIFF {ni} bytes");
     assert!(nb * 3 < nx, ".tmb {nb} bytes, .tmesh {nx} bytes");
     let xyz = |mesh: &Path| {
         let tif = d.join(format!("{}.tif", mesh.file_name().unwrap().to_string_lossy()));
         let o = common::run(&["eval", mesh.to_str().unwrap(), "-o", tif.to_str().unwrap()], None);
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        let o = Command::new("gdal_translate").args(["-q", "-of", "XYZ", "-co", "SIGNIFICANT_DIGITS=17", tif.to_str().unwrap(), "/vsistdout/"]).output().unwrap();
+        let o = Command::new("gdal_translate")
+            .args(["-q", "-of", "XYZ", "-co", "SIGNIFICANT_DIGITS=17", tif.to_str().unwrap(), "/vsistdout/"])
+            .output()
+            .unwrap();
         assert!(o.status.success());
         o.stdout
     };
@@ -669,7 +947,8 @@ fn binary_tmesh_round_trip_and_size() {
         let o = common::run(&["info", "--json", p.to_str().unwrap()], None);
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
-        let x: serde_json::Value = serde_json::from_slice(&common::run(&["info", "--json", xml.to_str().unwrap()], None).stdout).unwrap();
+        let x: serde_json::Value =
+            serde_json::from_slice(&common::run(&["info", "--json", xml.to_str().unwrap()], None).stdout).unwrap();
         assert_eq!(v["control_points"], x["control_points"]);
         assert_eq!(v["cells"], x["cells"]);
         assert_eq!(v["mask"], x["mask"]);
@@ -690,23 +969,41 @@ fn damaged_binary_tmesh_is_exit_3() {
         }
         cells.push('\n');
     }
-    std::fs::write(&asc, format!("ncols 50\nnrows 40\nxllcorner 0\nyllcorner 0\ncellsize 1\nNODATA_value -9999\n{cells}")).unwrap();
+    std::fs::write(
+        &asc,
+        format!("ncols 50\nnrows 40\nxllcorner 0\nyllcorner 0\ncellsize 1\nNODATA_value -9999\n{cells}"),
+    )
+    .unwrap();
     let good = d.join("r.tmb");
-    let o = common::run(&["-q", "fit", asc.to_str().unwrap(), "--max-error", "0.1", "-o", good.to_str().unwrap()], None);
+    let o =
+        common::run(&["-q", "fit", asc.to_str().unwrap(), "--max-error", "0.1", "-o", good.to_str().unwrap()], None);
     assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
     let bytes = std::fs::read(&good).unwrap();
     let mut flipped = bytes.clone();
     let mid = flipped.len() / 2;
     flipped[mid] ^= 0x10;
-    for (name, data, what) in [("trunc.tmb", &bytes[..bytes.len() - 9], "truncated"), ("flip.tmb", &flipped[..], "corrupt"), ("short.tmb", &bytes[..12], "truncated")] {
+    for (name, data, what) in [
+        ("trunc.tmb", &bytes[..bytes.len() - 9], "truncated"),
+        ("flip.tmb", &flipped[..], "corrupt"),
+        ("short.tmb", &bytes[..12], "truncated"),
+    ] {
         let p = d.join(name);
         std::fs::write(&p, data).unwrap();
         let out = d.join("o.tif");
-        for args in [vec!["eval", p.to_str().unwrap(), "-o", out.to_str().unwrap()], vec!["info", p.to_str().unwrap()], vec!["surface", p.to_str().unwrap(), "-o", d.join("s.glb").to_str().unwrap()], vec!["export", p.to_str().unwrap(), "-o", d.join("e.glb").to_str().unwrap()]] {
+        for args in [
+            vec!["eval", p.to_str().unwrap(), "-o", out.to_str().unwrap()],
+            vec!["info", p.to_str().unwrap()],
+            vec!["surface", p.to_str().unwrap(), "-o", d.join("s.glb").to_str().unwrap()],
+            vec!["export", p.to_str().unwrap(), "-o", d.join("e.glb").to_str().unwrap()],
+        ] {
             let o = common::run(&args, None);
             let e = String::from_utf8_lossy(&o.stderr);
             assert_eq!(o.status.code(), Some(3), "{name} {}: {e}", args[0]);
-            assert!(e.contains(name) && (e.contains(what) || e.contains("damaged") || e.contains("checksum")), "{name} {}: {e}", args[0]);
+            assert!(
+                e.contains(name) && (e.contains(what) || e.contains("damaged") || e.contains("checksum")),
+                "{name} {}: {e}",
+                args[0]
+            );
         }
     }
 }
@@ -725,23 +1022,70 @@ fn aniso_splits_meet_the_tolerance_with_fewer_points() {
     let p = |n: &str| dir.path().join(n).to_str().unwrap().to_string();
     let mut points = Vec::new();
     for split in ["quad", "aniso"] {
-        let (mesh, tmb, report, eval) = (p(&format!("{split}.tmesh")), p(&format!("{split}.tmb")), p(&format!("{split}.json")), p(&format!("{split}.tif")));
-        let o = common::run(&["fit", input, "-o", &mesh, "--max-error", "0.5", "--device", "cpu", "--split", split, "--report", &report], None);
+        let (mesh, tmb, report, eval) = (
+            p(&format!("{split}.tmesh")),
+            p(&format!("{split}.tmb")),
+            p(&format!("{split}.json")),
+            p(&format!("{split}.tif")),
+        );
+        let o = common::run(
+            &[
+                "fit",
+                input,
+                "-o",
+                &mesh,
+                "--max-error",
+                "0.5",
+                "--device",
+                "cpu",
+                "--split",
+                split,
+                "--report",
+                &report,
+            ],
+            None,
+        );
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         let rep: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
         assert_eq!(rep.get("split").map(|v| v.as_str().unwrap()), (split == "aniso").then_some("anisotropic"));
         points.push(rep["control_points"].as_u64().unwrap());
-        let o = common::run(&["fit", input, "-o", &tmb, "--max-error", "0.5", "--device", "cpu", "--split", split], None);
+        let o =
+            common::run(&["fit", input, "-o", &tmb, "--max-error", "0.5", "--device", "cpu", "--split", split], None);
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         for m in [&mesh, &tmb] {
             let o = common::run(&["eval", m, "-o", &eval], None);
             assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-            let chk = Command::new("python3").args([&script("tspline_maxerror.py"), input, &eval, "0.5"]).output().unwrap();
-            assert!(chk.status.success(), "{split} {m}: {}{}", String::from_utf8_lossy(&chk.stdout), String::from_utf8_lossy(&chk.stderr));
+            let chk =
+                Command::new("python3").args([&script("tspline_maxerror.py"), input, &eval, "0.5"]).output().unwrap();
+            assert!(
+                chk.status.success(),
+                "{split} {m}: {}{}",
+                String::from_utf8_lossy(&chk.stdout),
+                String::from_utf8_lossy(&chk.stderr)
+            );
         }
     }
     assert!(points[1] < points[0], "aniso {} control points, quad {}", points[1], points[0]);
-    let o = common::run(&["fit", input, "-o", &p("w.tmesh"), "--max-error", "0.5", "--split", "aniso", "--srcwin", "0", "0", "200", "200", "--tile-cell", "64"], None);
+    let o = common::run(
+        &[
+            "fit",
+            input,
+            "-o",
+            &p("w.tmesh"),
+            "--max-error",
+            "0.5",
+            "--split",
+            "aniso",
+            "--srcwin",
+            "0",
+            "0",
+            "200",
+            "200",
+            "--tile-cell",
+            "64",
+        ],
+        None,
+    );
     assert_eq!(o.status.code(), Some(2), "a usage error, before the raster is read");
     assert!(!Path::new(&p("w.tmesh")).exists());
     assert!(String::from_utf8_lossy(&o.stderr).contains("square cells"), "{}", String::from_utf8_lossy(&o.stderr));

@@ -36,7 +36,8 @@ fn read_obj(path: &str) -> Vec<(String, Vec<[f64; 3]>, Vec<[usize; 3]>)> {
             let v: Vec<f64> = r.split_whitespace().map(|x| x.parse().unwrap()).collect();
             all_v.push([v[0] + origin[0], v[1] + origin[1], v[2] + origin[2]]);
         } else if let Some(r) = l.strip_prefix("f ") {
-            let f: Vec<usize> = r.split_whitespace().map(|x| x.split('/').next().unwrap().parse::<usize>().unwrap() - 1).collect();
+            let f: Vec<usize> =
+                r.split_whitespace().map(|x| x.split('/').next().unwrap().parse::<usize>().unwrap() - 1).collect();
             out.last_mut().unwrap().2.push([f[0], f[1], f[2]]);
         }
     }
@@ -214,7 +215,8 @@ fn warm_started_update_needs_fewer_iterations() {
     let (wm, cm) = (p(d.path(), "w.gfim"), p(d.path(), "c.gfim"));
     geofit_ok(&["-q", "implicit", "update", &m, "--move", &mv, "-o", &wm, "--report", &w]);
     geofit_ok(&["-q", "implicit", "update", &m, "--move", &mv, "--cold", "-o", &cm, "--report", &c]);
-    let (wi, ci) = (report(&w)["cg_iterations_total"].as_u64().unwrap(), report(&c)["cg_iterations_total"].as_u64().unwrap());
+    let (wi, ci) =
+        (report(&w)["cg_iterations_total"].as_u64().unwrap(), report(&c)["cg_iterations_total"].as_u64().unwrap());
     let ratio = wi as f64 / ci as f64;
     eprintln!("update after moving one constraint: warm {wi} CG iterations, cold {ci} ({:.0} %)", ratio * 100.0);
     // Same answer both ways (the two solves stop at the same tolerance).
@@ -250,10 +252,15 @@ fn csg_of_two_spheres_matches_analytic_volumes() {
         for (_, v, f) in read_obj(&out) {
             for t in f {
                 let [a, b, c] = t.map(|i| v[i]);
-                vol += (a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) + a[2] * (b[0] * c[1] - b[1] * c[0])) / 6.0;
+                vol += (a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
+                    + a[2] * (b[0] * c[1] - b[1] * c[0]))
+                    / 6.0;
             }
         }
-        eprintln!("{op}: volume {vol:.5} (report {v:.5}), analytic {want:.5}, error {:.2} %", 100.0 * (vol - want) / want);
+        eprintln!(
+            "{op}: volume {vol:.5} (report {v:.5}), analytic {want:.5}, error {:.2} %",
+            100.0 * (vol - want) / want
+        );
         assert!(r["closed"].as_bool().unwrap(), "{op}: surface not closed");
         assert!(((vol - want) / want).abs() < 0.02, "{op}: volume {vol} vs {want}");
         assert!(((v - vol) / want).abs() < 1e-6, "report volume {v} disagrees with the OBJ {vol}");
@@ -304,8 +311,10 @@ fn las_input_and_vtk_output() {
     let text = std::fs::read_to_string(&vtk).unwrap();
     let mut lines = text.lines();
     assert_eq!(lines.next(), Some("# vtk DataFile Version 3.0"));
-    let np: usize = text.lines().find(|l| l.starts_with("POINTS")).unwrap().split_whitespace().nth(1).unwrap().parse().unwrap();
-    let nc: usize = text.lines().find(|l| l.starts_with("CELLS")).unwrap().split_whitespace().nth(1).unwrap().parse().unwrap();
+    let np: usize =
+        text.lines().find(|l| l.starts_with("POINTS")).unwrap().split_whitespace().nth(1).unwrap().parse().unwrap();
+    let nc: usize =
+        text.lines().find(|l| l.starts_with("CELLS")).unwrap().split_whitespace().nth(1).unwrap().parse().unwrap();
     let after: Vec<&str> = text.split("LOOKUP_TABLE default\n").nth(1).unwrap().lines().collect();
     assert_eq!(after.len(), np, "one φ per point");
     assert!(after.iter().all(|v| v.parse::<f64>().unwrap().is_finite()));
@@ -331,7 +340,16 @@ fn outputs_pass_gltf_validator_and_pymeshlab_manifold() {
     let m = p(d.path(), "s.gfim");
     let attr = p(d.path(), "attr.xyz");
     // A second attribute (x-coordinate as a "signal") co-visualised as vertex colours.
-    std::fs::write(&attr, (0..200).map(|i| { let t = i as f64 / 199.0 * 2.0 - 1.0; format!("{t} 0 0 {t}\n") }).collect::<String>()).unwrap();
+    std::fs::write(
+        &attr,
+        (0..200)
+            .map(|i| {
+                let t = i as f64 / 199.0 * 2.0 - 1.0;
+                format!("{t} 0 0 {t}\n")
+            })
+            .collect::<String>(),
+    )
+    .unwrap();
     geofit_ok(&["-q", "implicit", &pts, "-o", &glb, "--model", &m, "--attribute", &attr]);
     geofit_ok(&["-q", "implicit", "iso", &m, "-o", &obj]);
     let sec = p(d.path(), "section.glb");
@@ -341,7 +359,8 @@ fn outputs_pass_gltf_validator_and_pymeshlab_manifold() {
     if common::tool("node") {
         for f in [&glb, &sec] {
             let out = Command::new("node").arg(script("gltf_validator.js")).arg(f).output().unwrap();
-            let rep: Value = serde_json::from_slice(&out.stdout).unwrap_or_else(|e| panic!("validator: {e} {}", String::from_utf8_lossy(&out.stderr)));
+            let rep: Value = serde_json::from_slice(&out.stdout)
+                .unwrap_or_else(|e| panic!("validator: {e} {}", String::from_utf8_lossy(&out.stderr)));
             assert_eq!(rep["issues"]["numErrors"], 0, "{f}: {}", rep["issues"]["messages"]);
         }
     }
@@ -377,7 +396,12 @@ fn bad_input_gives_clear_messages() {
     let out = p(d.path(), "o.obj");
     let args = ["-q", "implicit", "-", "-o", &out];
     expect_fail(&args, Some(b"0 0 0 0 0 1\n1 0 0 0 0 1\n0 1 0 0 0 1\n"), 1, "at least 4 points");
-    expect_fail(&args, Some(b"0 0 0 0 0 1\n0 0 0 0 0 1\n1 1 1 0 0 1\n1 1 1 0 0 1\n1 1 1 0 0 1\n"), 1, "distinct positions");
+    expect_fail(
+        &args,
+        Some(b"0 0 0 0 0 1\n0 0 0 0 0 1\n1 1 1 0 0 1\n1 1 1 0 0 1\n1 1 1 0 0 1\n"),
+        1,
+        "distinct positions",
+    );
     expect_fail(&args, Some(b"0 0 0 0\n0 0 0 5\n1 0 0 0\n0 1 0 0\n0 0 1 0\n"), 1, "duplicated point");
     expect_fail(&args, Some(b"0 0 0 1 0 0\n1 0 0 1 0 0\n0 1 0 1 0 0\n1 1 0 1 0 0\n2 1 0 1 0 0\n"), 1, "coplanar");
     expect_fail(&args, Some(b"0 0 0\n1 0 0\n2 0 0\n3 0 0\n"), 1, "collinear");
@@ -390,7 +414,12 @@ fn bad_input_gives_clear_messages() {
     std::fs::write(&f, "v 100 100 100\nv 101 100 100\nv 100 101 100\nf 1 2 3\n").unwrap();
     expect_fail(&["-q", "implicit", &pts, "--fault", &f, "-o", &out], None, 1, "does not cut the model domain");
     // CG cap.
-    expect_fail(&["-q", "implicit", &pts, "--max-iter", "3", "-o", &out], None, 1, "did not converge within 3 iterations");
+    expect_fail(
+        &["-q", "implicit", &pts, "--max-iter", "3", "-o", &out],
+        None,
+        1,
+        "did not converge within 3 iterations",
+    );
     // A model file that is not one.
     let bogus = p(d.path(), "bogus.gfim");
     std::fs::write(&bogus, b"hello").unwrap();

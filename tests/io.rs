@@ -83,7 +83,11 @@ fn full_disk_keeps_the_old_output() {
     noisy_points(&small, 4);
     let big = d.join("big.xyz");
     noisy_points(&big, 150); // 22,500 noisy Float64 cells ≈ 170 KiB compressed > 64 KiB
-    let probe = Command::new("unshare").args(["-rm", "sh", "-c", "mkdir -p \"$0\" && mount -t tmpfs -o size=64k tmpfs \"$0\""]).arg(d.join("probe")).output().unwrap();
+    let probe = Command::new("unshare")
+        .args(["-rm", "sh", "-c", "mkdir -p \"$0\" && mount -t tmpfs -o size=64k tmpfs \"$0\""])
+        .arg(d.join("probe"))
+        .output()
+        .unwrap();
     if !probe.status.success() {
         let why = String::from_utf8_lossy(&probe.stderr);
         assert!(!common::in_ci(), "CI runs as root and can mount a tmpfs: {why}");
@@ -109,11 +113,18 @@ fn full_disk_keeps_the_old_output() {
         let read = |f: &str| std::fs::read_to_string(d.join(format!("{f}-{name}"))).unwrap();
         let err = read("err");
         assert_eq!(read("code").trim(), "4", "{name}: {err}");
-        assert!(err.contains(name) && (err.contains("No space left on device") || err.contains("disk full")), "{name}: {err}");
+        assert!(
+            err.contains(name) && (err.contains("No space left on device") || err.contains("disk full")),
+            "{name}: {err}"
+        );
         assert!(!err.contains(".geofit-raster"), "{name}: the message names the temporary file: {err}");
         assert_eq!(err.lines().count(), 1, "{name}: one line: {err}");
         let before = std::fs::read(d.join(format!("before-{name}"))).unwrap();
-        assert_eq!(before, std::fs::read(d.join(format!("after-{name}"))).unwrap(), "{name}: the old output was changed");
+        assert_eq!(
+            before,
+            std::fs::read(d.join(format!("after-{name}"))).unwrap(),
+            "{name}: the old output was changed"
+        );
         assert!(raster_io::read_raster(&d.join(format!("after-{name}"))).is_ok());
         let listing = read("ls");
         assert!(!listing.contains(".geofit"), "{name}: temporary files left: {listing}");
@@ -172,7 +183,21 @@ fn failed_steps_write_no_output_unless_keep_partial() {
     ok(&["-q", "rasterize", s(&pts), "--cell", "1", "-o", s(&r)]);
     let mesh = d.join("m.tmesh");
     let report = d.join("fit.json");
-    let fit = ["-q", "fit", s(&r), "--max-error", "0.001", "--max-points", "20", "--device", "cpu", "-o", s(&mesh), "--report", s(&report)];
+    let fit = [
+        "-q",
+        "fit",
+        s(&r),
+        "--max-error",
+        "0.001",
+        "--max-points",
+        "20",
+        "--device",
+        "cpu",
+        "-o",
+        s(&mesh),
+        "--report",
+        s(&report),
+    ];
     fails(&fit, 1, &["control-point cap", "m.tmesh not written", "--keep-partial"]);
     assert!(!mesh.exists(), "a failed fit wrote its mesh");
     let rep: Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
@@ -190,10 +215,14 @@ fn failed_steps_write_no_output_unless_keep_partial() {
 
     // diff --check: the statistics are printed, the pictures are not written
     let pts2 = d.join("pts2.xyz");
-    let shifted: String = std::fs::read_to_string(&pts).unwrap().lines().map(|l| {
-        let v: Vec<f64> = l.split_whitespace().map(|x| x.parse().unwrap()).collect();
-        format!("{} {} {}\n", v[0], v[1], v[2] + 5.0)
-    }).collect();
+    let shifted: String = std::fs::read_to_string(&pts)
+        .unwrap()
+        .lines()
+        .map(|l| {
+            let v: Vec<f64> = l.split_whitespace().map(|x| x.parse().unwrap()).collect();
+            format!("{} {} {}\n", v[0], v[1], v[2] + 5.0)
+        })
+        .collect();
     std::fs::write(&pts2, shifted).unwrap();
     let r2 = d.join("r2.tif");
     ok(&["-q", "rasterize", s(&pts2), "--cell", "1", "-o", s(&r2)]);
@@ -252,7 +281,8 @@ fn outputs_by_driver() {
     assert_eq!(st["COMPRESSION"], "DEFLATE");
 
     // the input's band type is kept: Float32 in, Float32 out (warp, unwarp, eval --like)
-    let st = Command::new("gdal_translate").args(["-q", "-ot", "Float32", &p("cog.tif"), &p("f32.tif")]).status().unwrap();
+    let st =
+        Command::new("gdal_translate").args(["-q", "-ot", "Float32", &p("cog.tif"), &p("f32.tif")]).status().unwrap();
     assert!(st.success());
     ok(&["-q", "warp", &p("f32.tif"), "-o", &p("w32.tif"), "--spacing", "5"]);
     assert_eq!(band_type(&p("w32.tif")), "Float32");
@@ -314,7 +344,12 @@ fn gdal_virtual_paths_are_read() {
     assert!(st.success());
     let zip = d.join("r.zip");
     let st = common::python()
-        .args(["-c", "import sys, zipfile; zipfile.ZipFile(sys.argv[1], 'w').write(sys.argv[2], 'in/r.tif')", s(&zip), s(&r)])
+        .args([
+            "-c",
+            "import sys, zipfile; zipfile.ZipFile(sys.argv[1], 'w').write(sys.argv[2], 'in/r.tif')",
+            s(&zip),
+            s(&r),
+        ])
         .status()
         .unwrap();
     assert!(st.success());
@@ -329,7 +364,11 @@ fn gdal_virtual_paths_are_read() {
     let w = d.join("w.tif");
     ok(&["-q", "warp", &vgz, "-o", s(&w), "--spacing", "3"]);
     let info: Value = serde_json::from_slice(&ok(&["info", &vgz, "--json"]).stdout).unwrap();
-    assert_eq!((info["kind"].as_str(), info["width"].as_u64(), info["valid_count"].as_u64()), (Some("raster"), Some(10), Some(100)), "{info}");
+    assert_eq!(
+        (info["kind"].as_str(), info["width"].as_u64(), info["valid_count"].as_u64()),
+        (Some("raster"), Some(10), Some(100)),
+        "{info}"
+    );
     ok(&["-q", "fit", &vzip, "--max-error", "100", "--device", "cpu", "-o", s(&d.join("m.tmesh"))]);
     // a virtual path to nothing: exit 3 with GDAL's reason, not a Rust-side guess
     fails(&["diff", &format!("/vsigzip/{}/missing.gz", s(d)), s(&r)], 3, &["missing.gz"]);
@@ -354,15 +393,27 @@ fn crs_strings_and_cell_units() {
         let g = Command::new("gdalsrsinfo").arg("foo").output().unwrap();
         assert!(!g.status.success(), "gdalsrsinfo accepts foo?");
     }
-    fails(&["rasterize", s(&pts), "--cell", "1", "-o", o, "--t-srs", "foo", "--s-srs", "EPSG:25832"], 2, &["--t-srs", "'foo'"]);
-    fails(&["rasterize", s(&pts), "--cell", "1", "-o", o, "--s-srs", "EPSG:99999999"], 2, &["--s-srs", "'EPSG:99999999'"]);
+    fails(
+        &["rasterize", s(&pts), "--cell", "1", "-o", o, "--t-srs", "foo", "--s-srs", "EPSG:25832"],
+        2,
+        &["--t-srs", "'foo'"],
+    );
+    fails(
+        &["rasterize", s(&pts), "--cell", "1", "-o", o, "--s-srs", "EPSG:99999999"],
+        2,
+        &["--s-srs", "'EPSG:99999999'"],
+    );
     fails(&["rasterize", s(&pts), "--cell", "1", "-o", o, "--t-srs", "EPSG:25832"], 2, &["--s-srs"]);
     if let Some(gml) = common::fixture("citygml/ogc-building/CityGMLv2/Building_LOD2-EPSG25832.gml") {
         fails(&["export", s(&gml), "-o", s(&d.join("x.glb")), "--t-srs", "foo"], 2, &["--t-srs", "'foo'"]);
     }
     let Some(ship) = common::fixture("terrain/gmt_ship_03.txt") else { return };
     // lon/lat degrees (no CRS declared) at a metre-sized cell
-    fails(&["rasterize", s(&ship), "--cell", "25", "-o", o], 2, &["--cell 25", "degrees", "1×2", "--t-srs", "declare their CRS with --s-srs"]);
+    fails(
+        &["rasterize", s(&ship), "--cell", "25", "-o", o],
+        2,
+        &["--cell 25", "degrees", "1×2", "--t-srs", "declare their CRS with --s-srs"],
+    );
     fails(&["rasterize", s(&ship), "--cell", "25", "-o", o, "--s-srs", "EPSG:4326"], 2, &["geographic CRS"]);
     assert!(!out.exists());
     // local coordinates in the same numeric range are not taken for degrees: GMT's Table 5.11
@@ -382,8 +433,13 @@ fn crs_strings_and_cell_units() {
     let wkt = info["coordinateSystem"]["wkt"].as_str().unwrap();
     assert!(wkt.contains("UTM zone 25S"), "{wkt}");
     // the first sounding, transformed by gdaltransform, lies inside the grid
-    let t = Command::new("sh").arg("-c").arg("echo 326.12501 -8.68370 | gdaltransform -s_srs EPSG:4326 -t_srs EPSG:32725").output().unwrap();
-    let xy: Vec<f64> = String::from_utf8_lossy(&t.stdout).split_whitespace().take(2).map(|v| v.parse().unwrap()).collect();
+    let t = Command::new("sh")
+        .arg("-c")
+        .arg("echo 326.12501 -8.68370 | gdaltransform -s_srs EPSG:4326 -t_srs EPSG:32725")
+        .output()
+        .unwrap();
+    let xy: Vec<f64> =
+        String::from_utf8_lossy(&t.stdout).split_whitespace().take(2).map(|v| v.parse().unwrap()).collect();
     let gt: Vec<f64> = info["geoTransform"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
     let size: Vec<f64> = info["size"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
     assert!(xy[0] >= gt[0] && xy[0] <= gt[0] + size[0] * gt[1], "{xy:?} {gt:?} {size:?}");
@@ -403,7 +459,10 @@ fn completions_man_page_and_version() {
         let st = Command::new("bash").args(["-n", s(&f)]).output().unwrap();
         assert!(st.status.success(), "bash -n: {}", String::from_utf8_lossy(&st.stderr));
         let text = String::from_utf8_lossy(&o.stdout);
-        assert!(text.contains("rasterize") && text.contains("--max-error") && text.contains("--keep-partial"), "incomplete");
+        assert!(
+            text.contains("rasterize") && text.contains("--max-error") && text.contains("--keep-partial"),
+            "incomplete"
+        );
         // the completion works: COMPREPLY for `geofit ras<TAB>`
         let st = Command::new("bash")
             .arg("-c")
@@ -434,7 +493,10 @@ fn completions_man_page_and_version() {
         child.stdin.take().unwrap().write_all(fit.as_bytes()).unwrap();
         let o = child.wait_with_output().unwrap();
         let text = String::from_utf8_lossy(&o.stdout);
-        assert!(o.status.success() && text.contains("max") && text.contains("error") && text.contains("geofit"), "{text}");
+        assert!(
+            o.status.success() && text.contains("max") && text.contains("error") && text.contains("geofit"),
+            "{text}"
+        );
     }
     let v = String::from_utf8_lossy(&ok(&["--version"]).stdout).into_owned();
     assert!(v.starts_with(&format!("geofit {}", env!("CARGO_PKG_VERSION"))), "{v}");
@@ -477,7 +539,10 @@ fn check_schema_and_units(what: &str, r: &Value, schema: &str) {
     let units = r["units"].as_object().unwrap_or_else(|| panic!("{what}: no units object"));
     for (key, unit) in units {
         assert!(unit.as_str().is_some_and(|u| !u.is_empty()), "{what}: unit of {key}");
-        assert!(key_resolves(r, &key.split('.').collect::<Vec<_>>()), "{what}: units name {key}, which the report lacks");
+        assert!(
+            key_resolves(r, &key.split('.').collect::<Vec<_>>()),
+            "{what}: units name {key}, which the report lacks"
+        );
     }
 }
 
@@ -486,7 +551,12 @@ fn check_schema_and_units(what: &str, r: &Value, schema: &str) {
 /// terrain, buildings and info/validate reports on shipped and generated data.
 #[test]
 fn json_reports_carry_schema_and_units() {
-    let (Some(dem), Some(gml)) = (common::fixture("terrain/giswqs-lidar_dem.tif"), common::fixture("citygml/v2/FZK-Haus-LoD2-KIT-IAI-KHH-B36-V1.gml")) else { return };
+    let (Some(dem), Some(gml)) = (
+        common::fixture("terrain/giswqs-lidar_dem.tif"),
+        common::fixture("citygml/v2/FZK-Haus-LoD2-KIT-IAI-KHH-B36-V1.gml"),
+    ) else {
+        return;
+    };
     if !common::tool("gdal_translate") {
         return;
     }
@@ -495,7 +565,10 @@ fn json_reports_carry_schema_and_units() {
     let read = |p: &Path| -> Value { serde_json::from_slice(&std::fs::read(p).unwrap()).unwrap() };
     let stdout_json = |args: &[&str]| -> Value { serde_json::from_slice(&ok(args).stdout).unwrap() };
     let small = d.join("small.tif");
-    let st = Command::new("gdal_translate").args(["-q", "-srcwin", "0", "0", "40", "40", s(&dem), s(&small)]).status().unwrap();
+    let st = Command::new("gdal_translate")
+        .args(["-q", "-srcwin", "0", "0", "40", "40", s(&dem), s(&small)])
+        .status()
+        .unwrap();
     assert!(st.success());
     let (tm, rep) = (d.join("s.tmb"), d.join("fit.json"));
     ok(&["-q", "fit", s(&small), "--max-error", "0.5", "-o", s(&tm), "--report", s(&rep)]);
@@ -510,7 +583,9 @@ fn json_reports_carry_schema_and_units() {
     let rrep = d.join("rasterize.json");
     ok(&["-q", "rasterize", s(&pts), "--cell", "1", "-o", s(&d.join("r.tif")), "--report", s(&rrep)]);
     check_schema_and_units("rasterize", &read(&rrep), "geofit-rasterize-report/1");
-    for (what, input) in [("info raster", s(&small)), ("info points", s(&pts)), ("info citygml", s(&gml)), ("info tmesh", s(&tm))] {
+    for (what, input) in
+        [("info raster", s(&small)), ("info points", s(&pts)), ("info citygml", s(&gml)), ("info tmesh", s(&tm))]
+    {
         check_schema_and_units(what, &stdout_json(&["-q", "info", "--json", input]), "geofit-info/1");
     }
     check_schema_and_units("validate", &stdout_json(&["-q", "validate", "--json", s(&gml)]), "geofit-validate/1");
@@ -519,7 +594,8 @@ fn json_reports_carry_schema_and_units() {
     check_schema_and_units("heal", &read(&hrep), "geofit-heal-report/1");
     ok(&["-q", "export", s(&gml), "-o", s(&d.join("h.glb")), "--report", s(&erep)]);
     check_schema_and_units("export", &read(&erep), "geofit-export-report/1");
-    let (p1, p2, crep, arep, brep) = (d.join("a.popa3d"), d.join("b.popa3d"), d.join("c.json"), d.join("a.json"), d.join("b.json"));
+    let (p1, p2, crep, arep, brep) =
+        (d.join("a.popa3d"), d.join("b.popa3d"), d.join("c.json"), d.join("a.json"), d.join("b.json"));
     ok(&["-q", "citygml2popa3d", s(&gml), "-o", s(&p1), "--report", s(&crep)]);
     check_schema_and_units("citygml2popa3d", &read(&crep), "geofit-citygml2popa3d-report/1");
     ok(&["-q", "adjust", s(&p1), "-o", s(&p2), "--report", s(&arep)]);

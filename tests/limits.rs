@@ -39,7 +39,12 @@ fn geofit_path() -> &'static str {
 fn bash(dir: &Path, line: &str) -> (Output, Duration) {
     let t = Instant::now();
     let mut cmd = Command::new("bash");
-    cmd.current_dir(dir).arg("-c").arg(line).env_remove("GEOFIT_MAX_POINTS").env_remove("GEOFIT_MAX_INPUT_BYTES").env_remove("GEOFIT_MAX_CELLS");
+    cmd.current_dir(dir)
+        .arg("-c")
+        .arg(line)
+        .env_remove("GEOFIT_MAX_POINTS")
+        .env_remove("GEOFIT_MAX_INPUT_BYTES")
+        .env_remove("GEOFIT_MAX_CELLS");
     let o = cmd.stdin(Stdio::null()).stdout(Stdio::null()).stderr(Stdio::piped()).output().unwrap();
     (o, t.elapsed())
 }
@@ -50,7 +55,8 @@ fn bash(dir: &Path, line: &str) -> (Output, Duration) {
 fn endless_inputs_stop_at(dir: &Path, setup: &str, limit: &str) {
     let g = geofit_path();
     let tif = dir.join("x.tif");
-    let line = format!("{setup}; timeout 240 bash -c \"yes '1 2 3' 2>/dev/null | '{g}' -q rasterize - --cell 1 -o x.tif\"");
+    let line =
+        format!("{setup}; timeout 240 bash -c \"yes '1 2 3' 2>/dev/null | '{g}' -q rasterize - --cell 1 -o x.tif\"");
     let (o, took) = bash(dir, &line);
     fails(&o, 3, &["<stdin>", "more than", "points", limit], &tif);
     assert!(took < Duration::from_secs(200), "{took:?}");
@@ -84,7 +90,11 @@ impl MemoryCgroup {
             let (Some(point), mut fs) = (left.split(' ').nth(4), right.split(' ')) else { continue };
             let (fstype, opts) = (fs.next().unwrap_or(""), fs.nth(1).unwrap_or(""));
             let (limit_file, ok) = match fstype {
-                "cgroup2" => ("memory.max", std::fs::read_to_string(Path::new(point).join("cgroup.subtree_control")).is_ok_and(|c| c.split_whitespace().any(|x| x == "memory"))),
+                "cgroup2" => (
+                    "memory.max",
+                    std::fs::read_to_string(Path::new(point).join("cgroup.subtree_control"))
+                        .is_ok_and(|c| c.split_whitespace().any(|x| x == "memory")),
+                ),
                 "cgroup" => ("memory.limit_in_bytes", opts.split(',').any(|o| o == "memory")),
                 _ => continue,
             };
@@ -141,7 +151,8 @@ fn box_popa3d(dir: &Path) -> (String, PathBuf) {
     ];
     let (mut solid, mut bounded) = (String::new(), String::new());
     for (k, (kind, pts)) in faces.iter().enumerate() {
-        let ring: Vec<String> = pts.iter().chain(&pts[..1]).map(|p| format!("{:.3} {:.3} {:.3}", p[0], p[1], p[2])).collect();
+        let ring: Vec<String> =
+            pts.iter().chain(&pts[..1]).map(|p| format!("{:.3} {:.3} {:.3}", p[0], p[1], p[2])).collect();
         solid.push_str(&format!("<gml:surfaceMember xlink:href=\"#P{k}\"/>\n"));
         bounded.push_str(&format!(
             "<bldg:boundedBy><bldg:{kind} gml:id=\"S{k}\"><bldg:lod2MultiSurface><gml:MultiSurface><gml:surfaceMember>\
@@ -211,7 +222,11 @@ fn nul_bytes_in_a_tmesh_name_the_input() {
     let dir = common::tempdir();
     let d = dir.path();
     let grid = d.join("g.asc");
-    std::fs::write(&grid, "ncols 4\nnrows 4\nxllcorner 0\nyllcorner 0\ncellsize 1\n1 2 3 4\n2 3 4 5\n3 4 5 6\n4 5 6 7\n").unwrap();
+    std::fs::write(
+        &grid,
+        "ncols 4\nnrows 4\nxllcorner 0\nyllcorner 0\ncellsize 1\n1 2 3 4\n2 3 4 5\n3 4 5 6\n4 5 6 7\n",
+    )
+    .unwrap();
     let mesh = d.join("m.tmesh");
     let o = common::run(&["-q", "fit", s(&grid), "--max-error", "0.5", "-o", s(&mesh)], None);
     assert_eq!(common::code(&o), 0, "{}", String::from_utf8_lossy(&o.stderr));
@@ -243,7 +258,8 @@ fn heal_refuses_a_file_it_cannot_heal() {
     let nan = gml.replacen("324100.000 5729100.000 50.000", "NaN 5729100.000 50.000", 1);
     let xlink = gml.replacen("xlink:href=\"#P0\"", "xlink:href=\"#P99\"", 1);
     assert!(nan != gml && xlink != gml);
-    let cases = [("nan", nan, 3, "non-finite coordinate 'NaN'"), ("xlink", xlink, 1, "xlink:href=\"#P99\" points to nothing")];
+    let cases =
+        [("nan", nan, 3, "non-finite coordinate 'NaN'"), ("xlink", xlink, 1, "xlink:href=\"#P99\" points to nothing")];
     for (what, content, code, why) in cases {
         let input = d.join(format!("{what}.gml"));
         std::fs::write(&input, content).unwrap();

@@ -42,7 +42,18 @@ fn fzk(rel: &str) {
     let d = tempdir();
     let out = d.path().join("fzk.popa3d");
     let rep = d.path().join("fzk.json");
-    let o = run(&["-q", "citygml2popa3d", gml.to_str().unwrap(), "-o", out.to_str().unwrap(), "--report", rep.to_str().unwrap()], None);
+    let o = run(
+        &[
+            "-q",
+            "citygml2popa3d",
+            gml.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "--report",
+            rep.to_str().unwrap(),
+        ],
+        None,
+    );
     assert_eq!(code(&o), 0, "{}", String::from_utf8_lossy(&o.stderr));
     xsd_valid(&out);
     reread_and_validate(&out);
@@ -81,7 +92,18 @@ fn all_100_buildings_of_lod2_buildings_v3_convert() {
     let d = tempdir();
     let out = d.path().join("b.popa3d");
     let rep = d.path().join("b.json");
-    let o = run(&["-q", "citygml2popa3d", gml.to_str().unwrap(), "-o", out.to_str().unwrap(), "--report", rep.to_str().unwrap()], None);
+    let o = run(
+        &[
+            "-q",
+            "citygml2popa3d",
+            gml.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "--report",
+            rep.to_str().unwrap(),
+        ],
+        None,
+    );
     assert_eq!(code(&o), 0, "{}", String::from_utf8_lossy(&o.stderr));
     let r = report(&rep);
     assert_eq!(r["converted"], 100);
@@ -94,12 +116,30 @@ fn all_100_buildings_of_lod2_buildings_v3_convert() {
 fn nrw_tiles_convert_and_list_every_rejection() {
     let mut total = 0u64;
     let mut ok = 0u64;
-    for t in ["LoD2_32_324_5729_1_NW", "LoD2_32_327_5723_1_NW", "LoD2_32_328_5733_1_NW", "LoD2_32_330_5731_1_NW", "LoD2_32_332_5729_1_NW", "LoD2_32_338_5724_1_NW"] {
+    for t in [
+        "LoD2_32_324_5729_1_NW",
+        "LoD2_32_327_5723_1_NW",
+        "LoD2_32_328_5733_1_NW",
+        "LoD2_32_330_5731_1_NW",
+        "LoD2_32_332_5729_1_NW",
+        "LoD2_32_338_5724_1_NW",
+    ] {
         let Some(gml) = fixture(&format!("citygml/nrw/{t}.gml")) else { return };
         let d = tempdir();
         let out = d.path().join("t.popa3d");
         let rep = d.path().join("t.json");
-        let o = run(&["-q", "citygml2popa3d", gml.to_str().unwrap(), "-o", out.to_str().unwrap(), "--report", rep.to_str().unwrap()], None);
+        let o = run(
+            &[
+                "-q",
+                "citygml2popa3d",
+                gml.to_str().unwrap(),
+                "-o",
+                out.to_str().unwrap(),
+                "--report",
+                rep.to_str().unwrap(),
+            ],
+            None,
+        );
         let r = report(&rep);
         let rejected = r["rejected"].as_array().unwrap();
         assert_eq!(code(&o), if rejected.is_empty() { 0 } else { 1 }, "{t}");
@@ -125,7 +165,18 @@ fn three_storey_fixture_converts_with_generated_conditions() {
     let d = tempdir();
     let out = d.path().join("t.popa3d");
     let rep = d.path().join("t.json");
-    let o = run(&["-q", "citygml2popa3d", &repo("fixtures/citygml/three_storey.gml"), "-o", out.to_str().unwrap(), "--report", rep.to_str().unwrap()], None);
+    let o = run(
+        &[
+            "-q",
+            "citygml2popa3d",
+            &repo("fixtures/citygml/three_storey.gml"),
+            "-o",
+            out.to_str().unwrap(),
+            "--report",
+            rep.to_str().unwrap(),
+        ],
+        None,
+    );
     assert_eq!(code(&o), 0, "{}", String::from_utf8_lossy(&o.stderr));
     let r = report(&rep);
     let b = &r["buildings"][0];
@@ -145,7 +196,17 @@ fn obj_sketch_with_distances_converts_and_validates() {
     let out = d.path().join("rooms.popa3d");
     let rep = d.path().join("rooms.json");
     let o = run(
-        &["-q", "obj2popa3d", &repo("fixtures/popa3d/rooms.obj"), "--distances", &repo("fixtures/popa3d/rooms_distances.csv"), "-o", out.to_str().unwrap(), "--report", rep.to_str().unwrap()],
+        &[
+            "-q",
+            "obj2popa3d",
+            &repo("fixtures/popa3d/rooms.obj"),
+            "--distances",
+            &repo("fixtures/popa3d/rooms_distances.csv"),
+            "-o",
+            out.to_str().unwrap(),
+            "--report",
+            rep.to_str().unwrap(),
+        ],
         None,
     );
     assert_eq!(code(&o), 0, "{}", String::from_utf8_lossy(&o.stderr));
@@ -153,7 +214,10 @@ fn obj_sketch_with_distances_converts_and_validates() {
     assert_eq!(r["distances"], 6);
     // 3 rooms in a row: 3 normals (9 parameters); planes: floor, ceiling, south, north, 4 cross walls.
     let last = &r["counts"]["stages"][4];
-    assert_eq!((last["normals"].as_u64(), last["parameters"].as_u64(), last["planes"].as_u64()), (Some(3), Some(9), Some(8)));
+    assert_eq!(
+        (last["normals"].as_u64(), last["parameters"].as_u64(), last["planes"].as_u64()),
+        (Some(3), Some(9), Some(8))
+    );
     assert_eq!(last["faces"], 16, "18 drawn faces, 2 shared walls");
     // Sketch priors: per normal consecutive plane differences (1 + 1 + 3) and 3 normal pairs.
     assert_eq!(r["plane_differences"], 5);
@@ -194,7 +258,11 @@ fn boxes(buildings: &[(&str, Vec<Vec<[f64; 3]>>, bool)]) -> String {
     );
     for (id, polys, solid) in buildings {
         s.push_str(&format!("<core:cityObjectMember><bldg:Building gml:id=\"{id}\">\n"));
-        s.push_str(if *solid { "<bldg:lod2Solid><gml:Solid><gml:exterior><gml:CompositeSurface>\n" } else { "<bldg:lod2MultiSurface><gml:MultiSurface>\n" });
+        s.push_str(if *solid {
+            "<bldg:lod2Solid><gml:Solid><gml:exterior><gml:CompositeSurface>\n"
+        } else {
+            "<bldg:lod2MultiSurface><gml:MultiSurface>\n"
+        });
         for (k, p) in polys.iter().enumerate() {
             let mut pts: Vec<String> = p.iter().map(|q| format!("{} {} {}", q[0], q[1], q[2])).collect();
             pts.push(pts[0].clone());
@@ -203,7 +271,11 @@ fn boxes(buildings: &[(&str, Vec<Vec<[f64; 3]>>, bool)]) -> String {
                 pts.join(" ")
             ));
         }
-        s.push_str(if *solid { "</gml:CompositeSurface></gml:exterior></gml:Solid></bldg:lod2Solid>\n" } else { "</gml:MultiSurface></bldg:lod2MultiSurface>\n" });
+        s.push_str(if *solid {
+            "</gml:CompositeSurface></gml:exterior></gml:Solid></bldg:lod2Solid>\n"
+        } else {
+            "</gml:MultiSurface></bldg:lod2MultiSurface>\n"
+        });
         s.push_str("</bldg:Building></core:cityObjectMember>\n");
     }
     s.push_str("</core:CityModel>\n");

@@ -59,7 +59,12 @@ fn terrain_fixtures_read_like_gdal() {
         assert_eq!(r.height as u64, truth["height"].as_u64().unwrap(), "{name} height");
         let gt: Vec<f64> = truth["geotransform"].as_array().unwrap().iter().map(f).collect();
         for k in 0..6 {
-            assert!((r.geotransform[k] - gt[k]).abs() <= 1e-12 * gt[k].abs().max(1.0), "{name} gt[{k}] {} vs {}", r.geotransform[k], gt[k]);
+            assert!(
+                (r.geotransform[k] - gt[k]).abs() <= 1e-12 * gt[k].abs().max(1.0),
+                "{name} gt[{k}] {} vs {}",
+                r.geotransform[k],
+                gt[k]
+            );
         }
         assert_eq!(r.nodata_count() as u64, truth["nodata_count"].as_u64().unwrap(), "{name} nodata count");
         // gdalinfo -json prints a Float32 marker with 7 significant digits (-3.402823e+38 for
@@ -73,7 +78,11 @@ fn terrain_fixtures_read_like_gdal() {
         assert_eq!(lo, f(&truth["min"]), "{name} min");
         assert_eq!(hi, f(&truth["max"]), "{name} max");
         let mean = r.data.iter().filter(|d| !d.is_nan()).sum::<f64>() / r.valid_count() as f64;
-        assert!((mean - f(&truth["mean"])).abs() < 1e-9 * mean.abs().max(1.0), "{name} mean {mean} vs {}", truth["mean"]);
+        assert!(
+            (mean - f(&truth["mean"])).abs() < 1e-9 * mean.abs().max(1.0),
+            "{name} mean {mean} vs {}",
+            truth["mean"]
+        );
         // no data is NaN and nothing else: every other value is finite
         assert!(r.data.iter().all(|d| d.is_nan() || d.is_finite()), "{name} values");
         // `geofit info --json` reports the same size, geotransform and nodata count.
@@ -86,7 +95,12 @@ fn terrain_fixtures_read_like_gdal() {
         assert_eq!(info["nodata_count"], truth["nodata_count"], "{name} info nodata count");
         let igt: Vec<f64> = info["geotransform"].as_array().unwrap().iter().map(f).collect();
         for k in 0..6 {
-            assert!((igt[k] - gt[k]).abs() <= 1e-12 * gt[k].abs().max(1.0), "{name} info gt[{k}] {} vs {}", igt[k], gt[k]);
+            assert!(
+                (igt[k] - gt[k]).abs() <= 1e-12 * gt[k].abs().max(1.0),
+                "{name} info gt[{k}] {} vs {}",
+                igt[k],
+                gt[k]
+            );
         }
     }
     // The README's count for Kilauea, as a fixed anchor.
@@ -144,7 +158,19 @@ fn tin_matches_gdal_grid_linear() {
         let pts = dir.join(file);
         let ours = tmp.path().join("ours.tif");
         let rep = tmp.path().join("rep.json");
-        ok(&["-q", "rasterize", pts.to_str().unwrap(), "-o", ours.to_str().unwrap(), "--cell", cell, "--method", "tin", "--report", rep.to_str().unwrap()]);
+        ok(&[
+            "-q",
+            "rasterize",
+            pts.to_str().unwrap(),
+            "-o",
+            ours.to_str().unwrap(),
+            "--cell",
+            cell,
+            "--method",
+            "tin",
+            "--report",
+            rep.to_str().unwrap(),
+        ]);
         let report: Value = serde_json::from_str(&std::fs::read_to_string(&rep).unwrap()).unwrap();
         let theirs = gdal_grid_linear(tmp.path(), &pts, &report);
         let a = raster_io::read_raster(&theirs).unwrap();
@@ -152,7 +178,12 @@ fn tin_matches_gdal_grid_linear() {
         assert_eq!((a.width, a.height), (b.width, b.height), "{file}");
         // gdal_grid derives the pixel size as (xmax − xmin)/w: equal up to rounding
         for k in 0..6 {
-            assert!((a.geotransform[k] - b.geotransform[k]).abs() <= 1e-12 * a.geotransform[k].abs().max(1.0), "{file}: {:?} vs {:?}", a.geotransform, b.geotransform);
+            assert!(
+                (a.geotransform[k] - b.geotransform[k]).abs() <= 1e-12 * a.geotransform[k].abs().max(1.0),
+                "{file}: {:?} vs {:?}",
+                a.geotransform,
+                b.geotransform
+            );
         }
         // Footprint: every cell gdal_grid fills, we fill. Along a single ship track the hull holds
         // extremely flat sliver triangles that gdal_grid's qhull triangulation drops; there we
@@ -168,7 +199,8 @@ fn tin_matches_gdal_grid_linear() {
         assert!(b.valid_count() > 100, "{file}: {}", b.valid_count());
         let (lo, hi) = a.min_max().unwrap();
         let tol = 1e-9 * (hi - lo);
-        let worst = a.data.iter().zip(&b.data).filter(|(x, _)| x.is_finite()).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max);
+        let worst =
+            a.data.iter().zip(&b.data).filter(|(x, _)| x.is_finite()).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max);
         assert!(worst <= tol, "{file}: max |ours − gdal_grid| = {worst} > {tol}");
     }
 }
@@ -181,7 +213,19 @@ fn laz_ground_class_rasterizes() {
     let tmp = common::tempdir();
     let out = tmp.path().join("ground.tif");
     let rep = tmp.path().join("rep.json");
-    ok(&["-q", "rasterize", laz.to_str().unwrap(), "--class", "2", "-o", out.to_str().unwrap(), "--cell", "2", "--report", rep.to_str().unwrap()]);
+    ok(&[
+        "-q",
+        "rasterize",
+        laz.to_str().unwrap(),
+        "--class",
+        "2",
+        "-o",
+        out.to_str().unwrap(),
+        "--cell",
+        "2",
+        "--report",
+        rep.to_str().unwrap(),
+    ]);
     let report: Value = serde_json::from_str(&std::fs::read_to_string(&rep).unwrap()).unwrap();
     assert_eq!(report["points"], 8159);
     let r = raster_io::read_raster(&out).unwrap();
@@ -193,11 +237,38 @@ fn laz_ground_class_rasterizes() {
     // the LAS 1.2 GeoTIFF-key CRS travels into the raster as WKT
     assert!(r.crs.as_deref().is_some_and(|w| w.starts_with("PROJCS") || w.starts_with("PROJCRS")), "{:?}", r.crs);
     assert!(r.valid_count() > 1000);
-    let water = common::run(&["-q", "rasterize", laz.to_str().unwrap(), "--class", "9", "-o", tmp.path().join("w.tif").to_str().unwrap(), "--cell", "2", "--report", "-"], None);
+    let water = common::run(
+        &[
+            "-q",
+            "rasterize",
+            laz.to_str().unwrap(),
+            "--class",
+            "9",
+            "-o",
+            tmp.path().join("w.tif").to_str().unwrap(),
+            "--cell",
+            "2",
+            "--report",
+            "-",
+        ],
+        None,
+    );
     assert_eq!(common::code(&water), 0, "{}", stderr(&water));
     let wrep: Value = serde_json::from_slice(&water.stdout).unwrap();
     assert_eq!(wrep["points"], 3897);
-    let none = common::run(&["rasterize", laz.to_str().unwrap(), "--class", "17", "-o", tmp.path().join("n.tif").to_str().unwrap(), "--cell", "2"], None);
+    let none = common::run(
+        &[
+            "rasterize",
+            laz.to_str().unwrap(),
+            "--class",
+            "17",
+            "-o",
+            tmp.path().join("n.tif").to_str().unwrap(),
+            "--cell",
+            "2",
+        ],
+        None,
+    );
     assert_eq!(common::code(&none), 3);
     let e = stderr(&none);
     assert!(e.contains("no point of class 17") && e.contains("2 (8159)"), "{e}");
@@ -219,7 +290,19 @@ fn gauss_splat_leaves_nodata_where_no_point_is_near() {
     std::fs::write(&pts, s).unwrap();
     for method in ["gauss", "gauss-literal", "tin"] {
         let out = tmp.path().join(format!("{method}.tif"));
-        ok(&["-q", "rasterize", pts.to_str().unwrap(), "-o", out.to_str().unwrap(), "--cell", "1", "--method", method, "--max-edge", "3"]);
+        ok(&[
+            "-q",
+            "rasterize",
+            pts.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "--cell",
+            "1",
+            "--method",
+            method,
+            "--max-edge",
+            "3",
+        ]);
         let r = raster_io::read_raster(&out).unwrap();
         assert!(r.data.iter().filter(|v| v.is_finite()).all(|v| (v - 5.0).abs() < 1e-12), "{method}");
         // the gap between the clusters (x = 8..19) has no value
@@ -249,7 +332,17 @@ fn warp_then_unwarp_restores_grid_and_values() {
     let warped = d.join("w.tif");
     let back = d.join("back.tif");
     let rep = d.join("warp.json");
-    ok(&["-q", "warp", src.to_str().unwrap(), "-o", warped.to_str().unwrap(), "--spacing", "10", "--report", rep.to_str().unwrap()]);
+    ok(&[
+        "-q",
+        "warp",
+        src.to_str().unwrap(),
+        "-o",
+        warped.to_str().unwrap(),
+        "--spacing",
+        "10",
+        "--report",
+        rep.to_str().unwrap(),
+    ]);
     let wr: Value = serde_json::from_str(&std::fs::read_to_string(&rep).unwrap()).unwrap();
     assert!((f(&wr["rotation_deg"]) + 30.0).abs() < 2.0, "{}", wr["rotation_deg"]);
     let wt = python_json(&[script("raster_gdal_truth.py").to_str().unwrap(), warped.to_str().unwrap()]);
@@ -270,7 +363,13 @@ fn warp_then_unwarp_restores_grid_and_values() {
     assert_eq!(bt["height"], st["height"]);
     assert_eq!(bt["geotransform"], st["geotransform"]);
     assert_eq!(bt["nodata_count"], st["nodata_count"]);
-    let truth = python_json(&[script("raster_diff_truth.py").to_str().unwrap(), src.to_str().unwrap(), back.to_str().unwrap(), "1", "0.1,1"]);
+    let truth = python_json(&[
+        script("raster_diff_truth.py").to_str().unwrap(),
+        src.to_str().unwrap(),
+        back.to_str().unwrap(),
+        "1",
+        "0.1,1",
+    ]);
     assert_eq!(truth["only_in_a"], 0);
     assert_eq!(truth["only_in_b"], 0);
     assert!(f(&truth["rms"]) < 0.25, "RMS after warp+unwarp {}", truth["rms"]);
@@ -292,13 +391,26 @@ fn warp_then_unwarp_restores_grid_and_values() {
     let p1 = d.join("p1.xyz");
     let p2 = d.join("p2.xyz");
     std::fs::write(&p0, pts).unwrap();
-    ok(&["-q", "unwarp", warped.to_str().unwrap(), "--points", p0.to_str().unwrap(), "--forward", "-o", p1.to_str().unwrap()]);
+    ok(&[
+        "-q",
+        "unwarp",
+        warped.to_str().unwrap(),
+        "--points",
+        p0.to_str().unwrap(),
+        "--forward",
+        "-o",
+        p1.to_str().unwrap(),
+    ]);
     ok(&["-q", "unwarp", warped.to_str().unwrap(), "--points", p1.to_str().unwrap(), "-o", p2.to_str().unwrap()]);
     let read = |p: &Path| -> Vec<(f64, f64, f64)> {
-        std::fs::read_to_string(p).unwrap().lines().map(|l| {
-            let v: Vec<f64> = l.split_whitespace().map(|t| t.parse().unwrap()).collect();
-            (v[0], v[1], v[2])
-        }).collect()
+        std::fs::read_to_string(p)
+            .unwrap()
+            .lines()
+            .map(|l| {
+                let v: Vec<f64> = l.split_whitespace().map(|t| t.parse().unwrap()).collect();
+                (v[0], v[1], v[2])
+            })
+            .collect()
     };
     let (fwd, back) = (read(&p1), read(&p2));
     assert_eq!(back.len(), 5000);
@@ -328,16 +440,38 @@ fn diff_statistics_match_numpy() {
     let tmp = common::tempdir();
     let d = tmp.path();
     let a = d.join("a.asc");
-    let st = std::process::Command::new("gdal_translate").args(["-q", "-of", "AAIGrid", k.to_str().unwrap(), a.to_str().unwrap()]).status().unwrap();
+    let st = std::process::Command::new("gdal_translate")
+        .args(["-q", "-of", "AAIGrid", k.to_str().unwrap(), a.to_str().unwrap()])
+        .status()
+        .unwrap();
     assert!(st.success());
     let b = d.join("b.asc");
     make_synthetic(d, &["perturb", a.to_str().unwrap(), b.to_str().unwrap(), "42"]);
     let bounds = "0.01,0.02,0.05,0.1,0.2,0.5,1,2";
     let png = d.join("map.png");
     let hist = d.join("hist.png");
-    let o = ok(&["diff", a.to_str().unwrap(), b.to_str().unwrap(), "--tolerance", "0.5", "--classes", bounds, "--json", "--png", png.to_str().unwrap(), "--hist", hist.to_str().unwrap()]);
+    let o = ok(&[
+        "diff",
+        a.to_str().unwrap(),
+        b.to_str().unwrap(),
+        "--tolerance",
+        "0.5",
+        "--classes",
+        bounds,
+        "--json",
+        "--png",
+        png.to_str().unwrap(),
+        "--hist",
+        hist.to_str().unwrap(),
+    ]);
     let ours: Value = serde_json::from_slice(&o.stdout).unwrap();
-    let truth = python_json(&[script("raster_diff_truth.py").to_str().unwrap(), a.to_str().unwrap(), b.to_str().unwrap(), "0.5", bounds]);
+    let truth = python_json(&[
+        script("raster_diff_truth.py").to_str().unwrap(),
+        a.to_str().unwrap(),
+        b.to_str().unwrap(),
+        "0.5",
+        bounds,
+    ]);
     for k in ["cells_compared", "only_in_a", "only_in_b", "over_tolerance"] {
         assert_eq!(ours[k], truth[k], "{k}");
     }
@@ -351,10 +485,22 @@ fn diff_statistics_match_numpy() {
     check_histogram_picture(&hist, &ours);
     // --plain: the bare map, one pixel per cell, placed exactly on A's grid
     let plain = d.join("plain.png");
-    ok(&["diff", a.to_str().unwrap(), b.to_str().unwrap(), "--classes", bounds, "--png", plain.to_str().unwrap(), "--plain"]);
+    ok(&[
+        "diff",
+        a.to_str().unwrap(),
+        b.to_str().unwrap(),
+        "--classes",
+        bounds,
+        "--png",
+        plain.to_str().unwrap(),
+        "--plain",
+    ]);
     let (w, h, _) = decode_png(&plain);
     assert_eq!((w, h), (857, 793));
-    assert_eq!(gdal_json(&[plain.to_str().unwrap()])["geoTransform"], gdal_json(&[a.to_str().unwrap()])["geoTransform"]);
+    assert_eq!(
+        gdal_json(&[plain.to_str().unwrap()])["geoTransform"],
+        gdal_json(&[a.to_str().unwrap()])["geoTransform"]
+    );
     // --check turns cells over the tolerance into exit 1
     let c = common::run(&["diff", a.to_str().unwrap(), b.to_str().unwrap(), "--tolerance", "0.5", "--check"], None);
     assert_eq!(common::code(&c), 1);
@@ -410,7 +556,10 @@ fn check_error_map_picture(a: &Path, png: &Path, report: &Value, n_classes: usiz
     let at = report["max_at"].as_array().unwrap();
     let (c, r) = (at[0].as_u64().unwrap() as usize, at[1].as_u64().unwrap() as usize);
     let (x, y) = (ga[0] + (c as f64 + 0.5) * ga[1], ga[3] + (r as f64 + 0.5) * ga[5]);
-    let o = std::process::Command::new("gdallocationinfo").args(["-valonly", "-geoloc", png.to_str().unwrap(), &x.to_string(), &y.to_string()]).output().unwrap();
+    let o = std::process::Command::new("gdallocationinfo")
+        .args(["-valonly", "-geoloc", png.to_str().unwrap(), &x.to_string(), &y.to_string()])
+        .output()
+        .unwrap();
     let rgba: Vec<u8> = String::from_utf8_lossy(&o.stdout).split_whitespace().map(|v| v.parse().unwrap()).collect();
     let i = 4 * ((oy + r) * w + ox + c);
     assert_eq!(rgba, px[i..i + 4], "GDAL's pixel at the largest error");
@@ -471,7 +620,9 @@ fn bad_input_is_reported_clearly() {
     // corrupt and unsupported files
     let bad = d.join("bad.tif");
     std::fs::write(&bad, b"II*\0garbage that is not a TIFF").unwrap();
-    for cmd in [&["diff", bad.to_str().unwrap(), bad.to_str().unwrap()][..], &["warp", bad.to_str().unwrap(), "-o", o_s][..]] {
+    for cmd in
+        [&["diff", bad.to_str().unwrap(), bad.to_str().unwrap()][..], &["warp", bad.to_str().unwrap(), "-o", o_s][..]]
+    {
         check(cmd, 3, "bad.tif");
     }
     let txt = d.join("notes.txt");
@@ -534,11 +685,19 @@ fn claimed_sizes_are_checked_before_allocating() {
     let d = dir.path();
     let s = |p: &Path| p.to_str().unwrap().to_string();
     let asc = d.join("big.asc");
-    std::fs::write(&asc, "ncols 1000000\nnrows 1000000\nxllcorner 0\nyllcorner 0\ncellsize 1\nNODATA_value -9999\n1 2 3\n").unwrap();
+    std::fs::write(
+        &asc,
+        "ncols 1000000\nnrows 1000000\nxllcorner 0\nyllcorner 0\ncellsize 1\nNODATA_value -9999\n1 2 3\n",
+    )
+    .unwrap();
     let vrt = d.join("big.vrt");
     std::fs::write(&vrt, r#"<VRTDataset rasterXSize="1000000" rasterYSize="1000000"><VRTRasterBand dataType="Float64" band="1"/></VRTDataset>"#).unwrap();
     let small = d.join("small.asc");
-    std::fs::write(&small, "ncols 3\nnrows 3\nxllcorner 0\nyllcorner 0\ncellsize 1\nNODATA_value -9999\n1 2 3\n4 5 6\n7 8 10\n").unwrap();
+    std::fs::write(
+        &small,
+        "ncols 3\nnrows 3\nxllcorner 0\nyllcorner 0\ncellsize 1\nNODATA_value -9999\n1 2 3\n4 5 6\n7 8 10\n",
+    )
+    .unwrap();
     let mesh = d.join("m.tmesh");
     let o = common::run(&["-q", "fit", &s(&small), "--max-error", "0.5", "-o", &s(&mesh)], None);
     assert_eq!(common::code(&o), 0, "{}", stderr(&o));
@@ -558,7 +717,10 @@ fn claimed_sizes_are_checked_before_allocating() {
             let e = stderr(&o);
             assert_eq!(common::code(&o), 3, "{args:?}: {e}");
             assert_eq!(e.lines().count(), 1, "{args:?}: one line: {e}");
-            assert!(e.contains(&b) && e.contains("1000000×1000000 cells") && e.contains("GEOFIT_MAX_CELLS"), "{args:?}: {e}");
+            assert!(
+                e.contains(&b) && e.contains("1000000×1000000 cells") && e.contains("GEOFIT_MAX_CELLS"),
+                "{args:?}: {e}"
+            );
         }
     }
     // rasterize: 3 points spanning 46 km at --cell 1 (2.1·10⁹ cells); the budget is fixed by
@@ -572,7 +734,10 @@ fn claimed_sizes_are_checked_before_allocating() {
         .unwrap();
     let e = stderr(&o);
     assert_eq!(common::code(&o), 2, "{e}");
-    assert!(e.contains("--cell 1") && e.contains("46001 × 46001 cells") && e.contains("a cell size of 47 or more fits"), "{e}");
+    assert!(
+        e.contains("--cell 1") && e.contains("46001 × 46001 cells") && e.contains("a cell size of 47 or more fits"),
+        "{e}"
+    );
     assert!(!Path::new(&out).exists());
     // and that suggestion works
     let o = common::geofit()

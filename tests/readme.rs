@@ -3,7 +3,6 @@
 
 mod common;
 
-
 /// The first ```bash block after the "## Pipelines" heading.
 fn pipelines_block(readme: &str) -> String {
     let section = &readme[readme.find("## Pipelines").expect("README has a Pipelines section")..];
@@ -22,19 +21,21 @@ fn readme_pipelines_run_verbatim_on_the_shipped_data() {
     let readme = std::fs::read_to_string(common::repo_root().join("README.md")).unwrap();
     let script = pipelines_block(&readme);
     let dir = common::tempdir();
-    let o = common::bash_with_geofit(dir.path())
-        .args(["-euo", "pipefail", "-c", &script])
-        .output()
-        .expect("bash");
-    assert!(
-        o.status.success(),
-        "README pipelines failed ({:?}):\n{}",
-        o.status,
-        String::from_utf8_lossy(&o.stderr)
-    );
-    for out in ["healed.gml", "heal.json", "findings.json", "healed.glb", "adjusted.gml", "grid.tif", "grid.tmesh",
-        "fitted.tif", "err.png", "grid.glb", "sphere.glb"]
-    {
+    let o = common::bash_with_geofit(dir.path()).args(["-euo", "pipefail", "-c", &script]).output().expect("bash");
+    assert!(o.status.success(), "README pipelines failed ({:?}):\n{}", o.status, String::from_utf8_lossy(&o.stderr));
+    for out in [
+        "healed.gml",
+        "heal.json",
+        "findings.json",
+        "healed.glb",
+        "adjusted.gml",
+        "grid.tif",
+        "grid.tmesh",
+        "fitted.tif",
+        "err.png",
+        "grid.glb",
+        "sphere.glb",
+    ] {
         let len = std::fs::metadata(dir.path().join(out)).map(|m| m.len()).unwrap_or(0);
         assert!(len > 0, "README pipelines wrote no {out}");
     }

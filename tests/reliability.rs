@@ -271,7 +271,9 @@ fn inputs_read_whole_stop_at_the_byte_budget() {
     let run_with = |args: &[&str], stdin: Option<Vec<u8>>| {
         let mut cmd = common::geofit();
         cmd.args(args).envs(budget);
-        cmd.stdin(if stdin.is_some() { Stdio::piped() } else { Stdio::null() }).stdout(Stdio::piped()).stderr(Stdio::piped());
+        cmd.stdin(if stdin.is_some() { Stdio::piped() } else { Stdio::null() })
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped());
         let mut child = cmd.spawn().unwrap();
         if let Some(bytes) = stdin {
             let mut si = child.stdin.take().unwrap();
@@ -288,7 +290,8 @@ fn inputs_read_whole_stop_at_the_byte_budget() {
     let o = run_with(&["info", "-"], Some(vec![0u8; 3_000_000]));
     fails(&o, 3, &["<stdin>", "more than 1000000 bytes set by GEOFIT_MAX_INPUT_BYTES"]);
     assert!(t.elapsed() < Duration::from_secs(20));
-    let endless_xml = b"<!-- a comment that never ends ".iter().copied().chain(std::iter::repeat_n(b'x', 3_000_000)).collect();
+    let endless_xml =
+        b"<!-- a comment that never ends ".iter().copied().chain(std::iter::repeat_n(b'x', 3_000_000)).collect();
     let o = run_with(&["-q", "heal", "-", "-o", s(&out)], Some(endless_xml));
     fails(&o, 3, &["<stdin>", "more than 1000000 bytes"]);
     let big = dir.path().join("big.gml");
@@ -320,7 +323,11 @@ fn errors_quote_at_most_200_bytes_of_the_input() {
     std::fs::write(&g, format!("<?xml version=\"1.0\"?>\n<core:CityModel xmlns:core=\"http://www.opengis.net/citygml/2.0\"><a{huge}></b></core:CityModel>\n")).unwrap();
     // T-mesh XML: a degree that is not a number
     let t = d.join("m.tmesh");
-    std::fs::write(&t, format!("<?xml version=\"1.0\"?>\n<tmesh xmlns=\"{}\" degree=\"{huge}\"/>\n", tspline_namespace())).unwrap();
+    std::fs::write(
+        &t,
+        format!("<?xml version=\"1.0\"?>\n<tmesh xmlns=\"{}\" degree=\"{huge}\"/>\n", tspline_namespace()),
+    )
+    .unwrap();
     let (out, tif, popa) = (d.join("out.gml"), d.join("out.tif"), d.join("out.popa3d"));
     let (old, old_tif, old_popa) = (old_output(&out), old_output(&tif), old_output(&popa));
     let cases: [(&[&str], &str); 5] = [
@@ -425,7 +432,10 @@ fn stale_temporaries_of_dead_processes_are_removed() {
     // the atomic writer (a text output) cleans too, and its own temporary is gone after the run
     std::fs::write(&stale_file, "half a file").unwrap();
     age(&stale_file);
-    let o = common::run(&["-q", "citygml2popa3d", "-", "-o", s(&d.join("m.popa3d"))], Some(city(&box_building(0)).as_bytes()));
+    let o = common::run(
+        &["-q", "citygml2popa3d", "-", "-o", s(&d.join("m.popa3d"))],
+        Some(city(&box_building(0)).as_bytes()),
+    );
     assert_eq!(common::code(&o), 0, "{}", stderr(&o));
     assert!(!stale_file.exists());
     let left: Vec<String> = std::fs::read_dir(d)
@@ -447,7 +457,11 @@ fn validate_refuses_an_element_with_100k_attributes_in_time() {
     let dir = common::tempdir();
     let f = dir.path().join("attrs.gml");
     let attrs: String = (0..100_000).map(|i| format!(" a{i}=\"{i}\"")).collect();
-    let doc = city(&box_building(0)).replacen("<bldg:Building gml:id=\"B0\"", &format!("<bldg:Building gml:id=\"B0\"{attrs}"), 1);
+    let doc = city(&box_building(0)).replacen(
+        "<bldg:Building gml:id=\"B0\"",
+        &format!("<bldg:Building gml:id=\"B0\"{attrs}"),
+        1,
+    );
     std::fs::write(&f, doc).unwrap();
     let t = Instant::now();
     let o = common::run(&["validate", "--no-geometry", "--schemas", s(&xsd), s(&f)], None);
@@ -541,7 +555,9 @@ fn citygml_of_1_gib_is_summarised_and_validated_in_200_mib() {
     assert_eq!(code, 1, "the tile has findings, so has the big file");
     eprintln!("validate --no-xsd of the same: peak RSS {peak:.0} MiB");
     assert!(peak <= 200.0, "validate --no-xsd: peak RSS {peak:.0} MiB for a 1 GiB file");
-    let findings = |r: &[u8]| serde_json::from_slice::<serde_json::Value>(r).unwrap()["geometry"]["findings"].as_array().unwrap().len() as u64;
+    let findings = |r: &[u8]| {
+        serde_json::from_slice::<serde_json::Value>(r).unwrap()["geometry"]["findings"].as_array().unwrap().len() as u64
+    };
     assert_eq!(findings(&check), copies * findings(&one_check));
     assert_eq!(json_number(&check, "/geometry/features"), copies * json_number(&one_check, "/geometry/features"));
 }
@@ -585,12 +601,30 @@ fn gauss_rasterize_memory_does_not_grow_with_the_points() {
         las_points(&las, n);
         let tif = dir.path().join(format!("p{n}.tif"));
         let report = dir.path().join(format!("p{n}.json"));
-        let args = ["-q", "rasterize", s(&las), "--cell", "2", "--bounds", "0", "0", "2000", "2000", "-o", s(&tif), "--report", s(&report)];
+        let args = [
+            "-q",
+            "rasterize",
+            s(&las),
+            "--cell",
+            "2",
+            "--bounds",
+            "0",
+            "0",
+            "2000",
+            "2000",
+            "-o",
+            s(&tif),
+            "--report",
+            s(&report),
+        ];
         let (code, peak, _) = run_measuring_rss(dir.path(), &args);
         assert_eq!(code, 0);
         let r = std::fs::read(&report).unwrap();
         assert_eq!(json_number(&r, "/points"), n);
-        assert!(json_number(&r, "/cells_with_value") >= 999_000, "a point within 1.5 cells of almost every cell centre");
+        assert!(
+            json_number(&r, "/cells_with_value") >= 999_000,
+            "a point within 1.5 cells of almost every cell centre"
+        );
         let raster = raster_io::read_raster(&tif).unwrap();
         let (lo, hi) = raster.data.iter().fold((f64::MAX, f64::MIN), |(a, b), v| (a.min(*v), b.max(*v)));
         assert!(lo >= 89.99 && hi <= 110.01, "heights {lo}..{hi}");
@@ -618,7 +652,11 @@ fn a_netcdf_header_claiming_billions_of_values_is_refused_before_gdal_reads_it()
     std::fs::write(&bad, &bytes).unwrap();
     let out = dir.path().join("out.tmesh");
     let old = old_output(&out);
-    for args in [vec!["info", s(&bad)], vec!["-q", "fit", s(&bad), "--max-error", "10", "-o", s(&out)], vec!["-q", "tile", "plan", s(&bad)]] {
+    for args in [
+        vec!["info", s(&bad)],
+        vec!["-q", "fit", s(&bad), "--max-error", "10", "-o", s(&out)],
+        vec!["-q", "tile", "plan", s(&bad)],
+    ] {
         let (code, peak, _) = run_measuring_rss(dir.path(), &args);
         let e = std::fs::read_to_string(dir.path().join("stderr")).unwrap();
         assert_eq!(code, 3, "{args:?}: {e}");
@@ -643,7 +681,11 @@ fn a_full_disk_between_outputs_leaves_every_old_output() {
     let dir = common::tempdir();
     let d = dir.path();
     let grid = d.join("g.asc");
-    let rows: String = (0..40).map(|r| (0..40).map(|c| format!("{}", ((r * 7 + c * 13) % 17) as f64 * 0.9)).collect::<Vec<_>>().join(" ") + "\n").collect();
+    let rows: String = (0..40)
+        .map(|r| {
+            (0..40).map(|c| format!("{}", ((r * 7 + c * 13) % 17) as f64 * 0.9)).collect::<Vec<_>>().join(" ") + "\n"
+        })
+        .collect();
     std::fs::write(&grid, format!("ncols 40\nnrows 40\nxllcorner 0\nyllcorner 0\ncellsize 1\n{rows}")).unwrap();
     let bin = env!("CARGO_BIN_EXE_geofit");
     // the full disk holds the mesh (written first) and then the report (written last)
@@ -651,7 +693,11 @@ fn a_full_disk_between_outputs_leaves_every_old_output() {
         let (small, big) = (d.join(format!("small-{full}")), d.join(format!("big-{full}")));
         std::fs::create_dir_all(&small).unwrap();
         std::fs::create_dir_all(&big).unwrap();
-        let (mesh, report) = if full == "mesh" { (small.join("m.tmesh"), big.join("r.json")) } else { (big.join("m.tmesh"), small.join("r.json")) };
+        let (mesh, report) = if full == "mesh" {
+            (small.join("m.tmesh"), big.join("r.json"))
+        } else {
+            (big.join("m.tmesh"), small.join("r.json"))
+        };
         let script = format!(
             "mount -t tmpfs -o size=64k none '{small}' || exit 99; echo 'old mesh' > '{mesh}'; echo 'old report' > '{report}'; \
              head -c 1000000 /dev/zero > '{small}/filler' 2>/dev/null; \
@@ -662,7 +708,10 @@ fn a_full_disk_between_outputs_leaves_every_old_output() {
         let out = String::from_utf8_lossy(&o.stdout);
         let err = String::from_utf8_lossy(&o.stderr);
         assert!(out.contains("exit 4"), "{full}: the fit must fail writing: {out} {err}");
-        assert!(out.contains("old mesh") && out.contains("old report"), "{full}: an old output was replaced: {out} {err}");
+        assert!(
+            out.contains("old mesh") && out.contains("old report"),
+            "{full}: an old output was replaced: {out} {err}"
+        );
         assert!(err.contains("No space left"), "{err}");
     }
 }

@@ -29,14 +29,25 @@ fn script(name: &str) -> PathBuf {
 
 fn nrw_sources() -> Option<Vec<PathBuf>> {
     let dir = common::fixture(NRW)?;
-    let mut v: Vec<PathBuf> = std::fs::read_dir(dir).ok()?.filter_map(|e| e.ok()).map(|e| e.path()).filter(|p| p.extension().is_some_and(|x| x == "gml")).collect();
+    let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
+        .ok()?
+        .filter_map(|e| e.ok())
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|x| x == "gml"))
+        .collect();
     v.sort();
     assert!(v.len() >= 2, "NRW fixture tiles expected");
     Some(v)
 }
 
 fn ok(o: &Output, what: &str) {
-    assert!(o.status.success(), "{what} failed ({:?}):\nstdout: {}\nstderr: {}", o.status, String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
+    assert!(
+        o.status.success(),
+        "{what} failed ({:?}):\nstdout: {}\nstderr: {}",
+        o.status,
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
 }
 
 fn last_json(o: &Output, what: &str) -> Value {
@@ -58,7 +69,15 @@ fn python_ok() -> bool {
 }
 
 fn plan(sources: &[PathBuf], out: &Path) -> Vec<Value> {
-    let mut args = vec!["-q".to_string(), "tile".into(), "plan".into(), "--buildings-per-tile".into(), BUILDINGS_PER_TILE.into(), "-o".into(), out.display().to_string()];
+    let mut args = vec![
+        "-q".to_string(),
+        "tile".into(),
+        "plan".into(),
+        "--buildings-per-tile".into(),
+        BUILDINGS_PER_TILE.into(),
+        "-o".into(),
+        out.display().to_string(),
+    ];
     args.extend(sources.iter().map(|p| p.display().to_string()));
     let o = common::geofit().args(&args).output().unwrap();
     ok(&o, "geofit tile plan");
@@ -82,19 +101,35 @@ fn extracts_partition_the_buildings_and_halo_buildings_stay_home() {
         let id = t["id"].as_str().unwrap();
         assert!(t["work"].as_u64().unwrap() <= 30, "tile {id} over budget");
         let p = dir.path().join(format!("{id}.gml"));
-        let o = common::geofit().args(["-q", "tile", "extract"]).arg(dir.path().join("plan.jsonl")).args(["--tile", id, "-o"]).arg(&p).output().unwrap();
+        let o = common::geofit()
+            .args(["-q", "tile", "extract"])
+            .arg(dir.path().join("plan.jsonl"))
+            .args(["--tile", id, "-o"])
+            .arg(&p)
+            .output()
+            .unwrap();
         ok(&o, "geofit tile extract");
         extracts.push(p);
     }
     // each extract names the sources' CRS (heal refuses degrees, export records it) and stays
     // schema-valid with its new envelope
     let source_text = std::fs::read_to_string(&sources[0]).unwrap();
-    let srs = source_text.split("srsName=\"").nth(1).and_then(|r| r.split('"').next()).expect("the source names its CRS");
+    let srs =
+        source_text.split("srsName=\"").nth(1).and_then(|r| r.split('"').next()).expect("the source names its CRS");
     for p in &extracts {
-        assert!(std::fs::read_to_string(p).unwrap().contains(&format!("srsName=\"{srs}\"")), "{} lacks srsName", p.display());
+        assert!(
+            std::fs::read_to_string(p).unwrap().contains(&format!("srsName=\"{srs}\"")),
+            "{} lacks srsName",
+            p.display()
+        );
     }
     if let Some(xsd) = common::shared_xsd() {
-        let o = common::geofit().args(["-q", "validate", "--no-geometry", "--schemas"]).arg(&xsd).arg(&extracts[0]).output().unwrap();
+        let o = common::geofit()
+            .args(["-q", "validate", "--no-geometry", "--schemas"])
+            .arg(&xsd)
+            .arg(&extracts[0])
+            .output()
+            .unwrap();
         ok(&o, "geofit validate (XSD) of an extract");
     }
     let mut c = common::python();
@@ -112,14 +147,22 @@ fn extracts_partition_the_buildings_and_halo_buildings_stay_home() {
         .iter()
         .flat_map(|t| {
             let id = t["id"].as_str().unwrap().to_string();
-            t["halo_buildings"].as_array().cloned().unwrap_or_default().into_iter().map(move |b| (id.clone(), b.as_str().unwrap().to_string()))
+            t["halo_buildings"]
+                .as_array()
+                .cloned()
+                .unwrap_or_default()
+                .into_iter()
+                .map(move |b| (id.clone(), b.as_str().unwrap().to_string()))
         })
         .collect();
     assert!(!halo.is_empty(), "no building crosses a tile border at this tile size: the rule is untested");
     for (tile, b) in &halo {
         let text = std::fs::read_to_string(dir.path().join(format!("{tile}.gml"))).unwrap();
         assert!(!text.contains(&format!("gml:id=\"{b}\"")), "halo building {b} written into tile {tile}");
-        let homes = extracts.iter().filter(|p| std::fs::read_to_string(p).unwrap().contains(&format!("gml:id=\"{b}\""))).count();
+        let homes = extracts
+            .iter()
+            .filter(|p| std::fs::read_to_string(p).unwrap().contains(&format!("gml:id=\"{b}\"")))
+            .count();
         assert_eq!(homes, 1, "halo building {b} is in {homes} extracts");
     }
 }
@@ -131,22 +174,30 @@ fn raster_plan_windows_cover_the_raster_once() {
     if !common::tool("gdalinfo") {
         return;
     }
-    let info: Value = serde_json::from_slice(&Command::new("gdalinfo").arg("-json").arg(&raster).output().unwrap().stdout).unwrap();
+    let info: Value =
+        serde_json::from_slice(&Command::new("gdalinfo").arg("-json").arg(&raster).output().unwrap().stdout).unwrap();
     let (w, h) = (info["size"][0].as_u64().unwrap() as usize, info["size"][1].as_u64().unwrap() as usize);
     let gt: Vec<f64> = info["geoTransform"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
-    let o = common::geofit().args(["-q", "tile", "plan", "--cells-per-tile", "10000", "--halo", "8"]).arg(&raster).output().unwrap();
+    let o = common::geofit()
+        .args(["-q", "tile", "plan", "--cells-per-tile", "10000", "--halo", "8"])
+        .arg(&raster)
+        .output()
+        .unwrap();
     ok(&o, "geofit tile plan (raster)");
-    let tiles: Vec<Value> = String::from_utf8_lossy(&o.stdout).lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    let tiles: Vec<Value> =
+        String::from_utf8_lossy(&o.stdout).lines().map(|l| serde_json::from_str(l).unwrap()).collect();
     assert_eq!(tiles.len(), w.div_ceil(100) * h.div_ceil(100));
     let mut covered = vec![0u8; w * h];
     for t in &tiles {
-        let px: Vec<usize> = t["core"]["pixels"].as_array().unwrap().iter().map(|v| v.as_u64().unwrap() as usize).collect();
+        let px: Vec<usize> =
+            t["core"]["pixels"].as_array().unwrap().iter().map(|v| v.as_u64().unwrap() as usize).collect();
         for r in px[1]..px[1] + px[3] {
             for c in px[0]..px[0] + px[2] {
                 covered[r * w + c] += 1;
             }
         }
-        let halo: Vec<usize> = t["halo"]["pixels"].as_array().unwrap().iter().map(|v| v.as_u64().unwrap() as usize).collect();
+        let halo: Vec<usize> =
+            t["halo"]["pixels"].as_array().unwrap().iter().map(|v| v.as_u64().unwrap() as usize).collect();
         assert_eq!(halo[0], px[0].saturating_sub(8));
         assert_eq!(halo[0] + halo[2], (px[0] + px[2] + 8).min(w));
         // georeferenced core from gdalinfo's geotransform (north-up)
@@ -160,7 +211,14 @@ fn raster_plan_windows_cover_the_raster_once() {
 
 fn snakemake(work: &Path, config: &[String], extra: &[&str], env: &[(&str, &str)]) -> Output {
     let mut c = Command::new("snakemake");
-    c.arg("-s").arg(common::repo_root().join("workflows/Snakefile")).arg("--directory").arg(work).args(["--cores", "2"]).args(extra).arg("--config").args(config);
+    c.arg("-s")
+        .arg(common::repo_root().join("workflows/Snakefile"))
+        .arg("--directory")
+        .arg(work)
+        .args(["--cores", "2"])
+        .args(extra)
+        .arg("--config")
+        .args(config);
     c.env_remove("GEOFIT_FAIL_ONCE");
     for (k, v) in env {
         c.env(k, v);
@@ -212,7 +270,11 @@ fn snakemake_tiled_run_matches_whole_file_retries_and_make() {
 
     // 1. full run
     ok(&snakemake(work.path(), &config, &[], &[]), "snakemake full run");
-    let tiles: Vec<String> = std::fs::read_to_string(out.join("plan.jsonl")).unwrap().lines().map(|l| serde_json::from_str::<Value>(l).unwrap()["id"].as_str().unwrap().to_string()).collect();
+    let tiles: Vec<String> = std::fs::read_to_string(out.join("plan.jsonl"))
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str::<Value>(l).unwrap()["id"].as_str().unwrap().to_string())
+        .collect();
     assert!(tiles.len() >= 6);
     let first = tree(&out);
 
@@ -272,10 +334,11 @@ fn snakemake_tiled_run_matches_whole_file_retries_and_make() {
     let victim = &tiles[tiles.len() / 2];
     std::fs::remove_file(out.join(format!("healed/{victim}.gml"))).unwrap();
     let jobs = common::snakemake_dry_run_jobs(&snakemake(work.path(), &config, &["-n"], &[]));
-    let want: BTreeSet<(String, String)> = [("heal", victim.as_str()), ("export", victim.as_str()), ("report", ""), ("tileset", ""), ("all", "")]
-        .iter()
-        .map(|(r, t)| (r.to_string(), t.to_string()))
-        .collect();
+    let want: BTreeSet<(String, String)> =
+        [("heal", victim.as_str()), ("export", victim.as_str()), ("report", ""), ("tileset", ""), ("all", "")]
+            .iter()
+            .map(|(r, t)| (r.to_string(), t.to_string()))
+            .collect();
     assert_eq!(jobs, want, "dry run after deleting healed/{victim}.gml");
 
     // 7. fault injection: the heal job of `victim` fails once; without retries the run fails,
@@ -299,13 +362,18 @@ fn snakemake_tiled_run_matches_whole_file_retries_and_make() {
     let work2 = common::tempdir();
     let mut c = Command::new("make");
     c.current_dir(work2.path()).args(["-j2", "-s", "-f"]).arg(common::repo_root().join("workflows/tiles.mk"));
-    c.arg("OUT=out").arg(format!("SOURCES={}", sources.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(" ")));
+    c.arg("OUT=out")
+        .arg(format!("SOURCES={}", sources.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(" ")));
     c.arg(format!("GEOFIT={geofit}")).arg(format!("GEOFIT_BUILDINGS_PER_TILE={BUILDINGS_PER_TILE}"));
     c.arg("GEOFIT_TILESET_ARGS=--heights-as-is").arg("GEOFIT_VALIDATE_ARGS=--no-xsd");
     ok(&c.output().unwrap(), "make -j2 -f workflows/tiles.mk");
     let mut made = tree(&work2.path().join("out"));
     assert!(made.remove("plan.mk").is_some(), "make writes its plan fragment");
-    assert_eq!(made.keys().collect::<Vec<_>>(), first.keys().collect::<Vec<_>>(), "make and Snakemake write different files");
+    assert_eq!(
+        made.keys().collect::<Vec<_>>(),
+        first.keys().collect::<Vec<_>>(),
+        "make and Snakemake write different files"
+    );
     for (k, v) in &first {
         assert!(&made[k] == v, "make output {k} differs from Snakemake's");
     }
@@ -330,7 +398,10 @@ fn tile_commands_exit_codes_and_make_fragment() {
     std::fs::create_dir(&sub).unwrap();
     let glb = dir.path().join("a.glb");
     std::fs::write(&glb, b"glTF").unwrap();
-    let o = common::run(&["tile", "tileset", glb.to_str().unwrap(), "-o", sub.join("tileset.json").to_str().unwrap()], None);
+    let o = common::run(
+        &["tile", "tileset", glb.to_str().unwrap(), "-o", sub.join("tileset.json").to_str().unwrap()],
+        None,
+    );
     assert_eq!(common::code(&o), 3, "a 4-byte glb is unreadable: {}", String::from_utf8_lossy(&o.stderr));
     let mut args = vec!["-q", "tile", "plan", "--buildings-per-tile", BUILDINGS_PER_TILE, "--format", "make"];
     let srcs: Vec<String> = sources[..2].iter().map(|s| s.display().to_string()).collect();
@@ -338,7 +409,8 @@ fn tile_commands_exit_codes_and_make_fragment() {
     let o = common::run(&args, None);
     assert_eq!(common::code(&o), 0);
     let text = String::from_utf8_lossy(&o.stdout);
-    let ids: Vec<&str> = text.lines().find_map(|l| l.strip_prefix("TILES := ")).expect("TILES line").split(' ').collect();
+    let ids: Vec<&str> =
+        text.lines().find_map(|l| l.strip_prefix("TILES := ")).expect("TILES line").split(' ').collect();
     let want: Vec<&str> = tiles.iter().map(|t| t["id"].as_str().unwrap()).collect();
     assert_eq!(ids, want);
 }

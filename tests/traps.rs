@@ -36,7 +36,14 @@ fn refused(args: &[&str], stdin: Option<&[u8]>, exit: i32, words: &[&str], out: 
 fn an_output_naming_its_input_is_refused_and_the_input_kept() {
     let dir = common::tempdir();
     let grid = write(dir.path(), "g2.asc", GRID.as_bytes());
-    refused(&["fit", s(&grid), "--max-error", "5", "-o", s(&grid)], None, 2, &["names the input", "g2.asc"], None, &[&grid]);
+    refused(
+        &["fit", s(&grid), "--max-error", "5", "-o", s(&grid)],
+        None,
+        2,
+        &["names the input", "g2.asc"],
+        None,
+        &[&grid],
+    );
     // a hard link and a symlink to the input are the same file under another name
     let hard = dir.path().join("hard.tmesh");
     std::fs::hard_link(&grid, &hard).unwrap();
@@ -49,7 +56,14 @@ fn an_output_naming_its_input_is_refused_and_the_input_kept() {
     refused(&["fit", s(&grid), "--max-error", "5", "--report", s(&grid)], None, 2, &["--report"], None, &[&grid]);
     // two outputs naming one file
     let out = dir.path().join("out.tmesh");
-    refused(&["fit", s(&grid), "--max-error", "5", "-o", s(&out), "--report", s(&out)], None, 2, &["name one file"], Some(&out), &[&grid]);
+    refused(
+        &["fit", s(&grid), "--max-error", "5", "-o", s(&out), "--report", s(&out)],
+        None,
+        2,
+        &["name one file"],
+        Some(&out),
+        &[&grid],
+    );
 }
 
 #[test]
@@ -60,7 +74,14 @@ fn a_template_named_as_output_is_refused() {
     let popa = dir.path().join("house.popa3d");
     let o = run(&["citygml2popa3d", s(&copy), "-o", s(&popa)], None);
     assert_eq!(code(&o), 0, "{}", String::from_utf8_lossy(&o.stderr));
-    refused(&["popa3d2citygml", s(&popa), "--template", s(&copy), "-o", s(&copy)], None, 2, &["(template)", "names the input"], None, &[&copy, &popa]);
+    refused(
+        &["popa3d2citygml", s(&popa), "--template", s(&copy), "-o", s(&copy)],
+        None,
+        2,
+        &["(template)", "names the input"],
+        None,
+        &[&copy, &popa],
+    );
 }
 
 #[test]
@@ -69,7 +90,14 @@ fn an_output_extension_of_another_format_is_refused() {
     let grid = write(dir.path(), "g.asc", GRID.as_bytes());
     for ext in ["tif", "glb", "asc"] {
         let out = dir.path().join(format!("x.{ext}"));
-        refused(&["fit", s(&grid), "--max-error", "5", "-o", s(&out)], None, 2, &["T-mesh", ".tmesh", ".tmb"], Some(&out), &[&grid]);
+        refused(
+            &["fit", s(&grid), "--max-error", "5", "-o", s(&out)],
+            None,
+            2,
+            &["T-mesh", ".tmesh", ".tmb"],
+            Some(&out),
+            &[&grid],
+        );
     }
     let Some(gml) = common::fixture(GML) else { return };
     let glb = dir.path().join("h.glb");
@@ -92,7 +120,10 @@ fn the_right_extension_or_none_still_writes() {
     // atomic writers replaced the node with a regular file. Root makes its own null device
     // here, so a regression cannot take the host's /dev/null with it.
     let own_null = dir.path().join("null");
-    let made = std::process::Command::new("mknod").args(["-m", "666", s(&own_null), "c", "1", "3"]).status().is_ok_and(|st| st.success());
+    let made = std::process::Command::new("mknod")
+        .args(["-m", "666", s(&own_null), "c", "1", "3"])
+        .status()
+        .is_ok_and(|st| st.success());
     let null = if made { own_null } else { PathBuf::from("/dev/null") };
     let pts = write(dir.path(), "p.xyz", b"0 0 1\n1 0 2\n0 1 3\n1 1 4\n");
     let runs: [&[&str]; 2] = [
@@ -104,9 +135,13 @@ fn the_right_extension_or_none_still_writes() {
     let to_file = dir.path().join("stdout.tmesh");
     let fit = format!("geofit -q fit '{}' --max-error 5 -o /dev/stdout > '{}'", s(&grid), s(&to_file));
     let private = format!("mount -t tmpfs none /dev && ln -s /proc/self/fd/1 /dev/stdout && mknod -m 666 /dev/null c 1 3 && {fit} && test -L /dev/stdout");
-    let in_namespace = made && std::process::Command::new("unshare").args(["-m", "true"]).status().is_ok_and(|st| st.success());
+    let in_namespace =
+        made && std::process::Command::new("unshare").args(["-m", "true"]).status().is_ok_and(|st| st.success());
     let o = if in_namespace {
-        common::bash_with_geofit(dir.path()).args(["-c", &format!("unshare -m bash -c \"{private}\"")]).output().unwrap()
+        common::bash_with_geofit(dir.path())
+            .args(["-c", &format!("unshare -m bash -c \"{private}\"")])
+            .output()
+            .unwrap()
     } else {
         common::bash_with_geofit(dir.path()).args(["-c", &format!("{fit} && test -L /dev/stdout")]).output().unwrap()
     };
@@ -116,7 +151,11 @@ fn the_right_extension_or_none_still_writes() {
     for args in runs {
         let o = run(args, None);
         assert_eq!(code(&o), 0, "{args:?}: {}", String::from_utf8_lossy(&o.stderr));
-        assert!(std::fs::metadata(&null).unwrap().file_type().is_char_device(), "{args:?}: {} is still a device", null.display());
+        assert!(
+            std::fs::metadata(&null).unwrap().file_type().is_char_device(),
+            "{args:?}: {} is still a device",
+            null.display()
+        );
     }
 }
 
@@ -127,9 +166,23 @@ fn a_file_of_another_kind_names_the_command_that_reads_it() {
     let grid = write(dir.path(), "grid.asc", GRID.as_bytes());
     let out = dir.path().join("out.tif");
     // a raster given to eval, which reads T-meshes
-    refused(&["eval", s(&grid), "-o", s(&out)], None, 3, &["ESRI ASCII grid raster", "T-mesh", "fit"], Some(&out), &[&grid]);
+    refused(
+        &["eval", s(&grid), "-o", s(&out)],
+        None,
+        3,
+        &["ESRI ASCII grid raster", "T-mesh", "fit"],
+        Some(&out),
+        &[&grid],
+    );
     // CityGML given to rasterize, which reads points
-    refused(&["rasterize", s(&gml), "--cell", "1", "-o", s(&out)], None, 3, &["CityGML", "point text", "validate"], Some(&out), &[&gml]);
+    refused(
+        &["rasterize", s(&gml), "--cell", "1", "-o", s(&out)],
+        None,
+        3,
+        &["CityGML", "point text", "validate"],
+        Some(&out),
+        &[&gml],
+    );
     // CityGML given to fit
     let tm = dir.path().join("x.tmesh");
     refused(&["fit", s(&gml), "--max-error", "1", "-o", s(&tm)], None, 3, &["CityGML", "raster"], Some(&tm), &[&gml]);
@@ -147,7 +200,14 @@ fn directories_empty_files_and_devices_are_named() {
     std::fs::create_dir(&sub).unwrap();
     refused(&["fit", s(&sub), "--max-error", "1", "-o", s(&out)], None, 3, &["is a directory"], Some(&out), &[]);
     let empty = write(dir.path(), "empty.tif", b"");
-    refused(&["fit", s(&empty), "--max-error", "1", "-o", s(&out)], None, 3, &["empty (0 bytes)", "earlier step"], Some(&out), &[&empty]);
+    refused(
+        &["fit", s(&empty), "--max-error", "1", "-o", s(&out)],
+        None,
+        3,
+        &["empty (0 bytes)", "earlier step"],
+        Some(&out),
+        &[&empty],
+    );
     // README: `geofit info /dev/zero` ends with exit 3, at once, not after gigabytes
     let started = std::time::Instant::now();
     refused(&["info", "/dev/zero"], None, 3, &["/dev/zero", "not a data file"], None, &[]);
@@ -158,7 +218,11 @@ fn directories_empty_files_and_devices_are_named() {
 fn cityjson_gzip_and_glb_inputs_say_what_to_do() {
     let dir = common::tempdir();
     let out = dir.path().join("h.gml");
-    let cj = write(dir.path(), "x.city.json", br#"{"type": "CityJSON", "version": "2.0", "CityObjects": {}, "vertices": []}"#);
+    let cj = write(
+        dir.path(),
+        "x.city.json",
+        br#"{"type": "CityJSON", "version": "2.0", "CityObjects": {}, "vertices": []}"#,
+    );
     for command in ["heal", "validate", "citygml2popa3d", "info"] {
         let mut args = vec![command, s(&cj)];
         if command == "heal" {
@@ -168,7 +232,11 @@ fn cityjson_gzip_and_glb_inputs_say_what_to_do() {
     }
     let Some(gml) = common::fixture(GML) else { return };
     let gz = dir.path().join("house.gml.gz");
-    let o = std::process::Command::new("sh").arg("-c").arg(format!("gzip -c '{}' > '{}'", gml.display(), gz.display())).status().unwrap();
+    let o = std::process::Command::new("sh")
+        .arg("-c")
+        .arg(format!("gzip -c '{}' > '{}'", gml.display(), gz.display()))
+        .status()
+        .unwrap();
     assert!(o.success());
     refused(&["heal", s(&gz), "-o", s(&out)], None, 3, &["gzip", "gunzip -c"], Some(&out), &[&gz]);
     let glb = write(dir.path(), "m.glb", b"glTF\x02\0\0\0\x0c\0\0\0");
@@ -177,7 +245,9 @@ fn cityjson_gzip_and_glb_inputs_say_what_to_do() {
 
 #[test]
 fn an_empty_stdin_says_the_previous_stage_wrote_nothing() {
-    for args in [&["adjust", "-"][..], &["heal", "-"], &["validate", "-"], &["eval", "-"], &["fit", "-", "--max-error", "1"]] {
+    for args in
+        [&["adjust", "-"][..], &["heal", "-"], &["validate", "-"], &["eval", "-"], &["fit", "-", "--max-error", "1"]]
+    {
         refused(args, Some(b""), 3, &["no input (the previous stage wrote nothing)"], None, &[]);
     }
     // a failed first stage: the pipe's status is the first failure, and the next stage says why
@@ -229,10 +299,15 @@ fn each_kind_given_to_the_wrong_command_names_the_right_one() {
     let popa_as_gml = write(dir.path(), "model.gml", &std::fs::read(&popa).unwrap());
     let las = write(dir.path(), "cloud.las", b"LASF\0\0\0\0\x01\x02");
     let grid_as_xyz = write(dir.path(), "grid.xyz", GRID.as_bytes());
-    let (tif, gml_out, popa_out, tm_out) = (dir.path().join("o.tif"), dir.path().join("o.gml"), dir.path().join("o.popa3d"), dir.path().join("o.tmesh"));
+    let (tif, gml_out, popa_out, tm_out) =
+        (dir.path().join("o.tif"), dir.path().join("o.gml"), dir.path().join("o.popa3d"), dir.path().join("o.tmesh"));
     let glb = dir.path().join("o.glb");
     let cases: &[(&[&str], &[&str], &Path)] = &[
-        (&["heal", s(&popa_as_gml), "-o", s(&gml_out)], &["popa3d model", "adjust, observe, popa3d2citygml"], &popa_as_gml),
+        (
+            &["heal", s(&popa_as_gml), "-o", s(&gml_out)],
+            &["popa3d model", "adjust, observe, popa3d2citygml"],
+            &popa_as_gml,
+        ),
         (&["adjust", s(&gml), "-o", s(&popa_out)], &["CityGML", "citygml2popa3d"], &gml),
         (&["fit", s(&tmesh), "--max-error", "1", "-o", s(&tm_out)], &["T-mesh", "eval, surface"], &tmesh),
         (&["fit", s(&las), "--max-error", "1", "-o", s(&tm_out)], &["LAS/LAZ", "rasterize"], &las),
@@ -301,7 +376,11 @@ fn a_cell_on_points_in_feet_states_its_unit() {
         return;
     }
     let dir = common::tempdir();
-    let pts = write(dir.path(), "ft.xyz", b"x y z\n2000000 1000000 10\n2000300 1000000 11\n2000000 1000300 12\n2000300 1000300 13\n");
+    let pts = write(
+        dir.path(),
+        "ft.xyz",
+        b"x y z\n2000000 1000000 10\n2000300 1000000 11\n2000000 1000300 12\n2000300 1000300 13\n",
+    );
     let tif = dir.path().join("ft.tif");
     let base = ["-q", "rasterize", s(&pts), "--s-srs", "EPSG:2240", "--cell", "10", "--method", "tin", "-o", s(&tif)];
     refused(&base, None, 2, &["US survey foot", "--cell-unit crs", "--cell-unit m"], Some(&tif), &[&pts]);

@@ -89,7 +89,13 @@ fn findings(r: &Value) -> Vec<(u64, String, String, u64, Option<f64>)> {
         .iter()
         .map(|f| {
             let t = |k: &str| f[k].as_str().unwrap_or("").to_string();
-            (f["code"].as_u64().unwrap(), t("feature"), t("primitive"), f["line"].as_u64().unwrap(), f["value"].as_f64())
+            (
+                f["code"].as_u64().unwrap(),
+                t("feature"),
+                t("primitive"),
+                f["line"].as_u64().unwrap(),
+                f["value"].as_f64(),
+            )
         })
         .collect()
 }
@@ -147,9 +153,21 @@ fn longitude_first_under_epsg_4979_is_refused() {
     let dir = common::tempdir();
     let swapped = dir.path().join("swapped.gml");
     reproject(&small, &swapped, "EPSG:32654", "EPSG:4979", EPSG_4979, "lonlat");
-    refused(&["-q", "validate", "--no-xsd", s(&swapped)], 3, &["swapped.gml", "EPSG:4979", "other order"], None, &[&swapped]);
+    refused(
+        &["-q", "validate", "--no-xsd", s(&swapped)],
+        3,
+        &["swapped.gml", "EPSG:4979", "other order"],
+        None,
+        &[&swapped],
+    );
     let out = dir.path().join("b.glb");
-    refused(&["-q", "export", s(&swapped), "--t-srs", "EPSG:32654", "-o", s(&out)], 3, &["EPSG:4979", "other axis order"], Some(&out), &[&swapped]);
+    refused(
+        &["-q", "export", s(&swapped), "--t-srs", "EPSG:32654", "-o", s(&out)],
+        3,
+        &["EPSG:4979", "other axis order"],
+        Some(&out),
+        &[&swapped],
+    );
     // the same file in the declared order is read, in zone 54
     let right = dir.path().join("right.gml");
     reproject(&small, &right, "EPSG:32654", "EPSG:4979", EPSG_4979, "latlon");
@@ -170,7 +188,13 @@ fn citygml2popa3d_refuses_a_geographic_file_naming_the_zone() {
     let geo = dir.path().join("b4979.gml");
     reproject(&small, &geo, "EPSG:25832", "EPSG:4979", EPSG_4979, "latlon");
     let out = dir.path().join("b.popa3d");
-    refused(&["-q", "citygml2popa3d", s(&geo), "-o", s(&out)], 2, &["b4979.gml", "EPSG:4979", "degrees", "EPSG:32632"], Some(&out), &[&geo]);
+    refused(
+        &["-q", "citygml2popa3d", s(&geo), "-o", s(&out)],
+        2,
+        &["b4979.gml", "EPSG:4979", "degrees", "EPSG:32632"],
+        Some(&out),
+        &[&geo],
+    );
 }
 
 fn export_report(args: &[&str], report: &Path) -> Value {
@@ -195,9 +219,27 @@ fn export_of_a_geographic_file_needs_a_projected_target() {
     let geo = dir.path().join("m4979.gml");
     reproject(&medium, &geo, "EPSG:25832", "EPSG:4979", EPSG_4979, "latlon");
     let out = dir.path().join("m.glb");
-    refused(&["-q", "export", s(&geo), "-o", s(&out)], 2, &["m4979.gml", "geographic", "--t-srs EPSG:32632"], Some(&out), &[&geo]);
-    refused(&["-q", "export", s(&geo), "--t-srs", "EPSG:4326", "-o", s(&out)], 2, &["--t-srs EPSG:4326", "geographic"], Some(&out), &[&geo]);
-    refused(&["-q", "export", s(&medium), "--t-srs", "EPSG:4979", "-o", s(&out)], 2, &["EPSG:4979", "geographic"], Some(&out), &[&medium]);
+    refused(
+        &["-q", "export", s(&geo), "-o", s(&out)],
+        2,
+        &["m4979.gml", "geographic", "--t-srs EPSG:32632"],
+        Some(&out),
+        &[&geo],
+    );
+    refused(
+        &["-q", "export", s(&geo), "--t-srs", "EPSG:4326", "-o", s(&out)],
+        2,
+        &["--t-srs EPSG:4326", "geographic"],
+        Some(&out),
+        &[&geo],
+    );
+    refused(
+        &["-q", "export", s(&medium), "--t-srs", "EPSG:4979", "-o", s(&out)],
+        2,
+        &["EPSG:4979", "geographic"],
+        Some(&out),
+        &[&medium],
+    );
 
     let utm = export_report(&[s(&medium), "-o", s(&dir.path().join("u.glb"))], &dir.path().join("u.json"));
     let g = export_report(&[s(&geo), "--t-srs", "EPSG:25832", "-o", s(&out)], &dir.path().join("g.json"));
@@ -239,8 +281,20 @@ fn tileset_of_an_nrw_tile_needs_a_height_choice() {
     let dir = common::tempdir();
     let glb = glb_of(&small, dir.path(), "nrw.glb");
     let ts = dir.path().join("tileset.json");
-    refused(&["-q", "tile", "tileset", s(&glb), "-o", s(&ts)], 2, &["nrw.glb", "DHHN2016", "--height-offset", "--heights-as-is", "--geoid"], Some(&ts), &[&glb]);
-    refused(&["-q", "tile", "tileset", s(&glb), "--crs", "EPSG:25832", "-o", s(&ts)], 2, &["DHHN2016"], Some(&ts), &[&glb]);
+    refused(
+        &["-q", "tile", "tileset", s(&glb), "-o", s(&ts)],
+        2,
+        &["nrw.glb", "DHHN2016", "--height-offset", "--heights-as-is", "--geoid"],
+        Some(&ts),
+        &[&glb],
+    );
+    refused(
+        &["-q", "tile", "tileset", s(&glb), "--crs", "EPSG:25832", "-o", s(&ts)],
+        2,
+        &["DHHN2016"],
+        Some(&ts),
+        &[&glb],
+    );
 
     let o = run(&["-q", "tile", "tileset", s(&glb), "--height-offset", "46.5", "-o", s(&ts)], None);
     assert_eq!(code(&o), 0, "{}", String::from_utf8_lossy(&o.stderr));
@@ -258,7 +312,13 @@ fn tileset_of_an_nrw_tile_needs_a_height_choice() {
     let r = origins(&ts, "EPSG:25832", 0.0);
     assert!(r["max_dh_m"].as_f64().unwrap() < 0.05, "{r}");
     // a missing --geoid grid is refused
-    refused(&["-q", "tile", "tileset", s(&glb), "--geoid", "no_such_grid.tif", "-o", s(&dir.path().join("t2.json"))], 2, &["no_such_grid.tif"], Some(&dir.path().join("t2.json")), &[&glb]);
+    refused(
+        &["-q", "tile", "tileset", s(&glb), "--geoid", "no_such_grid.tif", "-o", s(&dir.path().join("t2.json"))],
+        2,
+        &["no_such_grid.tif"],
+        Some(&dir.path().join("t2.json")),
+        &[&glb],
+    );
 }
 
 /// Trap: a compound CRS (UTM 32N + EGM96 heights, as an OGC compound URN) goes to ellipsoidal
@@ -275,7 +335,11 @@ fn compound_crs_heights_go_through_the_geoid_grid() {
     let egm = dir.path().join("egm96.gml");
     relabel(&small, &egm, "urn:ogc:def:crs,crs:EPSG::25832,crs:EPSG::5773");
     let (_, r) = validate_json(&egm);
-    assert_eq!((r["heights"]["epsg"].as_u64(), r["heights"]["name"].as_str()), (Some(5773), Some("EGM96 height")), "{r}");
+    assert_eq!(
+        (r["heights"]["epsg"].as_u64(), r["heights"]["name"].as_str()),
+        (Some(5773), Some("EGM96 height")),
+        "{r}"
+    );
     let o = run(&["-q", "validate", "--no-xsd", s(&small)], None);
     assert!(String::from_utf8_lossy(&o.stdout).contains("heights: DHHN2016 height (EPSG:7837, normal heights)"));
 
@@ -306,8 +370,26 @@ fn a_crs_proj_does_not_know_is_refused() {
     relabel(&small, &odd, "urn:example:crs:site-grid");
     let glb = glb_of(&odd, dir.path(), "odd.glb");
     let ts = dir.path().join("tileset.json");
-    refused(&["-q", "tile", "tileset", s(&glb), "--heights-as-is", "-o", s(&ts)], 2, &["urn:example:crs:site-grid", "--crs"], Some(&ts), &[&glb]);
-    refused(&["-q", "tile", "tileset", s(&glb), "--crs", "EPSG:999999", "--heights-as-is", "-o", s(&ts)], 2, &["EPSG:999999"], Some(&ts), &[&glb]);
+    refused(
+        &["-q", "tile", "tileset", s(&glb), "--heights-as-is", "-o", s(&ts)],
+        2,
+        &["urn:example:crs:site-grid", "--crs"],
+        Some(&ts),
+        &[&glb],
+    );
+    refused(
+        &["-q", "tile", "tileset", s(&glb), "--crs", "EPSG:999999", "--heights-as-is", "-o", s(&ts)],
+        2,
+        &["EPSG:999999"],
+        Some(&ts),
+        &[&glb],
+    );
     let out = dir.path().join("o.glb");
-    refused(&["-q", "export", s(&odd), "--t-srs", "EPSG:25832", "-o", s(&out)], 2, &["urn:example:crs:site-grid"], Some(&out), &[&odd]);
+    refused(
+        &["-q", "export", s(&odd), "--t-srs", "EPSG:25832", "-o", s(&out)],
+        2,
+        &["urn:example:crs:site-grid"],
+        Some(&out),
+        &[&odd],
+    );
 }

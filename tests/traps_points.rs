@@ -191,10 +191,15 @@ fn decimal_commas_in_a_comma_separated_file_are_refused() {
     refused(&args, 3, &["h.csv:1:", "may be 6 whole numbers or 3 numbers with decimal commas", "--sep ,"], &p, &out);
     // given as fields: x, y, z are the first three whole numbers of rows that also carry
     // three whole-number attributes, on the plane z = 12 + (x − 341000) + 0.5 (y − 5724000)
-    let p = write(d.path(), "g.csv", b"341000,5724000,12,1,2,3\n341004,5724000,16,1,2,3\n341000,5724004,14,1,2,3\n341004,5724004,18,1,2,3\n");
+    let p = write(
+        d.path(),
+        "g.csv",
+        b"341000,5724000,12,1,2,3\n341004,5724000,16,1,2,3\n341000,5724004,14,1,2,3\n341004,5724004,18,1,2,3\n",
+    );
     let args = ["-q", "rasterize", s(&p), "--cell", "1", "--method", "tin", "-o", s(&out)];
     refused(&args, 3, &["g.csv:1:", "may be 6 whole numbers"], &p, &out);
-    let o = common::run(&["-q", "rasterize", s(&p), "--cell", "1", "--method", "tin", "-o", s(&out), "--sep", ","], None);
+    let o =
+        common::run(&["-q", "rasterize", s(&p), "--cell", "1", "--method", "tin", "-o", s(&out), "--sep", ","], None);
     assert_eq!(common::code(&o), 0, "{}", stderr(&o));
     if gdal() {
         let c = cells(&out);
@@ -204,7 +209,11 @@ fn decimal_commas_in_a_comma_separated_file_are_refused() {
         }
     }
     // quoted decimal commas in a comma-separated file are read right
-    let p = write(d.path(), "q.csv", text(Some("x,y,z"), &lattice(), ",", "\n", |v| format!("\"{}\"", comma(v))).as_bytes());
+    let p = write(
+        d.path(),
+        "q.csv",
+        text(Some("x,y,z"), &lattice(), ",", "\n", |v| format!("\"{}\"", comma(v))).as_bytes(),
+    );
     tin_gives_the_plane(s(&p), None, d.path(), &[]);
 }
 
@@ -224,7 +233,11 @@ fn rows_whose_field_count_differs_are_refused() {
     let args = ["-q", "rasterize", s(&p), "--cell", "1", "-o", s(&out)];
     refused(&args, 3, &["noheader.xyz:4:", "4 fields, but line 1 has 3"], &p, &out);
     // the same rows with the same counts are read (extra columns of a headerless file ignored)
-    let p = write(d.path(), "extra.xyz", text(None, &lattice(), " ", "\n", |v| v.to_string()).replace('\n', " 99\n").as_bytes());
+    let p = write(
+        d.path(),
+        "extra.xyz",
+        text(None, &lattice(), " ", "\n", |v| v.to_string()).replace('\n', " 99\n").as_bytes(),
+    );
     tin_gives_the_plane(s(&p), None, d.path(), &[]);
 }
 
@@ -236,10 +249,22 @@ fn thousands_separators_and_mixed_marks_are_refused() {
     let d = common::tempdir();
     let out = d.path().join("o.tif");
     let cases: [(&str, &[u8], &[&str]); 4] = [
-        ("t.csv", b"x,y,z\n\"341.000,5\",\"5.724.000,25\",\"12,5\"\n", &["t.csv:2:", "x = \"341.000,5\"", "thousands separator"]),
-        ("m.csv", b"x;y;z\n341000,5;5724000;1\n341001.5;5724000;2\n", &["m.csv:3:", "decimal point, but line 2 has a decimal comma (\"341000,5\")"]),
+        (
+            "t.csv",
+            b"x,y,z\n\"341.000,5\",\"5.724.000,25\",\"12,5\"\n",
+            &["t.csv:2:", "x = \"341.000,5\"", "thousands separator"],
+        ),
+        (
+            "m.csv",
+            b"x;y;z\n341000,5;5724000;1\n341001.5;5724000;2\n",
+            &["m.csv:3:", "decimal point, but line 2 has a decimal comma (\"341000,5\")"],
+        ),
         ("s.csv", b"x;y;z\n341000;5 724 000,25;1\n", &["s.csv:2:", "y = \"5 724 000,25\" is not a number"]),
-        ("a.csv", b"x,y,z\n\"1,234\",2,3\n5,6,7\n", &["a.csv:2:", "decimal comma or a thousands separator", "--decimal"]),
+        (
+            "a.csv",
+            b"x,y,z\n\"1,234\",2,3\n5,6,7\n",
+            &["a.csv:2:", "decimal comma or a thousands separator", "--decimal"],
+        ),
     ];
     for (name, content, needles) in cases {
         let p = write(d.path(), name, content);
@@ -247,9 +272,13 @@ fn thousands_separators_and_mixed_marks_are_refused() {
     }
     // settled by --decimal: "1,234" is 1.234 (quoted decimal commas, comma separator)
     let flat: Vec<[f64; 3]> = lattice().iter().map(|p| [p[0], p[1], 1.234]).collect();
-    let p = write(d.path(), "dec.csv", text(Some("x,y,z"), &flat, ",", "\n", |v| format!("\"{}\"", comma(v))).as_bytes());
+    let p =
+        write(d.path(), "dec.csv", text(Some("x,y,z"), &flat, ",", "\n", |v| format!("\"{}\"", comma(v))).as_bytes());
     refused(&["-q", "rasterize", s(&p), "--cell", "1", "-o", s(&out)], 3, &["dec.csv:2: z = \"1,234\""], &p, &out);
-    let o = common::run(&["-q", "rasterize", s(&p), "--cell", "1", "--method", "tin", "-o", s(&out), "--decimal", ","], None);
+    let o = common::run(
+        &["-q", "rasterize", s(&p), "--cell", "1", "--method", "tin", "-o", s(&out), "--decimal", ","],
+        None,
+    );
     assert_eq!(common::code(&o), 0, "{}", stderr(&o));
     if gdal() {
         let c = cells(&out);
@@ -259,7 +288,13 @@ fn thousands_separators_and_mixed_marks_are_refused() {
     // a --decimal that the text contradicts is refused, not obeyed
     let p = write(d.path(), "pt.csv", text(Some("x;y;z"), &lattice(), ";", "\n", |v| v.to_string()).as_bytes());
     let args = ["-q", "rasterize", s(&p), "--cell", "1", "-o", s(&out), "--decimal", ","];
-    refused(&args, 3, &["pt.csv:2:", "x = \"341000.5\" has a decimal point", "the decimal mark given is ','"], &p, &out);
+    refused(
+        &args,
+        3,
+        &["pt.csv:2:", "x = \"341000.5\" has a decimal point", "the decimal mark given is ','"],
+        &p,
+        &out,
+    );
 }
 
 /// A sounding without a depth (`NaN`, empty, `inf`) is a data error naming its line, not a
@@ -285,10 +320,24 @@ fn depth_columns_stay_positive_down_and_the_notice_says_so() {
     let d = common::tempdir();
     let pts: Vec<[f64; 3]> = lattice().iter().map(|p| [p[0], p[1], plane(p[0], p[1])]).collect();
     assert!(pts.iter().all(|p| p[2] > 0.0));
-    let p = write(d.path(), "depth.csv", text(Some("Northing;Easting;Depth"), &pts.iter().map(|p| [p[1], p[0], p[2]]).collect::<Vec<_>>(), ";", "\n", comma).as_bytes());
+    let p = write(
+        d.path(),
+        "depth.csv",
+        text(
+            Some("Northing;Easting;Depth"),
+            &pts.iter().map(|p| [p[1], p[0], p[2]]).collect::<Vec<_>>(),
+            ";",
+            "\n",
+            comma,
+        )
+        .as_bytes(),
+    );
     // columns in another order: y first; the plane check proves x and y were not swapped
     let e = tin_gives_the_plane(s(&p), None, d.path(), &[]);
-    assert!(e.contains("x y z = columns Easting, Northing, Depth (values as given: a depth stays positive down)"), "{e}");
+    assert!(
+        e.contains("x y z = columns Easting, Northing, Depth (values as given: a depth stays positive down)"),
+        "{e}"
+    );
 }
 
 /// Lon/lat soundings with a cell meant as metres were gridded in degrees (a 1×1 grid) with
@@ -299,10 +348,17 @@ fn depth_columns_stay_positive_down_and_the_notice_says_so() {
 fn lon_lat_soundings_with_metre_cells() {
     let d = common::tempdir();
     let out = d.path().join("o.tif");
-    let pts: Vec<[f64; 3]> = (0..100).map(|k| [7.0 + 0.0001 * (k % 10) as f64, 51.5 + 0.0001 * (k / 10) as f64, 4.25]).collect();
+    let pts: Vec<[f64; 3]> =
+        (0..100).map(|k| [7.0 + 0.0001 * (k % 10) as f64, 51.5 + 0.0001 * (k / 10) as f64, 4.25]).collect();
     let p = write(d.path(), "ll.csv", text(Some("lon,lat,depth"), &pts, ",", "\n", |v| v.to_string()).as_bytes());
     let args = ["-q", "rasterize", s(&p), "--cell", "0.5", "-o", s(&out)];
-    refused(&args, 2, &["--cell 0.5", "header names longitude/latitude columns", "--s-srs EPSG:4326 --t-srs EPSG:32632"], &p, &out);
+    refused(
+        &args,
+        2,
+        &["--cell 0.5", "header names longitude/latitude columns", "--s-srs EPSG:4326 --t-srs EPSG:32632"],
+        &p,
+        &out,
+    );
     let q = write(d.path(), "plain.xyz", text(None, &pts, " ", "\n", |v| v.to_string()).as_bytes());
     let args = ["-q", "rasterize", s(&q), "--cell", "0.5", "-o", s(&out), "--s-srs", "EPSG:4326"];
     refused(&args, 2, &["geographic CRS", "--t-srs EPSG:32632 (UTM zone 32N"], &q, &out);
@@ -310,7 +366,24 @@ fn lon_lat_soundings_with_metre_cells() {
     let o = common::run(&["-q", "rasterize", s(&p), "--cell", "0.0001", "-o", s(&out)], None);
     assert_eq!(common::code(&o), 0, "{}", stderr(&o));
     // metres through the suggested reprojection
-    let o = common::run(&["-q", "rasterize", s(&p), "--cell", "2", "--method", "tin", "-o", s(&out), "--s-srs", "EPSG:4326", "--t-srs", "EPSG:32632"], None);
+    let o = common::run(
+        &[
+            "-q",
+            "rasterize",
+            s(&p),
+            "--cell",
+            "2",
+            "--method",
+            "tin",
+            "-o",
+            s(&out),
+            "--s-srs",
+            "EPSG:4326",
+            "--t-srs",
+            "EPSG:32632",
+        ],
+        None,
+    );
     assert_eq!(common::code(&o), 0, "{}", stderr(&o));
     if !gdal() || !common::tool("gdaltransform") {
         return;
@@ -322,7 +395,9 @@ fn lon_lat_soundings_with_metre_cells() {
     assert_eq!((gt[1], gt[5]), (2.0, -2.0));
     let input: String = pts.iter().map(|p| format!("{} {}\n", p[0], p[1])).collect();
     let mut t = Command::new("gdaltransform");
-    t.args(["-s_srs", "EPSG:4326", "-t_srs", "EPSG:32632"]).stdin(std::process::Stdio::piped()).stdout(std::process::Stdio::piped());
+    t.args(["-s_srs", "EPSG:4326", "-t_srs", "EPSG:32632"])
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped());
     let mut child = t.spawn().unwrap();
     std::io::Write::write_all(&mut child.stdin.take().unwrap(), input.as_bytes()).unwrap();
     let o = child.wait_with_output().unwrap();
@@ -335,7 +410,10 @@ fn lon_lat_soundings_with_metre_cells() {
         .collect();
     assert_eq!(xy.len(), 100);
     for (x, y) in &xy {
-        assert!(*x >= gt[0] && *x <= gt[0] + size[0] * gt[1] && *y <= gt[3] && *y >= gt[3] + size[1] * gt[5], "{x} {y} outside {gt:?} {size:?}");
+        assert!(
+            *x >= gt[0] && *x <= gt[0] + size[0] * gt[1] && *y <= gt[3] && *y >= gt[3] + size[1] * gt[5],
+            "{x} {y} outside {gt:?} {size:?}"
+        );
     }
     // ~70 m × 111 m of points on 2 m cells: a real grid, every value the depth as given
     assert!(size[0] > 25.0 && size[1] > 45.0, "{size:?}");
@@ -350,21 +428,57 @@ fn ambiguous_headers_and_options_are_refused() {
     let d = common::tempdir();
     let out = d.path().join("o.tif");
     let p = write(d.path(), "two.csv", b"lon,lat,x,y,z\n7,51,341000,5724000,3\n");
-    refused(&["-q", "rasterize", s(&p), "--cell", "1", "-o", s(&out)], 3, &["two.csv:1:", "2 columns for x (lon, x)"], &p, &out);
+    refused(
+        &["-q", "rasterize", s(&p), "--cell", "1", "-o", s(&out)],
+        3,
+        &["two.csv:1:", "2 columns for x (lon, x)"],
+        &p,
+        &out,
+    );
     // a header that names x and y but no z (ID first: the first three columns would be wrong)
     let p = write(d.path(), "partial.csv", b"ID,Easting,Northing,Sounding\n1,341000,5724000,3\n");
-    refused(&["-q", "rasterize", s(&p), "--cell", "1", "-o", s(&out)], 3, &["partial.csv:1:", "the header names no z column"], &p, &out);
+    refused(
+        &["-q", "rasterize", s(&p), "--cell", "1", "-o", s(&out)],
+        3,
+        &["partial.csv:1:", "the header names no z column"],
+        &p,
+        &out,
+    );
     let p = write(d.path(), "unnamed.txt", b"Punkt Spalte2 Spalte3 Spalte4\n1 341000 5724000 3\n");
-    refused(&["-q", "rasterize", s(&p), "--cell", "1", "-o", s(&out)], 3, &["unnamed.txt:1:", "cannot tell which of the header's 4 columns"], &p, &out);
+    refused(
+        &["-q", "rasterize", s(&p), "--cell", "1", "-o", s(&out)],
+        3,
+        &["unnamed.txt:1:", "cannot tell which of the header's 4 columns"],
+        &p,
+        &out,
+    );
     let p = write(d.path(), "mixed.xyz", b"1,2 3,4,5\n");
-    refused(&["-q", "rasterize", s(&p), "--cell", "1", "-o", s(&out)], 3, &["mixed.xyz:1:", "cannot tell the field separator", "--sep"], &p, &out);
+    refused(
+        &["-q", "rasterize", s(&p), "--cell", "1", "-o", s(&out)],
+        3,
+        &["mixed.xyz:1:", "cannot tell the field separator", "--sep"],
+        &p,
+        &out,
+    );
     let p = write(d.path(), "semi.csv", b"x;y;z\n0;0;1\n");
-    refused(&["-q", "rasterize", s(&p), "--cell", "1", "-o", s(&out), "--sep", ","], 3, &["semi.csv:1:", "1 field(s) split by ','"], &p, &out);
+    refused(
+        &["-q", "rasterize", s(&p), "--cell", "1", "-o", s(&out), "--sep", ","],
+        3,
+        &["semi.csv:1:", "1 field(s) split by ','"],
+        &p,
+        &out,
+    );
     let o = common::run(&["-q", "rasterize", s(&p), "--cell", "1", "-o", s(&out), "--sep", "|"], None);
     assert_eq!(common::code(&o), 2, "{}", stderr(&o));
     assert!(stderr(&o).contains("--sep") && !out.exists());
     if let Some(las) = common::fixture("terrain/lidR_Topography.laz") {
-        refused(&["-q", "rasterize", s(&las), "--cell", "2", "-o", s(&out), "--decimal", ","], 2, &["--sep and --decimal are for XYZ/CSV text"], &las, &out);
+        refused(
+            &["-q", "rasterize", s(&las), "--cell", "2", "-o", s(&out), "--decimal", ","],
+            2,
+            &["--sep and --decimal are for XYZ/CSV text"],
+            &las,
+            &out,
+        );
     }
 }
 
@@ -380,5 +494,8 @@ fn gmt_tab_padded_columns_read_as_before() {
     let o = common::run(&["rasterize", s(&ship), "--cell", "0.05", "-o", s(&out)], None);
     let e = stderr(&o);
     assert_eq!(common::code(&o), 0, "{e}");
-    assert!(e.contains(&format!("read {n} points from")) && e.contains("tabs separated (detected), decimal point"), "{e}");
+    assert!(
+        e.contains(&format!("read {n} points from")) && e.contains("tabs separated (detected), decimal point"),
+        "{e}"
+    );
 }

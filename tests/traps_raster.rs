@@ -40,15 +40,20 @@ fn surface_m(col: usize, row: usize) -> f64 {
 /// Writes an ESRI ASCII grid (rows from the top; NaN = -9999) and, with `unit`, the
 /// `.aux.xml` that gives band 1 that unit type.
 fn write_asc(path: &Path, w: usize, h: usize, cell: f64, values: &[f64], unit: Option<&str>) {
-    let mut t = format!("ncols {w}\nnrows {h}\nxllcorner 500000\nyllcorner 5700000\ncellsize {cell}\nNODATA_value -9999\n");
+    let mut t =
+        format!("ncols {w}\nnrows {h}\nxllcorner 500000\nyllcorner 5700000\ncellsize {cell}\nNODATA_value -9999\n");
     for row in 0..h {
-        let line: Vec<String> = (0..w).map(|c| values[row * w + c]).map(|v| if v.is_nan() { "-9999".into() } else { format!("{v:.17e}") }).collect();
+        let line: Vec<String> = (0..w)
+            .map(|c| values[row * w + c])
+            .map(|v| if v.is_nan() { "-9999".into() } else { format!("{v:.17e}") })
+            .collect();
         t.push_str(&line.join(" "));
         t.push('\n');
     }
     std::fs::write(path, t).unwrap();
     if let Some(u) = unit {
-        let aux = format!("<PAMDataset><PAMRasterBand band=\"1\"><UnitType>{u}</UnitType></PAMRasterBand></PAMDataset>\n");
+        let aux =
+            format!("<PAMDataset><PAMRasterBand band=\"1\"><UnitType>{u}</UnitType></PAMRasterBand></PAMDataset>\n");
         std::fs::write(format!("{}.aux.xml", path.display()), aux).unwrap();
     }
 }
@@ -69,7 +74,10 @@ fn surface_tif(dir: &Path, name: &str, unit: Option<&str>, metres_per_unit: f64,
     let asc = dir.join(format!("{name}.asc"));
     write_asc(&asc, w, h, 10.0, &v, unit);
     let tif = dir.join(format!("{name}.tif"));
-    gdal("gdal_translate", &["-q", "-oo", "DATATYPE=Float64", "-ot", "Float64", "-a_srs", "EPSG:25832", s(&asc), s(&tif)]);
+    gdal(
+        "gdal_translate",
+        &["-q", "-oo", "DATATYPE=Float64", "-ot", "Float64", "-a_srs", "EPSG:25832", s(&asc), s(&tif)],
+    );
     (tif, v)
 }
 
@@ -99,7 +107,13 @@ fn read_back(path: &Path) -> (usize, usize, Vec<f64>, Option<f64>) {
 
 /// Fits `input` with `args`, evaluates the mesh on the input's grid (`eval --like`) and returns
 /// the largest |evaluated − truth| in metres over the cells `truth_m` has, with the report.
-fn fit_error_m(dir: &Path, input: &Path, args: &[&str], truth_m: &[f64], metres_per_unit: f64) -> (f64, serde_json::Value, String) {
+fn fit_error_m(
+    dir: &Path,
+    input: &Path,
+    args: &[&str],
+    truth_m: &[f64],
+    metres_per_unit: f64,
+) -> (f64, serde_json::Value, String) {
     let mesh = dir.join("m.tmesh");
     let rep = dir.join("fit.json");
     let mut a = vec!["fit", s(input), "--device", "cpu", "-o", s(&mesh), "--report", s(&rep)];
@@ -208,7 +222,14 @@ fn unknown_or_missing_units_are_refused_not_guessed() {
     let out = d.path().join("out.tmesh");
     let (furlong, _) = surface_tif(d.path(), "furlong", Some("furlong"), 201.168, false);
     let fit = |input: &Path, extra: &[&str]| {
-        let mut a = vec!["fit".to_string(), s(input).to_string(), "--max-error".into(), "1".into(), "-o".into(), s(&out).to_string()];
+        let mut a = vec![
+            "fit".to_string(),
+            s(input).to_string(),
+            "--max-error".into(),
+            "1".into(),
+            "-o".into(),
+            s(&out).to_string(),
+        ];
         a.extend(extra.iter().map(|x| x.to_string()));
         a
     };
@@ -229,7 +250,11 @@ fn unknown_or_missing_units_are_refused_not_guessed() {
     assert_refused(&args, 3, &["--z-unit", "stateplane.tif", "foot"], &sp, &out);
     // `info` says what the band declares
     let o = common::run(&["info", s(&furlong)], None);
-    assert!(String::from_utf8_lossy(&o.stdout).contains("z unit:       furlong"), "{}", String::from_utf8_lossy(&o.stdout));
+    assert!(
+        String::from_utf8_lossy(&o.stdout).contains("z unit:       furlong"),
+        "{}",
+        String::from_utf8_lossy(&o.stdout)
+    );
     let o = common::run(&["info", "--json", s(&furlong)], None);
     let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(j["z_unit"], "furlong");
@@ -240,7 +265,9 @@ fn terrain_rgb_png(dir: &Path) -> PathBuf {
     let (w, h) = (24, 20);
     let mut paths = Vec::new();
     for (i, name) in ["r", "g", "b", "a"].iter().enumerate() {
-        let v: Vec<f64> = (0..w * h).map(|q| if i == 3 { 255.0 } else { ((q % w) * 5 + (q / w) * 3 + i * 40) as f64 % 256.0 }).collect();
+        let v: Vec<f64> = (0..w * h)
+            .map(|q| if i == 3 { 255.0 } else { ((q % w) * 5 + (q / w) * 3 + i * 40) as f64 % 256.0 })
+            .collect();
         let p = dir.join(format!("{name}.asc"));
         write_asc(&p, w, h, 1.0, &v, None);
         paths.push(p);
@@ -264,7 +291,13 @@ fn a_four_band_png_needs_a_band() {
     let d = common::tempdir();
     let png = terrain_rgb_png(d.path());
     let out = d.path().join("out.tmesh");
-    assert_refused(&["fit", s(&png), "--max-error", "1", "-o", s(&out)], 2, &["terrain-rgb.png", "4 bands", "-b"], &png, &out);
+    assert_refused(
+        &["fit", s(&png), "--max-error", "1", "-o", s(&out)],
+        2,
+        &["terrain-rgb.png", "4 bands", "-b"],
+        &png,
+        &out,
+    );
     assert_refused(&["fit", s(&png), "-b", "5", "--max-error", "1", "-o", s(&out)], 2, &["-b 5", "4 band"], &png, &out);
     let tif = d.path().join("w.tif");
     for cmd in [vec!["warp", s(&png), "-o", s(&tif)], vec!["diff", s(&png), s(&png)]] {
@@ -330,7 +363,8 @@ fn eval_like_keeps_the_no_data_cells() {
         }
     }
     let filled = d.path().join("filled.tif");
-    let o = common::run(&["-q", "eval", s(&mesh), "--device", "cpu", "--like", s(&tif), "--fill", "-o", s(&filled)], None);
+    let o =
+        common::run(&["-q", "eval", s(&mesh), "--device", "cpu", "--like", s(&tif), "--fill", "-o", s(&filled)], None);
     assert_eq!(common::code(&o), 0, "{}", stderr(&o));
     let (_, _, got, _) = read_back(&filled);
     assert!(got.iter().all(|g| !g.is_nan()), "--fill: every cell inside the mesh has a value");
@@ -359,8 +393,15 @@ fn wrong_file_kinds_are_named() {
     std::fs::write(&gml, "<?xml version=\"1.0\"?>\n<core:CityModel xmlns:core=\"http://www.opengis.net/citygml/2.0\"></core:CityModel>\n").unwrap();
     assert_refused(&["fit", s(&gml), "--max-error", "1", "-o", s(&out)], 3, &["city.gml", "CityGML"], &gml, &out);
     let xyz = d.path().join("soundings.txt");
-    std::fs::write(&xyz, "x y z\n500000.5 5700000.2 -12.5\n500003.1 5700007.9 -12.9\n500011.0 5700001.4 -13.2\n").unwrap();
-    assert_refused(&["fit", s(&xyz), "--max-error", "1", "-o", s(&out)], 3, &["soundings.txt", "rasterize"], &xyz, &out);
+    std::fs::write(&xyz, "x y z\n500000.5 5700000.2 -12.5\n500003.1 5700007.9 -12.9\n500011.0 5700001.4 -13.2\n")
+        .unwrap();
+    assert_refused(
+        &["fit", s(&xyz), "--max-error", "1", "-o", s(&out)],
+        3,
+        &["soundings.txt", "rasterize"],
+        &xyz,
+        &out,
+    );
     let (tif, _) = surface_tif(d.path(), "grid", None, 1.0, false);
     let ev = d.path().join("ev.tif");
     assert_refused(&["eval", s(&tif), "-o", s(&ev)], 3, &["grid.tif", "raster", "T-mesh", "fit"], &tif, &ev);
@@ -380,7 +421,10 @@ fn south_up_fits_and_rotated_is_refused() {
     write_asc(&asc, w, h, 5.0, &v, None);
     let south = d.path().join("south.tif");
     // upper-left y below lower-right y: GDAL stores a positive y pixel size (row 0 is the south)
-    gdal("gdal_translate", &["-q", "-a_srs", "EPSG:25832", "-a_ullr", "500000", "5700000", "500200", "5700150", s(&asc), s(&south)]);
+    gdal(
+        "gdal_translate",
+        &["-q", "-a_srs", "EPSG:25832", "-a_ullr", "500000", "5700000", "500200", "5700150", s(&asc), s(&south)],
+    );
     let info = Command::new("gdalinfo").args(["-json", s(&south)]).output().unwrap();
     let j: serde_json::Value = serde_json::from_slice(&info.stdout).unwrap();
     assert!(j["geoTransform"][5].as_f64().unwrap() > 0.0, "south-up: {}", j["geoTransform"]);
@@ -396,7 +440,13 @@ fn south_up_fits_and_rotated_is_refused() {
     );
     std::fs::write(&rot, vrt).unwrap();
     let out = d.path().join("rot.tmesh");
-    assert_refused(&["fit", s(&rot), "--max-error", "1", "-o", s(&out)], 3, &["rot.vrt", "rotated", "gdalwarp"], &rot, &out);
+    assert_refused(
+        &["fit", s(&rot), "--max-error", "1", "-o", s(&out)],
+        3,
+        &["rot.vrt", "rotated", "gdalwarp"],
+        &rot,
+        &out,
+    );
 }
 
 /// Lengths in the CRS's units are not applied to degrees: warp --spacing on a geographic raster
@@ -435,7 +485,21 @@ fn blunder_deviations_are_the_ones_the_test_used() {
     let asc = d.path().join("spikes.asc");
     write_asc(&asc, w, h, 10.0, &v, None);
     let csv = d.path().join("b.csv");
-    let o = common::run(&["fit", s(&asc), "--max-error", "0.5", "--device", "cpu", "--outliers-csv", s(&csv), "-o", s(&d.path().join("m.tmesh"))], None);
+    let o = common::run(
+        &[
+            "fit",
+            s(&asc),
+            "--max-error",
+            "0.5",
+            "--device",
+            "cpu",
+            "--outliers-csv",
+            s(&csv),
+            "-o",
+            s(&d.path().join("m.tmesh")),
+        ],
+        None,
+    );
     assert!(matches!(common::code(&o), 0 | 1), "{}", stderr(&o));
     let text = std::fs::read_to_string(&csv).unwrap();
     let rows: Vec<&str> = text.lines().skip(1).collect();

@@ -308,7 +308,10 @@ fn findings_point_at_the_primitive() {
     let line = x["line"].as_u64().unwrap() as usize;
     let col = x["column"].as_u64().unwrap() as usize;
     let l = text.lines().nth(line - 1).unwrap();
-    assert!(l[col - 1..].starts_with("<gml:LinearRing") || l[col - 1..].starts_with("<gml:Polygon"), "{line}:{col} → {l}");
+    assert!(
+        l[col - 1..].starts_with("<gml:LinearRing") || l[col - 1..].starts_with("<gml:Polygon"),
+        "{line}:{col} → {l}"
+    );
     // the first LinearRing of the file is that ring
     let first = text.lines().position(|l| l.contains("<gml:LinearRing")).unwrap() + 1;
     assert!(line == first || line + 2 == first, "line {line}, first ring at {first}");
@@ -341,11 +344,8 @@ fn stdin_text_output_and_exit_codes() {
 #[test]
 fn without_schemas_it_says_how_to_get_them_and_checks_geometry() {
     let Some(f) = common::fixture("citygml/qie/i103_1.gml") else { return };
-    let o = common::geofit()
-        .args(["validate", "--json", f.to_str().unwrap()])
-        .env("GEOFIT_SCHEMAS", "")
-        .output()
-        .unwrap();
+    let o =
+        common::geofit().args(["validate", "--json", f.to_str().unwrap()]).env("GEOFIT_SCHEMAS", "").output().unwrap();
     assert_eq!(common::code(&o), 1);
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("schemas not found") && err.contains("--schemas"), "{err}");
@@ -412,7 +412,10 @@ fn shell_xml(faces: &[Vec<Pt>], id: &str) -> String {
 }
 
 fn solid_xml(shells: &[Vec<Vec<Pt>>], id: &str) -> String {
-    let mut s = format!("<gml:Solid gml:id=\"{id}\">\n<gml:exterior>{}</gml:exterior>\n", shell_xml(&shells[0], &format!("{id}_e")));
+    let mut s = format!(
+        "<gml:Solid gml:id=\"{id}\">\n<gml:exterior>{}</gml:exterior>\n",
+        shell_xml(&shells[0], &format!("{id}_e"))
+    );
     for (k, sh) in shells[1..].iter().enumerate() {
         s += &format!("<gml:interior>{}</gml:interior>\n", shell_xml(sh, &format!("{id}_i{k}")));
     }
@@ -437,7 +440,10 @@ fn building_doc(geometry: &str) -> String {
 fn composite_xml(solids: &[Vec<Vec<Pt>>]) -> String {
     let mut s = String::from("<gml:CompositeSolid gml:id=\"CS1\">\n");
     for (k, sol) in solids.iter().enumerate() {
-        s += &format!("<gml:solidMember>{}</gml:solidMember>\n", solid_xml(std::slice::from_ref(sol), &format!("S{}", k + 1)));
+        s += &format!(
+            "<gml:solidMember>{}</gml:solidMember>\n",
+            solid_xml(std::slice::from_ref(sol), &format!("S{}", k + 1))
+        );
     }
     s + "</gml:CompositeSolid>\n"
 }
@@ -467,7 +473,8 @@ fn solid_interior_disconnected_404_on_generated_solids() {
     let (code, c, r) = generated_codes(d, "cup_ok.gml", &doc);
     assert_eq!((code, c), (0, BTreeSet::new()), "{}", r["geometry"]["findings"]);
     // a cube cavity sharing part of the roof: 401, not 404
-    let flush: Vec<Vec<Pt>> = cube_faces([1.5, 1.5, 3.], 1.).into_iter().map(|f| f.into_iter().rev().collect()).collect();
+    let flush: Vec<Vec<Pt>> =
+        cube_faces([1.5, 1.5, 3.], 1.).into_iter().map(|f| f.into_iter().rev().collect()).collect();
     let doc = building_doc(&solid_xml(&[ext, flush], "SOL"));
     let (_, c, r) = generated_codes(d, "flush401.gml", &doc);
     assert_eq!(c, BTreeSet::from([401]), "{}", r["geometry"]["findings"]);
@@ -497,8 +504,7 @@ fn composite_solid_codes_501_502_503_on_generated_solids() {
     }
     // the same solids as a MultiSolid: nothing is prescribed between its members
     let doc = building_doc(
-        &composite_xml(&[a.clone(), cube_faces([0.99, 0., 0.], 1.)])
-            .replace("CompositeSolid", "MultiSolid"),
+        &composite_xml(&[a.clone(), cube_faces([0.99, 0., 0.], 1.)]).replace("CompositeSolid", "MultiSolid"),
     );
     let (code, c, r) = generated_codes(d, "multisolid.gml", &doc);
     assert_eq!((code, c), (0, BTreeSet::new()), "{}", r["geometry"]["findings"]);
@@ -517,7 +523,8 @@ fn dangling_face_xlink_is_a_finding_with_its_href_and_line() {
     let last = full.rfind("<gml:surfaceMember>").unwrap();
     let end = full[last..].find("</gml:surfaceMember>").unwrap() + last + "</gml:surfaceMember>".len();
     let broken = format!("{}<gml:surfaceMember xlink:href=\"#nowhere\"/>{}", &full[..last], &full[end..]);
-    let doc = building_doc(&broken).replacen("xmlns:gml=", "xmlns:xlink=\"http://www.w3.org/1999/xlink\" xmlns:gml=", 1);
+    let doc =
+        building_doc(&broken).replacen("xmlns:gml=", "xmlns:xlink=\"http://www.w3.org/1999/xlink\" xmlns:gml=", 1);
     let (code, c, r) = generated_codes(d, "dangling.gml", &doc);
     assert_eq!(code, 1, "{r}");
     assert!(c.contains(&901), "{r}");
@@ -555,7 +562,10 @@ fn whole_geometry_by_xlink_is_checked_as_its_target() {
     };
     for (name, prop) in [
         ("lod2solid", "bldg:Building gml:id=\"R\"><bldg:lod2Solid xlink:href=\"#SOL\"/></bldg:Building"),
-        ("generic", "gen:GenericCityObject gml:id=\"G\"><gen:lod2Geometry xlink:href=\"#SOL\"/></gen:GenericCityObject"),
+        (
+            "generic",
+            "gen:GenericCityObject gml:id=\"G\"><gen:lod2Geometry xlink:href=\"#SOL\"/></gen:GenericCityObject",
+        ),
     ] {
         let doc = referenced(prop);
         assert_eq!(object_codes(&doc, 1), inline, "{name}: the referencing object");
@@ -567,7 +577,8 @@ fn whole_geometry_by_xlink_is_checked_as_its_target() {
         let (code, _, r) = generated_codes(d, &format!("{name}_dangling.gml"), &doc);
         assert_eq!(code, 1, "{r}");
         let line = doc.lines().position(|l| l.contains("#nowhere")).unwrap() + 1;
-        let f: Vec<&Value> = r["geometry"]["findings"].as_array().unwrap().iter().filter(|f| f["code"] == 901).collect();
+        let f: Vec<&Value> =
+            r["geometry"]["findings"].as_array().unwrap().iter().filter(|f| f["code"] == 901).collect();
         assert_eq!(f.len(), 1, "{name}: {f:?}");
         assert_eq!(f[0]["line"].as_u64(), Some(line as u64), "{name}: {}", f[0]);
         assert!(f[0]["detail"].as_str().unwrap().contains("#nowhere"), "{name}: {}", f[0]);
@@ -637,7 +648,6 @@ fn validate_lines(args: &[&str], env: &[(&str, &str)]) -> (i32, Vec<Value>, Valu
     (code, lines, summary, stderr)
 }
 
-
 /// The summary as recounted from the per-file objects: files, valid, invalid, unreadable,
 /// findings per code (geometry codes; `xsd` / `not_well_formed` for the XSD findings).
 fn recount(lines: &[Value]) -> Value {
@@ -691,7 +701,10 @@ fn directory_run_equals_the_single_file_runs_with_xsd() {
     }
     assert_eq!(code, worst, "exit status: the worst of the single runs");
     assert_eq!(summary_counts(&summary), recount(&lines));
-    assert_eq!(summary["summary"]["invalid"].as_u64(), Some(lines.iter().filter(|l| l["valid"] == false).count() as u64));
+    assert_eq!(
+        summary["summary"]["invalid"].as_u64(),
+        Some(lines.iter().filter(|l| l["valid"] == false).count() as u64)
+    );
 }
 
 #[test]
@@ -721,7 +734,10 @@ fn text_run_is_the_concatenation_of_single_file_texts_then_a_summary() {
 
 #[test]
 fn a_bad_file_among_good_ones_is_reported_and_the_rest_checked() {
-    let (Some(good), Some(v1)) = (common::fixture("citygml/qie/v001.gml"), common::fixture("citygml/qie/i201_1.gml")) else { return };
+    let (Some(good), Some(v1)) = (common::fixture("citygml/qie/v001.gml"), common::fixture("citygml/qie/i201_1.gml"))
+    else {
+        return;
+    };
     let tmp = common::tempdir();
     let text = std::fs::read(&good).unwrap();
     let cut = write(tmp.path(), "cut.gml", std::str::from_utf8(&text[..text.len() / 2]).unwrap_or("<a"));
@@ -789,7 +805,8 @@ fn quoted_glob_patterns_and_stdin_among_files() {
     let mut o = o;
     std::io::Write::write_all(&mut o.stdin.take().unwrap(), &stdin).unwrap();
     let o = o.wait_with_output().unwrap();
-    let lines: Vec<Value> = String::from_utf8(o.stdout).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    let lines: Vec<Value> =
+        String::from_utf8(o.stdout).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
     assert_eq!(lines[1]["file"], "<stdin>");
     let (_, single) = validate_json(&["--no-xsd", want[0].to_str().unwrap()]);
     assert_eq!(lines[1]["geometry"], single["geometry"]);

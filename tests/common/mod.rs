@@ -2,9 +2,9 @@
 //! temporary directories. Each test file does `mod common;` and uses what it needs.
 #![allow(dead_code)]
 
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
-use std::io::Write;
 
 /// The `geofit` binary cargo built for this test run.
 pub fn geofit() -> Command {
@@ -92,7 +92,9 @@ pub fn run(args: &[&str], stdin: Option<&[u8]>) -> Output {
 
 /// Exit code of an output (panics on signal, which is itself a test failure: e.g. a crash).
 pub fn code(o: &Output) -> i32 {
-    o.status.code().unwrap_or_else(|| panic!("geofit killed by a signal; stderr: {}", String::from_utf8_lossy(&o.stderr)))
+    o.status
+        .code()
+        .unwrap_or_else(|| panic!("geofit killed by a signal; stderr: {}", String::from_utf8_lossy(&o.stderr)))
 }
 
 /// A fresh temporary directory for one test.
@@ -175,7 +177,9 @@ pub fn snakemake_dry_run_jobs(o: &Output) -> std::collections::BTreeSet<(String,
     let mut rule: Option<String> = None;
     for line in text.lines() {
         let l = line.trim();
-        if let Some(r) = l.strip_prefix("rule ").or_else(|| l.strip_prefix("localrule ")).or_else(|| l.strip_prefix("checkpoint ")) {
+        if let Some(r) =
+            l.strip_prefix("rule ").or_else(|| l.strip_prefix("localrule ")).or_else(|| l.strip_prefix("checkpoint "))
+        {
             if let Some(r) = r.strip_suffix(':') {
                 if let Some(prev) = rule.replace(r.to_string()) {
                     jobs.insert((prev, String::new()));
@@ -202,7 +206,11 @@ pub fn tileset_read_by_py3dtiles(tileset: &Path) -> Option<serde_json::Value> {
         eprintln!("SKIP: py3dtiles not installed");
         return None;
     }
-    let o = python().arg(repo_root().join("tests/scripts/tileset_py3dtiles.py")).arg(tileset).output().expect("python runs");
+    let o = python()
+        .arg(repo_root().join("tests/scripts/tileset_py3dtiles.py"))
+        .arg(tileset)
+        .output()
+        .expect("python runs");
     let text = String::from_utf8_lossy(&o.stdout).into_owned();
     assert!(o.status.success(), "py3dtiles on {}: {text}{}", tileset.display(), String::from_utf8_lossy(&o.stderr));
     Some(serde_json::from_str(text.lines().last().unwrap_or("")).expect("one JSON line"))
@@ -212,7 +220,14 @@ pub fn tileset_read_by_py3dtiles(tileset: &Path) -> Option<serde_json::Value> {
 /// every one of `words`, nothing written at `out` (unless `out` is one of the inputs), and every
 /// path in `untouched` with the bytes it had (or still missing). Returns stderr.
 #[track_caller]
-pub fn refused(args: &[&str], stdin: Option<&[u8]>, exit: i32, words: &[&str], out: Option<&Path>, untouched: &[&Path]) -> String {
+pub fn refused(
+    args: &[&str],
+    stdin: Option<&[u8]>,
+    exit: i32,
+    words: &[&str],
+    out: Option<&Path>,
+    untouched: &[&Path],
+) -> String {
     let before: Vec<Option<Vec<u8>>> = untouched.iter().map(|p| std::fs::read(p).ok()).collect();
     let o = run(args, stdin);
     let err = String::from_utf8_lossy(&o.stderr).into_owned();

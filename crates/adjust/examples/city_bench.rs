@@ -18,8 +18,11 @@ fn main() {
     for b in 0..n {
         let mut nrm = Vec::new();
         for k in 0..3 {
-            let ids: Vec<_> = (0..3).map(|c| p.add_unknown(format!("b{b}.n{k}.{c}"), if c == k { 1.0 } else { 0.001 * rnd() })).collect();
-            p.add_restriction(format!("b{b} NormNV {k}"), NormNvRestriction, ids.iter().map(|&u| u.into()).collect()).unwrap();
+            let ids: Vec<_> = (0..3)
+                .map(|c| p.add_unknown(format!("b{b}.n{k}.{c}"), if c == k { 1.0 } else { 0.001 * rnd() }))
+                .collect();
+            p.add_restriction(format!("b{b} NormNV {k}"), NormNvRestriction, ids.iter().map(|&u| u.into()).collect())
+                .unwrap();
             nrm.push(ids);
         }
         let size = [10.0 + 5.0 * rnd(), 10.0 + 5.0 * rnd(), 8.0 + 4.0 * rnd()];
@@ -29,10 +32,18 @@ fn main() {
             let hi = p.add_unknown(format!("b{b}.d{k}hi"), size[k] + 0.05 * rnd());
             planes.push((lo, hi));
             let o = p.add_observation(format!("b{b} sketch {k}"), size[k] + 0.1 * rnd(), 0.1).unwrap();
-            p.add_condition(format!("b{b} RelativeDistancePlanePlane {k}"), RelativeDistancePlanePlane, vec![lo.into(), hi.into()], vec![o]).unwrap();
-            let sl = |d| -> Vec<Slot> { nrm[k].iter().map(|&u| u.into()).chain(std::iter::once(Slot::from(d))).collect() };
+            p.add_condition(
+                format!("b{b} RelativeDistancePlanePlane {k}"),
+                RelativeDistancePlanePlane,
+                vec![lo.into(), hi.into()],
+                vec![o],
+            )
+            .unwrap();
+            let sl =
+                |d| -> Vec<Slot> { nrm[k].iter().map(|&u| u.into()).chain(std::iter::once(Slot::from(d))).collect() };
             let o = p.add_observation(format!("b{b} laser {k}"), size[k] + 0.001 * rnd(), 0.001).unwrap();
-            p.add_condition(format!("b{b} DistanceFaceFace {k}"), DistanceFaceFace, [sl(lo), sl(hi)].concat(), vec![o]).unwrap();
+            p.add_condition(format!("b{b} DistanceFaceFace {k}"), DistanceFaceFace, [sl(lo), sl(hi)].concat(), vec![o])
+                .unwrap();
             for d in [lo, hi] {
                 p.add_identity_observation(d, 1.0).unwrap();
             }
@@ -40,7 +51,8 @@ fn main() {
         for (a, c) in [(0, 1), (0, 2), (1, 2)] {
             let o = p.add_observation(format!("b{b} relangle {a}{c}"), 0.001 * rnd(), 0.001).unwrap();
             let x: Vec<Slot> = nrm[a].iter().chain(nrm[c].iter()).map(|&u| u.into()).collect();
-            p.add_condition(format!("b{b} RelativeAngleNormalNormal {a}{c}"), RelativeAngleNormalNormal, x, vec![o]).unwrap();
+            p.add_condition(format!("b{b} RelativeAngleNormalNormal {a}{c}"), RelativeAngleNormalNormal, x, vec![o])
+                .unwrap();
         }
         for k in 0..3 {
             for &u in &nrm[k] {

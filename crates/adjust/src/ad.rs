@@ -36,13 +36,7 @@ pub trait DynEquation: Send + Sync {
     /// slot `s` to a variable, `lmap[s]` maps observation slot `s` to a variable. `grad` (length
     /// `vars.len()`) receives ∂f/∂var. Returns `None` when the equation touches more distinct
     /// variables than the largest supported gradient length ([`MAX_VARS`]).
-    fn value_grad(
-        &self,
-        vars: &[f64],
-        xmap: &[(usize, f64)],
-        lmap: &[usize],
-        grad: &mut [f64],
-    ) -> Option<f64>;
+    fn value_grad(&self, vars: &[f64], xmap: &[(usize, f64)], lmap: &[usize], grad: &mut [f64]) -> Option<f64>;
 }
 
 /// Largest number of distinct variables one equation may touch (popa3d needs ≤ 24 + 3).
@@ -56,11 +50,8 @@ fn eval_n<E: Equation + ?Sized, const N: usize>(
     grad: &mut [f64],
 ) -> f64 {
     debug_assert!(vars.len() <= N);
-    let seeded: Vec<DualSVec64<N>> = vars
-        .iter()
-        .enumerate()
-        .map(|(i, &v)| DualSVec64::<N>::from_re(v).derivative(i))
-        .collect();
+    let seeded: Vec<DualSVec64<N>> =
+        vars.iter().enumerate().map(|(i, &v)| DualSVec64::<N>::from_re(v).derivative(i)).collect();
     let x: Vec<DualSVec64<N>> = xmap.iter().map(|&(i, s)| seeded[i] * s).collect();
     let l: Vec<DualSVec64<N>> = lmap.iter().map(|&i| seeded[i]).collect();
     let f = eq.eval(&x, &l);
@@ -82,13 +73,7 @@ impl<E: Equation> DynEquation for E {
     fn value(&self, x: &[f64], l: &[f64]) -> f64 {
         self.eval::<f64>(x, l)
     }
-    fn value_grad(
-        &self,
-        vars: &[f64],
-        xmap: &[(usize, f64)],
-        lmap: &[usize],
-        grad: &mut [f64],
-    ) -> Option<f64> {
+    fn value_grad(&self, vars: &[f64], xmap: &[(usize, f64)], lmap: &[usize], grad: &mut [f64]) -> Option<f64> {
         // Dispatch to the smallest fixed gradient length that fits: stack-allocated duals.
         let n = vars.len();
         Some(match n {

@@ -399,7 +399,11 @@ mod tests {
         check(&PlaneOffset { c: [120.0, -35.5, 7.25] }, &a, &[-2.0]);
         let q = unit([0.9, 0.02, -0.01]);
         let setup = [q[0], q[1], q[2], 0.3, 1.0, 2.0, 0.5];
-        check(&PointOnPlanePolar { ih: 1.5, class: "PointOnFace" }, &[setup.to_vec(), a.clone()].concat(), &[123.4, 97.0, 4.2]);
+        check(
+            &PointOnPlanePolar { ih: 1.5, class: "PointOnFace" },
+            &[setup.to_vec(), a.clone()].concat(),
+            &[123.4, 97.0, 4.2],
+        );
         check(&crate::fits::PointOnCircle, &[1.0, 2.0, 3.0], &[3.5, 4.0]);
         check(&crate::fits::PointOnPlane, &a, &[1.0, 2.0, 0.5]);
         check(&crate::fits::LineYofX, &[1.0, 2.0], &[0.5, 2.1]);
@@ -426,7 +430,14 @@ mod tests {
     #[test]
     fn grid_search_recovers_a_levelled_setup() {
         // Room box: planes x=0, x=6, y=0, y=4, z=0, z=3; instrument at (2, 1.5, 0) with iH=1.4, rotated 137 gon.
-        let planes = [([1.0, 0.0, 0.0], 0.0), ([1.0, 0.0, 0.0], 6.0), ([0.0, 1.0, 0.0], 0.0), ([0.0, 1.0, 0.0], 4.0), ([0.0, 0.0, 1.0], 0.0), ([0.0, 0.0, 1.0], 3.0)];
+        let planes = [
+            ([1.0, 0.0, 0.0], 0.0),
+            ([1.0, 0.0, 0.0], 6.0),
+            ([0.0, 1.0, 0.0], 0.0),
+            ([0.0, 1.0, 0.0], 4.0),
+            ([0.0, 0.0, 1.0], 0.0),
+            ([0.0, 0.0, 1.0], 3.0),
+        ];
         let kappa = 137.0 * GON;
         let q = [(kappa / 2.0).cos(), 0.0, 0.0, (kappa / 2.0).sin()];
         let t = [2.0, 1.5, 0.0];
@@ -434,7 +445,14 @@ mod tests {
         let r = rotation(&q);
         let mut pts = Vec::new();
         // Aim at points on planes, compute polar values in the instrument frame.
-        let targets = [([0.0, 2.0, 1.0], 0usize), ([6.0, 1.0, 2.0], 1), ([3.0, 0.0, 1.5], 2), ([1.0, 4.0, 0.5], 3), ([4.0, 3.0, 0.0], 4), ([2.5, 2.5, 3.0], 5)];
+        let targets = [
+            ([0.0, 2.0, 1.0], 0usize),
+            ([6.0, 1.0, 2.0], 1),
+            ([3.0, 0.0, 1.5], 2),
+            ([1.0, 4.0, 0.5], 3),
+            ([4.0, 3.0, 0.0], 4),
+            ([2.5, 2.5, 3.0], 5),
+        ];
         for (p, k) in targets {
             let dxw = [p[0] - t[0], p[1] - t[1], p[2] - t[2] - ih];
             // x_local = Rᵀ dxw

@@ -74,7 +74,12 @@ pub fn fit_line_2d(points: &[(f64, f64)], sigma_x: &[f64], sigma_y: &[f64]) -> R
 }
 
 /// [`fit_line_2d`] with explicit options.
-pub fn fit_line_2d_with(points: &[(f64, f64)], sigma_x: &[f64], sigma_y: &[f64], opts: &Options) -> Result<LineFit, AdjustError> {
+pub fn fit_line_2d_with(
+    points: &[(f64, f64)],
+    sigma_x: &[f64],
+    sigma_y: &[f64],
+    opts: &Options,
+) -> Result<LineFit, AdjustError> {
     // Starting values: ordinary least squares of y on x.
     let n = points.len() as f64;
     let (mx, my) = points.iter().fold((0.0, 0.0), |a, p| (a.0 + p.0 / n, a.1 + p.1 / n));

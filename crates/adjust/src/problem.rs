@@ -104,12 +104,7 @@ impl Problem {
     }
 
     /// Add an uncorrelated observation with standard deviation `sigma` (> 0, spec MA12).
-    pub fn add_observation(
-        &mut self,
-        name: impl Into<String>,
-        value: f64,
-        sigma: f64,
-    ) -> Result<ObsId, AdjustError> {
+    pub fn add_observation(&mut self, name: impl Into<String>, value: f64, sigma: f64) -> Result<ObsId, AdjustError> {
         let name = name.into();
         if !(sigma > 0.0 && sigma.is_finite()) {
             return Err(AdjustError::InvalidSigma { observation: name, sigma });
@@ -125,25 +120,42 @@ impl Problem {
     /// individual σ of those observations; the matrix must be symmetric positive definite.
     pub fn set_covariance(&mut self, obs: &[ObsId], cov: Vec<f64>) -> Result<(), AdjustError> {
         let n = obs.len();
-        let names = || obs.iter().map(|o| self.obs.get(o.0).map_or(format!("#{}", o.0), |d| d.name.clone())).collect::<Vec<_>>().join(", ");
+        let names = || {
+            obs.iter()
+                .map(|o| self.obs.get(o.0).map_or(format!("#{}", o.0), |d| d.name.clone()))
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
         if cov.len() != n * n {
-            return Err(AdjustError::InvalidCovariance { observations: names(), reason: format!("expected {} entries, got {}", n * n, cov.len()) });
+            return Err(AdjustError::InvalidCovariance {
+                observations: names(),
+                reason: format!("expected {} entries, got {}", n * n, cov.len()),
+            });
         }
         for o in obs {
             match self.obs.get(o.0) {
                 None => return Err(AdjustError::UnknownObservation { equation: "covariance group".into(), id: o.0 }),
                 Some(d) if d.group.is_some() => {
-                    return Err(AdjustError::InvalidCovariance { observations: names(), reason: format!("{} is already in a covariance group", d.name) })
+                    return Err(AdjustError::InvalidCovariance {
+                        observations: names(),
+                        reason: format!("{} is already in a covariance group", d.name),
+                    })
                 }
                 _ => {}
             }
         }
         let m = nalgebra::DMatrix::from_row_slice(n, n, &cov);
         if (&m - m.transpose()).amax() > 1e-12 * m.amax().max(1e-300) || m.iter().any(|v| !v.is_finite()) {
-            return Err(AdjustError::InvalidCovariance { observations: names(), reason: "matrix is not symmetric and finite".into() });
+            return Err(AdjustError::InvalidCovariance {
+                observations: names(),
+                reason: "matrix is not symmetric and finite".into(),
+            });
         }
         if m.clone().cholesky().is_none() {
-            return Err(AdjustError::InvalidCovariance { observations: names(), reason: "matrix is not positive definite".into() });
+            return Err(AdjustError::InvalidCovariance {
+                observations: names(),
+                reason: "matrix is not positive definite".into(),
+            });
         }
         let g = self.cov_groups.len();
         for (i, o) in obs.iter().enumerate() {

@@ -28,7 +28,8 @@ fn plane_fit_equals_svd_orthogonal_regression() {
         .collect();
     let fit = fit_plane(&pts, &vec![0.02; pts.len()]).unwrap();
     // SVD of centred points: normal = right singular vector of the smallest singular value.
-    let c = pts.iter().fold(nalgebra::Vector3::zeros(), |acc, p| acc + nalgebra::Vector3::new(p[0], p[1], p[2])) / pts.len() as f64;
+    let c = pts.iter().fold(nalgebra::Vector3::zeros(), |acc, p| acc + nalgebra::Vector3::new(p[0], p[1], p[2]))
+        / pts.len() as f64;
     let m = nalgebra::DMatrix::from_fn(pts.len(), 3, |i, j| pts[i][j] - c[j]);
     let svd = m.svd(false, true);
     let vt = svd.v_t.unwrap();
@@ -121,14 +122,12 @@ fn survey(seed: u64, blunder: Option<(bool, f64)>) -> Survey {
     let normals_true = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
     let mut nparams: Vec<[UnknownId; 3]> = Vec::new();
     for (k, n) in normals_true.iter().enumerate() {
-        let ids = [0, 1, 2].map(|c| p.add_unknown(format!("normal{k}.{c}"), n[c] + if n[c] == 0.0 { 0.002 } else { 0.0 }));
+        let ids =
+            [0, 1, 2].map(|c| p.add_unknown(format!("normal{k}.{c}"), n[c] + if n[c] == 0.0 { 0.002 } else { 0.0 }));
         nparams.push(ids);
     }
-    let groups: [(usize, Vec<f64>); 3] = [
-        (0, vec![0.0, 4.1, 8.3, 12.0, 15.9, 20.1]),
-        (1, vec![0.0, 5.2, 5.7, 7.7]),
-        (2, vec![0.0, 2.4, 3.0]),
-    ];
+    let groups: [(usize, Vec<f64>); 3] =
+        [(0, vec![0.0, 4.1, 8.3, 12.0, 15.9, 20.1]), (1, vec![0.0, 5.2, 5.7, 7.7]), (2, vec![0.0, 2.4, 3.0])];
     let mut planes: Vec<Vec<(UnknownId, f64)>> = Vec::new();
     let mut sketch: Vec<Vec<f64>> = Vec::new();
     for (k, ds) in &groups {
@@ -150,7 +149,8 @@ fn survey(seed: u64, blunder: Option<(bool, f64)>) -> Survey {
     };
     // Unit normals as restrictions; relative angles (sketch, σ 0.001); plane differences (σ 10 cm).
     for k in 0..3 {
-        p.add_restriction(format!("NormNV {k}"), NormNvRestriction, nparams[k].iter().map(|&u| u.into()).collect()).unwrap();
+        p.add_restriction(format!("NormNV {k}"), NormNvRestriction, nparams[k].iter().map(|&u| u.into()).collect())
+            .unwrap();
     }
     for (a, b) in [(0, 1), (0, 2), (1, 2)] {
         let o = p.add_observation(format!("relangle {a}-{b}"), g(0.001, &mut rng), 0.001).unwrap();
@@ -161,7 +161,13 @@ fn survey(seed: u64, blunder: Option<(bool, f64)>) -> Survey {
         for i in 0..planes[k].len() - 1 {
             let truth = planes[k][i + 1].1 - planes[k][i].1;
             let o = p.add_observation(format!("sketch {k}:{i}-{}", i + 1), truth + g(0.1, &mut rng), 0.1).unwrap();
-            p.add_condition(format!("RelativeDistancePlanePlane {k}:{i}"), RelativeDistancePlanePlane, vec![planes[k][i].0.into(), planes[k][i + 1].0.into()], vec![o]).unwrap();
+            p.add_condition(
+                format!("RelativeDistancePlanePlane {k}:{i}"),
+                RelativeDistancePlanePlane,
+                vec![planes[k][i].0.into(), planes[k][i + 1].0.into()],
+                vec![o],
+            )
+            .unwrap();
         }
     }
     // Laser distances ±1 mm: consecutive pairs three times (except the suspended ceiling pair), totals once.
@@ -170,7 +176,13 @@ fn survey(seed: u64, blunder: Option<(bool, f64)>) -> Survey {
     let add_dist = |p: &mut Problem, rng: &mut rand::rngs::StdRng, k: usize, i: usize, j: usize, tag: &str| -> ObsId {
         let truth = planes[k][j].1 - planes[k][i].1;
         let o = p.add_observation(format!("laser {k}:{i}-{j} {tag}"), truth + g(0.001, rng), 0.001).unwrap();
-        p.add_condition(format!("DistanceFaceFace {k}:{i}-{j} {tag}"), DistanceFaceFace, [slots(k, i), slots(k, j)].concat(), vec![o]).unwrap();
+        p.add_condition(
+            format!("DistanceFaceFace {k}:{i}-{j} {tag}"),
+            DistanceFaceFace,
+            [slots(k, i), slots(k, j)].concat(),
+            vec![o],
+        )
+        .unwrap();
         o
     };
     for k in 0..3 {
@@ -202,9 +214,16 @@ fn survey(seed: u64, blunder: Option<(bool, f64)>) -> Survey {
     };
     let r = rotation(&qt);
     let targets: [(usize, usize, [f64; 3]); 10] = [
-        (0, 0, [0.0, 1.0, 1.0]), (0, 0, [0.0, 3.5, 2.0]), (0, 1, [4.1, 1.0, 0.7]), (0, 1, [4.1, 4.0, 2.2]),
-        (1, 0, [1.0, 0.0, 1.2]), (1, 0, [3.0, 0.0, 2.5]), (1, 1, [2.5, 5.2, 1.0]), (2, 0, [1.0, 1.0, 0.0]),
-        (2, 0, [3.0, 4.0, 0.0]), (1, 1, [1.0, 5.2, 2.0]),
+        (0, 0, [0.0, 1.0, 1.0]),
+        (0, 0, [0.0, 3.5, 2.0]),
+        (0, 1, [4.1, 1.0, 0.7]),
+        (0, 1, [4.1, 4.0, 2.2]),
+        (1, 0, [1.0, 0.0, 1.2]),
+        (1, 0, [3.0, 0.0, 2.5]),
+        (1, 1, [2.5, 5.2, 1.0]),
+        (2, 0, [1.0, 1.0, 0.0]),
+        (2, 0, [3.0, 4.0, 0.0]),
+        (1, 1, [1.0, 5.2, 2.0]),
     ];
     let mut pointings = Vec::new();
     let mut raw = Vec::new();
@@ -224,7 +243,13 @@ fn survey(seed: u64, blunder: Option<(bool, f64)>) -> Survey {
         let ov = p.add_observation(format!("pointing {m} V"), v, 0.0005).unwrap();
         let os = p.add_observation(format!("pointing {m} s"), s, 0.002).unwrap();
         let x: Vec<Slot> = q.iter().chain(t.iter()).map(|&u| u.into()).chain(slots(k, i)).collect();
-        p.add_condition(format!("PointOnFace {m}"), PointOnPlanePolar { ih, class: "PointOnFace" }, x, vec![ohz, ov, os]).unwrap();
+        p.add_condition(
+            format!("PointOnFace {m}"),
+            PointOnPlanePolar { ih, class: "PointOnFace" },
+            x,
+            vec![ohz, ov, os],
+        )
+        .unwrap();
     }
     let (well, weak) = (well.unwrap(), weak.unwrap());
     if let Some((on_well, size)) = blunder {
@@ -253,7 +278,12 @@ fn survey_sigma0_is_one_and_redundancy_numbers_sum_to_redundancy() {
         let s = survey(seed, None);
         let sol = adjust(&s.problem, &opts_free(&s.subset)).unwrap_or_else(|e| panic!("seed {seed}: {e}"));
         assert_eq!(sol.datum_restrictions, 6, "datum defect of the survey");
-        assert!((sol.redundancy_sum - sol.redundancy as f64).abs() < 1e-6, "Σr_i = {} vs r = {}", sol.redundancy_sum, sol.redundancy);
+        assert!(
+            (sol.redundancy_sum - sol.redundancy as f64).abs() < 1e-6,
+            "Σr_i = {} vs r = {}",
+            sol.redundancy_sum,
+            sol.redundancy
+        );
         sum += sol.sigma0_post.unwrap();
         let r = &sol.obs[s.well_controlled.0];
         assert!(r.redundancy >= 0.3, "well-controlled r = {}", r.redundancy);
@@ -372,7 +402,9 @@ fn hard_and_soft_datum_solve_the_survey() {
         p.fix(id);
     }
     let hard = adjust(&p, &Options::default()).unwrap_or_else(|e| {
-        for u in 0..p.unknown_count() { eprintln!("{} fixed={}", p.unknown_name(UnknownId(u)), p.is_fixed(UnknownId(u))); }
+        for u in 0..p.unknown_count() {
+            eprintln!("{} fixed={}", p.unknown_name(UnknownId(u)), p.is_fixed(UnknownId(u)));
+        }
         panic!("{e}")
     });
     let free = adjust(&s.problem, &opts_free(&s.subset)).unwrap();
@@ -382,4 +414,3 @@ fn hard_and_soft_datum_solve_the_survey() {
     assert!((w(&hard.x) - w(&free.x)).abs() < 1e-6, "{} vs {}", w(&hard.x), w(&free.x));
     assert!((hard.vtpv - free.vtpv).abs() < 1e-6 * free.vtpv);
 }
-

@@ -25,7 +25,9 @@ fn levelled_setup_found_by_grid_search_and_adjusted() {
     let inc = Incidence::new(&m);
     let pos = m.node_positions(&inc).unwrap();
     // Instrument inside the bounding box, rotated by 123 gon about z, levelled.
-    let (lo, hi) = pos.iter().fold(([f64::MAX; 3], [f64::MIN; 3]), |(a, b), p| ([a[0].min(p[0]), a[1].min(p[1]), a[2].min(p[2])], [b[0].max(p[0]), b[1].max(p[1]), b[2].max(p[2])]));
+    let (lo, hi) = pos.iter().fold(([f64::MAX; 3], [f64::MIN; 3]), |(a, b), p| {
+        ([a[0].min(p[0]), a[1].min(p[1]), a[2].min(p[2])], [b[0].max(p[0]), b[1].max(p[1]), b[2].max(p[2])])
+    });
     let t = [lo[0] + 0.3 * (hi[0] - lo[0]), lo[1] + 0.4 * (hi[1] - lo[1]), lo[2]];
     let ih = 1.2;
     let kappa = 123.0 * GON;
@@ -38,12 +40,20 @@ fn levelled_setup_found_by_grid_search_and_adjusted() {
     let mut n = 0;
     for f in 0..m.faces.len() {
         let loops = m.face_loops(&inc, FaceId::from(f), &pos).unwrap();
-        let c = loops[0].iter().fold([0.0; 3], |a, nd| [a[0] + pos[nd.idx()][0], a[1] + pos[nd.idx()][1], a[2] + pos[nd.idx()][2]]);
+        let c = loops[0]
+            .iter()
+            .fold([0.0; 3], |a, nd| [a[0] + pos[nd.idx()][0], a[1] + pos[nd.idx()][1], a[2] + pos[nd.idx()][2]]);
         let k = loops[0].len() as f64;
         let p = [c[0] / k, c[1] / k, c[2] / k];
         let (hz, v, s) = common::polar_reading(&r, t, ih, p);
         m.add_observation(Observation::new(
-            ObsKind::PointOnFace { setup: su, target: FaceId::from(f), hz: Measured::new(hz, 0.0005), v: Measured::new(v, 0.0005), s: Measured::new(s, 0.002) },
+            ObsKind::PointOnFace {
+                setup: su,
+                target: FaceId::from(f),
+                hz: Measured::new(hz, 0.0005),
+                v: Measured::new(v, 0.0005),
+                s: Measured::new(s, 0.002),
+            },
             ObsOrigin::Measured,
         ));
         n += 1;

@@ -28,7 +28,12 @@ pub enum ExportCrsError {
 }
 
 /// The CRS plan of an export of `model` (named `name`) with `--s-srs` / `--t-srs`.
-pub fn export_crs(model: &CityModel, name: &str, s_srs: Option<&str>, t_srs: Option<&str>) -> Result<ExportCrs, ExportCrsError> {
+pub fn export_crs(
+    model: &CityModel,
+    name: &str,
+    s_srs: Option<&str>,
+    t_srs: Option<&str>,
+) -> Result<ExportCrs, ExportCrsError> {
     let source = s_srs.map(str::to_string).or_else(|| model.srs_name.clone());
     let geographic = geographic_document(model, s_srs);
     if let Some(g) = &geographic {

@@ -69,7 +69,13 @@ pub struct CityScene {
 
 /// Builds the scene of `model` (see the crate docs); `name` is the file name used in the
 /// skipped-polygon lines, `progress(n)` is called after each top-level object.
-pub fn build_scene(model: &CityModel, name: &str, opts: &SceneOptions, reproject: Option<Reproject<'_>>, progress: &dyn Fn(usize)) -> CityScene {
+pub fn build_scene(
+    model: &CityModel,
+    name: &str,
+    opts: &SceneOptions,
+    reproject: Option<Reproject<'_>>,
+    progress: &dyn Fn(usize),
+) -> CityScene {
     let lods = object_lods(model, opts.lod);
     let mut b = Builder {
         name,
@@ -233,7 +239,14 @@ impl Builder<'_> {
 
     /// Adds the polygons of `o` and of its nested non-part objects into `node`, and returns the
     /// nested parts (which become child nodes).
-    fn collect<'o>(&mut self, node: &mut MeshNode, o: &'o CityObject, lod: u8, owner: &str, parts: &mut Vec<&'o CityObject>) {
+    fn collect<'o>(
+        &mut self,
+        node: &mut MeshNode,
+        o: &'o CityObject,
+        lod: u8,
+        owner: &str,
+        parts: &mut Vec<&'o CityObject>,
+    ) {
         for g in o.geometries.iter().filter(|g| g.lod == Some(lod)) {
             for p in g.polygons() {
                 self.add_polygon(node, p, owner);
@@ -277,4 +290,3 @@ impl Builder<'_> {
 fn object_lods(model: &CityModel, lod: Option<u8>) -> Vec<Option<u8>> {
     model.objects.iter().map(|o| lod.or_else(|| max_lod(o))).collect()
 }
-

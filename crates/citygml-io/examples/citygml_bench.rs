@@ -63,7 +63,10 @@ fn tokenize_numbers_fast(src: &[u8]) -> usize {
         match r.read_event() {
             Ok(Event::Eof) => break,
             Ok(Event::Start(e)) => {
-                coords = matches!(e.local_name().as_ref(), b"posList" | b"pos" | b"coordinates" | b"lowerCorner" | b"upperCorner");
+                coords = matches!(
+                    e.local_name().as_ref(),
+                    b"posList" | b"pos" | b"coordinates" | b"lowerCorner" | b"upperCorner"
+                );
                 n += 1;
             }
             Ok(Event::Text(t)) if coords => {
@@ -150,7 +153,8 @@ fn main() {
                                 if p.via_xlink.is_none() {
                                     polys += 1;
                                     rings += 1 + p.interiors.len();
-                                    pts += p.exterior.points.len() + p.interiors.iter().map(|r| r.points.len()).sum::<usize>();
+                                    pts += p.exterior.points.len()
+                                        + p.interiors.iter().map(|r| r.points.len()).sum::<usize>();
                                 }
                             }
                         }

@@ -74,7 +74,8 @@ pub fn proj_crs(srs_name: &str) -> String {
 /// Geographic 2D/3D CRSs met in city models (WGS 84, ETRS89, NAD83, GDA94/2020, JGD2000/2011,
 /// CGCS2000, NZGD2000 and their 3D variants). Their ellipsoids are GRS80 or WGS 84 (equal to
 /// 0.1 mm), so one ellipsoid serves them all for a local metric frame.
-pub const GEOGRAPHIC: &[u32] = &[4326, 4979, 4258, 4937, 4269, 4617, 4283, 7843, 7844, 4612, 6668, 4490, 4167, 4959, 6318, 4759];
+pub const GEOGRAPHIC: &[u32] =
+    &[4326, 4979, 4258, 4937, 4269, 4617, 4283, 7843, 7844, 4612, 6668, 4490, 4167, 4959, 6318, 4759];
 
 /// The EPSG code of `srs_name` when it names a geographic CRS (any of the common spellings:
 /// `EPSG:4326`, `urn:ogc:def:crs:EPSG::4979`, `http://www.opengis.net/def/crs/EPSG/0/4326`, a
@@ -296,7 +297,13 @@ pub fn vertical_part(srs_name: &str) -> Option<VerticalDatum> {
         if let Some(i) = s.find(wkt_key) {
             let name = s[i + wkt_key.len()..].split('"').next().unwrap_or("").to_string();
             let known = VERTICAL.iter().find(|v| v.1 == name).and_then(|v| vertical_epsg(v.0));
-            return Some(known.unwrap_or(VerticalDatum { name, epsg: None, kind: "unknown", unit_m: 1.0, grids: vec![] }));
+            return Some(known.unwrap_or(VerticalDatum {
+                name,
+                epsg: None,
+                kind: "unknown",
+                unit_m: 1.0,
+                grids: vec![],
+            }));
         }
     }
     let codes = epsg_codes(s);
@@ -304,7 +311,13 @@ pub fn vertical_part(srs_name: &str) -> Option<VerticalDatum> {
         return vertical_epsg(v);
     }
     codes.iter().skip(1).find_map(|&c| {
-        vertical_epsg(c).or(Some(VerticalDatum { name: format!("EPSG:{c}"), epsg: Some(c), kind: "unknown", unit_m: 1.0, grids: vec![] }))
+        vertical_epsg(c).or(Some(VerticalDatum {
+            name: format!("EPSG:{c}"),
+            epsg: Some(c),
+            kind: "unknown",
+            unit_m: 1.0,
+            grids: vec![],
+        }))
     })
 }
 
@@ -364,6 +377,7 @@ mod tests {
         assert_eq!(vertical_part("urn:ogc:def:crs,crs:EPSG::25832,crs:EPSG::9999").unwrap().kind, "unknown");
         let wkt = r#"COMPOUNDCRS["x",PROJCRS["ETRS89 / UTM zone 32N"],VERTCRS["EGM96 height",VDATUM["EGM96 geoid"]]]"#;
         assert_eq!(vertical_part(wkt).unwrap().epsg, Some(5773));
-        assert!(describe("urn:adv:crs:ETRS89_UTM32*DE_DHHN2016_NH*GCG2016").contains("heights: DHHN2016 height (EPSG:7837, normal heights)"));
+        assert!(describe("urn:adv:crs:ETRS89_UTM32*DE_DHHN2016_NH*GCG2016")
+            .contains("heights: DHHN2016 height (EPSG:7837, normal heights)"));
     }
 }

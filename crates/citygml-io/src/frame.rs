@@ -124,6 +124,11 @@ impl GeographicDocument {
 
     /// One line: `CRS urn:…4979 is geographic (EPSG:4979, degrees, latitude, longitude)`.
     pub fn what(&self) -> String {
-        format!("CRS {} is geographic (EPSG:{}, degrees, {})", self.srs, self.epsg, crate::crs::axis_order(&self.srs).describe())
+        format!(
+            "CRS {} is geographic (EPSG:{}, degrees, {})",
+            self.srs,
+            self.epsg,
+            crate::crs::axis_order(&self.srs).describe()
+        )
     }
 }

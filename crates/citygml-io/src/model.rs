@@ -255,15 +255,12 @@ impl Geometry {
     pub fn polygons(&self) -> Vec<&Polygon> {
         match &self.kind {
             GeometryKind::Surfaces(p) => p.iter().collect(),
-            GeometryKind::Solid { exterior, interior } => exterior
-                .polygons
-                .iter()
-                .chain(interior.iter().flat_map(|s| s.polygons.iter()))
-                .collect(),
-            GeometryKind::Solids(v) => v
-                .iter()
-                .flat_map(|(e, i)| e.polygons.iter().chain(i.iter().flat_map(|s| s.polygons.iter())))
-                .collect(),
+            GeometryKind::Solid { exterior, interior } => {
+                exterior.polygons.iter().chain(interior.iter().flat_map(|s| s.polygons.iter())).collect()
+            }
+            GeometryKind::Solids(v) => {
+                v.iter().flat_map(|(e, i)| e.polygons.iter().chain(i.iter().flat_map(|s| s.polygons.iter()))).collect()
+            }
         }
     }
 }

@@ -55,7 +55,12 @@ impl<'a> ObjectStream<'a> {
     pub fn new(src: &'a [u8]) -> Result<ObjectStream<'a>, ReadError> {
         let lines = Arc::new(LineIndex::new(src));
         if src.is_empty() {
-            return Err(ReadError { line: 1, column: 1, byte: 0, message: "empty file (0 bytes), not a CityGML document".into() });
+            return Err(ReadError {
+                line: 1,
+                column: 1,
+                byte: 0,
+                message: "empty file (0 bytes), not a CityGML document".into(),
+            });
         }
         let start = if src.starts_with(BOM) { BOM.len() } else { 0 };
         let body = start..src.len();
@@ -206,10 +211,9 @@ impl<'a> ObjectStream<'a> {
                 }
                 Ev::Empty(_) | Ev::Text { .. } => {}
                 Ev::Eof => {
-                    return Err(self.p.err(
-                        self.p.pos(),
-                        "unexpected end of file: <CityModel> is not closed (truncated document?)",
-                    ))
+                    return Err(self
+                        .p
+                        .err(self.p.pos(), "unexpected end of file: <CityModel> is not closed (truncated document?)"))
                 }
             }
         }

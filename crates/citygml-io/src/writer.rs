@@ -83,7 +83,11 @@ pub fn ring_edits(ring: &Ring, points: &[Point3]) -> Result<Vec<Edit>, WriteErro
 
 /// [`ring_edits`] with the text of each value chosen by `value(point index, coordinate index,
 /// value)`: a writer that keeps the input's number of decimals, or its unchanged tokens.
-pub fn ring_edits_with(ring: &Ring, points: &[Point3], value: impl Fn(usize, usize, f64) -> String) -> Result<Vec<Edit>, WriteError> {
+pub fn ring_edits_with(
+    ring: &Ring,
+    points: &[Point3],
+    value: impl Fn(usize, usize, f64) -> String,
+) -> Result<Vec<Edit>, WriteError> {
     if points.iter().flatten().any(|v| !v.is_finite()) {
         return Err(WriteError::Coordinates("a new coordinate is not finite".into()));
     }
@@ -150,10 +154,14 @@ pub fn linear_ring_element(prefix: &str, id: Option<&str>, coordinates: &str, sr
 /// (its gml:id, its posList text). Used to write a polygon whose outline changed (merged
 /// coplanar polygons) in place of the old element.
 pub fn polygon_element(prefix: &str, id: Option<&str>, rings: &[(Option<&str>, String)], srs_dimension: u8) -> String {
-    let mut t = format!("<{prefix}Polygon{}>", id.map(|i| format!(" {prefix}id=\"{}\"", attr_escape(i))).unwrap_or_default());
+    let mut t =
+        format!("<{prefix}Polygon{}>", id.map(|i| format!(" {prefix}id=\"{}\"", attr_escape(i))).unwrap_or_default());
     for (k, (rid, coords)) in rings.iter().enumerate() {
         let wrapper = if k == 0 { "exterior" } else { "interior" };
-        t.push_str(&format!("<{prefix}{wrapper}>{}</{prefix}{wrapper}>", linear_ring_element(prefix, *rid, coords, srs_dimension)));
+        t.push_str(&format!(
+            "<{prefix}{wrapper}>{}</{prefix}{wrapper}>",
+            linear_ring_element(prefix, *rid, coords, srs_dimension)
+        ));
     }
     t.push_str(&format!("</{prefix}Polygon>"));
     t

@@ -170,7 +170,10 @@ fn writer_rejects_overlaps_and_applies_unsorted_edits() {
     let mut out = Vec::new();
     write_with_edits(src, &[e(6, 8, "x"), e(1, 2, "ab"), e(9, 9, "!")], &mut out).unwrap();
     assert_eq!(out, b"0ab2345x8!9");
-    assert!(matches!(write_with_edits(src, &[e(1, 5, ""), e(4, 6, "")], &mut Vec::new()), Err(WriteError::Overlap { .. })));
+    assert!(matches!(
+        write_with_edits(src, &[e(1, 5, ""), e(4, 6, "")], &mut Vec::new()),
+        Err(WriteError::Overlap { .. })
+    ));
     assert!(matches!(write_with_edits(src, &[e(5, 11, "")], &mut Vec::new()), Err(WriteError::OutOfBounds { .. })));
 }
 
@@ -257,7 +260,8 @@ fn cube_solid(id: &str, dx: f64) -> String {
     ];
     let mut s = format!("<gml:Solid gml:id=\"{id}\"><gml:exterior><gml:Shell>\n");
     for (k, f) in faces.iter().enumerate() {
-        let pos: Vec<String> = f.iter().chain(std::iter::once(&f[0])).map(|p| format!("{} {} {}", p[0] + dx, p[1], p[2])).collect();
+        let pos: Vec<String> =
+            f.iter().chain(std::iter::once(&f[0])).map(|p| format!("{} {} {}", p[0] + dx, p[1], p[2])).collect();
         s += &format!(
             "<gml:surfaceMember><gml:Polygon gml:id=\"{id}-f{k}\"><gml:exterior><gml:LinearRing><gml:posList>{}</gml:posList></gml:LinearRing></gml:exterior></gml:Polygon></gml:surfaceMember>\n",
             pos.join(" ")
@@ -315,10 +319,9 @@ fn composite_solid_xlinks_within_the_object_and_to_xlinked_faces() {
     // The referenced solid is in the same building (a BuildingPart) and its faces are XLinks
     // to polygons of the part's MultiSurface: the copy has the polygons, all marked as copies.
     let faces: String = (0..6).map(|k| format!("<gml:surfaceMember xlink:href=\"#P-f{k}\"/>")).collect();
-    let part_ms = cube_solid("P", 5.0).replace("<gml:Solid gml:id=\"P\"><gml:exterior><gml:Shell>", "<gml:MultiSurface>").replace(
-        "</gml:Shell></gml:exterior></gml:Solid>",
-        "</gml:MultiSurface>",
-    );
+    let part_ms = cube_solid("P", 5.0)
+        .replace("<gml:Solid gml:id=\"P\"><gml:exterior><gml:Shell>", "<gml:MultiSurface>")
+        .replace("</gml:Shell></gml:exterior></gml:Solid>", "</gml:MultiSurface>");
     let body = format!(
         "<core:cityObjectMember><bldg:Building gml:id=\"b\"><bldg:lod2Solid><gml:CompositeSolid>\n\
          <gml:solidMember>{a}</gml:solidMember><gml:solidMember xlink:href=\"#PS\"></gml:solidMember>\n\
@@ -334,7 +337,10 @@ fn composite_solid_xlinks_within_the_object_and_to_xlinked_faces() {
     let GeometryKind::Solids(solids) = &g.kind else { panic!() };
     assert_eq!(solids.len(), 2);
     let p = &solids[1].0.polygons;
-    assert_eq!(p.iter().map(|p| p.id.as_deref().unwrap()).collect::<Vec<_>>(), ["P-f0", "P-f1", "P-f2", "P-f3", "P-f4", "P-f5"]);
+    assert_eq!(
+        p.iter().map(|p| p.id.as_deref().unwrap()).collect::<Vec<_>>(),
+        ["P-f0", "P-f1", "P-f2", "P-f3", "P-f4", "P-f5"]
+    );
     assert_eq!(p[3].exterior.points[0], [6.0, 0.0, 0.0]);
     let member_line = src.lines().position(|l| l.contains("xlink:href=\"#PS\"")).unwrap() + 1;
     assert!(p.iter().all(|p| p.via_xlink.as_ref().unwrap().line == member_line));
@@ -349,13 +355,24 @@ fn composite_solid_member_referenced_twice_is_kept_twice() {
     let GeometryKind::Solids(solids) = &composite(&m).kind else { panic!() };
     assert_eq!(solids.len(), 2);
     // The same polygons, each copy marked by its own solidMember.
-    let ids = |k: usize| solids[k].0.polygons.iter().map(|p| (p.id.clone(), p.exterior.points.clone(), p.span.clone())).collect::<Vec<_>>();
+    let ids = |k: usize| {
+        solids[k]
+            .0
+            .polygons
+            .iter()
+            .map(|p| (p.id.clone(), p.exterior.points.clone(), p.span.clone()))
+            .collect::<Vec<_>>()
+    };
     assert_eq!(ids(0).len(), 6);
     assert_eq!(ids(0), ids(1));
     let via = |k: usize| solids[k].0.polygons[0].via_xlink.clone().unwrap().bytes.start;
     assert!(via(0) < via(1));
     // the shells say they are copies (counts of solids skip them); the definition does not
-    assert!(solids.iter().all(|s| s.0.via_xlink.as_ref().is_some_and(|v| v.bytes.start == s.0.polygons[0].via_xlink.as_ref().unwrap().bytes.start)));
+    assert!(solids.iter().all(|s| s
+        .0
+        .via_xlink
+        .as_ref()
+        .is_some_and(|v| v.bytes.start == s.0.polygons[0].via_xlink.as_ref().unwrap().bytes.start)));
     let GeometryKind::Solid { exterior, .. } = &m.objects[1].geometries[0].kind else { panic!() };
     assert!(exterior.via_xlink.is_none());
 }
@@ -377,15 +394,45 @@ fn xlink_to_a_city_object_says_what_it_points_to() {
     let got: Vec<(&str, Option<&str>, &str, Option<&str>, usize, String)> = m
         .unresolved_xlinks
         .iter()
-        .map(|u| (u.href.as_str(), u.feature.as_deref(), u.feature_type.as_str(), u.target.as_deref(), u.span.line, u.reason()))
+        .map(|u| {
+            (
+                u.href.as_str(),
+                u.feature.as_deref(),
+                u.feature_type.as_str(),
+                u.target.as_deref(),
+                u.span.line,
+                u.reason(),
+            )
+        })
         .collect();
     assert_eq!(
         got,
         [
-            ("#a", Some("w"), "WallSurface", Some("bldg:Building"), line_of("#a\""), "xlink:href=\"#a\" points to <bldg:Building>, not a geometry".to_string()),
-            ("#gone", Some("w"), "WallSurface", None, line_of("#gone"), "xlink:href=\"#gone\" points to nothing in the document".to_string()),
+            (
+                "#a",
+                Some("w"),
+                "WallSurface",
+                Some("bldg:Building"),
+                line_of("#a\""),
+                "xlink:href=\"#a\" points to <bldg:Building>, not a geometry".to_string()
+            ),
+            (
+                "#gone",
+                Some("w"),
+                "WallSurface",
+                None,
+                line_of("#gone"),
+                "xlink:href=\"#gone\" points to nothing in the document".to_string()
+            ),
             // an empty polygon brings nothing in either: unresolved, not silently "resolved"
-            ("#empty", Some("w"), "WallSurface", None, line_of("#gone"), "xlink:href=\"#empty\" points to nothing in the document".to_string()),
+            (
+                "#empty",
+                Some("w"),
+                "WallSurface",
+                None,
+                line_of("#gone"),
+                "xlink:href=\"#empty\" points to nothing in the document".to_string()
+            ),
         ]
     );
     assert!(m.all_polygons().is_empty(), "the building's polygons must not come in");
@@ -410,7 +457,11 @@ fn composite_solid_members_not_read_are_reported_not_dropped() {
         sk,
         [
             (Some("#nowhere"), "xlink:href=\"#nowhere\" points to nothing in the document", line_of("#nowhere")),
-            (Some("#B-f0"), "xlink:href=\"#B-f0\" points to <gml:Polygon>, not a solid", line_of("xlink:href=\"#B-f0\"")),
+            (
+                Some("#B-f0"),
+                "xlink:href=\"#B-f0\" points to <gml:Polygon>, not a solid",
+                line_of("xlink:href=\"#B-f0\"")
+            ),
             (None, "<gml:Polygon> is not a solid (not read)", line_of("gml:id=\"q\"")),
             (None, "empty gml:solidMember (no solid, no xlink:href)", line_of("<gml:solidMember/>")),
         ]
@@ -434,7 +485,9 @@ fn whole_solid_by_xlink_is_the_solid_it_points_to() {
         let m = parse(src.as_bytes()).unwrap();
         let g = &m.objects[1].geometries[0];
         assert_eq!((g.lod, g.property.as_str(), g.gml_type.as_str()), (Some(2), "lod2Solid", "Solid"), "{version}");
-        let GeometryKind::Solid { exterior, interior } = &g.kind else { panic!("{version}: not a solid: {:?}", g.kind) };
+        let GeometryKind::Solid { exterior, interior } = &g.kind else {
+            panic!("{version}: not a solid: {:?}", g.kind)
+        };
         assert!(interior.is_empty());
         assert_eq!(exterior.polygons.len(), 6);
         let line = src.lines().position(|l| l.contains("xlink:href=\"#B\"")).unwrap() + 1;
@@ -448,7 +501,10 @@ fn whole_solid_by_xlink_is_the_solid_it_points_to() {
         assert_ne!(long, src);
         let m2 = parse(long.as_bytes()).unwrap();
         let g2 = &m2.objects[1].geometries[0];
-        assert!(matches!(&g2.kind, GeometryKind::Solid { exterior, .. } if exterior.polygons.len() == 6), "{version}: end-tag form");
+        assert!(
+            matches!(&g2.kind, GeometryKind::Solid { exterior, .. } if exterior.polygons.len() == 6),
+            "{version}: end-tag form"
+        );
         let broken = src.replace("xlink:href=\"#B\"", "xlink:href=\"#nowhere\"");
         let m = parse(broken.as_bytes()).unwrap();
         let g = &m.objects[1].geometries[0];
@@ -489,7 +545,12 @@ fn whole_surface_geometry_by_xlink_is_what_it_points_to() {
         let head: Vec<_> = gs.iter().map(|g| (g.lod, g.property.as_str())).collect();
         assert_eq!(
             head,
-            [(Some(2), "lod2MultiSurface"), (Some(1), "lod1MultiSurface"), (Some(3), "lod3MultiSurface"), (Some(4), "lod4MultiSurface")],
+            [
+                (Some(2), "lod2MultiSurface"),
+                (Some(1), "lod1MultiSurface"),
+                (Some(3), "lod3MultiSurface"),
+                (Some(4), "lod4MultiSurface")
+            ],
             "{version}"
         );
         let GeometryKind::Surfaces(ms) = &gs[0].kind else { panic!("{version}: {:?}", gs[0].kind) };
@@ -498,15 +559,22 @@ fn whole_surface_geometry_by_xlink_is_what_it_points_to() {
         let GeometryKind::Surfaces(poly) = &gs[1].kind else { panic!("{version}: {:?}", gs[1].kind) };
         assert_eq!((gs[1].gml_type.as_str(), poly.len()), ("Polygon", 1), "{version}");
         assert_eq!(poly[0].via_xlink.as_ref().map(|v| v.line), Some(line("#B-f0")));
-        let GeometryKind::Solid { exterior, interior } = &gs[2].kind else { panic!("{version}: not a solid: {:?}", gs[2].kind) };
+        let GeometryKind::Solid { exterior, interior } = &gs[2].kind else {
+            panic!("{version}: not a solid: {:?}", gs[2].kind)
+        };
         assert_eq!((gs[2].gml_type.as_str(), exterior.polygons.len(), interior.len()), ("Solid", 6, 0), "{version}");
         assert!(exterior.polygons.iter().all(|p| p.via_xlink.as_ref().is_some_and(|v| v.line == line("#B"))));
         // the Building is not a geometry: a skipped member that says what the id names, with
         // the href and line, not the building's 8 polygons
         assert_eq!(gs[3].polygons().len(), 0, "{version}");
         assert!(m.unresolved_xlinks.is_empty(), "{version}");
-        let sk: Vec<_> = gs[3].skipped_members.iter().map(|s| (s.href.as_deref(), s.reason.as_str(), s.span.line)).collect();
-        assert_eq!(sk, [(Some("#a"), "xlink:href=\"#a\" points to <bldg:Building>, not a geometry", line("#a"))], "{version}");
+        let sk: Vec<_> =
+            gs[3].skipped_members.iter().map(|s| (s.href.as_deref(), s.reason.as_str(), s.span.line)).collect();
+        assert_eq!(
+            sk,
+            [(Some("#a"), "xlink:href=\"#a\" points to <bldg:Building>, not a geometry", line("#a"))],
+            "{version}"
+        );
         assert!(gs[..3].iter().all(|g| g.skipped_members.is_empty()));
         assert_eq!(m.all_polygons().len(), 8, "{version}: each polygon counted once, where defined");
 

@@ -140,7 +140,12 @@ pub trait ObjectFrame {
 /// Validates one document held in memory (or memory-mapped). The XSD check runs on its own
 /// thread while the geometry is read and checked; `progress` is called after each batch of
 /// checked features. `name` is used in the report and in error messages.
-pub fn validate_document(bytes: &[u8], name: &str, checks: &Checks, progress: &dyn Fn(Progress)) -> Result<Report, DocumentError> {
+pub fn validate_document(
+    bytes: &[u8],
+    name: &str,
+    checks: &Checks,
+    progress: &dyn Fn(Progress),
+) -> Result<Report, DocumentError> {
     validate_document_in(bytes, name, checks, None, progress)
 }
 
@@ -160,7 +165,14 @@ pub fn validate_document_in(
             check_geometry(bytes, &checks.options, frame, progress)
         } else {
             let srs = ObjectStream::new(bytes).ok().and_then(|s| s.srs_name());
-            let report = GeometryReport { checked: false, options: checks.options, features: 0, valid: None, findings: vec![], frame: None };
+            let report = GeometryReport {
+                checked: false,
+                options: checks.options,
+                features: 0,
+                valid: None,
+                findings: vec![],
+                frame: None,
+            };
             Ok((report, srs))
         };
         (xsd_job.join(), geometry)
@@ -173,7 +185,9 @@ pub fn validate_document_in(
     let (geometry, srs) = geometry.map_err(|e| {
         // Unreadable as CityGML: what libxml2 said about well-formedness, when it said something.
         match xsd.errors.iter().find(|f| f.kind == XsdErrorKind::NotWellFormed) {
-            Some(f) => DocumentError::Unreadable(format!("{name}:{}:{}: not well-formed XML: {}", f.line, f.column, f.message)),
+            Some(f) => {
+                DocumentError::Unreadable(format!("{name}:{}:{}: not well-formed XML: {}", f.line, f.column, f.message))
+            }
             None => DocumentError::Unreadable(format!("{name}:{e}")),
         }
     })?;
@@ -185,7 +199,12 @@ pub fn validate_document_in(
 fn xsd_report(bytes: &[u8], name: &str, schemas: &Result<SchemaSet, String>, version: Option<&str>) -> XsdReport {
     let set = match (schemas, version) {
         (Err(why), _) => return XsdReport::skipped(why.clone(), None),
-        (Ok(_), None) => return XsdReport::skipped("no CityGML 1.0/2.0/3.0 namespace on the root element, no schema to choose", None),
+        (Ok(_), None) => {
+            return XsdReport::skipped(
+                "no CityGML 1.0/2.0/3.0 namespace on the root element, no schema to choose",
+                None,
+            )
+        }
         (Ok(set), Some(_)) => set,
     };
     let version = version.unwrap_or_default();
@@ -236,7 +255,14 @@ fn check_geometry(
     add_unresolved_xlinks(&mut findings, stream.unresolved_xlinks());
     sort_findings(&mut findings);
     let described = frame.as_deref().and_then(|f| f.describe());
-    let report = GeometryReport { checked: true, options: *opts, features, valid: Some(findings.is_empty()), findings, frame: described };
+    let report = GeometryReport {
+        checked: true,
+        options: *opts,
+        features,
+        valid: Some(findings.is_empty()),
+        findings,
+        frame: described,
+    };
     Ok((report, stream.srs_name()))
 }
 

@@ -26,7 +26,11 @@ impl Snapper {
     }
 
     fn cell_size(&self) -> f64 {
-        if self.tol > 0.0 { self.tol } else { 1e-6 }
+        if self.tol > 0.0 {
+            self.tol
+        } else {
+            1e-6
+        }
     }
 
     fn cell(&self, p: &V3) -> (i64, i64, i64) {

@@ -39,7 +39,10 @@ pub mod tritri;
 pub mod xsd;
 
 pub use codes::ErrorCode;
-pub use model::{add_unresolved_xlinks, sort_findings, validate_model, validate_object, validate_objects, validate_objects_only, Finding};
+pub use model::{
+    add_unresolved_xlinks, sort_findings, validate_model, validate_object, validate_objects, validate_objects_only,
+    Finding,
+};
 pub use polygon::PolygonInput;
 
 /// Tolerances, with val3dity's defaults.
@@ -78,7 +81,14 @@ pub struct Issue {
 /// Checks a set of independent polygons (MultiSurface / CompositeSurface): ring and polygon levels.
 pub fn check_surfaces(polys: &[PolygonInput], opts: &Options) -> Vec<Issue> {
     if polys.is_empty() {
-        return vec![Issue { code: ErrorCode::EmptyPrimitive, polygon: None, ring: None, shell: None, detail: "no polygons".into(), value: None }];
+        return vec![Issue {
+            code: ErrorCode::EmptyPrimitive,
+            polygon: None,
+            ring: None,
+            shell: None,
+            detail: "no polygons".into(),
+            value: None,
+        }];
     }
     let mut snap = geom::Snapper::new(opts.snap_tol);
     polygon::check_polygons(polys, &mut snap, opts).0

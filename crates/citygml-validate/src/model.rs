@@ -46,7 +46,9 @@ fn locate(obj: &CityObject, geom: &Geometry, shells: &[Vec<&Polygon>], issue: Is
         (Some(p), Some(r)) => {
             let ring = if r == 0 { Some(&p.exterior) } else { p.interiors.get(r - 1) };
             match ring {
-                Some(ring) => (ring.id.clone().or_else(|| p.id.clone()), if ring.span.line > 0 { &ring.span } else { &p.span }),
+                Some(ring) => {
+                    (ring.id.clone().or_else(|| p.id.clone()), if ring.span.line > 0 { &ring.span } else { &p.span })
+                }
                 None => (p.id.clone(), &p.span),
             }
         }
@@ -93,7 +95,8 @@ fn check_geometry(obj: &CityObject, geom: &Geometry, opts: &Options) -> Vec<Find
             }
         }
         GeometryKind::Solid { exterior, interior } => {
-            let shells: Vec<Vec<&Polygon>> = std::iter::once(exterior).chain(interior.iter()).map(shell_polys).collect();
+            let shells: Vec<Vec<&Polygon>> =
+                std::iter::once(exterior).chain(interior.iter()).map(shell_polys).collect();
             let inp: Vec<Vec<PolygonInput>> = shells.iter().map(|s| to_inputs(s)).collect();
             for is in check_solid(&inp, opts) {
                 out.push(locate(obj, geom, &shells, is));
@@ -134,7 +137,8 @@ fn check_geometry(obj: &CityObject, geom: &Geometry, opts: &Options) -> Vec<Find
                 .iter()
                 .map(|(ext, ints)| std::iter::once(ext).chain(ints.iter()).map(shell_polys).collect())
                 .collect();
-            let inp: Vec<Vec<Vec<PolygonInput>>> = shells.iter().map(|s| s.iter().map(|p| to_inputs(p)).collect()).collect();
+            let inp: Vec<Vec<Vec<PolygonInput>>> =
+                shells.iter().map(|s| s.iter().map(|p| to_inputs(p)).collect()).collect();
             for (k, is) in check_composite_solid(&inp, opts) {
                 let between = is.shell.is_none();
                 let mut f = locate(obj, geom, &shells[k], is);
@@ -182,7 +186,8 @@ pub fn validate_object(top: &CityObject, opts: &Options) -> Vec<Finding> {
 /// conversion unit of a tool that changes geometry building by building (`geofit heal`
 /// compares a unit's findings before and after).
 pub fn validate_objects_only(objects: &[&CityObject], opts: &Options) -> Vec<Finding> {
-    let mut v: Vec<Finding> = objects.iter().flat_map(|o| o.geometries.iter().flat_map(|g| check_geometry(o, g, opts))).collect();
+    let mut v: Vec<Finding> =
+        objects.iter().flat_map(|o| o.geometries.iter().flat_map(|g| check_geometry(o, g, opts))).collect();
     sort_findings(&mut v);
     v
 }
@@ -198,7 +203,9 @@ pub fn validate_objects(objects: &[CityObject], opts: &Options) -> Vec<Finding> 
 /// Sorts findings by position in the document and drops repeats: a polygon reached twice
 /// (defined in a boundary surface and referenced by a solid through an XLink) is reported once.
 pub fn sort_findings(all: &mut Vec<Finding>) {
-    all.sort_by(|a, b| (a.line, a.column, a.code, &a.detail, &a.feature).cmp(&(b.line, b.column, b.code, &b.detail, &b.feature)));
+    all.sort_by(|a, b| {
+        (a.line, a.column, a.code, &a.detail, &a.feature).cmp(&(b.line, b.column, b.code, &b.detail, &b.feature))
+    });
     all.dedup_by(|a, b| a.line == b.line && a.column == b.column && a.code == b.code && a.detail == b.detail);
 }
 
@@ -216,7 +223,8 @@ pub fn validate_model(model: &CityModel, opts: &Options) -> Vec<Finding> {
 /// CompositeSolid member left out names its href itself).
 pub fn add_unresolved_xlinks(findings: &mut Vec<Finding>, refs: &[citygml_io::XLinkRef]) {
     let code = ErrorCode::InvalidInputFile;
-    let mut at: std::collections::HashSet<(usize, usize)> = findings.iter().filter(|f| f.code == code.code()).map(|f| (f.line, f.column)).collect();
+    let mut at: std::collections::HashSet<(usize, usize)> =
+        findings.iter().filter(|f| f.code == code.code()).map(|f| (f.line, f.column)).collect();
     for r in refs {
         let (line, column) = (r.span.line, r.span.column);
         if !at.insert((line, column)) {

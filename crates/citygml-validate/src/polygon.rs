@@ -8,8 +8,8 @@
 use crate::codes::ErrorCode;
 use crate::geom::{angle_deg, fit_plane, newell_normal, signed_area, Plane, Snapper, V2, V3};
 use crate::{Issue, Options};
-use geo::line_intersection::{line_intersection, LineIntersection};
 use geo::coordinate_position::CoordPos;
+use geo::line_intersection::{line_intersection, LineIntersection};
 use geo::{coord, CoordinatePosition, Line, LineString};
 use spade::{ConstrainedDelaunayTriangulation, Point2, Triangulation};
 
@@ -60,7 +60,9 @@ pub fn check_polygons(
     opts: &Options,
 ) -> (Vec<Issue>, Vec<Option<PreparedPolygon>>) {
     let finite = |p: &PolygonInput| {
-        std::iter::once(p.exterior).chain(p.interiors.iter().copied()).all(|r| r.iter().all(|q| q.iter().all(|c| c.is_finite())))
+        std::iter::once(p.exterior)
+            .chain(p.interiors.iter().copied())
+            .all(|r| r.iter().all(|q| q.iter().all(|c| c.is_finite())))
     };
     let ids: Vec<Option<Vec<Vec<u32>>>> = polys
         .iter()
@@ -97,13 +99,23 @@ fn check_ring(pi: usize, ri: usize, mut ids: Vec<u32>, snap: &Snapper) -> Result
     if ids.len() >= 2 && ids[0] != ids[ids.len() - 1] {
         let a = snap.points[ids[0] as usize];
         let b = snap.points[ids[ids.len() - 1] as usize];
-        let mut is = issue(ErrorCode::RingNotClosed, pi, Some(ri), format!("first and last points are {:.6} m apart", (a - b).norm()));
+        let mut is = issue(
+            ErrorCode::RingNotClosed,
+            pi,
+            Some(ri),
+            format!("first and last points are {:.6} m apart", (a - b).norm()),
+        );
         is.value = Some((a - b).norm());
         return Err(is);
     }
     ids.pop();
     if ids.len() < 3 {
-        return Err(issue(ErrorCode::TooFewPoints, pi, Some(ri), format!("{} distinct points, at least 3 needed", ids.len())));
+        return Err(issue(
+            ErrorCode::TooFewPoints,
+            pi,
+            Some(ri),
+            format!("{} distinct points, at least 3 needed", ids.len()),
+        ));
     }
     let n = ids.len();
     for k in 0..n {
@@ -113,7 +125,12 @@ fn check_ring(pi: usize, ri: usize, mut ids: Vec<u32>, snap: &Snapper) -> Result
                 ErrorCode::ConsecutivePointsSame,
                 pi,
                 Some(ri),
-                format!("points {} and {} coincide at {}", k + 1, (k + 1) % n + 1, fmt_pt(&snap.points[ids[k] as usize], &o)),
+                format!(
+                    "points {} and {} coincide at {}",
+                    k + 1,
+                    (k + 1) % n + 1,
+                    fmt_pt(&snap.points[ids[k] as usize], &o)
+                ),
             ));
         }
     }
@@ -138,7 +155,12 @@ fn check_polygon(
     let newell = newell_normal(&ext3);
     let extent = extent_from_first(&all3);
     if !(newell.norm() > 1e-12 * extent * extent) {
-        return Err(issue(ErrorCode::RingSelfIntersection, pi, Some(0), "outer ring is collapsed to a line or a point".into()));
+        return Err(issue(
+            ErrorCode::RingSelfIntersection,
+            pi,
+            Some(0),
+            "outer ring is collapsed to a line or a point".into(),
+        ));
     }
     let plane = polygon_plane(pi, &rs, &ext3, &all3, newell, snap, opts)?;
     let (u, v) = plane.basis();
@@ -147,7 +169,12 @@ fn check_polygon(
     let splits = check_ring_topology(pi, &rings2, &rs, extent)?;
     let rings_split = split_rings(&rs, splits);
     let triangles = triangulate(&rings_split, snap, &plane, u, v).ok_or_else(|| {
-        issue(ErrorCode::RingSelfIntersection, pi, None, "polygon cannot be triangulated in its plane (rings touch or cross)".into())
+        issue(
+            ErrorCode::RingSelfIntersection,
+            pi,
+            None,
+            "polygon cannot be triangulated in its plane (rings touch or cross)".into(),
+        )
     })?;
     check_triangle_normals(pi, &triangles, snap, extent, opts)?;
     let (normal, triangles) = if poly.reversed {
@@ -204,17 +231,20 @@ fn check_planarity(pi: usize, pl: &Plane, all3: &[V3], snap: &Snapper, opts: &Op
         }
     }
     if dmax > opts.planarity_tol {
-        return Err(with_value(dmax, issue(
-            ErrorCode::NonPlanarPolygonDistancePlane,
-            pi,
-            None,
-            format!(
-                "distance to fitted plane {:.6} m at {} (tolerance {} m)",
-                dmax,
-                fmt_pt(&all3[at], &snap.origin()),
-                opts.planarity_tol
+        return Err(with_value(
+            dmax,
+            issue(
+                ErrorCode::NonPlanarPolygonDistancePlane,
+                pi,
+                None,
+                format!(
+                    "distance to fitted plane {:.6} m at {} (tolerance {} m)",
+                    dmax,
+                    fmt_pt(&all3[at], &snap.origin()),
+                    opts.planarity_tol
+                ),
             ),
-        )));
+        ));
     }
     Ok(())
 }
@@ -263,7 +293,13 @@ fn split_rings(rs: &[Vec<u32>], mut splits: Vec<Split>) -> Vec<Vec<u32>> {
 }
 
 /// 204: the normals of the triangles must not deviate from each other by more than the tolerance.
-fn check_triangle_normals(pi: usize, triangles: &[[u32; 3]], snap: &Snapper, extent: f64, opts: &Options) -> Result<(), Issue> {
+fn check_triangle_normals(
+    pi: usize,
+    triangles: &[[u32; 3]],
+    snap: &Snapper,
+    extent: f64,
+    opts: &Options,
+) -> Result<(), Issue> {
     let normals: Vec<(f64, V3)> = triangles
         .iter()
         .filter_map(|t| {
@@ -276,12 +312,15 @@ fn check_triangle_normals(pi: usize, triangles: &[[u32; 3]], snap: &Snapper, ext
     if normals.len() > 1 {
         let worst = worst_normal_deviation(&normals);
         if worst > opts.normals_tol_deg {
-            return Err(with_value(worst, issue(
-                ErrorCode::NonPlanarPolygonNormalsDeviation,
-                pi,
-                None,
-                format!("normals of its triangles deviate by {:.4}° (tolerance {}°)", worst, opts.normals_tol_deg),
-            )));
+            return Err(with_value(
+                worst,
+                issue(
+                    ErrorCode::NonPlanarPolygonNormalsDeviation,
+                    pi,
+                    None,
+                    format!("normals of its triangles deviate by {:.4}° (tolerance {}°)", worst, opts.normals_tol_deg),
+                ),
+            ));
         }
     }
     Ok(())
@@ -311,7 +350,10 @@ fn gline(a: &V2, b: &V2) -> Line<f64> {
 }
 
 fn seg_bbox_overlap(a: &V2, b: &V2, c: &V2, d: &V2) -> bool {
-    a.x.min(b.x) <= c.x.max(d.x) && c.x.min(d.x) <= a.x.max(b.x) && a.y.min(b.y) <= c.y.max(d.y) && c.y.min(d.y) <= a.y.max(b.y)
+    a.x.min(b.x) <= c.x.max(d.x)
+        && c.x.min(d.x) <= a.x.max(b.x)
+        && a.y.min(b.y) <= c.y.max(d.y)
+        && c.y.min(d.y) <= a.y.max(b.y)
 }
 
 /// Pairs (i, j) of segments of rings `a` and `b` whose bounding boxes overlap, found by a sweep
@@ -376,7 +418,8 @@ fn ring_not_simple(r: &[V2], ids: &[u32]) -> Option<String> {
             match line_intersection(gline(&a, &b), gline(&c, &d)) {
                 None => {}
                 Some(LineIntersection::SinglePoint { .. }) if adjacent => {}
-                Some(LineIntersection::Collinear { intersection }) if adjacent && intersection.start == intersection.end => {}
+                Some(LineIntersection::Collinear { intersection })
+                    if adjacent && intersection.start == intersection.end => {}
                 Some(_) => {
                     return Some(format!("segments {} and {} of the ring intersect", i + 1, j + 1));
                 }
@@ -420,7 +463,12 @@ fn check_duplicated_rings(pi: usize, ids: &[Vec<u32>]) -> Result<(), Issue> {
             sa.sort_unstable();
             sb.sort_unstable();
             if sa == sb {
-                return Err(issue(ErrorCode::DuplicatedRings, pi, Some(b), format!("rings {} and {} are identical", a + 1, b + 1)));
+                return Err(issue(
+                    ErrorCode::DuplicatedRings,
+                    pi,
+                    Some(b),
+                    format!("rings {} and {} are identical", a + 1, b + 1),
+                ));
             }
         }
     }
@@ -429,7 +477,13 @@ fn check_duplicated_rings(pi: usize, ids: &[Vec<u32>]) -> Result<(), Issue> {
 
 /// 201 for every ring pair, in pair order: rings may touch in points but not cross or share a
 /// segment. Collects the touch points per pair (for 205) and the segment splits (into `splits`).
-fn ring_touches(pi: usize, rings: &[Vec<V2>], ids: &[Vec<u32>], eps: f64, splits: &mut Vec<Split>) -> Result<Touches, Issue> {
+fn ring_touches(
+    pi: usize,
+    rings: &[Vec<V2>],
+    ids: &[Vec<u32>],
+    eps: f64,
+    splits: &mut Vec<Split>,
+) -> Result<Touches, Issue> {
     let nr = rings.len();
     let mut touches: Touches = Vec::new();
     for a in 0..nr {
@@ -462,7 +516,12 @@ fn ring_pair_contacts(
         match line_intersection(gline(&p, &q), gline(&s, &t)) {
             None => {}
             Some(LineIntersection::SinglePoint { is_proper: true, .. }) => {
-                return Err(issue(ErrorCode::IntersectionRings, pi, Some(b), format!("ring {} crosses ring {}", b + 1, a + 1)));
+                return Err(issue(
+                    ErrorCode::IntersectionRings,
+                    pi,
+                    Some(b),
+                    format!("ring {} crosses ring {}", b + 1, a + 1),
+                ));
             }
             Some(LineIntersection::Collinear { intersection }) => {
                 let (x0, x1) = (intersection.start, intersection.end);
@@ -534,7 +593,12 @@ fn check_inner_ring_positions(pi: usize, rings: &[Vec<V2>]) -> Result<(), Issue>
     let position = |inner: usize, outer: usize| ring_position(&rings[inner], &polys[outer]);
     for b in 1..nr {
         if position(b, 0) == CoordPos::Outside {
-            return Err(issue(ErrorCode::InnerRingOutside, pi, Some(b), format!("inner ring {} lies outside the outer ring", b + 1)));
+            return Err(issue(
+                ErrorCode::InnerRingOutside,
+                pi,
+                Some(b),
+                format!("inner ring {} lies outside the outer ring", b + 1),
+            ));
         }
     }
     for b in 1..nr {

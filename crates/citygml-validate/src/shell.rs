@@ -44,7 +44,8 @@ impl ShellMesh {
         self.triangles
             .iter()
             .map(|t| {
-                let (a, b, d) = (self.points[t[0] as usize] - c, self.points[t[1] as usize] - c, self.points[t[2] as usize] - c);
+                let (a, b, d) =
+                    (self.points[t[0] as usize] - c, self.points[t[1] as usize] - c, self.points[t[2] as usize] - c);
                 a.dot(&b.cross(&d)) / 6.0
             })
             .sum()
@@ -110,11 +111,20 @@ pub fn check_shell(polys: &[PolygonInput], opts: &Options) -> (Vec<Issue>, Optio
     }
     if polys.len() < 4 {
         return (
-            vec![shell_issue(ErrorCode::TooFewPolygons, None, format!("{} polygons, a shell needs at least 4", polys.len()))],
+            vec![shell_issue(
+                ErrorCode::TooFewPolygons,
+                None,
+                format!("{} polygons, a shell needs at least 4", polys.len()),
+            )],
             None,
         );
     }
-    let mut mesh = ShellMesh { points: snap.points.clone(), origin: snap.origin(), triangles: Vec::new(), triangle_polygon: Vec::new() };
+    let mut mesh = ShellMesh {
+        points: snap.points.clone(),
+        origin: snap.origin(),
+        triangles: Vec::new(),
+        triangle_polygon: Vec::new(),
+    };
     for (pi, p) in prepared.iter().enumerate() {
         let p = p.as_ref().expect("valid polygons are prepared");
         for t in &p.triangles {
@@ -254,14 +264,25 @@ fn orientation_issues(mesh: &ShellMesh, edges: &EdgeUses) -> Vec<Issue> {
         let comp = label_flips_from(start, &adj, &mut label);
         let flipped: Vec<usize> = comp.iter().copied().filter(|&p| label[p] == Some(true)).collect();
         let kept = comp.len() - flipped.len();
-        let wrong: Vec<usize> =
-            if flipped.len() <= kept { flipped } else { comp.iter().copied().filter(|&p| label[p] == Some(false)).collect() };
+        let wrong: Vec<usize> = if flipped.len() <= kept {
+            flipped
+        } else {
+            comp.iter().copied().filter(|&p| label[p] == Some(false)).collect()
+        };
         for p in wrong {
-            issues.push(shell_issue(ErrorCode::PolygonWrongOrientation, Some(p), "polygon is oriented opposite to its neighbours".into()));
+            issues.push(shell_issue(
+                ErrorCode::PolygonWrongOrientation,
+                Some(p),
+                "polygon is oriented opposite to its neighbours".into(),
+            ));
         }
     }
     if issues.is_empty() {
-        issues.push(shell_issue(ErrorCode::PolygonWrongOrientation, None, "faces use an edge in the same direction".into()));
+        issues.push(shell_issue(
+            ErrorCode::PolygonWrongOrientation,
+            None,
+            "faces use an edge in the same direction".into(),
+        ));
     }
     issues
 }
@@ -310,7 +331,8 @@ fn non_manifold_vertices(triangles: &[[u32; 3]]) -> Vec<u32> {
             corners.entry(t[k]).or_default().push((t[(k + 1) % 3], t[(k + 2) % 3]));
         }
     }
-    let mut vertices: Vec<u32> = corners.iter().filter(|(_, cs)| has_closed_fan_among_several(cs)).map(|(v, _)| *v).collect();
+    let mut vertices: Vec<u32> =
+        corners.iter().filter(|(_, cs)| has_closed_fan_among_several(cs)).map(|(v, _)| *v).collect();
     vertices.sort_unstable();
     vertices
 }
@@ -362,7 +384,9 @@ fn separate_parts(mesh: &ShellMesh) -> Option<Issue> {
         dv.union(t[0] as usize, t[2] as usize);
     }
     let ncomp = tris.iter().map(|t| dv.find(t[0] as usize)).collect::<HashSet<_>>().len();
-    (ncomp > 1).then(|| shell_issue(ErrorCode::MultipleConnectedComponents, None, format!("the faces form {ncomp} separate parts")))
+    (ncomp > 1).then(|| {
+        shell_issue(ErrorCode::MultipleConnectedComponents, None, format!("the faces form {ncomp} separate parts"))
+    })
 }
 
 /// The number of parts the faces form through shared edges: more than one means the parts meet

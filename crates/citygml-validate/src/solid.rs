@@ -131,7 +131,11 @@ fn check_duplicated_shells(meshes: &[ShellMesh], opts: &Options) -> Vec<Issue> {
     for a in 0..meshes.len() {
         for b in a + 1..meshes.len() {
             if keys[a] == keys[b] {
-                issues.push(solid_issue(ErrorCode::DuplicatedShells, b, format!("shells {} and {} are identical", a + 1, b + 1)));
+                issues.push(solid_issue(
+                    ErrorCode::DuplicatedShells,
+                    b,
+                    format!("shells {} and {} are identical", a + 1, b + 1),
+                ));
             }
         }
     }
@@ -171,14 +175,20 @@ fn check_cavity_positions(meshes: &[ShellMesh], touch: f64) -> Vec<Issue> {
         let cs = samples(&meshes[s], touch);
         let outside = cs.iter().filter(|p| inside(0, p).abs() < 0.5).count();
         if outside == cs.len() {
-            issues.push(solid_issue(ErrorCode::InnerShellOutside, s, format!("interior shell {} is not inside the exterior shell", s)));
+            issues.push(solid_issue(
+                ErrorCode::InnerShellOutside,
+                s,
+                format!("interior shell {} is not inside the exterior shell", s),
+            ));
         } else if outside > 0 {
             issues.push(solid_issue(
                 ErrorCode::IntersectionShells,
                 s,
                 format!("interior shell {} is partly outside the exterior shell (they cross)", s),
             ));
-        } else if let Some(t) = (1..meshes.len()).filter(|&t| t != s).find(|&t| cs.iter().any(|p| inside(t, p).abs() > 0.5)) {
+        } else if let Some(t) =
+            (1..meshes.len()).filter(|&t| t != s).find(|&t| cs.iter().any(|p| inside(t, p).abs() > 0.5))
+        {
             issues.push(solid_issue(
                 ErrorCode::IntersectionShells,
                 s,
@@ -254,7 +264,13 @@ fn check_duplicated_solids(exts: &[ShellMesh], opts: &Options) -> Vec<(usize, Is
     for a in 0..exts.len() {
         for b in a + 1..exts.len() {
             if keys[a] == keys[b] {
-                out.push((b, composite_issue(ErrorCode::DuplicatedSolids, format!("solids {} and {} are identical", a + 1, b + 1))));
+                out.push((
+                    b,
+                    composite_issue(
+                        ErrorCode::DuplicatedSolids,
+                        format!("solids {} and {} are identical", a + 1, b + 1),
+                    ),
+                ));
             }
         }
     }
@@ -265,7 +281,10 @@ fn check_duplicated_solids(exts: &[ShellMesh], opts: &Options) -> Vec<(usize, Is
 fn check_disconnected_solids(mut adjacent: crate::shell::Dsu, count: usize) -> Vec<(usize, Issue)> {
     let root = adjacent.find(0);
     let detail = |k: usize| format!("solid {} shares no face with the other solids of the CompositeSolid", k + 1);
-    (1..count).filter(|&k| adjacent.find(k) != root).map(|k| (k, composite_issue(ErrorCode::DisconnectedSolids, detail(k)))).collect()
+    (1..count)
+        .filter(|&k| adjacent.find(k) != root)
+        .map(|k| (k, composite_issue(ErrorCode::DisconnectedSolids, detail(k))))
+        .collect()
 }
 
 /// The exterior shells of a CompositeSolid (in a common frame) for the pair tests, each shell's
@@ -303,7 +322,8 @@ impl<'a> SolidPairs<'a> {
                 }
                 let (crossing, shared) = self.meet(a, b);
                 if let Some(p) = crossing {
-                    let detail = format!("the interiors of solids {} and {} intersect near {}", a + 1, b + 1, fmt(&(p + o)));
+                    let detail =
+                        format!("the interiors of solids {} and {} intersect near {}", a + 1, b + 1, fmt(&(p + o)));
                     out.push((b, composite_issue(ErrorCode::IntersectionSolids, detail)));
                 } else if shared {
                     adjacent.union(a, b);
@@ -338,7 +358,11 @@ impl<'a> SolidPairs<'a> {
         let (_, samples) = self.indexed[x].as_ref()?;
         let (lo, hi) = self.boxes[y];
         let in_box = |p: &V3| (0..3).all(|i| p[i] >= lo[i] && p[i] <= hi[i]);
-        samples.iter().filter(|p| in_box(p)).find(|p| winding_number(&self.exts[y].points, &self.exts[y].triangles, p).abs() > 0.5).copied()
+        samples
+            .iter()
+            .filter(|p| in_box(p))
+            .find(|p| winding_number(&self.exts[y].points, &self.exts[y].triangles, p).abs() > 0.5)
+            .copied()
     }
 }
 
@@ -356,7 +380,8 @@ fn bbox(ps: &[V3], grow: f64) -> ([f64; 3], [f64; 3]) {
 }
 
 fn vertex_key(ps: &[V3], opts: &Options) -> Vec<[i64; 3]> {
-    let mut k: Vec<[i64; 3]> = ps.iter().map(|p| [p.x, p.y, p.z].map(|c| (c / opts.snap_tol.max(1e-9)).round() as i64)).collect();
+    let mut k: Vec<[i64; 3]> =
+        ps.iter().map(|p| [p.x, p.y, p.z].map(|c| (c / opts.snap_tol.max(1e-9)).round() as i64)).collect();
     k.sort_unstable();
     k.dedup();
     k

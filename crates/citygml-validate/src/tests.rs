@@ -15,7 +15,11 @@ fn poly(ext: &[P]) -> Vec<P> {
 fn codes_surfaces(rings: &[(Vec<P>, Vec<Vec<P>>)], opts: &Options) -> Vec<u16> {
     let inp: Vec<PolygonInput> = rings
         .iter()
-        .map(|(e, i)| PolygonInput { exterior: e, interiors: i.iter().map(|r| r.as_slice()).collect(), reversed: false })
+        .map(|(e, i)| PolygonInput {
+            exterior: e,
+            interiors: i.iter().map(|r| r.as_slice()).collect(),
+            reversed: false,
+        })
         .collect();
     check_surfaces(&inp, opts).iter().map(|i| i.code.code()).collect()
 }
@@ -37,7 +41,8 @@ fn cube() -> Vec<Vec<P>> {
 }
 
 fn solid_codes(faces: &[Vec<P>], opts: &Options) -> Vec<u16> {
-    let inp: Vec<PolygonInput> = faces.iter().map(|f| PolygonInput { exterior: f, interiors: vec![], reversed: false }).collect();
+    let inp: Vec<PolygonInput> =
+        faces.iter().map(|f| PolygonInput { exterior: f, interiors: vec![], reversed: false }).collect();
     check_solid(&[inp], opts).iter().map(|i| i.code.code()).collect()
 }
 
@@ -155,7 +160,12 @@ fn shell_level() {
     let apex = [0.5, 0.5, 0.0];
     let mut house = vec![cube()[0].clone()];
     house.extend(cube()[2..].iter().cloned());
-    for (a, b) in [([0., 0., 1.], [1., 0., 1.]), ([1., 0., 1.], [1., 1., 1.]), ([1., 1., 1.], [0., 1., 1.]), ([0., 1., 1.], [0., 0., 1.])] {
+    for (a, b) in [
+        ([0., 0., 1.], [1., 0., 1.]),
+        ([1., 0., 1.], [1., 1., 1.]),
+        ([1., 1., 1.], [0., 1., 1.]),
+        ([0., 1., 1.], [0., 0., 1.]),
+    ] {
         house.push(poly(&[a, b, apex]));
     }
     let c = solid_codes(&house, &o);
@@ -169,7 +179,8 @@ fn inp(s: &[Vec<P>]) -> Vec<PolygonInput<'_>> {
 #[test]
 fn cavity_checks() {
     let o = Options::default();
-    let ext: Vec<Vec<P>> = cube().into_iter().map(|f| f.into_iter().map(|p| [p[0] * 4., p[1] * 4., p[2] * 4.]).collect()).collect();
+    let ext: Vec<Vec<P>> =
+        cube().into_iter().map(|f| f.into_iter().map(|p| [p[0] * 4., p[1] * 4., p[2] * 4.]).collect()).collect();
     // a cavity is an inward-facing shell inside the exterior
     let cav: Vec<Vec<P>> = cube()
         .into_iter()
@@ -294,7 +305,8 @@ fn composite_doc(members: &str) -> String {
         }
         s + "</gml:Shell></gml:exterior></gml:Solid>"
     };
-    let members = members.replace("{A}", &solid("A", 0.0)).replace("{C}", &solid("C", 2.0)).replace("{D}", &solid("D", 0.0));
+    let members =
+        members.replace("{A}", &solid("A", 0.0)).replace("{C}", &solid("C", 2.0)).replace("{D}", &solid("D", 0.0));
     format!(
         "<?xml version=\"1.0\"?>\n<core:CityModel xmlns:core=\"http://www.opengis.net/citygml/2.0\" \
          xmlns:bldg=\"http://www.opengis.net/citygml/building/2.0\" xmlns:gml=\"http://www.opengis.net/gml\" \
@@ -334,7 +346,8 @@ fn composite_solid_members_by_xlink() {
 /// what the id names.
 #[test]
 fn face_xlink_to_a_city_object_is_a_901_of_its_feature() {
-    let members = "<gml:solidMember>{A}</gml:solidMember>\n<gml:solidMember><gml:Solid gml:id=\"X\"><gml:exterior><gml:Shell>\n\
+    let members =
+        "<gml:solidMember>{A}</gml:solidMember>\n<gml:solidMember><gml:Solid gml:id=\"X\"><gml:exterior><gml:Shell>\n\
                    <gml:surfaceMember xlink:href=\"#other\"/></gml:Shell></gml:exterior></gml:Solid></gml:solidMember>";
     let f = doc_findings(members);
     let x: Vec<_> = f.iter().filter(|f| f.code == 901).collect();
@@ -412,7 +425,8 @@ fn parts_meeting_at_t_junctions_are_one_component_with_holes() {
     // val3dity: connected through shared vertices, so not 305; the edges used once are holes (302)
     let o = Options::default();
     let faces = t_junction_box();
-    let inp: Vec<PolygonInput> = faces.iter().map(|f| PolygonInput { exterior: f, interiors: vec![], reversed: false }).collect();
+    let inp: Vec<PolygonInput> =
+        faces.iter().map(|f| PolygonInput { exterior: f, interiors: vec![], reversed: false }).collect();
     let is = check_solid(&[inp], &o);
     assert!(!is.is_empty() && is.iter().all(|i| i.code == ErrorCode::ShellNotClosed), "{is:?}");
     let all: String = is.iter().map(|i| i.detail.as_str()).collect();

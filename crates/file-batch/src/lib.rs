@@ -131,7 +131,8 @@ pub fn expand(args: &[String], dir_exts: &[&str]) -> Result<Vec<Source>, ExpandE
 }
 
 fn glob_matches(pattern: &str) -> Result<Vec<PathBuf>, ExpandError> {
-    let paths = glob::glob(pattern).map_err(|e| ExpandError::BadPattern { pattern: pattern.to_string(), message: e.to_string() })?;
+    let paths = glob::glob(pattern)
+        .map_err(|e| ExpandError::BadPattern { pattern: pattern.to_string(), message: e.to_string() })?;
     // An entry the pattern reached but could not read is kept: its job reports why.
     let mut v: Vec<PathBuf> = paths.map(|r| r.unwrap_or_else(|e| e.path().to_path_buf())).collect();
     v.sort();
@@ -189,11 +190,8 @@ where
     W: Fn(T) -> R + Sync,
     E: FnMut(usize, Result<R, Panicked>),
 {
-    let pool = rayon::ThreadPoolBuilder::new()
-        .stack_size(8 << 20)
-        .thread_name(|i| format!("file-batch-{i}"))
-        .build()
-        .ok();
+    let pool =
+        rayon::ThreadPoolBuilder::new().stack_size(8 << 20).thread_name(|i| format!("file-batch-{i}")).build().ok();
     let (tx, rx) = mpsc::channel::<(usize, Result<R, Panicked>)>();
     let work = &work;
     std::thread::scope(|s| {
@@ -218,8 +216,12 @@ where
 }
 
 /// Spawns one FIFO job per item; each sends its index and result (or panic) to `tx`.
-fn spawn_all<'s, T, R, W>(sc: &rayon::ScopeFifo<'s>, items: Vec<T>, work: &'s W, tx: &mpsc::Sender<(usize, Result<R, Panicked>)>)
-where
+fn spawn_all<'s, T, R, W>(
+    sc: &rayon::ScopeFifo<'s>,
+    items: Vec<T>,
+    work: &'s W,
+    tx: &mpsc::Sender<(usize, Result<R, Panicked>)>,
+) where
     T: Send + 's,
     R: Send + 's,
     W: Fn(T) -> R + Sync,
@@ -300,7 +302,10 @@ mod tests {
         let d = t.path();
         assert!(matches!(expand(&args(&[&format!("{}/*.none", d.display())]), &["gml"]), Err(ExpandError::NoMatch(_))));
         assert!(matches!(expand(&args(&["-", "-"]), &["gml"]), Err(ExpandError::StdinTwice)));
-        assert!(matches!(expand(&args(&[d.join("b/sub").to_str().unwrap()]), &["txt"]), Err(ExpandError::EmptyDir { .. })));
+        assert!(matches!(
+            expand(&args(&[d.join("b/sub").to_str().unwrap()]), &["txt"]),
+            Err(ExpandError::EmptyDir { .. })
+        ));
         assert!(matches!(expand(&[], &["gml"]), Err(ExpandError::Nothing)));
         let missing = d.join("missing.gml");
         let got = expand(&args(&[missing.to_str().unwrap()]), &["gml"]).unwrap();

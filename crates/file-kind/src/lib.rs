@@ -201,8 +201,11 @@ fn root_element(mut text: &[u8]) -> Option<String> {
         } else if text.starts_with(b"<!") {
             skip_to(b">")?
         } else {
-            let name: Vec<u8> =
-                text[1..].iter().copied().take_while(|b| !b.is_ascii_whitespace() && !matches!(b, b'>' | b'/')).collect();
+            let name: Vec<u8> = text[1..]
+                .iter()
+                .copied()
+                .take_while(|b| !b.is_ascii_whitespace() && !matches!(b, b'>' | b'/'))
+                .collect();
             return (!name.is_empty()).then(|| String::from_utf8_lossy(&name).into_owned());
         };
         text = &text[after..];
@@ -215,7 +218,9 @@ fn json_kind(text: &[u8]) -> FileKind {
     let compact: String = s.chars().filter(|c| !c.is_whitespace()).collect();
     if compact.contains("\"type\":\"CityJSON\"") || compact.contains("\"type\":\"CityJSONFeature\"") {
         FileKind::CityJson
-    } else if compact.contains("\"asset\":{") && ["\"meshes\"", "\"buffers\"", "\"scenes\""].iter().any(|k| compact.contains(k)) {
+    } else if compact.contains("\"asset\":{")
+        && ["\"meshes\"", "\"buffers\"", "\"scenes\""].iter().any(|k| compact.contains(k))
+    {
         FileKind::Gltf
     } else {
         FileKind::Json
@@ -229,8 +234,11 @@ fn text_kind(text: &[u8], complete: bool) -> FileKind {
     if !complete && lines.len() > 1 {
         lines.pop();
     }
-    let content: Vec<&str> =
-        lines.into_iter().filter(|l| !l.is_empty() && !l.starts_with('#') && !l.starts_with('%') && !l.starts_with('>')).take(50).collect();
+    let content: Vec<&str> = lines
+        .into_iter()
+        .filter(|l| !l.is_empty() && !l.starts_with('#') && !l.starts_with('%') && !l.starts_with('>'))
+        .take(50)
+        .collect();
     let Some(first) = content.first() else { return FileKind::Unknown };
     let keyword = first.split_whitespace().next().unwrap_or("").to_ascii_lowercase();
     if keyword == "ncols" || keyword == "nrows" {

@@ -6,11 +6,11 @@
 
 mod cmd;
 mod config;
+mod error;
 mod mesh_output;
 mod process_stats;
 mod report;
 mod terrain_io;
-mod error;
 
 use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 use std::process::ExitCode;
@@ -109,14 +109,21 @@ fn long_version() -> String {
     let gdal = raster_io::gdal_io::gdal_version();
     let proj = {
         use proj::Info;
-        proj::ProjBuilder::new().info().map(|i| format!("PROJ {}", i.version)).unwrap_or_else(|_| "PROJ (unknown)".into())
+        proj::ProjBuilder::new()
+            .info()
+            .map(|i| format!("PROJ {}", i.version))
+            .unwrap_or_else(|_| "PROJ (unknown)".into())
     };
     let opencl = match ocl::core::get_platform_ids() {
         Ok(ids) if !ids.is_empty() => ids
             .iter()
             .map(|p| {
-                let name = ocl::core::get_platform_info(p, ocl::core::PlatformInfo::Name).map(|i| i.to_string()).unwrap_or_default();
-                let version = ocl::core::get_platform_info(p, ocl::core::PlatformInfo::Version).map(|i| i.to_string()).unwrap_or_default();
+                let name = ocl::core::get_platform_info(p, ocl::core::PlatformInfo::Name)
+                    .map(|i| i.to_string())
+                    .unwrap_or_default();
+                let version = ocl::core::get_platform_info(p, ocl::core::PlatformInfo::Version)
+                    .map(|i| i.to_string())
+                    .unwrap_or_default();
                 format!("{name} ({version})")
             })
             .collect::<Vec<_>>()

@@ -79,14 +79,25 @@ impl SurfaceOptions {
 }
 
 /// Tessellates `file` (read from `name`) and writes it to `output` as `format`.
-pub fn tessellate(file: TMeshFile, name: &str, output: &Output, format: Format, opts: &SurfaceOptions, config: &Config) -> CmdResult {
+pub fn tessellate(
+    file: TMeshFile,
+    name: &str,
+    output: &Output,
+    format: Format,
+    opts: &SurfaceOptions,
+    config: &Config,
+) -> CmdResult {
     if format == Format::Obj && output.path().is_none() {
-        return Err(CliError::usage("OBJ output of a surface needs a file (-o OUT.obj): its materials go to OUT.mtl beside it"));
+        return Err(CliError::usage(
+            "OBJ output of a surface needs a file (-o OUT.obj): its materials go to OUT.mtl beside it",
+        ));
     }
     let range = height_range(opts)?;
     let grid = SampleGrid::new(file.mesh.bounds(), opts.step).map_err(|e| match e {
         TessellateError::Step(s) => CliError::usage(format!("--step must be positive, got {s}")),
-        TessellateError::TooManySamples { ns, nt } => CliError::usage(format!("{ns}×{nt} samples are too many; raise --step")),
+        TessellateError::TooManySamples { ns, nt } => {
+            CliError::usage(format!("{ns}×{nt} samples are too many; raise --step"))
+        }
         e => CliError::internal(format!("surface: {e}")),
     })?;
     let ocl = select_device(opts.device, config)?;
@@ -106,11 +117,15 @@ pub fn tessellate(file: TMeshFile, name: &str, output: &Output, format: Format, 
         None => None,
     };
     let sample_reference = |x: f64, y: f64| reference.as_ref().and_then(|r| r.sample(x, y, MissingCorners::Strict));
-    let colouring = if reference.is_some() { Colouring::ErrorAgainst(&sample_reference) } else { Colouring::Height { range } };
-    let mut scene = tspline::tessellate::tessellate(&file, &pb, &grid, z, colouring, !opts.no_mask, !opts.no_cell_edges).map_err(|e| match e {
-        TessellateError::NoPointInMask => CliError::findings(format!("{name}: {e}")),
-        e => CliError::internal(format!("surface: {e}")),
-    })?;
+    let colouring =
+        if reference.is_some() { Colouring::ErrorAgainst(&sample_reference) } else { Colouring::Height { range } };
+    let mut scene =
+        tspline::tessellate::tessellate(&file, &pb, &grid, z, colouring, !opts.no_mask, !opts.no_cell_edges).map_err(
+            |e| match e {
+                TessellateError::NoPointInMask => CliError::findings(format!("{name}: {e}")),
+                e => CliError::internal(format!("surface: {e}")),
+            },
+        )?;
     scene.generator = Some("geofit surface".into());
     write_scene(&scene, output, format, false, "surface export")?;
     Ok(Exit::Ok)
@@ -129,7 +144,13 @@ fn height_range(opts: &SurfaceOptions) -> Result<Option<(f64, f64)>, CliError> {
 /// `external_bin`, in OUT.bin beside it; OBJ with its MTL beside a file output (on stdout the OBJ
 /// alone). Side files are written atomically before the main file. `what` prefixes the message
 /// of a failure of the writer itself.
-pub fn write_scene(scene: &mesh_export::Scene, output: &Output, format: Format, external_bin: bool, what: &str) -> Result<(), CliError> {
+pub fn write_scene(
+    scene: &mesh_export::Scene,
+    output: &Output,
+    format: Format,
+    external_bin: bool,
+    what: &str,
+) -> Result<(), CliError> {
     let export_err = |e: mesh_export::ExportError| match e {
         mesh_export::ExportError::Io(e) => CliError::io_out(e),
         e => CliError::internal(format!("{what}: {e}")),
@@ -140,11 +161,13 @@ pub fn write_scene(scene: &mesh_export::Scene, output: &Output, format: Format, 
             let bin_path = path.with_extension("bin");
             let uri = file_name(&bin_path)?;
             let (mut json, mut bin) = (Vec::new(), Vec::new());
-            mesh_export::write_gltf(scene, &mut json, mesh_export::GltfBuffer::External { uri: &uri, bin: &mut bin }).map_err(export_err)?;
+            mesh_export::write_gltf(scene, &mut json, mesh_export::GltfBuffer::External { uri: &uri, bin: &mut bin })
+                .map_err(export_err)?;
             write_atomic(&bin_path, |w| w.write_all(&bin).map_err(CliError::io_out))?;
             output.write_bytes(&json)?;
         }
-        (Format::Gltf, _) => output.write_with(|w| mesh_export::write_gltf(scene, w, mesh_export::GltfBuffer::Embedded).map_err(export_err))?,
+        (Format::Gltf, _) => output
+            .write_with(|w| mesh_export::write_gltf(scene, w, mesh_export::GltfBuffer::Embedded).map_err(export_err))?,
         (Format::Obj, Some(path)) => {
             let mtl_path = path.with_extension("mtl");
             let mtl_name = file_name(&mtl_path)?;
@@ -160,5 +183,7 @@ pub fn write_scene(scene: &mesh_export::Scene, output: &Output, format: Format, 
 
 /// The last component of `p` (the name an OBJ's `mtllib` or a glTF's buffer `uri` refers to).
 pub fn file_name(p: &Path) -> Result<String, CliError> {
-    p.file_name().map(|n| n.to_string_lossy().into_owned()).ok_or_else(|| CliError::usage(format!("{}: not a file name", p.display())))
+    p.file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .ok_or_else(|| CliError::usage(format!("{}: not a file name", p.display())))
 }

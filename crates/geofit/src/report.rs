@@ -57,17 +57,32 @@ pub fn write_json_report<T: Serialize>(path: &str, kind: &ReportKind, report: &T
 }
 
 /// [`write_json_report`] with units known only at run time (a `--z-unit` option).
-pub fn write_json_report_with_units<T: Serialize>(path: &str, kind: &ReportKind, units: &[(&str, &str)], report: &T) -> Result<(), CliError> {
+pub fn write_json_report_with_units<T: Serialize>(
+    path: &str,
+    kind: &ReportKind,
+    units: &[(&str, &str)],
+    report: &T,
+) -> Result<(), CliError> {
     write_tagged(path, kind.schema, units, report)
 }
 
-fn write_tagged<T: Serialize>(path: &str, schema: &'static str, units: &[(&str, &str)], report: &T) -> Result<(), CliError> {
+fn write_tagged<T: Serialize>(
+    path: &str,
+    schema: &'static str,
+    units: &[(&str, &str)],
+    report: &T,
+) -> Result<(), CliError> {
     Output::from_arg(Some(path)).write_with(|w| write_json(w, &Tagged { schema, units: Units(units), body: report }))
 }
 
 /// The report of a report-only command on stdout: as JSON of `kind` with `--json`, else as the
 /// text `text` writes.
-pub fn print_report<T: Serialize>(json: bool, kind: &ReportKind, report: &T, text: impl FnOnce(&mut dyn Write) -> std::io::Result<()>) -> Result<(), CliError> {
+pub fn print_report<T: Serialize>(
+    json: bool,
+    kind: &ReportKind,
+    report: &T,
+    text: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
+) -> Result<(), CliError> {
     print_report_with_units(json, kind, kind.units, report, text)
 }
 
@@ -115,9 +130,16 @@ mod tests {
     #[test]
     fn schema_and_units_come_first_and_the_fields_stay() {
         let units = [("max", "m"), ("inner.area", "m2")];
-        let t = Tagged { schema: "geofit-x-report/1", units: Units(&units), body: &R { max: 1.5, inner: Inner { area: 2.0 } } };
+        let t = Tagged {
+            schema: "geofit-x-report/1",
+            units: Units(&units),
+            body: &R { max: 1.5, inner: Inner { area: 2.0 } },
+        };
         let s = serde_json::to_string(&t).unwrap();
-        assert_eq!(s, r#"{"schema":"geofit-x-report/1","units":{"max":"m","inner.area":"m2"},"max":1.5,"inner":{"area":2.0}}"#);
+        assert_eq!(
+            s,
+            r#"{"schema":"geofit-x-report/1","units":{"max":"m","inner.area":"m2"},"max":1.5,"inner":{"area":2.0}}"#
+        );
     }
 
     #[test]

@@ -31,13 +31,13 @@ mod verify;
 
 use citygml_io::{CityModel, CityObject, Edit};
 use measure::Measures;
-use normalize::conditions::ConditionOptions;
 use normalize::citygml::unit_name;
+use normalize::conditions::ConditionOptions;
 use normalize::to_citygml::{BackOptions, BackReport, Template};
-pub use verify::UnitResult;
 use rayon::prelude::*;
 use serde::Serialize;
 use std::sync::atomic::{AtomicUsize, Ordering};
+pub use verify::UnitResult;
 
 /// Options of [`heal`].
 #[derive(Debug, Clone)]
@@ -65,7 +65,12 @@ impl Default for HealOptions {
             tolerances: normalize::Tolerances::default(),
             // Healing makes faces planar with the least change: no squaring (parallel or
             // orthogonal conditions) and no snapping of offset planes (ε = 0).
-            conditions: ConditionOptions { parallel_deg: 0.0, orthogonal_deg: 0.0, epsilon: 0.0, ..ConditionOptions::default() },
+            conditions: ConditionOptions {
+                parallel_deg: 0.0,
+                orthogonal_deg: 0.0,
+                epsilon: 0.0,
+                ..ConditionOptions::default()
+            },
             back: BackOptions::default(),
             max_move: 0.05,
             max_area_change: 0.005,
@@ -181,7 +186,12 @@ pub fn heal(original: &[u8], opts: &HealOptions, progress: &(dyn Fn(usize) + Syn
 /// new validation code, change its area by more than `opts.max_area_change` or move further than
 /// `opts.max_move` (Hausdorff) keeps its original geometry and is named in `report.kept`.
 /// Returns the verified document and the summed write-back report of the whole model.
-pub fn write_back(model: &popa3d_model::Popa3d, original: &[u8], back: &BackOptions, opts: &HealOptions) -> Result<(Healed, BackReport), WriteBackError> {
+pub fn write_back(
+    model: &popa3d_model::Popa3d,
+    original: &[u8],
+    back: &BackOptions,
+    opts: &HealOptions,
+) -> Result<(Healed, BackReport), WriteBackError> {
     let doc = Document::read(original, true)?;
     let units = units(&doc.city);
     if units.is_empty() {
@@ -211,7 +221,9 @@ fn split_by_unit(units: &[&CityObject], edits: Vec<Edit>) -> (Vec<Vec<Edit>>, Ve
     let mut per_unit = vec![Vec::new(); units.len()];
     let mut always = Vec::new();
     for e in edits {
-        let holder = (0..units.len()).filter(|&i| units[i].span.bytes.start <= e.bytes.start && e.bytes.end <= units[i].span.bytes.end).max_by_key(|&i| units[i].span.bytes.start);
+        let holder = (0..units.len())
+            .filter(|&i| units[i].span.bytes.start <= e.bytes.start && e.bytes.end <= units[i].span.bytes.end)
+            .max_by_key(|&i| units[i].span.bytes.start);
         match holder {
             Some(i) => per_unit[i].push(e),
             None => always.push(e),
@@ -242,13 +254,23 @@ impl Document {
 }
 
 /// The verification of the units' edits (see [`verify`]) and the report.
-fn verified(original: &[u8], doc: &Document, units: &[&CityObject], results: Vec<UnitResult>, always: Vec<Edit>, opts: &HealOptions) -> Result<Healed, HealError> {
+fn verified(
+    original: &[u8],
+    doc: &Document,
+    units: &[&CityObject],
+    results: Vec<UnitResult>,
+    always: Vec<Edit>,
+    opts: &HealOptions,
+) -> Result<Healed, HealError> {
     let bad = &doc.bad;
     let mut kept: Vec<Option<String>> = results.iter().map(|r| r.as_ref().err().cloned()).collect();
     let mut with_bad_numbers = Vec::new();
     for b in bad {
         // the innermost unit holding the bad number keeps its geometry
-        if let Some(i) = (0..units.len()).filter(|&i| units[i].span.bytes.contains(&b.byte)).max_by_key(|&i| units[i].span.bytes.start) {
+        if let Some(i) = (0..units.len())
+            .filter(|&i| units[i].span.bytes.contains(&b.byte))
+            .max_by_key(|&i| units[i].span.bytes.start)
+        {
             kept[i] = Some(format!("non-finite coordinate '{}' at line {}, column {}", b.token, b.line, b.column));
             with_bad_numbers.push(i);
         }
@@ -260,12 +282,28 @@ fn verified(original: &[u8], doc: &Document, units: &[&CityObject], results: Vec
         before[i].area = f64::NAN; // measured on the stand-in numbers: left out of the totals
     }
     let touched_by = verify::touch_map(units, &results);
-    let verifier = verify::Verifier { original, units, results: &results, always: &always, touched_by: &touched_by, with_bad_numbers: &with_bad_numbers, opts };
+    let verifier = verify::Verifier {
+        original,
+        units,
+        results: &results,
+        always: &always,
+        touched_by: &touched_by,
+        with_bad_numbers: &with_bad_numbers,
+        opts,
+    };
     let (document, after, rounds) = verifier.run(&mut kept, &before)?;
     let report = summary(original, units, &results, &kept, &before, &after, rounds);
     let defects = Defects {
-        bad_numbers: bad.iter().map(|b| format!("{}:{}: non-finite coordinate '{}'", b.line, b.column, b.token)).collect(),
-        unresolved_xlinks: doc.city.unresolved_xlinks.iter().map(|x| format!("{}:{}: {}", x.span.line, x.span.column, input_limits::quote(&x.reason()))).collect(),
+        bad_numbers: bad
+            .iter()
+            .map(|b| format!("{}:{}: non-finite coordinate '{}'", b.line, b.column, b.token))
+            .collect(),
+        unresolved_xlinks: doc
+            .city
+            .unresolved_xlinks
+            .iter()
+            .map(|x| format!("{}:{}: {}", x.span.line, x.span.column, input_limits::quote(&x.reason())))
+            .collect(),
     };
     Ok(Healed { document, report, defects })
 }
@@ -277,7 +315,15 @@ fn changes_bytes(original: &[u8], edits: &[Edit]) -> bool {
 
 /// The report of a verified write-back. "Healed" is honest: the unit's geometry was rewritten
 /// (its bytes changed) and its validation findings fell (docs/decisions.md#honest-heal-summaries).
-fn summary(original: &[u8], units: &[&CityObject], results: &[UnitResult], kept: &[Option<String>], before: &[Measures], after: &[Measures], rounds: usize) -> HealReport {
+fn summary(
+    original: &[u8],
+    units: &[&CityObject],
+    results: &[UnitResult],
+    kept: &[Option<String>],
+    before: &[Measures],
+    after: &[Measures],
+    rounds: usize,
+) -> HealReport {
     let mut back = BackReport::default();
     let (mut healed, mut changed) = (0, 0);
     let mut moved_m = std::collections::BTreeMap::new();
@@ -311,7 +357,11 @@ fn summary(original: &[u8], units: &[&CityObject], results: &[UnitResult], kept:
         changed,
         valid_before: before.iter().filter(|m| m.codes.is_empty()).count(),
         valid_after: after.iter().filter(|m| m.codes.is_empty()).count(),
-        kept: units.iter().zip(kept).filter_map(|(b, k)| k.as_ref().map(|r| Kept { building: unit_name(b), reason: r.clone() })).collect(),
+        kept: units
+            .iter()
+            .zip(kept)
+            .filter_map(|(b, k)| k.as_ref().map(|r| Kept { building: unit_name(b), reason: r.clone() }))
+            .collect(),
         area_before_m2: finite_sum(pairs(), |x| x.0),
         area_after_m2: finite_sum(pairs(), |x| x.1),
         max_moved_m: moved_m.values().cloned().fold(0.0, f64::max),
@@ -342,7 +392,10 @@ fn parse_tolerant(bytes: &[u8]) -> Result<(Vec<u8>, CityModel, Vec<BadNumber>), 
         match citygml_io::parse(&copy) {
             Ok(city) => return Ok((copy, city, bad)),
             Err(e) if e.message.contains("non-finite coordinate") && bad.len() < 10_000 && e.byte < copy.len() => {
-                let len = copy[e.byte..].iter().position(|c| c.is_ascii_whitespace() || *c == b'<' || *c == b',').unwrap_or(copy.len() - e.byte);
+                let len = copy[e.byte..]
+                    .iter()
+                    .position(|c| c.is_ascii_whitespace() || *c == b'<' || *c == b',')
+                    .unwrap_or(copy.len() - e.byte);
                 if len == 0 {
                     return Err(e);
                 }
@@ -370,7 +423,8 @@ fn add_back(t: &mut BackReport, r: &BackReport) {
     t.merged.extend(r.merged.iter().cloned());
     t.removed_surfaces.extend(r.removed_surfaces.iter().cloned());
     t.moved_openings.extend(r.moved_openings.iter().cloned());
-    t.mean_move = (t.mean_move * t.vertices_written as f64 + r.mean_move * r.vertices_written as f64) / (t.vertices_written + r.vertices_written).max(1) as f64;
+    t.mean_move = (t.mean_move * t.vertices_written as f64 + r.mean_move * r.vertices_written as f64)
+        / (t.vertices_written + r.vertices_written).max(1) as f64;
     t.vertices_written += r.vertices_written;
     t.max_move = t.max_move.max(r.max_move);
     t.vertices_dropped += r.vertices_dropped;

@@ -21,7 +21,12 @@ pub struct Measures {
 
 /// The objects of a unit and their own polygons (not those reached by XLink).
 fn own_polygons<'a>(objects: &[&'a CityObject]) -> Vec<&'a Polygon> {
-    objects.iter().flat_map(|o| o.geometries.iter()).flat_map(|g| g.polygons()).filter(|p| p.via_xlink.is_none()).collect()
+    objects
+        .iter()
+        .flat_map(|o| o.geometries.iter())
+        .flat_map(|g| g.polygons())
+        .filter(|p| p.via_xlink.is_none())
+        .collect()
 }
 
 /// Measures one unit (its own objects, see `normalize::citygml::own_objects`).
@@ -37,7 +42,10 @@ pub fn measure(objects: &[&CityObject], opts: &Options) -> Measures {
 /// The surface of a unit (its own polygons) for [`crate::hausdorff`].
 pub fn surface(objects: &[&CityObject]) -> crate::hausdorff::Surface {
     crate::hausdorff::Surface::new(
-        own_polygons(objects).into_iter().map(|p| std::iter::once(&p.exterior).chain(p.interiors.iter()).map(|r| r.points.clone()).collect()).collect(),
+        own_polygons(objects)
+            .into_iter()
+            .map(|p| std::iter::once(&p.exterior).chain(p.interiors.iter()).map(|r| r.points.clone()).collect())
+            .collect(),
     )
 }
 
@@ -64,7 +72,10 @@ pub fn reference_point(objects: &[&CityObject]) -> Result<[f64; 3], String> {
             for q in &r.points {
                 for k in 0..3 {
                     if !q[k].is_finite() {
-                        return Err(format!("a coordinate of polygon {} is not finite", p.id.as_deref().unwrap_or("without gml:id")));
+                        return Err(format!(
+                            "a coordinate of polygon {} is not finite",
+                            p.id.as_deref().unwrap_or("without gml:id")
+                        ));
                     }
                     lo[k] = lo[k].min(q[k]);
                     hi[k] = hi[k].max(q[k]);

@@ -190,7 +190,16 @@ impl Rows {
         self.push_kind(coefs, rhs, weight, ineq, float, owner, false)
     }
     #[allow(clippy::too_many_arguments)]
-    fn push_kind(&mut self, coefs: &[(u32, f64)], rhs: f64, weight: f64, ineq: bool, float: bool, owner: u32, is_value: bool) {
+    fn push_kind(
+        &mut self,
+        coefs: &[(u32, f64)],
+        rhs: f64,
+        weight: f64,
+        ineq: bool,
+        float: bool,
+        owner: u32,
+        is_value: bool,
+    ) {
         // Merge duplicate columns (e.g. both offset points in the same tetrahedron).
         let mut c: Vec<(u32, f64)> = Vec::with_capacity(coefs.len());
         for &(i, v) in coefs {
@@ -349,8 +358,11 @@ pub fn roughness_rows(mesh: &TetMesh, weight: f64) -> Rows {
 /// rows in parallel, each summed in a fixed order (bit-identical results).
 pub fn normal_system(n: usize, rows: &[&Rows], select: &dyn Fn(usize, usize) -> bool) -> (SymCsr, Vec<f64>) {
     // Selected rows as (set, row) in a fixed order.
-    let sel: Vec<(usize, usize)> =
-        rows.iter().enumerate().flat_map(|(s, rs)| (0..rs.len()).filter(move |&r| select(s, r)).map(move |r| (s, r))).collect();
+    let sel: Vec<(usize, usize)> = rows
+        .iter()
+        .enumerate()
+        .flat_map(|(s, rs)| (0..rs.len()).filter(move |&r| select(s, r)).map(move |r| (s, r)))
+        .collect();
     // Transpose: for each unknown, the selected rows touching it with the coefficient.
     let mut cnt = vec![0usize; n + 1];
     for &(s, r) in &sel {
@@ -416,7 +428,14 @@ pub fn normal_system(n: usize, rows: &[&Rows], select: &dyn Fn(usize, usize) -> 
 }
 
 /// The CG of the DSI system: IC(0)-preconditioned, stopping and judged at `tol`.
-pub fn pcg(a: &SymCsr, b: &[f64], x: &mut [f64], tol: f64, max_iter: usize, check: Option<Checkpoint<'_>>) -> Result<CgStats, NotConverged> {
+pub fn pcg(
+    a: &SymCsr,
+    b: &[f64],
+    x: &mut [f64],
+    tol: f64,
+    max_iter: usize,
+    check: Option<Checkpoint<'_>>,
+) -> Result<CgStats, NotConverged> {
     sparse_spd::pcg(a, b, x, &Preconditioner::ic0(a), &PcgOptions::new(tol, max_iter), check)
 }
 
@@ -524,7 +543,8 @@ pub fn solve_rows(
         let a = SymCsr::sum(&[&a_rough, &a_base, &a_float], shift);
         if !(a.vals.iter().chain(&b).all(|v| v.is_finite())) {
             return Err(Error::BadInput(
-                "the DSI system has a non-finite entry: a weight, position or value beyond what 64-bit floats hold".into(),
+                "the DSI system has a non-finite entry: a weight, position or value beyond what 64-bit floats hold"
+                    .into(),
             ));
         }
         let last = settled || round + 1 >= p.rounds.max(1);
@@ -541,7 +561,10 @@ pub fn solve_rows(
                 if std::env::var_os("GEOFIT_DEBUG_ACTIVE").is_some() {
                     // debug output: a closed or full stderr must not abort the solve
                     let changed = new.iter().zip(&act).filter(|(a, b)| a != b).count();
-                    let _ = std::io::Write::write_fmt(&mut std::io::stderr(), format_args!("active-set round {round}: {changed} rows change\n"));
+                    let _ = std::io::Write::write_fmt(
+                        &mut std::io::stderr(),
+                        format_args!("active-set round {round}: {changed} rows change\n"),
+                    );
                 }
                 next = Some(new);
                 same

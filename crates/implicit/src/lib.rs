@@ -28,8 +28,8 @@ pub mod fault;
 pub mod generate;
 pub mod geom;
 pub mod mesh;
-pub mod noise;
 pub mod model;
+pub mod noise;
 pub mod points;
 pub mod vtk;
 

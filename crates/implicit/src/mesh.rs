@@ -158,7 +158,9 @@ impl Locator {
                 let better = match &best {
                     None => true,
                     Some((bt, _, bw)) => {
-                        (worst >= -1e-12 && *bw < -1e-12) || ((worst >= -1e-12) == (*bw >= -1e-12) && (worst > *bw + 1e-15 || ((worst - bw).abs() <= 1e-15 && t < *bt)))
+                        (worst >= -1e-12 && *bw < -1e-12)
+                            || ((worst >= -1e-12) == (*bw >= -1e-12)
+                                && (worst > *bw + 1e-15 || ((worst - bw).abs() <= 1e-15 && t < *bt)))
                     }
                 };
                 if better {
@@ -287,11 +289,7 @@ impl Refiner {
             self.pts.push(p);
             self.pt_target.push(target);
             let cell = |x: f64, n: usize| ((x / self.cube).floor().max(0.0) as usize).min(n - 1);
-            let (i, j, k) = (
-                cell(p[0] - self.lo[0], nx),
-                cell(p[1] - self.lo[1], ny),
-                cell(p[2] - self.lo[2], nz),
-            );
+            let (i, j, k) = (cell(p[0] - self.lo[0], nx), cell(p[1] - self.lo[1], ny), cell(p[2] - self.lo[2], nz));
             let base = ((k * ny + j) * nx + i) * 6;
             // The six Kuhn tetrahedra of the cube are the roots; `sink` descends to the leaf.
             let mut target = None;
@@ -345,7 +343,8 @@ impl Refiner {
                 return;
             }
             let e = self.ref_edge(t);
-            let next = self.edge_tets.get(&e).and_then(|around| around.iter().copied().find(|&s| self.ref_edge(s) != e));
+            let next =
+                self.edge_tets.get(&e).and_then(|around| around.iter().copied().find(|&s| self.ref_edge(s) != e));
             match next {
                 Some(s) => self.bisect(s),
                 None => break,

@@ -113,10 +113,7 @@ pub enum Event<'a> {
 
 fn validate(points: &[DataPoint], sides: &[SidePoint]) -> Result<(Vec<DataPoint>, usize), Error> {
     if points.len() < 4 {
-        return Err(Error::BadInput(format!(
-            "need at least 4 points to span a volume, got {}",
-            points.len()
-        )));
+        return Err(Error::BadInput(format!("need at least 4 points to span a volume, got {}", points.len())));
     }
     // Duplicates: same position. Same value → merged; different values → contradiction.
     let mut order: Vec<usize> = (0..points.len()).collect();
@@ -194,8 +191,10 @@ fn auto_cell(local: &[V3], cube: f64, max_cells: usize) -> f64 {
     let mut cell = cube;
     for _ in 0..7 {
         let c = cell * 0.5;
-        let mut keys: Vec<(i64, i64, i64)> =
-            local.iter().map(|p| ((p[0] / c).floor() as i64, (p[1] / c).floor() as i64, (p[2] / c).floor() as i64)).collect();
+        let mut keys: Vec<(i64, i64, i64)> = local
+            .iter()
+            .map(|p| ((p[0] / c).floor() as i64, (p[1] / c).floor() as i64, (p[2] / c).floor() as i64))
+            .collect();
         keys.sort_unstable();
         keys.dedup();
         if (local.len() as f64) / (keys.len() as f64) < 3.0 || keys.len() * 4 > max_cells {
@@ -267,7 +266,13 @@ pub fn build(
             float: false,
         })
         .collect();
-    cs.extend(sides.iter().map(|s| Constraint { pos: local(s.pos), value: None, normal: None, side: s.side, float: false }));
+    cs.extend(sides.iter().map(|s| Constraint {
+        pos: local(s.pos),
+        value: None,
+        normal: None,
+        side: s.side,
+        float: false,
+    }));
     let grad = opt.grad.unwrap_or_else(|| dsi::gradient_scale(&cs));
     let noise_sigma = if opt.auto_rough {
         let vp: Vec<(V3, f64)> = cs.iter().filter_map(|c| c.value.map(|v| (c.pos, v))).collect();
@@ -279,14 +284,7 @@ pub fn build(
     if opt.auto_rough {
         weights.rough = dsi::auto_roughness(noise_sigma, cell);
     }
-    let params = Params {
-        weights,
-        step,
-        grad,
-        tol: opt.tol,
-        max_iter: opt.max_iter,
-        rounds: opt.rounds,
-    };
+    let params = Params { weights, step, grad, tol: opt.tol, max_iter: opt.max_iter, rounds: opt.rounds };
     params.check().map_err(Error::BadInput)?;
     let faults: Vec<Fault> = faults
         .iter()
@@ -295,8 +293,10 @@ pub fn build(
 
     // Guard memory before refining: the finest cells the samples touch bound the mesh size.
     {
-        let mut keys: Vec<(i64, i64, i64)> =
-            lp.iter().map(|p| ((p[0] / cell).floor() as i64, (p[1] / cell).floor() as i64, (p[2] / cell).floor() as i64)).collect();
+        let mut keys: Vec<(i64, i64, i64)> = lp
+            .iter()
+            .map(|p| ((p[0] / cell).floor() as i64, (p[1] / cell).floor() as i64, (p[2] / cell).floor() as i64))
+            .collect();
         keys.sort_unstable();
         keys.dedup();
         if keys.len() > opt.max_vertices {
@@ -441,7 +441,8 @@ impl Model {
 
     /// Misfit |φ − v| at the value constraints (mean, max), in φ units.
     pub fn misfit(&self, loc: &Locator) -> (f64, f64) {
-        let m: Vec<f64> = dsi::value_misfits(&self.mesh, loc, &self.constraints, &self.phi).into_iter().map(|(_, e)| e).collect();
+        let m: Vec<f64> =
+            dsi::value_misfits(&self.mesh, loc, &self.constraints, &self.phi).into_iter().map(|(_, e)| e).collect();
         stats(&m)
     }
 
@@ -470,7 +471,11 @@ impl Model {
         for p in added {
             self.constraints.push(Constraint {
                 pos: sub(p.pos, self.origin),
-                value: if p.value.is_some() || !any_value || p.normal.is_none() { Some(p.value.unwrap_or(0.0)) } else { None },
+                value: if p.value.is_some() || !any_value || p.normal.is_none() {
+                    Some(p.value.unwrap_or(0.0))
+                } else {
+                    None
+                },
                 normal: p.normal,
                 side: 0.0,
                 float: true,
@@ -508,9 +513,15 @@ impl Model {
         let cs: Vec<Constraint> = pts
             .iter()
             .map(|p| {
-                p.value.map(|v| Constraint { pos: sub(p.pos, self.origin), value: Some(v), normal: None, side: 0.0, float: false }).ok_or_else(
-                    || Error::BadInput(format!("attribute point at line {} has no value column", p.line)),
-                )
+                p.value
+                    .map(|v| Constraint {
+                        pos: sub(p.pos, self.origin),
+                        value: Some(v),
+                        normal: None,
+                        side: 0.0,
+                        float: false,
+                    })
+                    .ok_or_else(|| Error::BadInput(format!("attribute point at line {} has no value column", p.line)))
             })
             .collect::<Result<_, _>>()?;
         if cs.is_empty() {
@@ -592,7 +603,10 @@ impl Model {
     pub fn from_bytes(b: &[u8]) -> Result<Model, Error> {
         let mut r = Reader { b, at: 0 };
         if r.take(16)? != MAGIC {
-            return Err(Error::Model("not a geofit implicit model (bad magic; expected a file written by `geofit implicit interpolate`)".into()));
+            return Err(Error::Model(
+                "not a geofit implicit model (bad magic; expected a file written by `geofit implicit interpolate`)"
+                    .into(),
+            ));
         }
         let version = r.u32()?;
         if version != 1 {
@@ -642,7 +656,10 @@ impl Model {
             let normal = [r.f64()?, r.f64()?, r.f64()?];
             let side = r.f64()?;
             if !pos.iter().chain(&normal).chain([&value, &side]).all(|x| x.is_finite()) {
-                return Err(Error::Model(format!("constraint {} has a non-finite position, value, normal or side", constraints.len())));
+                return Err(Error::Model(format!(
+                    "constraint {} has a non-finite position, value, normal or side",
+                    constraints.len()
+                )));
             }
             constraints.push(Constraint {
                 pos,
@@ -662,7 +679,8 @@ impl Model {
             0 => None,
             _ => {
                 let l = r.u32()? as usize;
-                let name = String::from_utf8(r.take(l)?.to_vec()).map_err(|_| Error::Model("attribute name is not UTF-8".into()))?;
+                let name = String::from_utf8(r.take(l)?.to_vec())
+                    .map_err(|_| Error::Model("attribute name is not UTF-8".into()))?;
                 let mut v = Vec::with_capacity(nv);
                 for _ in 0..nv {
                     v.push(r.f64()?);
@@ -677,7 +695,17 @@ impl Model {
         if !finite {
             return Err(Error::Model("non-finite coordinate or value".into()));
         }
-        Ok(Model { origin, cell, params, mesh: TetMesh { verts, tets }, dof_vertex, constraints, phi, active, attribute })
+        Ok(Model {
+            origin,
+            cell,
+            params,
+            mesh: TetMesh { verts, tets },
+            dof_vertex,
+            constraints,
+            phi,
+            active,
+            attribute,
+        })
     }
 }
 

@@ -40,14 +40,16 @@ pub fn estimate_k(points: &[(V3, f64)], k: usize) -> Option<f64> {
         if group.len() <= k {
             continue;
         }
-        let tree = RTree::bulk_load(group.iter().enumerate().map(|(i, &p)| GeomWithData::new(p, i)).collect::<Vec<_>>());
+        let tree =
+            RTree::bulk_load(group.iter().enumerate().map(|(i, &p)| GeomWithData::new(p, i)).collect::<Vec<_>>());
         let stride = points.len().div_ceil(MAX_SAMPLE).max(1);
         let sample: Vec<usize> = (0..group.len()).step_by(stride).collect();
         let res: Vec<Option<f64>> = sample
             .par_iter()
             .map(|&i| {
                 let p = group[i];
-                let nb: Vec<V3> = tree.nearest_neighbor_iter(&p).filter(|g| g.data != i).take(k).map(|g| *g.geom()).collect();
+                let nb: Vec<V3> =
+                    tree.nearest_neighbor_iter(&p).filter(|g| g.data != i).take(k).map(|g| *g.geom()).collect();
                 if nb.len() < k {
                     return None;
                 }

@@ -40,8 +40,11 @@ pub fn parse_xyz(text: &[u8], source: &str) -> Result<Vec<DataPoint>, Error> {
 
 /// Parses side points: `x y z s` per line, `s` > 0 for φ > 0 and `s` < 0 for φ < 0.
 pub fn parse_side_points(text: &[u8], source: &str) -> Result<Vec<SidePoint>, Error> {
-    let text = std::str::from_utf8(text)
-        .map_err(|e| Error::Parse { file: source.to_string(), line: 0, msg: format!("not UTF-8 text ({e})") })?;
+    let text = std::str::from_utf8(text).map_err(|e| Error::Parse {
+        file: source.to_string(),
+        line: 0,
+        msg: format!("not UTF-8 text ({e})"),
+    })?;
     let mut out = Vec::new();
     for (i, raw) in text.lines().enumerate() {
         let line = i + 1;

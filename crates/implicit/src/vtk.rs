@@ -27,7 +27,8 @@ pub fn write_vtk(w: &mut dyn Write, mesh: &TetMesh, origin: V3, fields: &[(&str,
     if !fields.is_empty() {
         writeln!(w, "POINT_DATA {}", mesh.verts.len())?;
         for (name, vals) in fields {
-            let name: String = name.chars().map(|c| if c.is_ascii_alphanumeric() || c == '_' { c } else { '_' }).collect();
+            let name: String =
+                name.chars().map(|c| if c.is_ascii_alphanumeric() || c == '_' { c } else { '_' }).collect();
             writeln!(w, "SCALARS {name} double 1")?;
             writeln!(w, "LOOKUP_TABLE default")?;
             for v in vals.iter() {

@@ -166,7 +166,10 @@ fn cgroup_headroom() -> Option<u64> {
     let (m2, m1) = read("/proc/self/mountinfo".into()).map(|t| parse_cgroup_mounts(&t)).unwrap_or_default();
     let m2 = m2.unwrap_or_else(|| ("/".into(), "/sys/fs/cgroup".into()));
     let m1 = m1.unwrap_or_else(|| ("/".into(), "/sys/fs/cgroup/memory".into()));
-    let files = [(v2, m2, "memory.max", "memory.current", "inactive_file"), (v1, m1, "memory.limit_in_bytes", "memory.usage_in_bytes", "total_inactive_file")];
+    let files = [
+        (v2, m2, "memory.max", "memory.current", "inactive_file"),
+        (v1, m1, "memory.limit_in_bytes", "memory.usage_in_bytes", "total_inactive_file"),
+    ];
     let mut best: Option<u64> = None;
     for (path, (root, point), max, current, inactive) in files {
         let Some(path) = path else { continue };
@@ -211,8 +214,12 @@ pub fn budget(env: &str, bytes_per_unit: u64) -> (u64, BudgetSource) {
 pub fn describe(limit: u64, what: &str, source: BudgetSource, env: &str) -> String {
     match source {
         BudgetSource::Env => format!("{limit} {what} set by {env}"),
-        BudgetSource::Memory(b) => format!("{limit} {what}, what the {} of available memory hold; {env} sets another limit", gib(b)),
-        BudgetSource::Limit(b, l) => format!("{limit} {what}, what the {} left under {} hold; {env} sets another limit", size(b), l.name()),
+        BudgetSource::Memory(b) => {
+            format!("{limit} {what}, what the {} of available memory hold; {env} sets another limit", gib(b))
+        }
+        BudgetSource::Limit(b, l) => {
+            format!("{limit} {what}, what the {} left under {} hold; {env} sets another limit", size(b), l.name())
+        }
         BudgetSource::Fallback => format!("{limit} {what}; {env} sets another limit"),
     }
 }
@@ -224,7 +231,11 @@ pub fn gib(bytes: u64) -> String {
 
 /// `bytes` as "12.3 GiB", or "456 MiB" below one GiB.
 fn size(bytes: u64) -> String {
-    if bytes >= 1 << 30 { gib(bytes) } else { format!("{} MiB", bytes >> 20) }
+    if bytes >= 1 << 30 {
+        gib(bytes)
+    } else {
+        format!("{} MiB", bytes >> 20)
+    }
 }
 
 /// The environment variable that sets the whole-input byte budget explicitly.
@@ -291,12 +302,18 @@ mod tests {
         assert_eq!(parse_status_kb(status, "VmSize:"), Some(182636 * 1024));
         assert_eq!(parse_status_kb(status, "VmData:"), Some(6024 * 1024));
         assert_eq!(parse_status_kb(status, "VmSwap:"), None);
-        assert!(parse_limits(&std::fs::read_to_string("/proc/self/limits").unwrap_or_default(), "Max stack size").is_some() || !std::path::Path::new("/proc/self/limits").exists());
+        assert!(
+            parse_limits(&std::fs::read_to_string("/proc/self/limits").unwrap_or_default(), "Max stack size").is_some()
+                || !std::path::Path::new("/proc/self/limits").exists()
+        );
     }
 
     #[test]
     fn proc_self_cgroup_gives_the_v2_path_and_the_v1_memory_path() {
-        assert_eq!(parse_proc_cgroup("0::/user.slice/session-1.scope\n"), (Some("/user.slice/session-1.scope".into()), None));
+        assert_eq!(
+            parse_proc_cgroup("0::/user.slice/session-1.scope\n"),
+            (Some("/user.slice/session-1.scope".into()), None)
+        );
         let hybrid = "9:name=systemd:/\n4:memory:/docker/abc\n3:cpu,cpuacct:/\n0::/\n";
         assert_eq!(parse_proc_cgroup(hybrid), (Some("/".into()), Some("/docker/abc".into())));
         assert_eq!(parse_proc_cgroup("5:memory,hugetlb:/a:b\n"), (None, Some("/a:b".into())));
@@ -323,7 +340,10 @@ mod tests {
         let p = |s: &str| std::path::PathBuf::from(s);
         // a container sees its own cgroup at the mount point
         assert_eq!(cgroup_dirs("/sys/fs/cgroup/memory", "/docker/abc", "/docker/abc"), [p("/sys/fs/cgroup/memory")]);
-        assert_eq!(cgroup_dirs("/sys/fs/cgroup", "/", "/a/b"), [p("/sys/fs/cgroup/a/b"), p("/sys/fs/cgroup/a"), p("/sys/fs/cgroup")]);
+        assert_eq!(
+            cgroup_dirs("/sys/fs/cgroup", "/", "/a/b"),
+            [p("/sys/fs/cgroup/a/b"), p("/sys/fs/cgroup/a"), p("/sys/fs/cgroup")]
+        );
         assert_eq!(cgroup_dirs("/sys/fs/cgroup", "/", "/"), [p("/sys/fs/cgroup")]);
     }
 

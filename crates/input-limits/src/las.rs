@@ -203,7 +203,9 @@ fn check_laszip_items<R: Read + Seek>(r: &mut R, len: u64, c: &Claims) -> Result
                 Some(f) if f != size => {
                     return Err(LasClaim::ItemSize { index: i, kind, size, expected: f.to_string() });
                 }
-                None if size == 0 => return Err(LasClaim::ItemSize { index: i, kind, size, expected: "at least 1".into() }),
+                None if size == 0 => {
+                    return Err(LasClaim::ItemSize { index: i, kind, size, expected: "at least 1".into() })
+                }
                 _ => {}
             }
             items.push((t, size));
@@ -233,7 +235,13 @@ fn layers_of(item: (u64, u64)) -> u64 {
 /// reading it: sizes of 0xFFFFFFFF took 4.2 GB from a 14.7 KB file. Every chunk's layers must
 /// fit before the chunk table (or the end of the file). `table`: the chunk table's offset and
 /// chunk count, when the file has one (a count is not trusted: the bytes bound the walk).
-fn check_layers<R: Read + Seek>(r: &mut R, len: u64, c: &Claims, items: &[(u64, u64)], table: Option<(u64, u64)>) -> Result<(), LasClaim> {
+fn check_layers<R: Read + Seek>(
+    r: &mut R,
+    len: u64,
+    c: &Claims,
+    items: &[(u64, u64)],
+    table: Option<(u64, u64)>,
+) -> Result<(), LasClaim> {
     // without a table the chunks end at the first EVLR, or at the end of the file
     let end = match (table, c.evlr) {
         (Some((offset, _)), _) => offset,

@@ -30,7 +30,9 @@ use std::io::{self, Read};
 /// What the header claims that the file cannot hold.
 #[derive(Debug, thiserror::Error)]
 pub enum NetcdfClaim {
-    #[error("the netCDF header claims {count} {what} at byte {at} ({need} bytes), but only {left} bytes follow in the file")]
+    #[error(
+        "the netCDF header claims {count} {what} at byte {at} ({need} bytes), but only {left} bytes follow in the file"
+    )]
     Count { what: String, count: u64, need: u128, at: u64, left: u64 },
     #[error("the netCDF header is malformed at byte {at}: {why}")]
     Malformed { at: u64, why: String },
@@ -112,7 +114,9 @@ impl<R: Read> Header<'_, R> {
 
     fn read(&mut self, buf: &mut [u8]) -> Result<(), NetcdfClaim> {
         self.r.read_exact(buf).map_err(|e| match e.kind() {
-            io::ErrorKind::UnexpectedEof => NetcdfClaim::Malformed { at: self.at, why: "the header ends before the file does".into() },
+            io::ErrorKind::UnexpectedEof => {
+                NetcdfClaim::Malformed { at: self.at, why: "the header ends before the file does".into() }
+            }
             _ => NetcdfClaim::Io(e),
         })?;
         self.at += buf.len() as u64;
@@ -147,7 +151,10 @@ impl<R: Read> Header<'_, R> {
         let found = self.u32()?;
         let count = self.counted(what, bytes_each)?;
         if found != tag && !(found == 0 && count == 0) {
-            return Err(NetcdfClaim::Malformed { at, why: format!("expected the tag of the {what} list ({tag:#x}) or none, found {found:#x}") });
+            return Err(NetcdfClaim::Malformed {
+                at,
+                why: format!("expected the tag of the {what} list ({tag:#x}) or none, found {found:#x}"),
+            });
         }
         Ok(count)
     }
@@ -167,7 +174,8 @@ impl<R: Read> Header<'_, R> {
         for a in 0..n {
             let name = self.name(&format!("attribute {a} of {owner}"))?;
             let at = self.at;
-            let size = type_size(self.u32()?).ok_or_else(|| NetcdfClaim::Malformed { at, why: format!("attribute '{name}' has an unknown type") })?;
+            let size = type_size(self.u32()?)
+                .ok_or_else(|| NetcdfClaim::Malformed { at, why: format!("attribute '{name}' has an unknown type") })?;
             let values = self.counted(&format!("values of attribute '{name}'"), size)?;
             self.skip(padded(values * size))?;
         }

@@ -10,7 +10,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let dir = std::path::PathBuf::from(std::env::args().nth(1).unwrap_or_else(|| ".".into()));
     let (x0, y0, z0) = (458_100.0, 5_438_200.0, 112.0);
     let c = |x: f64, y: f64, z: f64| [x0 + 4.0 * x, y0 + 3.0 * y, z0 + 5.0 * z];
-    let v = [c(0., 0., 0.), c(1., 0., 0.), c(1., 1., 0.), c(0., 1., 0.), c(0., 0., 1.), c(1., 0., 1.), c(1., 1., 1.), c(0., 1., 1.)];
+    let v = [
+        c(0., 0., 0.),
+        c(1., 0., 0.),
+        c(1., 1., 0.),
+        c(0., 1., 0.),
+        c(0., 0., 1.),
+        c(1., 0., 1.),
+        c(1., 1., 1.),
+        c(0., 1., 1.),
+    ];
     let mut walls = TriangleMesh::new(Some(0));
     walls.positions = v.to_vec();
     walls.indices = vec![0, 2, 1, 0, 3, 2, 0, 1, 5, 0, 5, 4, 1, 2, 6, 1, 6, 5, 2, 3, 7, 2, 7, 6, 3, 0, 4, 3, 4, 7];
@@ -23,7 +32,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     building.extras = Some(serde_json::json!({"gml_id": "BOX_1"}));
     building.meshes = vec![walls, roof];
     let mut edges = MeshNode::new("edges");
-    edges.lines.push(LineSet { positions: vec![v[0], v[6], v[1], v[7]], indices: vec![0, 1, 2, 3], colors: None, material: Some(2) });
+    edges.lines.push(LineSet {
+        positions: vec![v[0], v[6], v[1], v[7]],
+        indices: vec![0, 1, 2, 3],
+        colors: None,
+        material: Some(2),
+    });
     building.children.push(edges);
     let mut scene = Scene {
         nodes: vec![building],
@@ -46,7 +60,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         GltfBuffer::External { uri: "box_ext.bin", bin: &mut bin },
     )?;
     let mut mtl = BufWriter::new(File::create(dir.join("box.mtl"))?);
-    mesh_export::write_obj(&scene, &mut BufWriter::new(File::create(dir.join("box.obj"))?), Some(("box.mtl", &mut mtl)))?;
+    mesh_export::write_obj(
+        &scene,
+        &mut BufWriter::new(File::create(dir.join("box.obj"))?),
+        Some(("box.mtl", &mut mtl)),
+    )?;
     println!("triangles {} area {}", scene.triangle_count(), scene.area());
     Ok(())
 }

@@ -19,18 +19,10 @@ use crate::{ExportError, MeshNode, Scene};
 /// Writes `scene` as OBJ to `obj`; with `mtl = Some((file_name, writer))` also writes the material
 /// library to `writer` and references it as `mtllib file_name` (give the name relative to the OBJ).
 /// Without `mtl`, `usemtl` lines are still written (readers fall back to a default material).
-pub fn write_obj(
-    scene: &Scene,
-    obj: &mut dyn Write,
-    mtl: Option<(&str, &mut dyn Write)>,
-) -> Result<(), ExportError> {
+pub fn write_obj(scene: &Scene, obj: &mut dyn Write, mtl: Option<(&str, &mut dyn Write)>) -> Result<(), ExportError> {
     scene.validate()?;
     let o = scene.origin;
-    writeln!(
-        obj,
-        "# {}",
-        scene.generator.as_deref().unwrap_or("mesh-export")
-    )?;
+    writeln!(obj, "# {}", scene.generator.as_deref().unwrap_or("mesh-export"))?;
     writeln!(obj, "# origin: {} {} {}", o[0], o[1], o[2])?;
     if let Some(crs) = &scene.crs {
         writeln!(obj, "# crs: {crs}")?;
@@ -43,14 +35,11 @@ pub fn write_obj(
     // OBJ indices are 1-based and global over the file.
     // Readers (tobj, MeshLab) expect colours on all vertices or on none: once any mesh has
     // per-vertex colours, the others get their material's colour (light grey without one).
-    let any_colors = scene.walk().iter().any(|n| {
-        n.meshes.iter().any(|m| m.colors.is_some()) || n.lines.iter().any(|l| l.colors.is_some())
-    });
-    let mut next = Counters {
-        vertex: 1,
-        normal: 1,
-        any_colors,
-    };
+    let any_colors = scene
+        .walk()
+        .iter()
+        .any(|n| n.meshes.iter().any(|m| m.colors.is_some()) || n.lines.iter().any(|l| l.colors.is_some()));
+    let mut next = Counters { vertex: 1, normal: 1, any_colors };
     for n in &scene.nodes {
         write_node(scene, n, "", obj, &mut next)?;
     }
@@ -73,8 +62,7 @@ fn write_node(
     next: &mut Counters,
 ) -> Result<(), ExportError> {
     let name = format!("{prefix}{}", sanitize(&n.name));
-    let has_geometry = n.meshes.iter().any(|m| !m.indices.is_empty())
-        || n.lines.iter().any(|l| !l.indices.is_empty());
+    let has_geometry = n.meshes.iter().any(|m| !m.indices.is_empty()) || n.lines.iter().any(|l| !l.indices.is_empty());
     if has_geometry {
         writeln!(obj, "o {name}")?;
     }
@@ -86,13 +74,7 @@ fn write_node(
             next.normal += nr.len() as u64;
             for v in nr {
                 let l = (v.iter().map(|&c| (c as f64) * (c as f64)).sum::<f64>()).sqrt();
-                writeln!(
-                    obj,
-                    "vn {} {} {}",
-                    v[0] as f64 / l,
-                    v[1] as f64 / l,
-                    v[2] as f64 / l
-                )?;
+                writeln!(obj, "vn {} {} {}", v[0] as f64 / l, v[1] as f64 / l, v[2] as f64 / l)?;
             }
         }
         write_usemtl(obj, scene, m.material)?;
@@ -131,9 +113,7 @@ fn write_usemtl(obj: &mut dyn Write, scene: &Scene, material: Option<usize>) -> 
 
 /// The colour given to uncoloured vertices when other vertices have colours.
 fn fallback(scene: &Scene, material: Option<usize>) -> [f32; 4] {
-    material
-        .map(|m| scene.materials[m].rgba)
-        .unwrap_or([0.8, 0.8, 0.8, 1.0])
+    material.map(|m| scene.materials[m].rgba).unwrap_or([0.8, 0.8, 0.8, 1.0])
 }
 
 /// The `v` numbers already written in the current object, by exact position and written colour.
@@ -185,11 +165,7 @@ fn write_vertices(
 
 /// Writes the MTL library: every material of the scene, in order (`Kd` colour, `d` opacity).
 pub fn write_mtl(scene: &Scene, mtl: &mut dyn Write) -> Result<(), ExportError> {
-    writeln!(
-        mtl,
-        "# {}",
-        scene.generator.as_deref().unwrap_or("mesh-export")
-    )?;
+    writeln!(mtl, "# {}", scene.generator.as_deref().unwrap_or("mesh-export"))?;
     for m in &scene.materials {
         let [r, g, b, a] = m.rgba;
         writeln!(mtl, "newmtl {}", sanitize(&m.name))?;
@@ -205,16 +181,7 @@ pub fn write_mtl(scene: &Scene, mtl: &mut dyn Write) -> Result<(), ExportError> 
 /// OBJ/MTL names end at whitespace: replace whitespace (and control characters) with `_`;
 /// an empty name becomes `_`.
 pub fn sanitize(name: &str) -> String {
-    let s: String = name
-        .chars()
-        .map(|c| {
-            if c.is_whitespace() || c.is_control() {
-                '_'
-            } else {
-                c
-            }
-        })
-        .collect();
+    let s: String = name.chars().map(|c| if c.is_whitespace() || c.is_control() { '_' } else { c }).collect();
     if s.is_empty() {
         "_".into()
     } else {

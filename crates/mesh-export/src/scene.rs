@@ -20,11 +20,7 @@ pub struct Material {
 
 impl Material {
     pub fn new(name: impl Into<String>, rgba: [f32; 4]) -> Self {
-        Material {
-            name: name.into(),
-            rgba,
-            double_sided: true,
-        }
+        Material { name: name.into(), rgba, double_sided: true }
     }
 }
 
@@ -46,10 +42,7 @@ pub struct TriangleMesh {
 
 impl TriangleMesh {
     pub fn new(material: Option<usize>) -> Self {
-        TriangleMesh {
-            material,
-            ..Default::default()
-        }
+        TriangleMesh { material, ..Default::default() }
     }
 
     pub fn triangle_count(&self) -> usize {
@@ -104,10 +97,7 @@ pub struct MeshNode {
 
 impl MeshNode {
     pub fn new(name: impl Into<String>) -> Self {
-        MeshNode {
-            name: name.into(),
-            ..Default::default()
-        }
+        MeshNode { name: name.into(), ..Default::default() }
     }
 
     /// This node and its descendants, depth first (parents before children).
@@ -121,11 +111,7 @@ impl MeshNode {
 
     /// The triangle mesh with `material`, created empty on first use.
     pub fn mesh_for(&mut self, material: Option<usize>) -> &mut TriangleMesh {
-        let i = match self
-            .meshes
-            .iter()
-            .position(|m| m.material == material && m.colors.is_none())
-        {
+        let i = match self.meshes.iter().position(|m| m.material == material && m.colors.is_none()) {
             Some(i) => i,
             None => {
                 self.meshes.push(TriangleMesh::new(material));
@@ -159,20 +145,12 @@ impl Scene {
     }
 
     pub fn triangle_count(&self) -> usize {
-        self.walk()
-            .iter()
-            .flat_map(|n| n.meshes.iter())
-            .map(|m| m.triangle_count())
-            .sum()
+        self.walk().iter().flat_map(|n| n.meshes.iter()).map(|m| m.triangle_count()).sum()
     }
 
     /// Total triangle area in world units² (f64, before the origin shift).
     pub fn area(&self) -> f64 {
-        self.walk()
-            .iter()
-            .flat_map(|n| n.meshes.iter())
-            .map(|m| m.area())
-            .sum()
+        self.walk().iter().flat_map(|n| n.meshes.iter()).map(|m| m.area()).sum()
     }
 
     /// Bounding box `(min, max)` of all vertices (triangles and lines), `None` when there are none.
@@ -197,11 +175,7 @@ impl Scene {
     pub fn auto_origin(&self) -> [f64; 3] {
         match self.bounds() {
             None => [0.0; 3],
-            Some((min, max)) => [
-                ((min[0] + max[0]) / 2.0).round(),
-                ((min[1] + max[1]) / 2.0).round(),
-                min[2].floor(),
-            ],
+            Some((min, max)) => [((min[0] + max[0]) / 2.0).round(), ((min[1] + max[1]) / 2.0).round(), min[2].floor()],
         }
     }
 
@@ -209,37 +183,19 @@ impl Scene {
     /// rely on them (and never write NaN or an out-of-range index).
     pub fn validate(&self) -> Result<(), ExportError> {
         if self.origin.iter().any(|v| !v.is_finite()) {
-            return Err(ExportError::NonFinite {
-                node: "<scene origin>".into(),
-            });
+            return Err(ExportError::NonFinite { node: "<scene origin>".into() });
         }
         for n in self.walk() {
-            let bad = |what: String| ExportError::InvalidMesh {
-                node: n.name.clone(),
-                what,
-            };
+            let bad = |what: String| ExportError::InvalidMesh { node: n.name.clone(), what };
             for (mi, m) in n.meshes.iter().enumerate() {
                 if m.indices.len() % 3 != 0 {
-                    return Err(bad(format!(
-                        "mesh {mi}: {} indices is not a multiple of 3",
-                        m.indices.len()
-                    )));
+                    return Err(bad(format!("mesh {mi}: {} indices is not a multiple of 3", m.indices.len())));
                 }
-                check_common(
-                    &m.positions,
-                    &m.indices,
-                    m.colors.as_deref(),
-                    m.material,
-                    self.materials.len(),
-                )
-                .map_err(|w| bad(format!("mesh {mi}: {w}")))?;
+                check_common(&m.positions, &m.indices, m.colors.as_deref(), m.material, self.materials.len())
+                    .map_err(|w| bad(format!("mesh {mi}: {w}")))?;
                 if let Some(nr) = &m.normals {
                     if nr.len() != m.positions.len() {
-                        return Err(bad(format!(
-                            "mesh {mi}: {} normals for {} vertices",
-                            nr.len(),
-                            m.positions.len()
-                        )));
+                        return Err(bad(format!("mesh {mi}: {} normals for {} vertices", nr.len(), m.positions.len())));
                     }
                     if let Some(i) = nr.iter().position(|v| {
                         let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
@@ -249,38 +205,23 @@ impl Scene {
                     }
                 }
                 if m.positions.iter().any(|p| p.iter().any(|v| !v.is_finite())) {
-                    return Err(ExportError::NonFinite {
-                        node: n.name.clone(),
-                    });
+                    return Err(ExportError::NonFinite { node: n.name.clone() });
                 }
             }
             for (li, l) in n.lines.iter().enumerate() {
                 if l.indices.len() % 2 != 0 {
-                    return Err(bad(format!(
-                        "line set {li}: {} indices is not a multiple of 2",
-                        l.indices.len()
-                    )));
+                    return Err(bad(format!("line set {li}: {} indices is not a multiple of 2", l.indices.len())));
                 }
-                check_common(
-                    &l.positions,
-                    &l.indices,
-                    l.colors.as_deref(),
-                    l.material,
-                    self.materials.len(),
-                )
-                .map_err(|w| bad(format!("line set {li}: {w}")))?;
+                check_common(&l.positions, &l.indices, l.colors.as_deref(), l.material, self.materials.len())
+                    .map_err(|w| bad(format!("line set {li}: {w}")))?;
                 if l.positions.iter().any(|p| p.iter().any(|v| !v.is_finite())) {
-                    return Err(ExportError::NonFinite {
-                        node: n.name.clone(),
-                    });
+                    return Err(ExportError::NonFinite { node: n.name.clone() });
                 }
             }
         }
         for m in &self.materials {
             if m.rgba.iter().any(|c| !(0.0..=1.0).contains(c)) {
-                return Err(ExportError::InvalidMaterial {
-                    name: m.name.clone(),
-                });
+                return Err(ExportError::InvalidMaterial { name: m.name.clone() });
             }
         }
         Ok(())
@@ -295,24 +236,14 @@ fn check_common(
     n_materials: usize,
 ) -> Result<(), String> {
     if positions.len() > u32::MAX as usize - 1 {
-        return Err(format!(
-            "{} vertices exceed the u32 index range",
-            positions.len()
-        ));
+        return Err(format!("{} vertices exceed the u32 index range", positions.len()));
     }
     if let Some(&i) = indices.iter().find(|&&i| i as usize >= positions.len()) {
-        return Err(format!(
-            "index {i} out of range ({} vertices)",
-            positions.len()
-        ));
+        return Err(format!("index {i} out of range ({} vertices)", positions.len()));
     }
     if let Some(c) = colors {
         if c.len() != positions.len() {
-            return Err(format!(
-                "{} colours for {} vertices",
-                c.len(),
-                positions.len()
-            ));
+            return Err(format!("{} colours for {} vertices", c.len(), positions.len()));
         }
         if c.iter().any(|c| c.iter().any(|v| !(0.0..=1.0).contains(v))) {
             return Err("colour component outside 0..=1 or not finite".into());
@@ -320,9 +251,7 @@ fn check_common(
     }
     if let Some(m) = material {
         if m >= n_materials {
-            return Err(format!(
-                "material {m} does not exist ({n_materials} materials)"
-            ));
+            return Err(format!("material {m} does not exist ({n_materials} materials)"));
         }
     }
     Ok(())

@@ -65,10 +65,7 @@ fn area_and_counts() {
     let (min, max) = s.bounds().unwrap();
     assert_eq!(max[2] - min[2], 4.0);
     // centre x,y rounded, bottom z
-    assert_eq!(
-        s.auto_origin(),
-        [O[0] + 11.0, (O[1] - 5.0 + 1.5f64).round(), O[2]]
-    );
+    assert_eq!(s.auto_origin(), [O[0] + 11.0, (O[1] - 5.0 + 1.5f64).round(), O[2]]);
 }
 
 #[test]
@@ -77,23 +74,16 @@ fn glb_reads_back_with_gltf_crate() {
     let mut glb = Vec::new();
     write_glb(&s, &mut glb).unwrap();
     assert_eq!(&glb[0..4], b"glTF");
-    assert_eq!(
-        u32::from_le_bytes(glb[8..12].try_into().unwrap()) as usize,
-        glb.len()
-    );
+    assert_eq!(u32::from_le_bytes(glb[8..12].try_into().unwrap()) as usize, glb.len());
     assert_eq!(glb.len() % 4, 0);
     let g = ::gltf::Gltf::from_slice(&glb).expect("valid glb");
     let blob = g.blob.as_ref().expect("BIN chunk");
     // Only used materials are written, in scene order.
-    let names: Vec<_> = g
-        .materials()
-        .map(|m| m.name().unwrap().to_string())
-        .collect();
+    let names: Vec<_> = g.materials().map(|m| m.name().unwrap().to_string()).collect();
     assert_eq!(names, ["wall", "roof"]);
     // The root node records the origin exactly and turns Z-up into Y-up.
     let root = g.default_scene().unwrap().nodes().next().unwrap();
-    let extras: serde_json::Value =
-        serde_json::from_str(root.extras().as_ref().unwrap().get()).unwrap();
+    let extras: serde_json::Value = serde_json::from_str(root.extras().as_ref().unwrap().get()).unwrap();
     assert_eq!(extras["origin"], serde_json::json!(O));
     assert_eq!(extras["crs"], "EPSG:25832");
     let node = root.children().next().unwrap();
@@ -108,10 +98,7 @@ fn glb_reads_back_with_gltf_crate() {
         let acc = prim.get(&::gltf::Semantic::Positions).unwrap();
         let min: Vec<f32> = serde_json::from_value(acc.min().unwrap()).unwrap();
         for k in 0..3 {
-            assert_eq!(
-                min[k],
-                pos.iter().map(|p| p[k]).fold(f32::INFINITY, f32::min)
-            );
+            assert_eq!(min[k], pos.iter().map(|p| p[k]).fold(f32::INFINITY, f32::min));
         }
         if let Some(n) = r.read_normals() {
             for n in n {
@@ -125,9 +112,7 @@ fn glb_reads_back_with_gltf_crate() {
             tris += 1;
         }
         // Local coordinates: world − origin.
-        assert!(pos
-            .iter()
-            .all(|p| p[0] >= 10.0 && p[0] <= 12.0 && p[1] >= -5.0 && p[1] <= -2.0));
+        assert!(pos.iter().all(|p| p[0] >= 10.0 && p[0] <= 12.0 && p[1] >= -5.0 && p[1] <= -2.0));
     }
     assert_eq!(tris, 12);
     assert!((area - 52.0).abs() < 1e-5, "{area}");
@@ -161,32 +146,16 @@ fn gltf_embedded_and_external_buffers() {
     write_gltf(&s, &mut text, GltfBuffer::Embedded).unwrap();
     let g = ::gltf::Gltf::from_slice(&text).unwrap();
     let buf = g.buffers().next().unwrap();
-    let ::gltf::buffer::Source::Uri(uri) = buf.source() else {
-        panic!("embedded buffer expected")
-    };
-    let b64 = uri
-        .strip_prefix("data:application/octet-stream;base64,")
-        .unwrap();
+    let ::gltf::buffer::Source::Uri(uri) = buf.source() else { panic!("embedded buffer expected") };
+    let b64 = uri.strip_prefix("data:application/octet-stream;base64,").unwrap();
     use base64::Engine as _;
-    let data = base64::engine::general_purpose::STANDARD
-        .decode(b64)
-        .unwrap();
+    let data = base64::engine::general_purpose::STANDARD.decode(b64).unwrap();
     assert_eq!(data, bin_glb);
 
     let (mut text, mut bin) = (Vec::new(), Vec::new());
-    write_gltf(
-        &s,
-        &mut text,
-        GltfBuffer::External {
-            uri: "model.bin",
-            bin: &mut bin,
-        },
-    )
-    .unwrap();
+    write_gltf(&s, &mut text, GltfBuffer::External { uri: "model.bin", bin: &mut bin }).unwrap();
     let g = ::gltf::Gltf::from_slice(&text).unwrap();
-    let ::gltf::buffer::Source::Uri(uri) = g.buffers().next().unwrap().source() else {
-        panic!()
-    };
+    let ::gltf::buffer::Source::Uri(uri) = g.buffers().next().unwrap().source() else { panic!() };
     assert_eq!(uri, "model.bin");
     assert_eq!(bin, bin_glb);
 }
@@ -203,12 +172,7 @@ fn obj_reads_back_with_tobj() {
     std::fs::write(dir.join("box.mtl"), &mtl).unwrap();
     let (models, mats) = tobj::load_obj(
         dir.join("box.obj"),
-        &tobj::LoadOptions {
-            single_index: true,
-            triangulate: false,
-            ignore_lines: false,
-            ..Default::default()
-        },
+        &tobj::LoadOptions { single_index: true, triangulate: false, ignore_lines: false, ..Default::default() },
     )
     .unwrap();
     let mats = mats.unwrap();
@@ -250,10 +214,7 @@ fn invalid_scenes_are_refused() {
 
     let mut s = box_scene();
     s.nodes[0].meshes[0].positions[3][1] = f64::NAN;
-    assert!(matches!(
-        write_obj(&s, &mut Vec::new(), None),
-        Err(ExportError::NonFinite { .. })
-    ));
+    assert!(matches!(write_obj(&s, &mut Vec::new(), None), Err(ExportError::NonFinite { .. })));
 
     let mut s = box_scene();
     s.nodes[0].meshes[1].normals = Some(vec![[0.0; 3]; 4]);

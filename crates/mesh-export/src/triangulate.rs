@@ -13,8 +13,8 @@
 //! constraint crossings are lifted back onto the plane. Triangles are oriented like the exterior
 //! ring (counter-clockwise seen from the side its Newell normal points to).
 
-use spade::{ConstrainedDelaunayTriangulation, Point2, Triangulation};
 use crate::vec3::{cross, dot, norm, sub, P3};
+use spade::{ConstrainedDelaunayTriangulation, Point2, Triangulation};
 
 /// A triangulated polygon: vertices (3D) and counter-clockwise triangles indexing them.
 #[derive(Debug, Clone, PartialEq)]
@@ -90,21 +90,10 @@ pub fn open_ring(ring: &[P3]) -> Vec<P3> {
 
 /// Triangulates the polygon bounded by `exterior` with `holes`. Rings may be given closed
 /// (first point repeated at the end) or open.
-pub fn triangulate_polygon(
-    exterior: &[P3],
-    holes: &[&[P3]],
-) -> Result<PolygonTriangles, TriangulateError> {
+pub fn triangulate_polygon(exterior: &[P3], holes: &[&[P3]]) -> Result<PolygonTriangles, TriangulateError> {
     let ext = open_ring(exterior);
-    let holes: Vec<Vec<P3>> = holes
-        .iter()
-        .map(|h| open_ring(h))
-        .filter(|h| h.len() >= 3)
-        .collect();
-    if ext
-        .iter()
-        .chain(holes.iter().flatten())
-        .any(|p| p.iter().any(|v| !v.is_finite()))
-    {
+    let holes: Vec<Vec<P3>> = holes.iter().map(|h| open_ring(h)).filter(|h| h.len() >= 3).collect();
+    if ext.iter().chain(holes.iter().flatten()).any(|p| p.iter().any(|v| !v.is_finite())) {
         return Err(TriangulateError::NonFinite);
     }
     if ext.len() < 3 {
@@ -112,10 +101,7 @@ pub fn triangulate_polygon(
     }
     let nv = newell_normal(&ext);
     let len = norm(nv);
-    let scale = ext
-        .iter()
-        .map(|p| norm(sub(*p, ext[0])))
-        .fold(0.0, f64::max);
+    let scale = ext.iter().map(|p| norm(sub(*p, ext[0]))).fold(0.0, f64::max);
     if len.is_nan() || len <= 1e-12 * scale * scale {
         return Err(TriangulateError::Degenerate);
     }
@@ -133,20 +119,15 @@ pub fn triangulate_polygon(
     let u = [u[0] / ul, u[1] / ul, u[2] / ul];
     let v = cross(n, u);
     let k = ext.len() as f64;
-    let c = ext.iter().fold([0.0; 3], |s, p| {
-        [s[0] + p[0] / k, s[1] + p[1] / k, s[2] + p[2] / k]
-    });
+    let c = ext.iter().fold([0.0; 3], |s, p| [s[0] + p[0] / k, s[1] + p[1] / k, s[2] + p[2] / k]);
     let to2 = |p: P3| {
         let d = sub(p, c);
         [dot(d, u), dot(d, v)]
     };
-    let rings2: Vec<Vec<[f64; 2]>> = std::iter::once(&ext)
-        .chain(holes.iter())
-        .map(|r| r.iter().map(|&p| to2(p)).collect())
-        .collect();
+    let rings2: Vec<Vec<[f64; 2]>> =
+        std::iter::once(&ext).chain(holes.iter()).map(|r| r.iter().map(|&p| to2(p)).collect()).collect();
 
-    let mut cdt: ConstrainedDelaunayTriangulation<Point2<f64>> =
-        ConstrainedDelaunayTriangulation::new();
+    let mut cdt: ConstrainedDelaunayTriangulation<Point2<f64>> = ConstrainedDelaunayTriangulation::new();
     // 3D position per spade vertex index (insertion order; a repeated 2D position maps to the
     // vertex inserted first).
     let mut pos3: Vec<P3> = Vec::new();
@@ -154,9 +135,7 @@ pub fn triangulate_polygon(
     for (r2, r3) in rings2.iter().zip(std::iter::once(&ext).chain(holes.iter())) {
         let mut hs = Vec::with_capacity(r2.len());
         for (q, &p) in r2.iter().zip(r3.iter()) {
-            let h = cdt
-                .insert(Point2::new(q[0], q[1]))
-                .map_err(|e| TriangulateError::Spade(format!("{e:?}")))?;
+            let h = cdt.insert(Point2::new(q[0], q[1])).map_err(|e| TriangulateError::Spade(format!("{e:?}")))?;
             if h.index() == pos3.len() {
                 pos3.push(p);
             }
@@ -175,21 +154,14 @@ pub fn triangulate_polygon(
     // Vertices created at constraint crossings: lift back onto the plane.
     for vh in cdt.vertices().skip(pos3.len()) {
         let p = vh.position();
-        pos3.push([
-            c[0] + p.x * u[0] + p.y * v[0],
-            c[1] + p.x * u[1] + p.y * v[1],
-            c[2] + p.x * u[2] + p.y * v[2],
-        ]);
+        pos3.push([c[0] + p.x * u[0] + p.y * v[0], c[1] + p.x * u[1] + p.y * v[1], c[2] + p.x * u[2] + p.y * v[2]]);
     }
 
     let mut triangles = Vec::new();
     for f in cdt.inner_faces() {
         let vs = f.vertices();
         let p = vs.map(|h| h.position());
-        let centroid = [
-            (p[0].x + p[1].x + p[2].x) / 3.0,
-            (p[0].y + p[1].y + p[2].y) / 3.0,
-        ];
+        let centroid = [(p[0].x + p[1].x + p[2].x) / 3.0, (p[0].y + p[1].y + p[2].y) / 3.0];
         if !inside_even_odd(centroid, &rings2) {
             continue;
         }
@@ -215,12 +187,7 @@ pub fn triangulate_polygon(
             *i = remap[*i as usize];
         }
     }
-    Ok(PolygonTriangles {
-        positions,
-        triangles,
-        normal: n,
-        plane_point: c,
-    })
+    Ok(PolygonTriangles { positions, triangles, normal: n, plane_point: c })
 }
 
 /// Even–odd point-in-polygon test over all rings (crossing number of a ray towards +x).
@@ -270,48 +237,25 @@ mod tests {
     fn wall_with_window_hole() {
         // A vertical 10 m × 5 m wall (normal −y) at UTM-like coordinates with a 2 × 1 m window.
         let (x0, y0) = (458_000.0, 5_438_000.0);
-        let ext = [
-            [x0, y0, 0.0],
-            [x0 + 10.0, y0, 0.0],
-            [x0 + 10.0, y0, 5.0],
-            [x0, y0, 5.0],
-            [x0, y0, 0.0],
-        ];
-        let hole = [
-            [x0 + 2.0, y0, 2.0],
-            [x0 + 2.0, y0, 3.0],
-            [x0 + 4.0, y0, 3.0],
-            [x0 + 4.0, y0, 2.0],
-        ];
+        let ext = [[x0, y0, 0.0], [x0 + 10.0, y0, 0.0], [x0 + 10.0, y0, 5.0], [x0, y0, 5.0], [x0, y0, 0.0]];
+        let hole = [[x0 + 2.0, y0, 2.0], [x0 + 2.0, y0, 3.0], [x0 + 4.0, y0, 3.0], [x0 + 4.0, y0, 2.0]];
         let t = triangulate_polygon(&ext, &[&hole]).unwrap();
         assert!((area(&t) - 48.0).abs() < 1e-9, "{}", area(&t));
         assert_eq!(t.positions.len(), 8);
         // 8 vertices, 2 boundaries → V − E + F = 0 for an annulus: T = V + 2·(holes) − 2 = 8.
         assert_eq!(t.triangles.len(), 8);
         let s = oriented_normal_sum(&t);
-        assert!(
-            s[1] < 0.0 && s[0].abs() < 1e-6 && s[2].abs() < 1e-6,
-            "{s:?}"
-        );
+        assert!(s[1] < 0.0 && s[0].abs() < 1e-6 && s[2].abs() < 1e-6, "{s:?}");
         assert!((t.normal[1] + 1.0).abs() < 1e-12);
         // Output vertices are the input vertices, bit for bit.
-        assert!(t
-            .positions
-            .iter()
-            .all(|p| ext.contains(p) || hole.contains(p)));
+        assert!(t.positions.iter().all(|p| ext.contains(p) || hole.contains(p)));
     }
 
     #[test]
     fn non_convex_l_shape_clockwise() {
         // Clockwise L-shape (normal −z), area 3.
-        let ring = [
-            [0.0, 0.0, 1.0],
-            [0.0, 2.0, 1.0],
-            [1.0, 2.0, 1.0],
-            [1.0, 1.0, 1.0],
-            [2.0, 1.0, 1.0],
-            [2.0, 0.0, 1.0],
-        ];
+        let ring =
+            [[0.0, 0.0, 1.0], [0.0, 2.0, 1.0], [1.0, 2.0, 1.0], [1.0, 1.0, 1.0], [2.0, 1.0, 1.0], [2.0, 0.0, 1.0]];
         let t = triangulate_polygon(&ring, &[]).unwrap();
         assert!((area(&t) - 3.0).abs() < 1e-12);
         assert_eq!(t.triangles.len(), 4);
@@ -320,23 +264,10 @@ mod tests {
 
     #[test]
     fn self_intersecting_bowtie_is_split_not_panicking() {
-        let ring = [
-            [0.0, 0.0, 0.0],
-            [2.0, 2.0, 0.0],
-            [2.0, 0.0, 0.0],
-            [0.0, 2.0, 0.0],
-        ];
+        let ring = [[0.0, 0.0, 0.0], [2.0, 2.0, 0.0], [2.0, 0.0, 0.0], [0.0, 2.0, 0.0]];
         // Newell normal of a symmetric bow-tie is zero: reported, not a panic.
-        assert_eq!(
-            triangulate_polygon(&ring, &[]),
-            Err(TriangulateError::Degenerate)
-        );
-        let ring = [
-            [0.0, 0.0, 0.0],
-            [4.0, 2.0, 0.0],
-            [4.0, 0.0, 0.0],
-            [0.0, 1.0, 0.0],
-        ];
+        assert_eq!(triangulate_polygon(&ring, &[]), Err(TriangulateError::Degenerate));
+        let ring = [[0.0, 0.0, 0.0], [4.0, 2.0, 0.0], [4.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
         let t = triangulate_polygon(&ring, &[]).unwrap();
         assert!(t.triangles.len() >= 2);
         assert!(area(&t) > 0.0);
@@ -349,25 +280,14 @@ mod tests {
             Err(TriangulateError::TooFewPoints(2))
         );
         let line = [[0.0, 0.0, 0.0], [1.0, 1.0, 1.0], [2.0, 2.0, 2.0]];
-        assert_eq!(
-            triangulate_polygon(&line, &[]),
-            Err(TriangulateError::Degenerate)
-        );
+        assert_eq!(triangulate_polygon(&line, &[]), Err(TriangulateError::Degenerate));
         let nan = [[0.0, 0.0, 0.0], [1.0, f64::NAN, 0.0], [0.0, 1.0, 0.0]];
-        assert_eq!(
-            triangulate_polygon(&nan, &[]),
-            Err(TriangulateError::NonFinite)
-        );
+        assert_eq!(triangulate_polygon(&nan, &[]), Err(TriangulateError::NonFinite));
     }
 
     #[test]
     fn slightly_non_planar_roof_keeps_original_vertices() {
-        let ring = [
-            [0.0, 0.0, 10.0],
-            [8.0, 0.0, 10.003],
-            [8.0, 6.0, 13.0],
-            [0.0, 6.0, 12.998],
-        ];
+        let ring = [[0.0, 0.0, 10.0], [8.0, 0.0, 10.003], [8.0, 6.0, 13.0], [0.0, 6.0, 12.998]];
         let t = triangulate_polygon(&ring, &[]).unwrap();
         assert_eq!(t.triangles.len(), 2);
         assert!(t.positions.iter().all(|p| ring.contains(p)));
@@ -399,12 +319,7 @@ mod tests {
                 [10.0 * a.cos(), 0.5, 10.0 * a.sin()]
             })
             .collect();
-        let hole = [
-            [-0.5, 0.5, -0.5],
-            [0.5, 0.5, -0.5],
-            [0.5, 0.5, 0.5],
-            [-0.5, 0.5, 0.5],
-        ];
+        let hole = [[-0.5, 0.5, -0.5], [0.5, 0.5, -0.5], [0.5, 0.5, 0.5], [-0.5, 0.5, 0.5]];
         let t = triangulate_polygon(&ring, &[&hole]).unwrap();
         let expected = 0.5 * n as f64 * 100.0 * (std::f64::consts::TAU / n as f64).sin() - 1.0;
         assert!((area(&t) - expected).abs() < 1e-9);

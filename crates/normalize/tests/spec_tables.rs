@@ -18,7 +18,8 @@ fn quad(p: [[f64; 3]; 4], solid: usize, id: &str) -> SoupPolygon {
 
 /// Box faces (outward, counter-clockwise seen from outside) from 8 corners indexed by bits (x, y, z).
 fn box_faces(c: &dyn Fn(usize) -> [f64; 3], solid: usize, tag: &str) -> Vec<SoupPolygon> {
-    let f = |a: usize, b: usize, cc: usize, d: usize, n: &str| quad([c(a), c(b), c(cc), c(d)], solid, &format!("{tag}{n}"));
+    let f =
+        |a: usize, b: usize, cc: usize, d: usize, n: &str| quad([c(a), c(b), c(cc), c(d)], solid, &format!("{tag}{n}"));
     vec![
         f(0, 2, 3, 1, "bottom"), // z = 0, normal −z
         f(4, 5, 7, 6, "top"),
@@ -88,7 +89,8 @@ fn row_of_rooms(k: usize) -> Soup {
     let mut soup = Soup { name: "row".into(), ..Default::default() };
     for r in 0..k {
         let x0 = r as f64 * 4.0;
-        let corner = move |i: usize| [x0 + (i & 1) as f64 * 4.0, ((i >> 1) & 1) as f64 * 5.0, ((i >> 2) & 1) as f64 * 3.0];
+        let corner =
+            move |i: usize| [x0 + (i & 1) as f64 * 4.0, ((i >> 1) & 1) as f64 * 5.0, ((i >> 2) & 1) as f64 * 3.0];
         soup.solids.push(SoupSolid { kind: SolidKind::Room, name: Some(format!("room{r}")) });
         soup.polygons.extend(box_faces(&corner, r, &format!("r{r}-")));
         soup.source_rings += 6;
@@ -207,7 +209,8 @@ fn euler_poincare_with_inner_rings_table_6_3() {
     let mut soup = cuboid(0.0, [4.0, 4.0, 2.0], [0.0; 3]);
     let top = soup.polygons.iter_mut().find(|p| p.locator == "c-top").unwrap();
     top.rings.push(vec![[1.0, 1.0, 2.0], [1.0, 3.0, 2.0], [3.0, 3.0, 2.0], [3.0, 1.0, 2.0]]);
-    top.vertex_sources.push((0..4).map(|i| VertexSource::CityGml { polygon: "c-top".into(), ring: 1, index: i }).collect());
+    top.vertex_sources
+        .push((0..4).map(|i| VertexSource::CityGml { polygon: "c-top".into(), ring: 1, index: i }).collect());
     let b = |i: usize| [1.0 + (i & 1) as f64 * 2.0, 1.0 + ((i >> 1) & 1) as f64 * 2.0, 2.0 + ((i >> 2) & 1) as f64];
     let mut bump = box_faces(&b, 0, "b-");
     bump.remove(0); // no bottom

@@ -101,17 +101,28 @@ pub fn terrain_xyz(fields: &[&str]) -> Result<Option<[usize; 3]>, String> {
         let axis = ["x", "y", "z"][k];
         let mut found: Vec<usize> = (0..fields.len()).filter(|&i| role(i) == Some(r)).collect();
         if found.len() > 1 && r == Z {
-            let weak = |i: &usize| matches!(without_unit(fields[*i]).trim_matches('"').to_ascii_lowercase().as_str(), "value" | "val");
+            let weak = |i: &usize| {
+                matches!(without_unit(fields[*i]).trim_matches('"').to_ascii_lowercase().as_str(), "value" | "val")
+            };
             if found.iter().any(|i| !weak(i)) {
                 found.retain(|i| !weak(i));
             }
         }
         match found.as_slice() {
-            [] => return Err(format!("the header names no {axis} column (found: {}); name the columns x, y, z", fields.join(", "))),
+            [] => {
+                return Err(format!(
+                    "the header names no {axis} column (found: {}); name the columns x, y, z",
+                    fields.join(", ")
+                ))
+            }
             [i] => out[k] = *i,
             many => {
                 let names: Vec<&str> = many.iter().map(|&i| fields[i]).collect();
-                return Err(format!("the header names {} columns for {axis} ({}): keep one", many.len(), names.join(", ")));
+                return Err(format!(
+                    "the header names {} columns for {axis} ({}): keep one",
+                    many.len(),
+                    names.join(", ")
+                ));
             }
         }
     }
@@ -120,7 +131,10 @@ pub fn terrain_xyz(fields: &[&str]) -> Result<Option<[usize; 3]>, String> {
 
 /// Whether a header name says longitude or latitude (the points are then in degrees).
 pub fn is_geographic_name(field: &str) -> bool {
-    matches!(field.trim().trim_matches('"').to_ascii_lowercase().as_str(), "lon" | "long" | "longitude" | "lat" | "latitude")
+    matches!(
+        field.trim().trim_matches('"').to_ascii_lowercase().as_str(),
+        "lon" | "long" | "longitude" | "lat" | "latitude"
+    )
 }
 
 #[cfg(test)]
@@ -149,13 +163,19 @@ mod tests {
         assert_eq!(terrain_xyz(&["", "X", "Y", "Z", "val"]), Ok(Some([1, 2, 3])));
         assert_eq!(terrain_xyz(&["lat", "lon", "value"]), Ok(Some([1, 0, 2])));
         assert_eq!(terrain_xyz(&["a", "b", "c"]), Ok(None));
-        assert_eq!(terrain_xyz(&["lon", "lat", "x", "y", "z"]).unwrap_err(), "the header names 2 columns for x (lon, x): keep one");
+        assert_eq!(
+            terrain_xyz(&["lon", "lat", "x", "y", "z"]).unwrap_err(),
+            "the header names 2 columns for x (lon, x): keep one"
+        );
         assert!(terrain_xyz(&["x", "y", "z", "depth"]).unwrap_err().contains("2 columns for z"));
         assert!(is_geographic_name(" \"Longitude\"") && !is_geographic_name("x"));
         // units in brackets, German names, and headers that name only some axes
         assert_eq!(terrain_xyz(&["ID", "Easting [m]", "Northing [m]", "Depth (m)"]), Ok(Some([1, 2, 3])));
         assert_eq!(terrain_xyz(&["Punkt", "Rechtswert", "Hochwert", "Höhe"]), Ok(Some([1, 2, 3])));
         let e = terrain_xyz(&["ID", "Easting", "Northing", "Sounding"]).unwrap_err();
-        assert_eq!(e, "the header names no z column (found: ID, Easting, Northing, Sounding); name the columns x, y, z");
+        assert_eq!(
+            e,
+            "the header names no z column (found: ID, Easting, Northing, Sounding); name the columns x, y, z"
+        );
     }
 }

@@ -96,7 +96,8 @@ impl LasPoints {
             }
             let first = self.read as usize;
             self.read += batch.len() as u64;
-            for (i, ((x, y), (z, c))) in batch.x().zip(batch.y()).zip(batch.z().zip(batch.classification())).enumerate() {
+            for (i, ((x, y), (z, c))) in batch.x().zip(batch.y()).zip(batch.z().zip(batch.classification())).enumerate()
+            {
                 self.classes_seen[c as usize] += 1;
                 if self.class.is_some_and(|k| k != c) {
                     continue;
@@ -151,8 +152,15 @@ fn decode_guarded<T>(f: impl FnOnce() -> T) -> Result<T, LasError> {
     let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(f));
     DECODING.with(|d| d.set(false));
     r.map_err(|p| {
-        let why = p.downcast_ref::<&str>().map(|s| s.to_string()).or_else(|| p.downcast_ref::<String>().cloned()).unwrap_or_default();
-        let e = std::io::Error::new(std::io::ErrorKind::InvalidData, format!("the compressed points are corrupt (the LAZ decoder failed: {why})"));
+        let why = p
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| p.downcast_ref::<String>().cloned())
+            .unwrap_or_default();
+        let e = std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!("the compressed points are corrupt (the LAZ decoder failed: {why})"),
+        );
         LasError::Read(las::Error::Io(e))
     })
 }
@@ -208,7 +216,8 @@ pub(crate) mod tests {
 
     #[test]
     fn no_point_of_the_class_lists_the_classes_present() {
-        let mut las = LasPoints::from_bytes(las_bytes(&[([1.0, 2.0, 3.0], 2), ([4.0, 5.0, 6.0], 1)]), Some(17)).unwrap();
+        let mut las =
+            LasPoints::from_bytes(las_bytes(&[([1.0, 2.0, 3.0], 2), ([4.0, 5.0, 6.0], 1)]), Some(17)).unwrap();
         assert_eq!(all(&mut las).unwrap(), Vec::<[f64; 3]>::new());
         assert_eq!(las.check_end().unwrap_err().to_string(), "no point of class 17; classes present: 1 (1), 2 (1)");
     }
@@ -303,11 +312,13 @@ pub(crate) mod tests {
     #[test]
     fn fuzz_regressions_do_not_panic() {
         let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz");
-        let files = |d: &str| -> Vec<_> { std::fs::read_dir(root.join(d)).unwrap().map(|e| e.unwrap().path()).collect() };
+        let files =
+            |d: &str| -> Vec<_> { std::fs::read_dir(root.join(d)).unwrap().map(|e| e.unwrap().path()).collect() };
         let bad = files("regressions/las");
         assert!(!bad.is_empty(), "no reproducers");
         for f in bad {
-            let read = LasPoints::from_bytes(std::fs::read(&f).unwrap(), None).and_then(|mut l| all(&mut l).and(l.check_end()));
+            let read = LasPoints::from_bytes(std::fs::read(&f).unwrap(), None)
+                .and_then(|mut l| all(&mut l).and(l.check_end()));
             // a corrupt compressed stream decodes to garbage where laz's debug assertions are off
             if !f.file_name().unwrap().to_string_lossy().starts_with("laz-decoder") {
                 assert!(read.is_err(), "{}", f.display());

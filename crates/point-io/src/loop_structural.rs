@@ -45,8 +45,9 @@ struct Columns {
 /// Parses XYZ/CSV text into data points (see the module docs). `source` names the text in
 /// errors.
 pub fn parse_xyz(text: &[u8], source: &str) -> Result<Vec<DataPoint>, PointsError> {
-    let text = std::str::from_utf8(text)
-        .map_err(|e| PointsError::line(source, 0, format!("not UTF-8 text ({e}); LAS/LAZ files need the .las/.laz extension")))?;
+    let text = std::str::from_utf8(text).map_err(|e| {
+        PointsError::line(source, 0, format!("not UTF-8 text ({e}); LAS/LAZ files need the .las/.laz extension"))
+    })?;
     let mut columns: Option<Columns> = None;
     // the field count every data line has: the header's or the first row's, and its line
     let mut count: Option<(usize, usize, &str)> = None;
@@ -96,7 +97,9 @@ fn is_header(fields: &[&str]) -> bool {
 
 fn header_columns(fields: &[&str], source: &str, line: usize) -> Result<Columns, PointsError> {
     let find = |role| find_column(fields, role, Dialect::LoopStructural);
-    let miss = |c: &str| PointsError::line(source, line, format!("header has no `{c}` column (found: {})", quote(&fields.join(","))));
+    let miss = |c: &str| {
+        PointsError::line(source, line, format!("header has no `{c}` column (found: {})", quote(&fields.join(","))))
+    };
     let x = find(Role::X).ok_or_else(|| miss("x"))?;
     let y = find(Role::Y).ok_or_else(|| miss("y"))?;
     let z = find(Role::Z).ok_or_else(|| miss("z"))?;
@@ -172,7 +175,8 @@ pub fn optional_number(field: Option<&str>, what: &str, source: &str, line: usiz
 
 /// [`optional_number`] for a field that must be there (`{what} is missing` otherwise).
 pub fn required_number(field: Option<&str>, what: &str, source: &str, line: usize) -> Result<f64, PointsError> {
-    optional_number(field, what, source, line)?.ok_or_else(|| PointsError::line(source, line, format!("{what} is missing")))
+    optional_number(field, what, source, line)?
+        .ok_or_else(|| PointsError::line(source, line, format!("{what} is missing")))
 }
 
 /// Reads LAS or LAZ bytes (positions only: LAS carries no normals or values). Errors are
@@ -230,7 +234,10 @@ mod tests {
     #[test]
     fn header_in_any_order_value_is_phi_and_empty_fields_are_absent() {
         let p = parse("nz,ny,nx,Val,Z,Y,X\n1,0,0,,3,2,1\n,,,4,6,5,\"4\"\n").unwrap();
-        assert_eq!(p, [sample([1.0, 2.0, 3.0], None, Some([0.0, 0.0, 1.0]), 2), sample([4.0, 5.0, 6.0], Some(4.0), None, 3)]);
+        assert_eq!(
+            p,
+            [sample([1.0, 2.0, 3.0], None, Some([0.0, 0.0, 1.0]), 2), sample([4.0, 5.0, 6.0], Some(4.0), None, 3)]
+        );
     }
 
     #[test]
@@ -242,7 +249,10 @@ mod tests {
         assert_eq!(e("x,y,z,nx,ny,nz\n1,2,3,1,,\n"), "s.csv:2: normal has only some of nx, ny, nz");
         assert_eq!(e("x,y,z\n1,,3\n"), "s.csv:2: y is missing");
         assert_eq!(e("lon lat z\n"), "s.csv:1: header has no `x` column (found: lon,lat,z)");
-        assert_eq!(e("x y z nx\n"), "s.csv:1: header has no `nx, ny and nz (only some normal columns are present)` column (found: x,y,z,nx)");
+        assert_eq!(
+            e("x y z nx\n"),
+            "s.csv:1: header has no `nx, ny and nz (only some normal columns are present)` column (found: x,y,z,nx)"
+        );
         assert!(e("\n1 2 3 4 5\n").starts_with("s.csv:2: 5 columns without a header"));
         assert!(parse_xyz(b"1 2 \xff", "b").unwrap_err().to_string().starts_with("b:0: not UTF-8 text"));
     }

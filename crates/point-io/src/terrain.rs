@@ -27,7 +27,9 @@ use input_limits::quote;
 
 use crate::columns::{is_geographic_name, terrain_xyz};
 use crate::las::{LasError, LasPoints};
-use crate::text::{could_be_decimal_commas, detect_separator, looks_numeric, split_fields, Decimals, FieldError, Separator, TextFormat};
+use crate::text::{
+    could_be_decimal_commas, detect_separator, looks_numeric, split_fields, Decimals, FieldError, Separator, TextFormat,
+};
 use crate::{PointsError, BATCH_POINTS};
 
 /// How the data lines of a text are read, fixed by its first content line.
@@ -109,7 +111,14 @@ impl XyzLines {
                     fields.len() / 2
                 )));
             }
-            self.layout = Some(Layout { sep, detected, columns: [0, 1, 2], fields: fields.len(), header: None, counted_at: line_no });
+            self.layout = Some(Layout {
+                sep,
+                detected,
+                columns: [0, 1, 2],
+                fields: fields.len(),
+                header: None,
+                counted_at: line_no,
+            });
         }
         let Some(layout) = self.layout.as_ref() else { return Ok(None) };
         let fields = split_fields(if layout.sep == Separator::Whitespace { content } else { line }, layout.sep)
@@ -122,7 +131,14 @@ impl XyzLines {
 
     /// A header: maps named columns (other columns, an index column "" or "id" among them, are
     /// skipped); a header without recognisable names means the first three columns.
-    fn header(&self, fields: &[&str], sep: Separator, detected: bool, line: &str, name: &str) -> Result<Layout, PointsError> {
+    fn header(
+        &self,
+        fields: &[&str],
+        sep: Separator,
+        detected: bool,
+        line: &str,
+        name: &str,
+    ) -> Result<Layout, PointsError> {
         let err = |m: String| PointsError::line(name, self.line_no, m);
         let named = terrain_xyz(fields);
         let numeric = fields.iter().any(|f| looks_numeric(f));
@@ -133,24 +149,48 @@ impl XyzLines {
             Some(c) => c,
             None if fields.len() < 3 => {
                 let how = if detected { "" } else { " (as given)" };
-                return Err(err(format!("{:?} is {} field(s) split by {}{how}: a point needs x, y and z", quote(line), fields.len(), sep.describe())));
+                return Err(err(format!(
+                    "{:?} is {} field(s) split by {}{how}: a point needs x, y and z",
+                    quote(line),
+                    fields.len(),
+                    sep.describe()
+                )));
             }
             None if fields.len() == 3 => [0, 1, 2],
             None => {
                 let found = fields.join(", ");
-                return Err(err(format!("cannot tell which of the header's {} columns are x, y, z (found: {found}); name them x, y, z", fields.len())));
+                return Err(err(format!(
+                    "cannot tell which of the header's {} columns are x, y, z (found: {found}); name them x, y, z",
+                    fields.len()
+                )));
             }
         };
         let names = fields.iter().map(|f| f.to_string()).collect();
-        Ok(Layout { sep, detected, columns, fields: fields.len(), header: Some((self.line_no, names)), counted_at: self.line_no })
+        Ok(Layout {
+            sep,
+            detected,
+            columns,
+            fields: fields.len(),
+            header: Some((self.line_no, names)),
+            counted_at: self.line_no,
+        })
     }
 }
 
 /// Why a row's field count is wrong, with what the text was read as.
 fn count_message(fields: &[&str], layout: &Layout) -> String {
-    let how = format!("fields separated by {}{}", layout.sep.describe(), if layout.detected { " (detected; --sep gives another)" } else { "" });
+    let how = format!(
+        "fields separated by {}{}",
+        layout.sep.describe(),
+        if layout.detected { " (detected; --sep gives another)" } else { "" }
+    );
     let mut m = match &layout.header {
-        Some((line, names)) => format!("{} fields, but the header (line {line}) has {} ({}); {how}", fields.len(), layout.fields, names.join(", ")),
+        Some((line, names)) => format!(
+            "{} fields, but the header (line {line}) has {} ({}); {how}",
+            fields.len(),
+            layout.fields,
+            names.join(", ")
+        ),
         None => format!("{} fields, but line {} has {}; {how}", fields.len(), layout.counted_at, layout.fields),
     };
     if layout.sep == Separator::Comma && fields.len() > layout.fields && !fields.iter().any(|f| f.contains('.')) {
@@ -168,7 +208,14 @@ fn read_line<R: BufRead>(reader: &mut R, buf: &mut String, name: &str, line_no: 
 }
 
 /// The point in `columns` of a data line's fields.
-fn xyz_fields(fields: &[&str], columns: [usize; 3], sep: Separator, decimals: &mut Decimals, name: &str, line: usize) -> Result<[f64; 3], PointsError> {
+fn xyz_fields(
+    fields: &[&str],
+    columns: [usize; 3],
+    sep: Separator,
+    decimals: &mut Decimals,
+    name: &str,
+    line: usize,
+) -> Result<[f64; 3], PointsError> {
     let mut p = [0.0; 3];
     for (k, &c) in columns.iter().enumerate() {
         let axis = ["x", "y", "z"][k];
@@ -212,7 +259,12 @@ impl<R: BufRead> XyzBatches<R> {
     /// Reads `reader` with the separator (`,` `;` `tab` `space`) and decimal mark (`.` `,`)
     /// named as by `--sep` and `--decimal` (`None`: detected); an unknown name is an error
     /// naming the choices ([`TextFormat::from_names`]).
-    pub fn with_format(reader: R, name: &str, sep: Option<&str>, decimal: Option<&str>) -> Result<XyzBatches<R>, String> {
+    pub fn with_format(
+        reader: R,
+        name: &str,
+        sep: Option<&str>,
+        decimal: Option<&str>,
+    ) -> Result<XyzBatches<R>, String> {
         Ok(XyzBatches::with_text_format(reader, name, TextFormat::from_names(sep, decimal)?))
     }
 
@@ -241,9 +293,11 @@ impl<R: BufRead> XyzBatches<R> {
 
     /// Whether the header names the x and y columns as longitude and latitude (degrees).
     pub fn geographic_columns(&self) -> bool {
-        self.lines.layout.as_ref().and_then(|l| l.header.as_ref().map(|(_, n)| (l, n))).is_some_and(|(l, n)| {
-            is_geographic_name(&n[l.columns[0]]) && is_geographic_name(&n[l.columns[1]])
-        })
+        self.lines
+            .layout
+            .as_ref()
+            .and_then(|l| l.header.as_ref().map(|(_, n)| (l, n)))
+            .is_some_and(|(l, n)| is_geographic_name(&n[l.columns[0]]) && is_geographic_name(&n[l.columns[1]]))
     }
 
     fn fill(&mut self) -> Result<Vec<[f64; 3]>, PointsError> {
@@ -335,7 +389,9 @@ fn las_error(name: &str, e: LasError) -> PointsError {
         LasError::Claim(input_limits::las::LasClaim::Io(_)) => PointsError::Las { name, message },
         LasError::Claim(_) => PointsError::TooLarge { name, message },
         LasError::NoPoints | LasError::NoPointOfClass { .. } => PointsError::Empty { name, message },
-        LasError::Open(_) | LasError::Read(_) | LasError::NonFinite { .. } | LasError::Short { .. } => PointsError::Las { name, message },
+        LasError::Open(_) | LasError::Read(_) | LasError::NonFinite { .. } | LasError::Short { .. } => {
+            PointsError::Las { name, message }
+        }
     }
 }
 
@@ -357,7 +413,10 @@ mod tests {
         assert_eq!(parse("x,y,z\n1,2,3\n").unwrap(), vec![[1.0, 2.0, 3.0]]);
         assert_eq!(parse("# c\n\n1, 2, 3, 99\n").unwrap(), vec![[1.0, 2.0, 3.0]]);
         // named columns in another order, with an index column
-        assert_eq!(parse(",Z,X,Y,extra\n0,30,10,20,a\n1,31,11,21,b\n").unwrap(), vec![[10.0, 20.0, 30.0], [11.0, 21.0, 31.0]]);
+        assert_eq!(
+            parse(",Z,X,Y,extra\n0,30,10,20,a\n1,31,11,21,b\n").unwrap(),
+            vec![[10.0, 20.0, 30.0], [11.0, 21.0, 31.0]]
+        );
         // a `value` column is the elevation here; a header of unknown names means x y z first
         assert_eq!(parse("lon lat value\n1 2 3\n").unwrap(), vec![[1.0, 2.0, 3.0]]);
         assert_eq!(parse("a b c\n1 2 3\n").unwrap(), vec![[1.0, 2.0, 3.0]]);
@@ -406,22 +465,39 @@ mod tests {
             Ok(points)
         };
         assert_eq!(given("1,2,3,4,5,6\n", Some(","), None).unwrap(), vec![[1.0, 2.0, 3.0]]);
-        assert_eq!(given("1;2;3\n", Some("space"), None).unwrap_err().to_string(), "t.xyz:1: \"1;2;3\" is 1 field(s) split by blanks (as given): a point needs x, y and z");
-        assert_eq!(given("1;2;3,5\n", None, Some(".")).unwrap_err().to_string(), "t.xyz:1: z = \"3,5\" has a decimal comma, but the decimal mark given is '.'");
+        assert_eq!(
+            given("1;2;3\n", Some("space"), None).unwrap_err().to_string(),
+            "t.xyz:1: \"1;2;3\" is 1 field(s) split by blanks (as given): a point needs x, y and z"
+        );
+        assert_eq!(
+            given("1;2;3,5\n", None, Some(".")).unwrap_err().to_string(),
+            "t.xyz:1: z = \"3,5\" has a decimal comma, but the decimal mark given is '.'"
+        );
     }
 
     #[test]
     fn texts_read_two_ways_are_refused() {
         // the file with commas for separators: 6 fields under a 3-column header
         let e = parse("x,y,z\n341000,5,5724000,25,12,5\n").unwrap_err().to_string();
-        assert!(e.starts_with("t.xyz:2: 6 fields, but the header (line 1) has 3 (x, y, z); fields separated by ','"), "{e}");
+        assert!(
+            e.starts_with("t.xyz:2: 6 fields, but the header (line 1) has 3 (x, y, z); fields separated by ','"),
+            "{e}"
+        );
         assert!(e.contains("decimal commas"), "{e}");
         // headerless: 6 whole numbers or 3 with decimal commas?
         let e = parse("341000,5,5724000,25,12,5\n").unwrap_err().to_string();
-        assert!(e.starts_with("t.xyz:1: \"341000,5,5724000,25,12,5\" may be 6 whole numbers or 3 numbers with decimal commas"), "{e}");
+        assert!(
+            e.starts_with(
+                "t.xyz:1: \"341000,5,5724000,25,12,5\" may be 6 whole numbers or 3 numbers with decimal commas"
+            ),
+            "{e}"
+        );
         // both marks in one text, or in one number
         let e = parse("x;y;z\n1,5;2;3\n1.5;2;3\n").unwrap_err().to_string();
-        assert_eq!(e, "t.xyz:3: x = \"1.5\" has a decimal point, but line 2 has a decimal comma (\"1,5\"); give --decimal");
+        assert_eq!(
+            e,
+            "t.xyz:3: x = \"1.5\" has a decimal point, but line 2 has a decimal comma (\"1,5\"); give --decimal"
+        );
         let e = parse("x;y;z\n\"1.234,5\";2;3\n").unwrap_err().to_string();
         assert!(e.starts_with("t.xyz:2: x = \"1.234,5\" has both ',' and '.'"), "{e}");
         let e = parse("x,y,z\n\"1,234\",2,3\n").unwrap_err().to_string();
@@ -436,7 +512,10 @@ mod tests {
     #[test]
     fn headers_that_do_not_say_which_columns_are_refused() {
         let e = parse("ID,Easting,Northing,Sounding\n1,2,3,4\n").unwrap_err().to_string();
-        assert_eq!(e, "t.xyz:1: the header names no z column (found: ID, Easting, Northing, Sounding); name the columns x, y, z");
+        assert_eq!(
+            e,
+            "t.xyz:1: the header names no z column (found: ID, Easting, Northing, Sounding); name the columns x, y, z"
+        );
         let e = parse("Punkt Spalte2 Spalte3 Spalte4\n1 2 3 4\n").unwrap_err().to_string();
         assert!(e.starts_with("t.xyz:1: cannot tell which of the header's 4 columns are x, y, z"), "{e}");
         assert_eq!(parse("ID;Easting [m];Northing [m];Depth (m)\n1;2;3;4,5\n").unwrap(), vec![[2.0, 3.0, 4.5]]);
@@ -447,7 +526,10 @@ mod tests {
         let e = parse("x y z\n1 2 3\n1 2 3 4 5\n").unwrap_err().to_string();
         assert_eq!(e, "t.xyz:3: 5 fields, but the header (line 1) has 3 (x, y, z); fields separated by blanks (detected; --sep gives another)");
         let e = parse("1 2 3\n\n4 5 6 7\n").unwrap_err().to_string();
-        assert_eq!(e, "t.xyz:3: 4 fields, but line 1 has 3; fields separated by blanks (detected; --sep gives another)");
+        assert_eq!(
+            e,
+            "t.xyz:3: 4 fields, but line 1 has 3; fields separated by blanks (detected; --sep gives another)"
+        );
         let e = parse("x;y;z\n1;2\n").unwrap_err().to_string();
         assert!(e.starts_with("t.xyz:2: 2 fields, but the header"), "{e}");
         // a tab-separated header with an empty column keeps its place

@@ -88,11 +88,16 @@ impl TextFormat {
     /// [`DecimalMark::from_name`]); an unknown name is an error naming the choices.
     pub fn from_names(sep: Option<&str>, decimal: Option<&str>) -> Result<TextFormat, String> {
         let separator = match sep {
-            Some(s) => Some(Separator::from_name(s).ok_or_else(|| format!("separator {:?}: expected one of , ; tab space", quote(s)))?),
+            Some(s) => Some(
+                Separator::from_name(s)
+                    .ok_or_else(|| format!("separator {:?}: expected one of , ; tab space", quote(s)))?,
+            ),
             None => None,
         };
         let decimal = match decimal {
-            Some(d) => Some(DecimalMark::from_name(d).ok_or_else(|| format!("decimal mark {:?}: expected . or ,", quote(d)))?),
+            Some(d) => {
+                Some(DecimalMark::from_name(d).ok_or_else(|| format!("decimal mark {:?}: expected . or ,", quote(d)))?)
+            }
             None => None,
         };
         Ok(TextFormat { separator, decimal })
@@ -217,7 +222,8 @@ pub fn detect_separator(line: &str) -> Result<Separator, String> {
     if has_unquoted(line, ';') {
         return Ok(Separator::Semicolon);
     }
-    let splits_cleanly = |sep| split_fields(line, sep).is_some_and(|f| !f.iter().any(|f| holds_numbers_between_blanks(f)));
+    let splits_cleanly =
+        |sep| split_fields(line, sep).is_some_and(|f| !f.iter().any(|f| holds_numbers_between_blanks(f)));
     if has_unquoted(line, '\t') && splits_cleanly(Separator::Tab) {
         return Ok(Separator::Tab);
     }
@@ -230,7 +236,10 @@ pub fn detect_separator(line: &str) -> Result<Separator, String> {
         if words.iter().all(|w| w.matches(',').count() <= 1 && !w.starts_with(',') && !w.ends_with(',')) {
             return Ok(Separator::Whitespace);
         }
-        return Err(format!("cannot tell the field separator of {:?}: both commas and blanks split it; give --sep", quote(line)));
+        return Err(format!(
+            "cannot tell the field separator of {:?}: both commas and blanks split it; give --sep",
+            quote(line)
+        ));
     }
     Ok(Separator::Whitespace)
 }
@@ -289,24 +298,35 @@ impl Decimals {
             (1, 0) => Some(DecimalMark::Comma),
             (0, 1) => Some(DecimalMark::Point),
             (0, _) if self.mark() == Some(DecimalMark::Comma) => {
-                return Err(FieldError::Decimal("has points between digit groups (a thousands separator?); write numbers without them".into()));
+                return Err(FieldError::Decimal(
+                    "has points between digit groups (a thousands separator?); write numbers without them".into(),
+                ));
             }
             (0, _) => return Err(FieldError::NotANumber),
             _ => {
-                return Err(FieldError::Decimal("has both ',' and '.' or several commas (a thousands separator?); write numbers without them".into()));
+                return Err(FieldError::Decimal(
+                    "has both ',' and '.' or several commas (a thousands separator?); write numbers without them"
+                        .into(),
+                ));
             }
         };
         if found == Some(DecimalMark::Comma) && sep == Separator::Comma && self.given.is_none() {
             let after = field.rsplit(',').next().unwrap_or("");
             if after.len() == 3 && after.bytes().all(|b| b.is_ascii_digit()) {
-                return Err(FieldError::Decimal("in a comma-separated file may be a decimal comma or a thousands separator; give --decimal".into()));
+                return Err(FieldError::Decimal(
+                    "in a comma-separated file may be a decimal comma or a thousands separator; give --decimal".into(),
+                ));
             }
         }
         if let Some(found) = found {
             match (self.given, &self.seen) {
                 (Some(given), _) if given != found => {
                     let more = if found == DecimalMark::Point { " (a thousands separator?)" } else { "" };
-                    return Err(FieldError::Decimal(format!("has a {}{more}, but the decimal mark given is '{}'", found.describe(), mark_char(given))));
+                    return Err(FieldError::Decimal(format!(
+                        "has a {}{more}, but the decimal mark given is '{}'",
+                        found.describe(),
+                        mark_char(given)
+                    )));
                 }
                 (None, Some((seen, at, example))) if *seen != found => {
                     return Err(FieldError::Decimal(format!(
@@ -320,7 +340,8 @@ impl Decimals {
                 _ => {}
             }
         }
-        let v: f64 = if found == Some(DecimalMark::Comma) { field.replace(',', ".").parse() } else { field.parse() }.map_err(|_| FieldError::NotANumber)?;
+        let v: f64 = if found == Some(DecimalMark::Comma) { field.replace(',', ".").parse() } else { field.parse() }
+            .map_err(|_| FieldError::NotANumber)?;
         if !v.is_finite() {
             return Err(FieldError::NotFinite);
         }
@@ -421,7 +442,10 @@ mod tests {
 
     #[test]
     fn names_of_the_options() {
-        assert_eq!(TextFormat::from_names(Some("tab"), Some(",")), Ok(TextFormat { separator: Some(Tab), decimal: Some(DecimalMark::Comma) }));
+        assert_eq!(
+            TextFormat::from_names(Some("tab"), Some(",")),
+            Ok(TextFormat { separator: Some(Tab), decimal: Some(DecimalMark::Comma) })
+        );
         assert!(TextFormat::from_names(Some("|"), None).unwrap_err().contains("expected one of"));
     }
 }

@@ -110,7 +110,14 @@ impl<'t> CsvLine<'t> {
         let ty = self.fields[0].1;
         if ty != "distance" && ty != kind.class_name() {
             let q = input_limits::quote(ty);
-            return Err(self.err(0, format!("type `{q}` does not match the primitives ({}); use `distance` or {}", kind.class_name(), kind.class_name())));
+            return Err(self.err(
+                0,
+                format!(
+                    "type `{q}` does not match the primitives ({}); use `distance` or {}",
+                    kind.class_name(),
+                    kind.class_name()
+                ),
+            ));
         }
         Ok(Observation::new(kind, ObsOrigin::Measured).with_label(format!("csv line {}", self.line)))
     }
@@ -129,7 +136,9 @@ impl<'t> CsvLine<'t> {
             return Ok(Prim::Node(NodeId(self.element_id(k, &q, p, r.model.nodes.len())?)));
         }
         if let Some(p) = s.strip_prefix("v:") {
-            let v: u32 = p.parse().map_err(|_| self.err(k, format!("`{q}`: `{}` is not a vertex number", input_limits::quote(p))))?;
+            let v: u32 = p
+                .parse()
+                .map_err(|_| self.err(k, format!("`{q}`: `{}` is not a vertex number", input_limits::quote(p))))?;
             return v
                 .checked_sub(1)
                 .and_then(|v| r.by_vertex.get(&v).copied())
@@ -139,14 +148,24 @@ impl<'t> CsvLine<'t> {
         if s.is_empty() {
             return Err(self.err(k, "empty primitive reference".into()));
         }
-        r.by_polygon.get(s).copied().map(Prim::Face).ok_or_else(|| self.err(k, format!("`{q}`: no face comes from a source polygon with this id")))
+        r.by_polygon
+            .get(s)
+            .copied()
+            .map(Prim::Face)
+            .ok_or_else(|| self.err(k, format!("`{q}`: no face comes from a source polygon with this id")))
     }
 
     /// The popa3d id `p` of field `k` (quoted whole as `q`), below the element count `n`.
     fn element_id(&self, k: usize, q: &str, p: &str, n: usize) -> Result<u32, CsvError> {
-        p.parse::<u32>()
-            .map_err(|_| self.err(k, format!("`{q}`: `{}` is not an id", input_limits::quote(p))))
-            .and_then(|v| if (v as usize) < n { Ok(v) } else { Err(self.err(k, format!("`{q}`: no such element (the model has {n})"))) })
+        p.parse::<u32>().map_err(|_| self.err(k, format!("`{q}`: `{}` is not an id", input_limits::quote(p)))).and_then(
+            |v| {
+                if (v as usize) < n {
+                    Ok(v)
+                } else {
+                    Err(self.err(k, format!("`{q}`: no such element (the model has {n})")))
+                }
+            },
+        )
     }
 
     /// The distance and its standard deviation (fields 3 and 4), MA11/MA12 checked.

@@ -114,11 +114,7 @@ impl Popa3d {
         }
         match best {
             Some((t, det)) if det > RANK_EPS => Ok(t),
-            _ => Err(GeometryError::NodeUnderdetermined {
-                node,
-                planes: planes.len(),
-                rank: self.plane_rank(&planes),
-            }),
+            _ => Err(GeometryError::NodeUnderdetermined { node, planes: planes.len(), rank: self.plane_rank(&planes) }),
         }
     }
 
@@ -152,10 +148,7 @@ impl Popa3d {
         let nk = Vector3::from(pk.n);
         let c = nj.cross(&nk);
         let m = Matrix3::from_rows(&[nj.transpose(), nk.transpose(), c.transpose()]);
-        let p = m
-            .lu()
-            .solve(&Vector3::new(pj.d, pk.d, 0.0))
-            .ok_or(GeometryError::EdgeParallelPlanes { edge })?;
+        let p = m.lu().solve(&Vector3::new(pj.d, pk.d, 0.0)).ok_or(GeometryError::EdgeParallelPlanes { edge })?;
         Ok(([p.x, p.y, p.z], [c.x, c.y, c.z]))
     }
 }

@@ -104,36 +104,109 @@ impl Observation {
 /// in the order of its half-edges). Distances are ≥ 0 (MA11).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub enum ObsKind {
-    DistanceFaceFace { a: FaceId, b: FaceId, l: Measured },
-    DistanceFaceEdge { a: FaceId, b: EdgeId, l: Measured },
-    DistanceFaceNode { a: FaceId, b: NodeId, l: Measured },
-    DistanceEdgeEdge { a: EdgeId, b: EdgeId, l: Measured },
-    DistanceEdgeNode { a: EdgeId, b: NodeId, l: Measured },
-    DistanceNodeNode { a: NodeId, b: NodeId, l: Measured },
+    DistanceFaceFace {
+        a: FaceId,
+        b: FaceId,
+        l: Measured,
+    },
+    DistanceFaceEdge {
+        a: FaceId,
+        b: EdgeId,
+        l: Measured,
+    },
+    DistanceFaceNode {
+        a: FaceId,
+        b: NodeId,
+        l: Measured,
+    },
+    DistanceEdgeEdge {
+        a: EdgeId,
+        b: EdgeId,
+        l: Measured,
+    },
+    DistanceEdgeNode {
+        a: EdgeId,
+        b: NodeId,
+        l: Measured,
+    },
+    DistanceNodeNode {
+        a: NodeId,
+        b: NodeId,
+        l: Measured,
+    },
     /// A reflectorless total-station pointing (Hz, V in gon, slope distance s in m) on a face.
-    PointOnFace { setup: SetupId, target: FaceId, hz: Measured, v: Measured, s: Measured },
-    PointOnEdge { setup: SetupId, target: EdgeId, hz: Measured, v: Measured, s: Measured },
-    PointOnNode { setup: SetupId, target: NodeId, hz: Measured, v: Measured, s: Measured },
+    PointOnFace {
+        setup: SetupId,
+        target: FaceId,
+        hz: Measured,
+        v: Measured,
+        s: Measured,
+    },
+    PointOnEdge {
+        setup: SetupId,
+        target: EdgeId,
+        hz: Measured,
+        v: Measured,
+        s: Measured,
+    },
+    PointOnNode {
+        setup: SetupId,
+        target: NodeId,
+        hz: Measured,
+        v: Measured,
+        s: Measured,
+    },
     /// Cosine between two faces' normals: 0 orthogonal, ±1 parallel.
-    ConstraintFaceFace { a: FaceId, b: FaceId, l: Measured },
+    ConstraintFaceFace {
+        a: FaceId,
+        b: FaceId,
+        l: Measured,
+    },
     /// Cosine between a face normal and an edge direction: 0 edge parallel to the face, ±1 orthogonal.
-    ConstraintFaceEdge { a: FaceId, b: EdgeId, l: Measured },
+    ConstraintFaceEdge {
+        a: FaceId,
+        b: EdgeId,
+        l: Measured,
+    },
     /// Cosine between two edge directions: 0 orthogonal, ±1 parallel.
-    ConstraintEdgeEdge { a: EdgeId, b: EdgeId, l: Measured },
+    ConstraintEdgeEdge {
+        a: EdgeId,
+        b: EdgeId,
+        l: Measured,
+    },
     /// Sketch prior Δd = d'_upper − d'_lower of two planes on one normal object (spec §4.6), where
     /// d' = sign·d is a plane's offset along the normal object's own direction (so planes stored with
     /// opposite signs compare correctly); the sort order makes the value ≥ 0.
-    RelativeDistancePlanePlane { lower: PlaneId, upper: PlaneId, l: Measured },
+    RelativeDistancePlanePlane {
+        lower: PlaneId,
+        upper: PlaneId,
+        l: Measured,
+    },
     /// Sketch prior ⟨n_a, n_b⟩ of two normals (spec §4.6).
-    RelativeAngleNormalNormal { a: NormalId, b: NormalId, l: Measured },
+    RelativeAngleNormalNormal {
+        a: NormalId,
+        b: NormalId,
+        l: Measured,
+    },
     /// ‖n‖ = 1: a pseudo-observation with σ, or a restriction when `sigma` is `None` (T 3.5/3.6).
-    NormNV { normal: NormalId, sigma: Option<f64> },
+    NormNV {
+        normal: NormalId,
+        sigma: Option<f64>,
+    },
     /// ‖q‖ = 1 of a set-up: always a restriction (T 3.14).
-    NormQ { setup: SetupId },
+    NormQ {
+        setup: SetupId,
+    },
     /// Restriction x = value (hard datum, or the zero parameter of a swap pair).
-    ParameterFix { unknown: Unknown, value: f64 },
+    ParameterFix {
+        unknown: Unknown,
+        value: f64,
+    },
     /// Identity observation x0 + v = x (soft datum), weakly weighted.
-    ParameterObs { unknown: Unknown, l: Measured },
+    ParameterObs {
+        unknown: Unknown,
+        l: Measured,
+    },
 }
 
 impl ObsKind {
@@ -163,10 +236,7 @@ impl ObsKind {
 
     /// True for restrictions g(x) = 0 (no observation, no σ).
     pub fn is_restriction(&self) -> bool {
-        matches!(
-            self,
-            ObsKind::NormQ { .. } | ObsKind::ParameterFix { .. } | ObsKind::NormNV { sigma: None, .. }
-        )
+        matches!(self, ObsKind::NormQ { .. } | ObsKind::ParameterFix { .. } | ObsKind::NormNV { sigma: None, .. })
     }
 
     /// The stochastic observations of this equation (value, σ): one for most classes, three for

@@ -67,11 +67,8 @@ impl Incidence {
 
     /// Distinct planes of the faces around a node, sorted by id.
     pub fn node_planes(&self, m: &Popa3d, n: NodeId) -> Vec<PlaneId> {
-        let mut out: Vec<PlaneId> = self
-            .node_faces(m, n)
-            .into_iter()
-            .filter_map(|f| m.faces.get(f.idx()).map(|f| f.plane))
-            .collect();
+        let mut out: Vec<PlaneId> =
+            self.node_faces(m, n).into_iter().filter_map(|f| m.faces.get(f.idx()).map(|f| f.plane)).collect();
         out.sort();
         out.dedup();
         out
@@ -163,10 +160,7 @@ impl Popa3d {
             })
             .collect();
         // Stable: the largest area first, ties keep chaining order.
-        let imax = loops
-            .iter()
-            .enumerate()
-            .fold(0, |b, (i, l)| if l.0 > loops[b].0 { i } else { b });
+        let imax = loops.iter().enumerate().fold(0, |b, (i, l)| if l.0 > loops[b].0 { i } else { b });
         if !loops.is_empty() {
             let outer = loops.remove(imax);
             loops.insert(0, outer);

@@ -175,7 +175,9 @@ pub fn topology_axioms(m: &Popa3d, inc: &Incidence) -> Vec<Violation> {
         }
         match inc.face_cycles(m, FaceId::from(f)) {
             Some(c) => inner_rings += c.len().saturating_sub(1),
-            None => out.push(v("TA07", format!("face {f}"), "its half-edges do not form simple closed cycles (TA07/TA08)")),
+            None => {
+                out.push(v("TA07", format!("face {f}"), "its half-edges do not form simple closed cycles (TA07/TA08)"))
+            }
         }
     }
     for (s, solid) in m.solids.iter().enumerate() {
@@ -199,7 +201,10 @@ pub fn topology_axioms(m: &Popa3d, inc: &Incidence) -> Vec<Violation> {
                 out.push(v(
                     "TA10",
                     "model",
-                    format!("Mäntylä: v − e + f = {} but 2(s − h) + r with s = {shells}, r = {r} admits no genus h ≥ 0", vv - e + f),
+                    format!(
+                        "Mäntylä: v − e + f = {} but 2(s − h) + r with s = {shells}, r = {r} admits no genus h ≥ 0",
+                        vv - e + f
+                    ),
                 ));
             }
         } else {
@@ -278,18 +283,26 @@ pub fn adjustment_axioms(m: &Popa3d, inc: &Incidence) -> Vec<Violation> {
         for r in observation_refs(&o.kind) {
             if let Ref::Edge(e) = r {
                 if m.edge_planes(inc, e).is_err() {
-                    out.push(v("AA01", format!("{} {i}", o.kind.class_name()), format!("{e} is not built from two non-parallel planes")));
+                    out.push(v(
+                        "AA01",
+                        format!("{} {i}", o.kind.class_name()),
+                        format!("{e} is not built from two non-parallel planes"),
+                    ));
                 }
             }
         }
     }
     let u = m.planes.len() + m.parameters.len() + 3 * m.fixed_points.len() + 4 * m.setups.len();
-    let eq: usize = m.observations.iter().map(|o| match o.kind {
-        ObsKind::PointOnFace { .. } => 1,
-        ObsKind::PointOnEdge { .. } => 2,
-        ObsKind::PointOnNode { .. } => 3,
-        _ => 1,
-    }).sum();
+    let eq: usize = m
+        .observations
+        .iter()
+        .map(|o| match o.kind {
+            ObsKind::PointOnFace { .. } => 1,
+            ObsKind::PointOnEdge { .. } => 2,
+            ObsKind::PointOnNode { .. } => 3,
+            _ => 1,
+        })
+        .sum();
     if u > 0 && eq < u {
         out.push(v(
             "AA02",

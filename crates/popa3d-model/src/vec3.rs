@@ -63,7 +63,9 @@ mod tests {
     #[test]
     fn newell_is_twice_the_area_along_the_normal() {
         let (u, v) = ([0.6, 0.0, 0.8], [0.0, 1.0, 0.0]);
-        let at = |s: f64, t: f64| [500_000.0 + s * u[0] + t * v[0], 5_400_000.0 + s * u[1] + t * v[1], 100.0 + s * u[2] + t * v[2]];
+        let at = |s: f64, t: f64| {
+            [500_000.0 + s * u[0] + t * v[0], 5_400_000.0 + s * u[1] + t * v[1], 100.0 + s * u[2] + t * v[2]]
+        };
         let ring = [at(0.0, 0.0), at(2.0, 0.0), at(2.0, 3.0), at(0.0, 3.0)];
         let normal = [-0.8, 0.0, 0.6]; // u × v
         for origin in [[0.0; 3], ring[0], [500_001.0, 5_400_001.0, 101.0]] {

@@ -24,7 +24,9 @@ pub struct CrsError(pub String);
 impl Crs {
     /// Parses `def` like `gdalsrsinfo`; the error names the string.
     pub fn parse(def: &str) -> Result<Crs, CrsError> {
-        let refuse = || CrsError(format!("'{def}' is not a coordinate reference system GDAL knows (try EPSG:code, WKT or a PROJ string; `gdalsrsinfo '{def}'` says the same)"));
+        let refuse = || {
+            CrsError(format!("'{def}' is not a coordinate reference system GDAL knows (try EPSG:code, WKT or a PROJ string; `gdalsrsinfo '{def}'` says the same)"))
+        };
         if def.trim().is_empty() {
             return Err(refuse());
         }
@@ -36,7 +38,11 @@ impl Crs {
     /// The CRS stored in a file (WKT), e.g. a LAS header's.
     pub fn from_wkt(wkt: &str) -> Result<Crs, CrsError> {
         let srs = SpatialRef::from_wkt(wkt).map_err(|e| CrsError(format!("the file's CRS is not readable: {e}")))?;
-        Ok(Crs { given: srs.name().unwrap_or_else(|| "the file's CRS".into()), wkt: wkt.to_string(), geographic: srs.is_geographic() })
+        Ok(Crs {
+            given: srs.name().unwrap_or_else(|| "the file's CRS".into()),
+            wkt: wkt.to_string(),
+            geographic: srs.is_geographic(),
+        })
     }
 
     fn spatial_ref(&self) -> Result<SpatialRef, CrsError> {
@@ -58,7 +64,10 @@ pub fn reproject(points: &mut [[f64; 3]], from: &Crs, to: &Crs) -> Result<(), Cr
         let mut y: Vec<f64> = chunk.iter().map(|p| p[1]).collect();
         let mut z = vec![0.0; chunk.len()];
         t.transform_coords(&mut x, &mut y, &mut z).map_err(|e| {
-            CrsError(format!("cannot transform ({}, {}) from {} to {}: {e}", chunk[0][0], chunk[0][1], from.given, to.given))
+            CrsError(format!(
+                "cannot transform ({}, {}) from {} to {}: {e}",
+                chunk[0][0], chunk[0][1], from.given, to.given
+            ))
         })?;
         for (i, p) in chunk.iter_mut().enumerate() {
             if !(x[i].is_finite() && y[i].is_finite()) {

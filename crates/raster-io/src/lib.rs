@@ -39,6 +39,9 @@ pub mod raster;
 pub mod units;
 
 pub use error::{PointsError, RasterError};
-pub use gdal_io::{bands, check_write, read_raster, read_raster_band, read_raster_band_typed, read_raster_window_typed, read_terrain_rgb, read_uncertainty, write_raster, BandInfo, RasterFormat, SampleType, WriteOptions};
+pub use gdal_io::{
+    bands, check_write, read_raster, read_raster_band, read_raster_band_typed, read_raster_window_typed,
+    read_terrain_rgb, read_uncertainty, write_raster, BandInfo, RasterFormat, SampleType, WriteOptions,
+};
 pub use points::{read_las, read_points, read_xyz, PointCloud, PointFormat};
 pub use raster::{GeoTransform, MissingCorners, Raster};

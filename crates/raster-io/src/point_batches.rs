@@ -37,7 +37,10 @@ pub use point_io::BATCH_POINTS;
 /// The points of one file, batch by batch (see the module docs).
 pub enum PointBatches {
     /// LAS/LAZ with its CRS as WKT (WKT VLR or GeoTIFF keys).
-    Las { points: Box<LasBatches>, crs: Option<String> },
+    Las {
+        points: Box<LasBatches>,
+        crs: Option<String>,
+    },
     Xyz(XyzBatches<std::io::BufReader<std::fs::File>>),
 }
 
@@ -54,9 +57,13 @@ impl PointBatches {
             }
             PointFormat::Xyz => {
                 if class.is_some() {
-                    return Err(PointsError::Io { name, message: "a class filter needs a LAS/LAZ file; XYZ text has no classes".into() });
+                    return Err(PointsError::Io {
+                        name,
+                        message: "a class filter needs a LAS/LAZ file; XYZ text has no classes".into(),
+                    });
                 }
-                let f = std::fs::File::open(path).map_err(|e| PointsError::Io { name: name.clone(), message: e.to_string() })?;
+                let f = std::fs::File::open(path)
+                    .map_err(|e| PointsError::Io { name: name.clone(), message: e.to_string() })?;
                 Ok(PointBatches::Xyz(XyzBatches::new(std::io::BufReader::new(f), &name)))
             }
         }

@@ -47,7 +47,11 @@ pub fn read_xyz<R: BufRead>(reader: R, name: &str) -> Result<PointCloud, PointsE
 }
 
 /// The points of `batches` in one cloud, within the point budget.
-fn collect(batches: impl Iterator<Item = Result<Vec<[f64; 3]>, PointsError>>, name: &str, crs: Option<String>) -> Result<PointCloud, PointsError> {
+fn collect(
+    batches: impl Iterator<Item = Result<Vec<[f64; 3]>, PointsError>>,
+    name: &str,
+    crs: Option<String>,
+) -> Result<PointCloud, PointsError> {
     let budget = PointBudget::for_cost(READ_BYTES_PER_POINT);
     let mut points = Vec::new();
     for batch in batches {
@@ -105,6 +109,9 @@ mod tests {
     fn the_budget_refuses_the_point_after_the_last_allowed() {
         let budget = PointBudget { max_points: 2, source: crate::limits::BudgetSource::Fallback };
         assert!(check_budget(1, &budget, "t").is_ok());
-        assert_eq!(check_budget(2, &budget, "t").unwrap_err().to_string(), format!("t: more than {}", budget.describe()));
+        assert_eq!(
+            check_budget(2, &budget, "t").unwrap_err().to_string(),
+            format!("t: more than {}", budget.describe())
+        );
     }
 }

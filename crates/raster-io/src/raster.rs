@@ -95,7 +95,8 @@ impl Raster {
             )));
         }
         check_geotransform(&geotransform)?;
-        let mut r = Raster { width, height, geotransform, crs, data, nodata: None, metadata: BTreeMap::new(), z_unit: None };
+        let mut r =
+            Raster { width, height, geotransform, crs, data, nodata: None, metadata: BTreeMap::new(), z_unit: None };
         for v in r.data.iter_mut() {
             if !v.is_finite() {
                 *v = f64::NAN;
@@ -283,10 +284,20 @@ impl Raster {
         }
         let n = self.width * self.height;
         if self.data.len() != n {
-            return Err(RasterError::Invalid(format!("raster {}×{} holds {} values", self.width, self.height, self.data.len())));
+            return Err(RasterError::Invalid(format!(
+                "raster {}×{} holds {} values",
+                self.width,
+                self.height,
+                self.data.len()
+            )));
         }
         if let Some(i) = self.data.iter().position(|d| d.is_infinite()) {
-            return Err(RasterError::Invalid(format!("cell ({}, {}) holds {} (no data is NaN)", i % self.width, i / self.width, self.data[i])));
+            return Err(RasterError::Invalid(format!(
+                "cell ({}, {}) holds {} (no data is NaN)",
+                i % self.width,
+                i / self.width,
+                self.data[i]
+            )));
         }
         check_geotransform(&self.geotransform)
     }

@@ -47,8 +47,8 @@ pub fn parse_length_unit(s: &str) -> Option<LengthUnit> {
         "ft" | "foot" | "feet" | "international foot" | "international feet" | "foot international" | "intl ft" => {
             unit("ft", 0.3048)
         }
-        "us ft" | "ftus" | "us survey foot" | "us survey feet" | "survey foot" | "survey feet" | "foot us" | "us foot"
-        | "us feet" | "foot us survey" => unit("us-ft", 1200.0 / 3937.0),
+        "us ft" | "ftus" | "us survey foot" | "us survey feet" | "survey foot" | "survey feet" | "foot us"
+        | "us foot" | "us feet" | "foot us survey" => unit("us-ft", 1200.0 / 3937.0),
         "fathom" | "fathoms" => unit("fathom", 1.8288),
         _ => None,
     }
@@ -91,7 +91,10 @@ pub fn horizontal_unit(wkt: Option<&str>) -> Horizontal {
     if srs.is_geographic() {
         return Horizontal::Degrees;
     }
-    Horizontal::Linear { name: srs.linear_units_name().unwrap_or_else(|| "unnamed unit".into()), metres: srs.linear_units() }
+    Horizontal::Linear {
+        name: srs.linear_units_name().unwrap_or_else(|| "unnamed unit".into()),
+        metres: srs.linear_units(),
+    }
 }
 
 /// The unit of the vertical part of a compound CRS (`None` when it has none).
@@ -104,7 +107,11 @@ fn vertical_unit_name(wkt: &str) -> Option<(String, f64)> {
     let mut name: *mut std::os::raw::c_char = std::ptr::null_mut();
     // SAFETY: `srs` is a live handle; GDAL returns a pointer to a string it owns (not freed here).
     let metres = unsafe { gdal_sys::OSRGetTargetLinearUnits(srs.to_c_hsrs(), key.as_ptr(), &mut name) };
-    let name = if name.is_null() { String::new() } else { unsafe { std::ffi::CStr::from_ptr(name) }.to_string_lossy().into_owned() };
+    let name = if name.is_null() {
+        String::new()
+    } else {
+        unsafe { std::ffi::CStr::from_ptr(name) }.to_string_lossy().into_owned()
+    };
     (metres > 0.0).then_some((name, metres))
 }
 
@@ -113,9 +120,14 @@ fn vertical_unit_name(wkt: &str) -> Option<(String, f64)> {
 /// then taken as they are, in metres as ever). Refused, with a one-line reason naming the string
 /// and `--z-unit`: a unit string geofit does not know, and a CRS whose x/y are in feet (or any
 /// unit but the metre) when the band says nothing: its heights may be in either.
-pub fn resolve_z_unit(band_unit: Option<&str>, crs_wkt: Option<&str>, given: Option<&str>) -> Result<Option<ZUnit>, String> {
+pub fn resolve_z_unit(
+    band_unit: Option<&str>,
+    crs_wkt: Option<&str>,
+    given: Option<&str>,
+) -> Result<Option<ZUnit>, String> {
     if let Some(g) = given {
-        let unit = parse_length_unit(g).ok_or_else(|| format!("--z-unit '{g}' is not a unit geofit knows ({KNOWN_UNITS})"))?;
+        let unit =
+            parse_length_unit(g).ok_or_else(|| format!("--z-unit '{g}' is not a unit geofit knows ({KNOWN_UNITS})"))?;
         return Ok(Some(ZUnit { unit, source: ZUnitSource::Given }));
     }
     if let Some(b) = band_unit.map(str::trim).filter(|b| !b.is_empty()) {
@@ -164,10 +176,18 @@ fn known_by_size(metres: f64) -> Option<LengthUnit> {
 /// assert!((ft - 32.808333).abs() < 1e-5);
 /// assert_eq!(length_in_crs_units("--cell", 2.0, None, None).unwrap(), 2.0);
 /// ```
-pub fn length_in_crs_units(option: &str, length: f64, unit: Option<&str>, crs_wkt: Option<&str>) -> Result<f64, String> {
+pub fn length_in_crs_units(
+    option: &str,
+    length: f64,
+    unit: Option<&str>,
+    crs_wkt: Option<&str>,
+) -> Result<f64, String> {
     let given = match unit {
         None | Some("crs") => None,
-        Some(u) => Some(parse_length_unit(u).ok_or_else(|| format!("{option}-unit {u}: not a unit geofit knows ({KNOWN_UNITS}, or crs)"))?),
+        Some(u) => Some(
+            parse_length_unit(u)
+                .ok_or_else(|| format!("{option}-unit {u}: not a unit geofit knows ({KNOWN_UNITS}, or crs)"))?,
+        ),
     };
     match (horizontal_unit(crs_wkt), given) {
         (Horizontal::Linear { metres, .. }, Some(u)) => Ok(length * u.metres / metres),
@@ -176,7 +196,9 @@ pub fn length_in_crs_units(option: &str, length: f64, unit: Option<&str>, crs_wk
              {option}-unit crs ({length} {name}) or {option}-unit m ({:.6} {name})",
             length / metres
         )),
-        (_, Some(u)) if (u.metres - 1.0).abs() > 1e-12 => Err(format!("{option}-unit {}: the grid's CRS is not in a linear unit to convert into", u.name)),
+        (_, Some(u)) if (u.metres - 1.0).abs() > 1e-12 => {
+            Err(format!("{option}-unit {}: the grid's CRS is not in a linear unit to convert into", u.name))
+        }
         _ => Ok(length),
     }
 }

@@ -160,7 +160,8 @@ mod tests {
     fn text_sets_the_glyph_pixels_and_nothing_outside_its_box() {
         let mut c = Canvas::filled(30, 12, WHITE);
         c.text(1, 1, "A", BLACK, 1);
-        let black: Vec<(usize, usize)> = (0..12).flat_map(|y| (0..30).map(move |x| (x, y))).filter(|&(x, y)| c.get(x, y) == BLACK).collect();
+        let black: Vec<(usize, usize)> =
+            (0..12).flat_map(|y| (0..30).map(move |x| (x, y))).filter(|&(x, y)| c.get(x, y) == BLACK).collect();
         assert!(black.len() > 10);
         assert!(black.iter().all(|&(x, y)| (1..9).contains(&x) && (1..9).contains(&y)));
     }

@@ -76,7 +76,13 @@ pub fn bar_chart(chart: &BarChart) -> Canvas {
     c.fill_rect(x0, y0, 1, PLOT_H + 1, BLACK);
     c.fill_rect(x0, y0 + PLOT_H, plot_w, 1, BLACK);
     let xl = &chart.x_label;
-    c.text(x0 + plot_w.saturating_sub(Canvas::text_width(xl, 1)) / 2, y0 + PLOT_H + 4 + Canvas::line_height(1) + 4, xl, BLACK, 1);
+    c.text(
+        x0 + plot_w.saturating_sub(Canvas::text_width(xl, 1)) / 2,
+        y0 + PLOT_H + 4 + Canvas::line_height(1) + 4,
+        xl,
+        BLACK,
+        1,
+    );
     c
 }
 
@@ -94,7 +100,11 @@ fn nice_axis(max: f64) -> (f64, f64) {
 fn format_tick(v: f64) -> String {
     let s = format!("{:.2}", v);
     let s = s.trim_end_matches('0').trim_end_matches('.');
-    if s == "-0" { "0".into() } else { s.to_string() }
+    if s == "-0" {
+        "0".into()
+    } else {
+        s.to_string()
+    }
 }
 
 #[cfg(test)]
@@ -112,7 +122,12 @@ mod tests {
     #[test]
     fn bar_heights_are_proportional_to_values() {
         let bar = |v: f64, c: Rgba| Bar { label: "x".into(), value: v, colour: c };
-        let chart = BarChart { title: "t".into(), x_label: "x".into(), y_label: "%".into(), bars: vec![bar(50.0, [255, 0, 0, 255]), bar(25.0, [0, 0, 255, 255])] };
+        let chart = BarChart {
+            title: "t".into(),
+            x_label: "x".into(),
+            y_label: "%".into(),
+            bars: vec![bar(50.0, [255, 0, 0, 255]), bar(25.0, [0, 0, 255, 255])],
+        };
         let c = bar_chart(&chart);
         let count = |col: Rgba| c.pixels().chunks(4).filter(|p| *p == col).count();
         let (red, blue) = (count([255, 0, 0, 255]), count([0, 0, 255, 255]));

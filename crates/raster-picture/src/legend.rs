@@ -56,9 +56,11 @@ const CHECKER: [Rgba; 2] = [[235, 235, 235, 255], [210, 210, 210, 255]];
 pub fn with_legend(map: &Canvas, title: &str, legend: &Legend) -> Framed {
     let row = Canvas::line_height(1).max(SWATCH[1] + 4);
     let legend_w = legend_width(legend);
-    let legend_h = Canvas::line_height(1) + 4 + legend.entries.len() * row + legend.note.as_ref().map_or(0, |_| row + 4);
+    let legend_h =
+        Canvas::line_height(1) + 4 + legend.entries.len() * row + legend.note.as_ref().map_or(0, |_| row + 4);
     let title_h = Canvas::line_height(TITLE_SCALE) + MARGIN;
-    let width = (MARGIN + map.width() + GAP + legend_w + MARGIN).max(2 * MARGIN + Canvas::text_width(title, TITLE_SCALE));
+    let width =
+        (MARGIN + map.width() + GAP + legend_w + MARGIN).max(2 * MARGIN + Canvas::text_width(title, TITLE_SCALE));
     let height = title_h + map.height().max(legend_h) + 2 * MARGIN;
     let mut c = Canvas::filled(width, height, WHITE);
     c.text(MARGIN, MARGIN, title, BLACK, TITLE_SCALE);
@@ -109,7 +111,8 @@ mod tests {
     use super::*;
 
     fn legend(n: usize) -> Legend {
-        let entries = (0..n).map(|k| LegendEntry { colour: [k as u8 * 20, 100, 40, 255], label: format!("class {k}") }).collect();
+        let entries =
+            (0..n).map(|k| LegendEntry { colour: [k as u8 * 20, 100, 40, 255], label: format!("class {k}") }).collect();
         Legend { title: "t (m)".into(), entries, note: None }
     }
 
@@ -128,7 +131,8 @@ mod tests {
         let l = legend(6);
         let f = with_legend(&map, "T", &l);
         for e in &l.entries {
-            let found = (0..f.canvas.height()).any(|y| (f.map_x + 20..f.canvas.width()).any(|x| f.canvas.get(x, y) == e.colour));
+            let found = (0..f.canvas.height())
+                .any(|y| (f.map_x + 20..f.canvas.width()).any(|x| f.canvas.get(x, y) == e.colour));
             assert!(found, "swatch {:?}", e.colour);
         }
         // a tall legend makes the picture taller than the map

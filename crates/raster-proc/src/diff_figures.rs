@@ -29,7 +29,12 @@ use crate::diff::{class_colour, class_map_rgba, CellClass, DiffOptions, DiffRepo
 pub fn error_map(report: &DiffReport, classes: &[CellClass], opts: &DiffOptions, unit: &str, title: &str) -> Framed {
     let n = opts.class_bounds.len() + 1;
     let map = Canvas::from_rgba(report.width, report.height, class_map_rgba(classes, n));
-    let mut entries: Vec<LegendEntry> = report.histogram.iter().enumerate().map(|(k, c)| LegendEntry { colour: class_colour(k, n), label: class_label(c) }).collect();
+    let mut entries: Vec<LegendEntry> = report
+        .histogram
+        .iter()
+        .enumerate()
+        .map(|(k, c)| LegendEntry { colour: class_colour(k, n), label: class_label(c) })
+        .collect();
     entries.push(LegendEntry { colour: ONE_RASTER_ONLY, label: "value in one raster only".into() });
     entries.push(LegendEntry { colour: [0, 0, 0, 0], label: "no value".into() });
     let note = report.max_at.map(|[c, r]| format!("max {:.4} {unit} at col {c} row {r}", report.max_abs));
@@ -39,7 +44,12 @@ pub fn error_map(report: &DiffReport, classes: &[CellClass], opts: &DiffOptions,
 /// The class histogram: one bar per class, in the map's colours, as % of the compared cells.
 pub fn histogram_chart(report: &DiffReport, unit: &str) -> BarChart {
     let n = report.histogram.len();
-    let bars = report.histogram.iter().enumerate().map(|(k, c)| Bar { label: class_label(c), value: 100.0 * c.share, colour: class_colour(k, n) }).collect();
+    let bars = report
+        .histogram
+        .iter()
+        .enumerate()
+        .map(|(k, c)| Bar { label: class_label(c), value: 100.0 * c.share, colour: class_colour(k, n) })
+        .collect();
     BarChart {
         title: format!("|dz| classes of {} cells", report.cells_compared),
         x_label: format!("|dz| class ({unit})"),

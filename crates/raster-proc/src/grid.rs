@@ -43,7 +43,10 @@ impl GridSpec {
     pub fn check_budget(&self) -> Result<(), ProcError> {
         let mut budget = raster_io::limits::CellBudget::for_cost(GRID_BYTES_PER_CELL);
         if budget.max_cells > MAX_CELLS as u64 {
-            budget = raster_io::limits::CellBudget { max_cells: MAX_CELLS as u64, source: raster_io::limits::BudgetSource::Fallback };
+            budget = raster_io::limits::CellBudget {
+                max_cells: MAX_CELLS as u64,
+                source: raster_io::limits::BudgetSource::Fallback,
+            };
         }
         if budget.allows(self.width, self.height) {
             return Ok(());
@@ -69,7 +72,9 @@ impl GridSpec {
     pub fn from_edges(xmin: f64, ymin: f64, xmax: f64, ymax: f64, cell: f64) -> Result<GridSpec, ProcError> {
         check_cell(cell)?;
         if !(xmax > xmin && ymax > ymin) {
-            return Err(ProcError::Input(format!("bounds {xmin} {ymin} {xmax} {ymax}: need xmin < xmax and ymin < ymax")));
+            return Err(ProcError::Input(format!(
+                "bounds {xmin} {ymin} {xmax} {ymax}: need xmin < xmax and ymin < ymax"
+            )));
         }
         let w = (xmax - xmin) / cell;
         let h = (ymax - ymin) / cell;
@@ -144,7 +149,13 @@ impl GridSpec {
     /// assert_eq!(grid.cell_in_metres_on_degrees(bounds, 7000, None, 25.0), Some(Degrees::Guessed));
     /// assert_eq!(grid.cell_in_metres_on_degrees(bounds, 7000, Some(false), 25.0), None);
     /// ```
-    pub fn cell_in_metres_on_degrees(&self, bounds: (f64, f64, f64, f64), points: usize, geographic: Option<bool>, cell: f64) -> Option<Degrees> {
+    pub fn cell_in_metres_on_degrees(
+        &self,
+        bounds: (f64, f64, f64, f64),
+        points: usize,
+        geographic: Option<bool>,
+        cell: f64,
+    ) -> Option<Degrees> {
         let (x0, y0, x1, y1) = bounds;
         let degrees = geographic.unwrap_or(x0 >= -180.0 && x1 <= 360.0 && y0 >= -90.0 && y1 <= 90.0);
         let (w, h) = (self.width as f64, self.height as f64);
@@ -163,10 +174,21 @@ impl Degrees {
     /// and the fix, with the UTM zone of the points' centre as `--t-srs` (and `--s-srs
     /// EPSG:4326` where no CRS was declared).
     #[allow(clippy::too_many_arguments)]
-    pub fn refusal(self, input: &str, cell: f64, bounds: (f64, f64, f64, f64), grid: &GridSpec, points: usize, crs_declared: bool, lonlat_header: bool) -> String {
+    pub fn refusal(
+        self,
+        input: &str,
+        cell: f64,
+        bounds: (f64, f64, f64, f64),
+        grid: &GridSpec,
+        points: usize,
+        crs_declared: bool,
+        lonlat_header: bool,
+    ) -> String {
         let (x0, y0, x1, y1) = bounds;
         let what = match self {
-            Degrees::Declared if !crs_declared && lonlat_header => "the header names longitude/latitude columns (degrees)",
+            Degrees::Declared if !crs_declared && lonlat_header => {
+                "the header names longitude/latitude columns (degrees)"
+            }
             Degrees::Declared => "the points are in a geographic CRS (degrees)",
             Degrees::Guessed => "the points declare no CRS and lie within longitude/latitude bounds",
         };
@@ -196,7 +218,11 @@ impl Degrees {
 pub fn utm_epsg(lon: f64, lat: f64) -> u32 {
     let lon = if lon >= 180.0 { lon - 360.0 } else { lon };
     let zone = (((lon + 180.0) / 6.0).floor() as i64).clamp(0, 59) as u32 + 1;
-    if lat >= 0.0 { 32600 + zone } else { 32700 + zone }
+    if lat >= 0.0 {
+        32600 + zone
+    } else {
+        32700 + zone
+    }
 }
 
 #[cfg(test)]
@@ -222,7 +248,11 @@ mod tests {
         assert_eq!(g.cell_in_metres_on_degrees(bounds, 100, Some(true), 0.5), Some(Degrees::Declared));
         assert_eq!(g.cell_in_metres_on_degrees(bounds, 100, None, 0.5), None, "a guess needs a cell of 1 or more");
         let m = Degrees::Declared.refusal("s.csv", 0.5, bounds, &g, 100, false, true);
-        assert!(m.contains("header names longitude/latitude") && m.contains("--s-srs EPSG:4326 --t-srs EPSG:32632 (UTM zone 32N"), "{m}");
+        assert!(
+            m.contains("header names longitude/latitude")
+                && m.contains("--s-srs EPSG:4326 --t-srs EPSG:32632 (UTM zone 32N"),
+            "{m}"
+        );
     }
 
     #[test]

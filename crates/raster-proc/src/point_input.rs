@@ -42,11 +42,18 @@ impl TextFacts {
 
 /// Opens a point file by extension: LAS/LAZ (with the class filter; `sep`/`decimal` are for
 /// text only and refused here), or XYZ text read with `sep` and `decimal` where given.
-pub fn open_file(path: &Path, class: Option<u8>, sep: Option<&str>, decimal: Option<&str>) -> Result<PointBatches, PointsError> {
+pub fn open_file(
+    path: &Path,
+    class: Option<u8>,
+    sep: Option<&str>,
+    decimal: Option<&str>,
+) -> Result<PointBatches, PointsError> {
     let name = path.display().to_string();
     let io = |message: String| PointsError::Io { name: name.clone(), message };
     match PointFormat::from_path(path) {
-        PointFormat::Las if sep.is_some() || decimal.is_some() => Err(io("a field separator or decimal mark is for XYZ/CSV text, not LAS/LAZ".into())),
+        PointFormat::Las if sep.is_some() || decimal.is_some() => {
+            Err(io("a field separator or decimal mark is for XYZ/CSV text, not LAS/LAZ".into()))
+        }
         PointFormat::Xyz if class.is_none() => {
             let f = std::fs::File::open(path).map_err(|e| io(e.to_string()))?;
             Ok(PointBatches::Xyz(XyzBatches::with_format(std::io::BufReader::new(f), &name, sep, decimal).map_err(io)?))
@@ -57,13 +64,20 @@ pub fn open_file(path: &Path, class: Option<u8>, sep: Option<&str>, decimal: Opt
 
 /// Every point of `batches` in one cloud, within the point budget (`GEOFIT_MAX_POINTS` or the
 /// available memory).
-pub fn collect(batches: &mut dyn Iterator<Item = Result<Vec<[f64; 3]>, PointsError>>, name: &str, crs: Option<String>) -> Result<PointCloud, PointsError> {
+pub fn collect(
+    batches: &mut dyn Iterator<Item = Result<Vec<[f64; 3]>, PointsError>>,
+    name: &str,
+    crs: Option<String>,
+) -> Result<PointCloud, PointsError> {
     let budget = PointBudget::for_cost(READ_BYTES_PER_POINT);
     let mut points = Vec::new();
     for batch in batches {
         let batch = batch?;
         if (points.len() + batch.len()) as u64 > budget.max_points {
-            return Err(PointsError::TooLarge { name: name.into(), message: format!("more than {}", budget.describe()) });
+            return Err(PointsError::TooLarge {
+                name: name.into(),
+                message: format!("more than {}", budget.describe()),
+            });
         }
         points.extend(batch);
     }
@@ -71,7 +85,12 @@ pub fn collect(batches: &mut dyn Iterator<Item = Result<Vec<[f64; 3]>, PointsErr
 }
 
 /// A point file read whole (TIN needs every point), with its text facts.
-pub fn read_file(path: &Path, class: Option<u8>, sep: Option<&str>, decimal: Option<&str>) -> Result<(PointCloud, TextFacts), PointsError> {
+pub fn read_file(
+    path: &Path,
+    class: Option<u8>,
+    sep: Option<&str>,
+    decimal: Option<&str>,
+) -> Result<(PointCloud, TextFacts), PointsError> {
     let mut batches = open_file(path, class, sep, decimal)?;
     let crs = batches.crs().map(str::to_string);
     let cloud = collect(&mut batches, &path.display().to_string(), crs)?;
@@ -79,8 +98,14 @@ pub fn read_file(path: &Path, class: Option<u8>, sep: Option<&str>, decimal: Opt
 }
 
 /// XYZ text from a reader (stdin) read whole, with its text facts.
-pub fn read_text<R: BufRead>(reader: R, name: &str, sep: Option<&str>, decimal: Option<&str>) -> Result<(PointCloud, TextFacts), PointsError> {
-    let mut batches = XyzBatches::with_format(reader, name, sep, decimal).map_err(|message| PointsError::Io { name: name.into(), message })?;
+pub fn read_text<R: BufRead>(
+    reader: R,
+    name: &str,
+    sep: Option<&str>,
+    decimal: Option<&str>,
+) -> Result<(PointCloud, TextFacts), PointsError> {
+    let mut batches = XyzBatches::with_format(reader, name, sep, decimal)
+        .map_err(|message| PointsError::Io { name: name.into(), message })?;
     let cloud = collect(&mut batches, name, None)?;
     let facts = TextFacts { read_as: batches.describe(), geographic: batches.geographic_columns() };
     Ok((cloud, facts))

@@ -138,7 +138,12 @@ impl SplatAccumulator {
 
 /// Rasterizes scattered points onto `grid` by splatting (points arriving in batches:
 /// [`SplatAccumulator::add_points`], docs/decisions.md#streaming-points).
-pub fn splat_points(cloud: &PointCloud, grid: &GridSpec, kernel: SplatKernel, crs: Option<String>) -> Result<Raster, ProcError> {
+pub fn splat_points(
+    cloud: &PointCloud,
+    grid: &GridSpec,
+    kernel: SplatKernel,
+    crs: Option<String>,
+) -> Result<Raster, ProcError> {
     if cloud.points.is_empty() {
         return Err(ProcError::Input("no points to rasterize".into()));
     }

@@ -53,7 +53,12 @@ pub const TIN_BYTES_PER_POINT: u64 = 220;
 /// Rasterizes `cloud` onto `grid` by linear interpolation in its Delaunay triangulation; refuses
 /// clouds whose triangulation would not fit the point budget (`GEOFIT_MAX_POINTS`, else the
 /// available memory over [`TIN_BYTES_PER_POINT`]).
-pub fn tin_points(cloud: &PointCloud, grid: &GridSpec, opts: &TinOptions, crs: Option<String>) -> Result<(Raster, TinStats), ProcError> {
+pub fn tin_points(
+    cloud: &PointCloud,
+    grid: &GridSpec,
+    opts: &TinOptions,
+    crs: Option<String>,
+) -> Result<(Raster, TinStats), ProcError> {
     tin_points_within(cloud, grid, opts, crs, PointBudget::for_cost(TIN_BYTES_PER_POINT))
 }
 

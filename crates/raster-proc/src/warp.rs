@@ -229,7 +229,12 @@ impl WarpField {
             (0.0, [0.5 * (e.0 + e.2), 0.5 * (e.1 + e.3)])
         };
         // Grid of landmarks in the rotated frame over the rotated footprint, one spacing margin.
-        let corners = [(-0.5, -0.5), (r.width as f64 - 0.5, -0.5), (-0.5, r.height as f64 - 0.5), (r.width as f64 - 0.5, r.height as f64 - 0.5)];
+        let corners = [
+            (-0.5, -0.5),
+            (r.width as f64 - 0.5, -0.5),
+            (-0.5, r.height as f64 - 0.5),
+            (r.width as f64 - 0.5, r.height as f64 - 0.5),
+        ];
         let (mut u0, mut v0, mut u1, mut v1) = (f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY);
         for (px, py) in corners {
             let (x, y) = r.pixel_to_world(px, py);
@@ -244,7 +249,9 @@ impl WarpField {
         let nu = ((u1 + spacing - u0) / spacing).ceil() as usize + 1;
         let nv = ((v1 + spacing - v0) / spacing).ceil() as usize + 1;
         if nu.saturating_mul(nv) > 4_000_000 {
-            return Err(ProcError::Input(format!("{nu} × {nv} landmarks: spacing {spacing} is too small for this raster")));
+            return Err(ProcError::Input(format!(
+                "{nu} × {nv} landmarks: spacing {spacing} is too small for this raster"
+            )));
         }
         let (uend, vend) = (u0 + (nu - 1) as f64 * spacing, v0 + (nv - 1) as f64 * spacing);
         let mut rotated = Vec::with_capacity(nu * nv); // index = j * nu + i
@@ -256,7 +263,11 @@ impl WarpField {
                 let p = rot(-rotation, centre, q);
                 let (px, py) = r.world_to_pixel(p[0], p[1]);
                 let (c, rr) = (px.round(), py.round());
-                let ins = c >= 0.0 && rr >= 0.0 && (c as usize) < r.width && (rr as usize) < r.height && r.get(c as usize, rr as usize).is_some();
+                let ins = c >= 0.0
+                    && rr >= 0.0
+                    && (c as usize) < r.width
+                    && (rr as usize) < r.height
+                    && r.get(c as usize, rr as usize).is_some();
                 rotated.push(q);
                 src.push(p);
                 inside.push(ins);
@@ -292,7 +303,8 @@ impl WarpField {
         };
 
         // y-warp: per-column stretch of the inside span onto the global span.
-        let ins_v: Vec<(f64, f64)> = rotated.iter().zip(&inside).filter(|(_, b)| **b).map(|(q, _)| (q[0], q[1])).collect();
+        let ins_v: Vec<(f64, f64)> =
+            rotated.iter().zip(&inside).filter(|(_, b)| **b).map(|(q, _)| (q[0], q[1])).collect();
         let (gmin, gmax, gmean) = if ins_v.is_empty() {
             (0.0, 0.0, 0.0)
         } else {
@@ -305,7 +317,8 @@ impl WarpField {
         let column_knots: Vec<Vec<(f64, f64)>> = (0..nu)
             .map(|i| {
                 let u = u0 + i as f64 * spacing;
-                let local: Vec<f64> = ins_v.iter().filter(|p| (p.0 - u).abs() <= half + 1e-9 * spacing).map(|p| p.1).collect();
+                let local: Vec<f64> =
+                    ins_v.iter().filter(|p| (p.0 - u).abs() <= half + 1e-9 * spacing).map(|p| p.1).collect();
                 let mut knots = vec![(v0, v0)];
                 if params.y_warp && !local.is_empty() {
                     let lmin = local.iter().cloned().fold(f64::INFINITY, f64::min);
@@ -330,9 +343,10 @@ impl WarpField {
         }
 
         // Delaunay triangulation of the landmarks (in the rotated frame: a regular grid).
-        let verts: Vec<LmVertex> = rotated.iter().enumerate().map(|(k, q)| LmVertex { p: Point2::new(q[0], q[1]), index: k as u32 }).collect();
-        let tri: DelaunayTriangulation<LmVertex> =
-            DelaunayTriangulation::bulk_load(verts).map_err(|e| ProcError::Input(format!("landmark triangulation failed: {e:?}")))?;
+        let verts: Vec<LmVertex> =
+            rotated.iter().enumerate().map(|(k, q)| LmVertex { p: Point2::new(q[0], q[1]), index: k as u32 }).collect();
+        let tri: DelaunayTriangulation<LmVertex> = DelaunayTriangulation::bulk_load(verts)
+            .map_err(|e| ProcError::Input(format!("landmark triangulation failed: {e:?}")))?;
         let mut triangles: Vec<[u32; 3]> = tri
             .inner_faces()
             .map(|f| {
@@ -412,7 +426,11 @@ impl WarpField {
 
     /// A point-location structure for forward and inverse mapping.
     pub fn mapper(&self) -> WarpMapper<'_> {
-        WarpMapper { field: self, src_index: TriIndex::new(&self.src, &self.triangles), dst_index: TriIndex::new(&self.dst, &self.triangles) }
+        WarpMapper {
+            field: self,
+            src_index: TriIndex::new(&self.src, &self.triangles),
+            dst_index: TriIndex::new(&self.dst, &self.triangles),
+        }
     }
 }
 
@@ -448,9 +466,11 @@ impl TriIndex {
         for (k, t) in tris.iter().enumerate() {
             let ps = t.map(|i| pts[i as usize]);
             let bx0 = ((ps.iter().map(|p| p[0]).fold(f64::INFINITY, f64::min) - x0) / cell).floor() as usize;
-            let bx1 = (((ps.iter().map(|p| p[0]).fold(f64::NEG_INFINITY, f64::max) - x0) / cell).floor() as usize).min(nx - 1);
+            let bx1 = (((ps.iter().map(|p| p[0]).fold(f64::NEG_INFINITY, f64::max) - x0) / cell).floor() as usize)
+                .min(nx - 1);
             let by0 = ((ps.iter().map(|p| p[1]).fold(f64::INFINITY, f64::min) - y0) / cell).floor() as usize;
-            let by1 = (((ps.iter().map(|p| p[1]).fold(f64::NEG_INFINITY, f64::max) - y0) / cell).floor() as usize).min(ny - 1);
+            let by1 = (((ps.iter().map(|p| p[1]).fold(f64::NEG_INFINITY, f64::max) - y0) / cell).floor() as usize)
+                .min(ny - 1);
             for by in by0..=by1 {
                 for bx in bx0..=bx1 {
                     buckets[by * nx + bx].push(k as u32);
@@ -569,10 +589,9 @@ pub fn warp_raster(r: &Raster, params: &WarpParams) -> Result<(Raster, WarpField
 
 /// Reads the field a warped raster carries.
 pub fn field_of(r: &Raster) -> Result<WarpField, ProcError> {
-    let s = r
-        .metadata
-        .get(WARP_METADATA_KEY)
-        .ok_or_else(|| ProcError::Field(format!("no {WARP_METADATA_KEY} metadata: not a raster written by `geofit warp`")))?;
+    let s = r.metadata.get(WARP_METADATA_KEY).ok_or_else(|| {
+        ProcError::Field(format!("no {WARP_METADATA_KEY} metadata: not a raster written by `geofit warp`"))
+    })?;
     WarpField::from_json(s)
 }
 
@@ -632,7 +651,8 @@ mod tests {
     #[test]
     fn forward_then_inverse_returns_points() {
         let r = channel(160, 120);
-        let (field, stats) = WarpField::build(&r, &WarpParams { landmark_spacing: Some(8.0), ..Default::default() }).unwrap();
+        let (field, stats) =
+            WarpField::build(&r, &WarpParams { landmark_spacing: Some(8.0), ..Default::default() }).unwrap();
         assert!((stats.rotation_deg + 30.0).abs() < 2.0, "{}", stats.rotation_deg);
         assert!(stats.landmarks_inside > 10);
         let m = field.mapper();
@@ -660,7 +680,8 @@ mod tests {
     #[test]
     fn fold_over_is_detected() {
         let r = channel(80, 60);
-        let (mut field, _) = WarpField::build(&r, &WarpParams { landmark_spacing: Some(8.0), ..Default::default() }).unwrap();
+        let (mut field, _) =
+            WarpField::build(&r, &WarpParams { landmark_spacing: Some(8.0), ..Default::default() }).unwrap();
         let t = field.triangles[field.triangles.len() / 2];
         // Push one vertex across its opposite edge.
         let (a, b, c) = (field.dst[t[0] as usize], field.dst[t[1] as usize], field.dst[t[2] as usize]);
@@ -672,7 +693,8 @@ mod tests {
     #[test]
     fn warp_fills_rectangle_and_unwarps() {
         let r = channel(160, 120);
-        let (w, field, stats) = warp_raster(&r, &WarpParams { landmark_spacing: Some(8.0), ..Default::default() }).unwrap();
+        let (w, field, stats) =
+            warp_raster(&r, &WarpParams { landmark_spacing: Some(8.0), ..Default::default() }).unwrap();
         assert_eq!(w.valid_count(), w.width * w.height);
         assert!(stats.cells_filled > 0);
         let back_field = field_of(&w).unwrap();

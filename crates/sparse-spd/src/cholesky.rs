@@ -93,7 +93,8 @@ pub fn cholesky_symbolic(start: &[usize], cols: &[u32]) -> Result<Symbolic, Chol
         return Err(CholeskyError::Symbolic("more entries than u32 indices address".into()));
     };
     let sym = SymbolicSparseColMatRef::new_checked(n, n, &col_ptr, None, &row_idx);
-    let symbolic = factorize_symbolic_cholesky(sym, Side::Lower, SymmetricOrdering::Amd, Default::default()).map_err(|e| CholeskyError::Symbolic(format!("{e:?}")))?;
+    let symbolic = factorize_symbolic_cholesky(sym, Side::Lower, SymmetricOrdering::Amd, Default::default())
+        .map_err(|e| CholeskyError::Symbolic(format!("{e:?}")))?;
     Ok(Symbolic(Cached { col_ptr, row_idx, symbolic }))
 }
 
@@ -110,17 +111,25 @@ pub fn cholesky_solve(a: &SymCsr, b: &[f64], max_factor_bytes: usize) -> Result<
     let Some((col_ptr, row_idx, vals)) = lower_csc(a) else {
         return Err(CholeskyError::Symbolic("more entries than u32 indices address".into()));
     };
-    SYMBOLIC.with(|cache| factor_and_solve(a, b, (&col_ptr, &row_idx, &vals), max_factor_bytes, &mut cache.borrow_mut()))
+    SYMBOLIC
+        .with(|cache| factor_and_solve(a, b, (&col_ptr, &row_idx, &vals), max_factor_bytes, &mut cache.borrow_mut()))
 }
 
-fn factor_and_solve(a: &SymCsr, b: &[f64], csc: (&[u32], &[u32], &[f64]), max_bytes: usize, cache: &mut Option<Cached>) -> Result<(Vec<f64>, bool), CholeskyError> {
+fn factor_and_solve(
+    a: &SymCsr,
+    b: &[f64],
+    csc: (&[u32], &[u32], &[f64]),
+    max_bytes: usize,
+    cache: &mut Option<Cached>,
+) -> Result<(Vec<f64>, bool), CholeskyError> {
     let n = a.n();
     let (col_ptr, row_idx, vals) = csc;
     let sym = SymbolicSparseColMatRef::new_checked(n, n, col_ptr, None, row_idx);
     let mat = SparseColMatRef::new(sym, vals);
     let reused = cache.as_ref().is_some_and(|c| c.col_ptr == col_ptr && c.row_idx == row_idx);
     if !reused {
-        let symbolic = factorize_symbolic_cholesky(sym, Side::Lower, SymmetricOrdering::Amd, Default::default()).map_err(|e| CholeskyError::Symbolic(format!("{e:?}")))?;
+        let symbolic = factorize_symbolic_cholesky(sym, Side::Lower, SymmetricOrdering::Amd, Default::default())
+            .map_err(|e| CholeskyError::Symbolic(format!("{e:?}")))?;
         *cache = Some(Cached { col_ptr: col_ptr.to_vec(), row_idx: row_idx.to_vec(), symbolic });
     }
     let Some(cached) = cache.as_ref() else { return Err(CholeskyError::Symbolic("no cached factorisation".into())) };
@@ -134,12 +143,23 @@ fn factor_and_solve(a: &SymCsr, b: &[f64], csc: (&[u32], &[u32], &[f64]), max_by
     // promise of the same answer on any machine excludes; measured CPU-neutral on 2 cores
     // (BENCHMARKS.md "Fit CPU on the largest mesh").
     let par = Par::Seq;
-    let scratch = StackReq::or(symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default()), symbolic.solve_in_place_scratch::<f64>(1, par));
+    let scratch = StackReq::or(
+        symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default()),
+        symbolic.solve_in_place_scratch::<f64>(1, par),
+    );
     WORKSPACE.with(|w| {
         let ws = &mut *w.borrow_mut();
         let (l, buf) = ws.get_or_insert_with(Workspace::default).fit(symbolic.len_val(), scratch);
         symbolic
-            .factorize_numeric_llt::<f64>(l, mat, Side::Lower, Default::default(), par, MemStack::new(buf), Default::default())
+            .factorize_numeric_llt::<f64>(
+                l,
+                mat,
+                Side::Lower,
+                Default::default(),
+                par,
+                MemStack::new(buf),
+                Default::default(),
+            )
             .map_err(|_| CholeskyError::NotPositiveDefinite)?;
         let llt = LltRef::<'_, u32, f64>::new(symbolic, l);
         let mut solve = |v: &mut [f64]| {
@@ -187,7 +207,9 @@ impl Workspace {
             self.factor.reserve_exact(room - self.factor.len());
         }
         self.factor.resize(len, 0.0);
-        let fits = |b: &MemBuffer| b.len() >= req.size_bytes() && (b.as_ptr() as usize).is_multiple_of(req.align_bytes().max(1));
+        let fits = |b: &MemBuffer| {
+            b.len() >= req.size_bytes() && (b.as_ptr() as usize).is_multiple_of(req.align_bytes().max(1))
+        };
         if !self.scratch.as_ref().is_some_and(fits) {
             self.scratch = None;
             self.scratch = Some(MemBuffer::new(req));

@@ -93,7 +93,11 @@ fn push_merged(acc: &[(u32, f64)], out: &mut SymCsr) {
 /// then the chunk sums in order, so identical input gives bit-identical iterates on any
 /// thread count. The chunk is part of the result's last bits, which is why callers fix it.
 pub fn det_dot(a: &[f64], b: &[f64], chunk: usize) -> f64 {
-    let parts: Vec<f64> = a.par_chunks(chunk).zip(b.par_chunks(chunk)).map(|(x, y)| x.iter().zip(y).map(|(p, q)| p * q).sum::<f64>()).collect();
+    let parts: Vec<f64> = a
+        .par_chunks(chunk)
+        .zip(b.par_chunks(chunk))
+        .map(|(x, y)| x.iter().zip(y).map(|(p, q)| p * q).sum::<f64>())
+        .collect();
     parts.iter().sum()
 }
 

@@ -51,7 +51,10 @@ mod csr;
 mod pcg;
 mod spd;
 
-pub use cholesky::{cholesky_solve, cholesky_symbolic, clear_symbolic, install_symbolic, release_workspace, symbolic_cached, CholeskyError, Symbolic};
+pub use cholesky::{
+    cholesky_solve, cholesky_symbolic, clear_symbolic, install_symbolic, release_workspace, symbolic_cached,
+    CholeskyError, Symbolic,
+};
 pub use csr::{det_dot, laplacian_1d, SymCsr};
 pub use pcg::{pcg, CgStats, Checkpoint, Ic0, PcgOptions, Preconditioner, DEFAULT_DOT_CHUNK, IC0_SHIFTS};
 pub use spd::{jacobi_cg, solve_spd, SolveInfo, SolveOptions};

@@ -190,18 +190,37 @@ fn factor_in_place(ptr: &[usize], idx: &[u32], val: &mut [f64], alpha: f64) -> b
 /// Preconditioned conjugate gradients on A x = b from the start value in `x`; `x` holds the
 /// last iterate either way. Err when the true relative residual misses `opts.accept.max(tol)`
 /// (tol: the checkpoint's loose one where `go_on` stopped there). b = 0 gives x = 0.
-pub fn pcg(a: &SymCsr, b: &[f64], x: &mut [f64], pre: &Preconditioner, opts: &PcgOptions, mut check: Option<Checkpoint<'_>>) -> Result<CgStats, NotConverged> {
+pub fn pcg(
+    a: &SymCsr,
+    b: &[f64],
+    x: &mut [f64],
+    pre: &Preconditioner,
+    opts: &PcgOptions,
+    mut check: Option<Checkpoint<'_>>,
+) -> Result<CgStats, NotConverged> {
     let n = b.len();
     let dot = |u: &[f64], v: &[f64]| det_dot(u, v, opts.dot_chunk);
     // Non-finite input is refused before the first iteration: no answer can come of it
     // (docs/decisions.md#crashes-and-hangs-of-issue-40).
     let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
     if !(finite(&a.vals) && finite(b) && finite(x)) {
-        return Err(NotConverged { method: "cg", n, iterations: 0, residual: f64::NAN, tol: opts.accept.max(opts.tol) });
+        return Err(NotConverged {
+            method: "cg",
+            n,
+            iterations: 0,
+            residual: f64::NAN,
+            tol: opts.accept.max(opts.tol),
+        });
     }
     let bn = dot(b, b).sqrt();
     if !bn.is_finite() {
-        return Err(NotConverged { method: "cg", n, iterations: 0, residual: f64::NAN, tol: opts.accept.max(opts.tol) });
+        return Err(NotConverged {
+            method: "cg",
+            n,
+            iterations: 0,
+            residual: f64::NAN,
+            tol: opts.accept.max(opts.tol),
+        });
     }
     if bn == 0.0 {
         x.iter_mut().for_each(|v| *v = 0.0);

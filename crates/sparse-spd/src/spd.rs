@@ -36,13 +36,21 @@ pub struct SolveInfo {
 /// `opts.direct` and the factorisation succeeds; CG from the Cholesky answer when that is not
 /// accurate enough; Jacobi-PCG from `x0` when the factorisation was refused (too large, not
 /// positive definite). Err when the CG misses its tolerance.
-pub fn solve_spd(a: &SymCsr, b: &[f64], x0: &[f64], opts: &SolveOptions) -> Result<(Vec<f64>, SolveInfo), NotConverged> {
+pub fn solve_spd(
+    a: &SymCsr,
+    b: &[f64],
+    x0: &[f64],
+    opts: &SolveOptions,
+) -> Result<(Vec<f64>, SolveInfo), NotConverged> {
     let bnorm = det_dot(b, b, opts.cg.dot_chunk).sqrt().max(1e-300);
     if opts.direct {
         if let Ok((x, reused)) = cholesky_solve(a, b, opts.max_factor_bytes) {
             let res = true_residual(a, b, &x, bnorm, opts.cg.dot_chunk);
             if res <= opts.direct_accept {
-                return Ok((x, SolveInfo { method: "cholesky", iterations: 0, relative_residual: res, symbolic_reused: reused }));
+                return Ok((
+                    x,
+                    SolveInfo { method: "cholesky", iterations: 0, relative_residual: res, symbolic_reused: reused },
+                ));
             }
             return jacobi_cg(a, b, &x, &opts.cg).map(|(x, info)| (x, SolveInfo { symbolic_reused: reused, ..info }));
         }
@@ -54,5 +62,13 @@ pub fn solve_spd(a: &SymCsr, b: &[f64], x0: &[f64], opts: &SolveOptions) -> Resu
 pub fn jacobi_cg(a: &SymCsr, b: &[f64], x0: &[f64], opts: &PcgOptions) -> Result<(Vec<f64>, SolveInfo), NotConverged> {
     let mut x = x0.to_vec();
     let st = pcg(a, b, &mut x, &Preconditioner::jacobi(a), opts, None)?;
-    Ok((x, SolveInfo { method: "cg", iterations: st.iterations, relative_residual: st.true_residual, symbolic_reused: false }))
+    Ok((
+        x,
+        SolveInfo {
+            method: "cg",
+            iterations: st.iterations,
+            relative_residual: st.true_residual,
+            symbolic_reused: false,
+        },
+    ))
 }

@@ -139,7 +139,8 @@ fn checkpoint_stops_at_the_loose_tolerance() {
     };
     let mut x = vec![0.0; a.n()];
     let opts = PcgOptions::new(1e-12, 10_000);
-    let st = pcg(&a, &b, &mut x, &Preconditioner::ic0(&a), &opts, Some(Checkpoint { loose: 1e-4, go_on: &mut stop })).unwrap();
+    let st = pcg(&a, &b, &mut x, &Preconditioner::ic0(&a), &opts, Some(Checkpoint { loose: 1e-4, go_on: &mut stop }))
+        .unwrap();
     assert_eq!(calls, 1);
     assert!(st.stopped_at_checkpoint && st.true_residual <= 1e-4 && st.true_residual > 1e-12, "{st:?}");
 }
@@ -233,9 +234,13 @@ fn non_finite_systems_are_refused_in_bounded_time() {
     let a = laplace_2d(10, 0.1);
     let mut b = vec![1.0; a.n()];
     b[3] = f64::NAN;
-    assert!(pcg(&a, &b, &mut vec![0.0; a.n()], &Preconditioner::jacobi(&a), &PcgOptions::new(1e-10, 100), None).is_err());
+    assert!(
+        pcg(&a, &b, &mut vec![0.0; a.n()], &Preconditioner::jacobi(&a), &PcgOptions::new(1e-10, 100), None).is_err()
+    );
     let b = vec![1e300; a.n()];
-    assert!(pcg(&a, &b, &mut vec![0.0; a.n()], &Preconditioner::jacobi(&a), &PcgOptions::new(1e-10, 100), None).is_err());
+    assert!(
+        pcg(&a, &b, &mut vec![0.0; a.n()], &Preconditioner::jacobi(&a), &PcgOptions::new(1e-10, 100), None).is_err()
+    );
     assert!(t0.elapsed().as_secs() < 10, "{:?}", t0.elapsed());
 }
 

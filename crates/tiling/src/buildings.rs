@@ -179,8 +179,12 @@ pub fn plan(sources: &[String], size: GridSize) -> Result<BuildingPlan, TilingEr
     }
     let step = match size {
         GridSize::Metres(m) if m > 0.0 && m.is_finite() => m,
-        GridSize::Metres(m) => return Err(TilingError::Usage(format!("tile size {m}: must be a positive number of metres"))),
-        GridSize::BuildingsPerTile(0) => return Err(TilingError::Usage("buildings per tile must be at least 1".into())),
+        GridSize::Metres(m) => {
+            return Err(TilingError::Usage(format!("tile size {m}: must be a positive number of metres")))
+        }
+        GridSize::BuildingsPerTile(0) => {
+            return Err(TilingError::Usage("buildings per tile must be at least 1".into()))
+        }
         GridSize::BuildingsPerTile(n) => step_for_budget(&sites, n),
     };
     Ok(BuildingPlan { tiles: tiles_for(&sites, sources, step), buildings: sites.len(), without_coordinates })
@@ -189,10 +193,9 @@ pub fn plan(sources: &[String], size: GridSize) -> Result<BuildingPlan, TilingEr
 /// The largest power-of-two step (metres, at least 1 m, from twice the extent down) whose
 /// fullest tile has at most `budget` buildings. Buildings closer than 1 m share a tile whatever the budget.
 pub fn step_for_budget(sites: &[BuildingSite], budget: usize) -> f64 {
-    let span = sites
-        .iter()
-        .map(|s| s.centroid)
-        .fold([f64::MAX, f64::MAX, f64::MIN, f64::MIN], |b, c| [b[0].min(c[0]), b[1].min(c[1]), b[2].max(c[0]), b[3].max(c[1])]);
+    let span = sites.iter().map(|s| s.centroid).fold([f64::MAX, f64::MAX, f64::MIN, f64::MIN], |b, c| {
+        [b[0].min(c[0]), b[1].min(c[1]), b[2].max(c[0]), b[3].max(c[1])]
+    });
     let extent = (span[2] - span[0]).max(span[3] - span[1]).max(1.0);
     // Cells of step s/2 nest in cells of step s (both aligned at 0), so the fullest tile never
     // grows when halving: the first step that fits is the largest power of two that does.
@@ -280,7 +283,12 @@ mod tests {
     use super::*;
 
     fn site(x: f64, y: f64, half: f64) -> BuildingSite {
-        BuildingSite { id: Some(format!("b{x}_{y}")), source: 0, centroid: [x, y], bounds: [x - half, y - half, x + half, y + half] }
+        BuildingSite {
+            id: Some(format!("b{x}_{y}")),
+            source: 0,
+            centroid: [x, y],
+            bounds: [x - half, y - half, x + half, y + half],
+        }
     }
 
     #[test]
@@ -300,7 +308,8 @@ mod tests {
     #[test]
     fn budget_gives_the_largest_step_that_fits() {
         // four buildings in the corners of a 100 m square: budget 1 needs cells < 100 m apart
-        let sites: Vec<_> = [(0.5, 0.5), (100.5, 0.5), (0.5, 100.5), (100.5, 100.5)].iter().map(|&(x, y)| site(x, y, 0.1)).collect();
+        let sites: Vec<_> =
+            [(0.5, 0.5), (100.5, 0.5), (0.5, 100.5), (100.5, 100.5)].iter().map(|&(x, y)| site(x, y, 0.1)).collect();
         let s = step_for_budget(&sites, 1);
         assert!(fullest(&sites, s) <= 1 && fullest(&sites, s * 2.0) > 1, "step {s}");
         assert_eq!(step_for_budget(&sites, 4), 256.0); // one tile holds all: extent 100 → 2^8
@@ -328,7 +337,12 @@ mod tests {
         let mut sites = vec![site(9.0, 5.0, 2.0), site(15.0, 5.0, 1.0), site(350_000.0, 5_600_000.0, 5.0)];
         sites[2].bounds[0] = 0.0;
         sites[2].bounds[1] = 0.0;
-        sites.push(BuildingSite { id: Some("far".into()), source: 0, centroid: [20.0, 20.0], bounds: [-1e308, -1e308, 1e308, 1e308] });
+        sites.push(BuildingSite {
+            id: Some("far".into()),
+            source: 0,
+            centroid: [20.0, 20.0],
+            bounds: [-1e308, -1e308, 1e308, 1e308],
+        });
         let tiles = tiles_for(&sites, &["s.gml".into()], 1.0);
         assert_eq!(tiles.len(), 4);
         assert!(t0.elapsed().as_secs() < 5, "{:?}", t0.elapsed());

@@ -47,8 +47,9 @@ pub fn extract(tile: &Tile, read: &dyn Fn(&str) -> Result<Vec<u8>, TilingError>)
             if cell_id(cell(c, tile.size)) != tile.id {
                 continue;
             }
-            let m = member_span(&bytes, o.span.bytes.clone())
-                .ok_or_else(|| TilingError::unreadable(src, format!("line {}: building not inside a member element", o.span.line)))?;
+            let m = member_span(&bytes, o.span.bytes.clone()).ok_or_else(|| {
+                TilingError::unreadable(src, format!("line {}: building not inside a member element", o.span.line))
+            })?;
             members.push(bytes[m].to_vec());
             envelope.merge(&o.envelope);
             count += 1;
@@ -109,7 +110,11 @@ fn root_start(b: &[u8]) -> Option<(Range<usize>, String)> {
             b'!' => i += b[i..].iter().position(|&c| c == b'>')? + 1,
             _ => {
                 let end = tag_end(b, i)?;
-                let name: String = b[i + 1..end].iter().take_while(|c| !c.is_ascii_whitespace() && **c != b'>' && **c != b'/').map(|&c| c as char).collect();
+                let name: String = b[i + 1..end]
+                    .iter()
+                    .take_while(|c| !c.is_ascii_whitespace() && **c != b'>' && **c != b'/')
+                    .map(|&c| c as char)
+                    .collect();
                 return Some((0..end + 1, name));
             }
         }
@@ -141,7 +146,8 @@ fn member_span(b: &[u8], obj: Range<usize>) -> Option<Range<usize>> {
     if matches!(b.get(start + 1), Some(b'/' | b'!' | b'?')) {
         return None;
     }
-    let name: Vec<u8> = b[start + 1..].iter().take_while(|c| !c.is_ascii_whitespace() && **c != b'>').copied().collect();
+    let name: Vec<u8> =
+        b[start + 1..].iter().take_while(|c| !c.is_ascii_whitespace() && **c != b'>').copied().collect();
     let close = [b"</".as_slice(), &name, b">"].concat();
     let rel = find(&b[obj.end..], &close)?;
     // only whitespace between the object and the member's end tag
@@ -162,6 +168,9 @@ mod tests {
         let s = find(doc, b"<bldg:Building").unwrap();
         let e = find(doc, b"/>\n  </core").unwrap() + 2;
         let m = member_span(doc, s..e).unwrap();
-        assert_eq!(&doc[m], b"<core:cityObjectMember>\n    <bldg:Building gml:id=\"b\"/>\n  </core:cityObjectMember>".as_slice());
+        assert_eq!(
+            &doc[m],
+            b"<core:cityObjectMember>\n    <bldg:Building gml:id=\"b\"/>\n  </core:cityObjectMember>".as_slice()
+        );
     }
 }

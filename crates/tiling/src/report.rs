@@ -18,11 +18,14 @@ pub struct TileReport {
 impl TileReport {
     /// Reads the report `text` of file `path`.
     pub fn parse(path: &str, text: &str) -> Result<TileReport, TilingError> {
-        let json: Value = serde_json::from_str(text).map_err(|e| TilingError::unreadable(path, format!("not JSON: {e}")))?;
+        let json: Value =
+            serde_json::from_str(text).map_err(|e| TilingError::unreadable(path, format!("not JSON: {e}")))?;
         let file = std::path::Path::new(path).file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or_default();
         let tile = file.split('.').next().unwrap_or_default().to_string();
         if tile.is_empty() {
-            return Err(TilingError::Usage(format!("{path}: no tile id in the file name (expected <tile>.<anything>.json)")));
+            return Err(TilingError::Usage(format!(
+                "{path}: no tile id in the file name (expected <tile>.<anything>.json)"
+            )));
         }
         Ok(TileReport { tile, json })
     }
@@ -112,9 +115,13 @@ pub fn merge(mut reports: Vec<TileReport>) -> Result<MergedReport, TilingError> 
     let (mut v, mut h) = (ValidateSum::default(), HealSum::default());
     let mut lines: BTreeMap<String, TileLine> = BTreeMap::new();
     for r in &reports {
-        let line = lines
-            .entry(r.tile.clone())
-            .or_insert_with(|| TileLine { tile: r.tile.clone(), validate_findings: None, buildings: None, healed: None, kept: None });
+        let line = lines.entry(r.tile.clone()).or_insert_with(|| TileLine {
+            tile: r.tile.clone(),
+            validate_findings: None,
+            buildings: None,
+            healed: None,
+            kept: None,
+        });
         if r.is_heal() {
             let j = &r.json;
             h.reports += 1;
@@ -130,7 +137,8 @@ pub fn merge(mut reports: Vec<TileReport>) -> Result<MergedReport, TilingError> 
             add_codes(&mut h.findings_before, j.get("findings_before"));
             add_codes(&mut h.findings_after, j.get("findings_after"));
             let back = j.get("back");
-            h.max_move_m = h.max_move_m.max(back.and_then(|b| b.get("max_move")).and_then(Value::as_f64).unwrap_or(0.0));
+            h.max_move_m =
+                h.max_move_m.max(back.and_then(|b| b.get("max_move")).and_then(Value::as_f64).unwrap_or(0.0));
             h.vertices_written += back.map(|b| count(b, "vertices_written")).unwrap_or(0);
             line.buildings = Some(line.buildings.unwrap_or(0) + count(j, "buildings"));
             line.healed = Some(line.healed.unwrap_or(0) + count(j, "healed"));
@@ -156,7 +164,14 @@ pub fn merge(mut reports: Vec<TileReport>) -> Result<MergedReport, TilingError> 
             )));
         }
     }
-    Ok(MergedReport { schema: "geofit-tile-report/1", units: UNITS.iter().copied().collect(), tiles: lines.len(), validate: v, heal: h, per_tile: lines.into_values().collect() })
+    Ok(MergedReport {
+        schema: "geofit-tile-report/1",
+        units: UNITS.iter().copied().collect(),
+        tiles: lines.len(),
+        validate: v,
+        heal: h,
+        per_tile: lines.into_values().collect(),
+    })
 }
 
 #[cfg(test)]
@@ -166,7 +181,10 @@ mod tests {
     #[test]
     fn sums_counts_codes_and_kept() {
         let heal = |b: u64, kept: &str| {
-            format!(r#"{{"schema":"geofit-heal-report/1","buildings":{b},"healed":{},"kept":[{kept}],"area_before_m2":1.5,"area_after_m2":1.25,"findings_before":{{"203":2}},"findings_after":{{}},"back":{{"max_move":0.01,"vertices_written":7}}}}"#, b - 1)
+            format!(
+                r#"{{"schema":"geofit-heal-report/1","buildings":{b},"healed":{},"kept":[{kept}],"area_before_m2":1.5,"area_after_m2":1.25,"findings_before":{{"203":2}},"findings_after":{{}},"back":{{"max_move":0.01,"vertices_written":7}}}}"#,
+                b - 1
+            )
         };
         let val = r#"{"file":"t","valid":false,"xsd":{"checked":false,"errors":[]},"geometry":{"features":3,"findings":[{"code":203},{"code":104}]}}"#;
         let reports = vec![

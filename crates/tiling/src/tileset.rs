@@ -70,7 +70,8 @@ const IDENTITY: M4 = [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0
 /// A node's local matrix (matrix, or translation and scale; rotations are refused: geofit's
 /// writer never uses them below the root).
 fn node_matrix(n: &Value, name: &str) -> Result<M4, TilingError> {
-    let nums = |k: &str| n.get(k).and_then(Value::as_array).map(|a| a.iter().filter_map(Value::as_f64).collect::<Vec<_>>());
+    let nums =
+        |k: &str| n.get(k).and_then(Value::as_array).map(|a| a.iter().filter_map(Value::as_f64).collect::<Vec<_>>());
     if let Some(m) = nums("matrix") {
         return m.try_into().map_err(|_| TilingError::unreadable(name, "node matrix without 16 numbers"));
     }
@@ -96,14 +97,20 @@ pub fn glb_extent(bytes: &[u8], name: &str) -> Result<GlbExtent, TilingError> {
         return Err(TilingError::unreadable(name, "expected one root node (geofit export's `origin` node)"));
     };
     let root = &j["nodes"][root.as_u64().unwrap_or(u64::MAX) as usize];
-    let origin: Vec<f64> = root["extras"]["origin"].as_array().map(|a| a.iter().filter_map(Value::as_f64).collect()).unwrap_or_default();
+    let origin: Vec<f64> =
+        root["extras"]["origin"].as_array().map(|a| a.iter().filter_map(Value::as_f64).collect()).unwrap_or_default();
     let origin: [f64; 3] = origin
         .try_into()
         .map_err(|_| TilingError::unreadable(name, "root node has no extras.origin (not written by geofit export)"))?;
     let crs = root["extras"]["crs"].as_str().map(str::to_string);
     let (mut min, mut max) = ([f64::MAX; 3], [f64::MIN; 3]);
-    let mut stack: Vec<(usize, M4)> =
-        root["children"].as_array().into_iter().flatten().filter_map(Value::as_u64).map(|c| (c as usize, IDENTITY)).collect();
+    let mut stack: Vec<(usize, M4)> = root["children"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter_map(Value::as_u64)
+        .map(|c| (c as usize, IDENTITY))
+        .collect();
     while let Some((i, parent)) = stack.pop() {
         let n = &j["nodes"][i];
         let m = mul(&parent, &node_matrix(n, name)?);
@@ -165,7 +172,8 @@ pub fn geoid_undulation(grid: &str, lon: f64, lat: f64) -> Result<f64, String> {
         "+proj=pipeline +step +proj=unitconvert +xy_in=deg +xy_out=rad +step +proj=vgridshift +grids={grid} +multiplier=1 +step +proj=axisswap +order=3,2,1"
     );
     let p = proj::Proj::new(&def).map_err(|e| format!("PROJ cannot open the geoid grid '{grid}': {e}"))?;
-    let (n, _) = p.convert((lon, lat)).map_err(|e| format!("geoid grid '{grid}' has no value at ({lon}, {lat}): {e}"))?;
+    let (n, _) =
+        p.convert((lon, lat)).map_err(|e| format!("geoid grid '{grid}' has no value at ({lon}, {lat}): {e}"))?;
     if !n.is_finite() || n.abs() > 200.0 {
         return Err(format!("geoid grid '{grid}' gives {n} m at ({lon}, {lat}): not a geoid undulation"));
     }
@@ -174,7 +182,13 @@ pub fn geoid_undulation(grid: &str, lon: f64, lat: f64) -> Result<f64, String> {
 
 /// The offset (m) that makes the heights of `crs` ellipsoidal at the tile origin (longitude,
 /// latitude), and what was done, for the tileset's `extras`.
-fn height_offset(heights: &Heights, crs_names: &[&str], uri: &str, lon: f64, lat: f64) -> Result<(f64, Value), TilingError> {
+fn height_offset(
+    heights: &Heights,
+    crs_names: &[&str],
+    uri: &str,
+    lon: f64,
+    lat: f64,
+) -> Result<(f64, Value), TilingError> {
     let vertical = crs_names.iter().find_map(|c| citygml_io::crs::vertical_part(c));
     let named = vertical.as_ref().map(|v| v.to_string());
     match heights {
@@ -186,16 +200,26 @@ fn height_offset(heights: &Heights, crs_names: &[&str], uri: &str, lon: f64, lat
         }
         Heights::Auto => {
             let Some(v) = vertical else {
-                return Ok((0.0, json!({"method": "as-is", "vertical": null, "why": "the CRS names no height system: heights taken as ellipsoidal"})));
+                return Ok((
+                    0.0,
+                    json!({"method": "as-is", "vertical": null, "why": "the CRS names no height system: heights taken as ellipsoidal"}),
+                ));
             };
             let choose = "give --geoid GRID (a PROJ geoid grid file), --height-offset M (h = H + M, e.g. the geoid undulation) or --heights-as-is";
             if v.unit_m != 1.0 {
-                return Err(TilingError::Usage(format!("{uri}: heights are {v}, not metres: convert them first, or {choose}")));
+                return Err(TilingError::Usage(format!(
+                    "{uri}: heights are {v}, not metres: convert them first, or {choose}"
+                )));
             }
             let mut tried = Vec::new();
             for grid in &v.grids {
                 match geoid_undulation(grid, lon, lat) {
-                    Ok(n) => return Ok((n, json!({"method": "geoid", "grid": grid, "undulation_m": n, "vertical": v.to_string()}))),
+                    Ok(n) => {
+                        return Ok((
+                            n,
+                            json!({"method": "geoid", "grid": grid, "undulation_m": n, "vertical": v.to_string()}),
+                        ))
+                    }
                     Err(_) => tried.push(*grid),
                 }
             }
@@ -204,7 +228,10 @@ fn height_offset(heights: &Heights, crs_names: &[&str], uri: &str, lon: f64, lat
             } else {
                 format!("no geoid grid for it is installed ({} not found by PROJ)", tried.join(", "))
             };
-            Err(TilingError::Usage(format!("{uri}: heights are {v} (CRS {}), not ellipsoidal; {looked}: {choose}", crs_names[crs_names.len() - 1])))
+            Err(TilingError::Usage(format!(
+                "{uri}: heights are {v} (CRS {}), not ellipsoidal; {looked}: {choose}",
+                crs_names[crs_names.len() - 1]
+            )))
         }
     }
 }
@@ -215,7 +242,9 @@ pub fn enu_like_transform(crs: &str, origin: [f64; 3], height_offset: f64) -> Re
         .map_err(|e| TilingError::Usage(format!("cannot transform from '{crs}' to geographic coordinates: {e}")))?;
     let h = origin[2] + height_offset;
     let ecef = |e: f64, n: f64| -> Result<[f64; 3], TilingError> {
-        let (lon, lat) = p.convert((e, n)).map_err(|err| TilingError::Usage(format!("'{crs}': ({e}, {n}) has no geographic position: {err}")))?;
+        let (lon, lat) = p
+            .convert((e, n))
+            .map_err(|err| TilingError::Usage(format!("'{crs}': ({e}, {n}) has no geographic position: {err}")))?;
         Ok(geodetic_to_ecef(lon, lat, h))
     };
     let (e0, n0) = (origin[0], origin[1]);
@@ -240,12 +269,18 @@ pub struct ContentTile {
 fn lon_lat(crs: &str, e: f64, n: f64) -> Result<(f64, f64), TilingError> {
     let p = proj::Proj::new_known_crs(crs, "EPSG:4326", None)
         .map_err(|err| TilingError::Usage(format!("PROJ cannot transform from CRS '{crs}' to geographic coordinates ({err}): give the CRS the glb are in, e.g. --crs EPSG:25832")))?;
-    p.convert((e, n)).map_err(|err| TilingError::Usage(format!("'{crs}': ({e}, {n}) has no geographic position: {err}")))
+    p.convert((e, n))
+        .map_err(|err| TilingError::Usage(format!("'{crs}': ({e}, {n}) has no geographic position: {err}")))
 }
 
 /// The tileset: a root with one leaf per content tile (refine ADD: every building is in exactly
 /// one tile), geometric error 0 at the leaves and the root box diagonal at the root.
-pub fn tileset(tiles: &[ContentTile], crs_override: Option<&str>, heights: &Heights, generator: &str) -> Result<Value, TilingError> {
+pub fn tileset(
+    tiles: &[ContentTile],
+    crs_override: Option<&str>,
+    heights: &Heights,
+    generator: &str,
+) -> Result<Value, TilingError> {
     if tiles.is_empty() {
         return Err(TilingError::Usage("no glb content to put in a tileset".into()));
     }
@@ -275,7 +310,9 @@ pub fn tileset(tiles: &[ContentTile], crs_override: Option<&str>, heights: &Heig
                 hi[ax] = hi[ax].max(q[ax]);
             }
         }
-        let id = Path::new(&t.uri).file_name().map(|f| f.to_string_lossy().split('.').next().unwrap_or_default().to_string());
+        let id = Path::new(&t.uri)
+            .file_name()
+            .map(|f| f.to_string_lossy().split('.').next().unwrap_or_default().to_string());
         children.push(json!({
             "boundingVolume": {"box": [centre[0], centre[1], centre[2], half[0], 0.0, 0.0, 0.0, half[1], 0.0, 0.0, 0.0, half[2]]},
             "transform": m,

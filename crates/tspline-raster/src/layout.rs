@@ -76,7 +76,9 @@ impl Params {
     pub fn list(&self) -> std::borrow::Cow<'_, [[f64; 2]]> {
         match self {
             Params::List(v) => std::borrow::Cow::Borrowed(v),
-            Params::Grid(g) => (0..g.ns * g.nt).map(|q| [g.s0 + (q % g.ns) as f64 * g.ds, g.t0 + (q / g.ns) as f64 * g.dt]).collect(),
+            Params::Grid(g) => {
+                (0..g.ns * g.nt).map(|q| [g.s0 + (q % g.ns) as f64 * g.ds, g.t0 + (q / g.ns) as f64 * g.dt]).collect()
+            }
         }
     }
 }
@@ -118,7 +120,11 @@ pub const MAX_GRID_CELLS: usize = 2_000_000_000;
 impl EvalGrid {
     /// The grid of `like` (size, geotransform, its CRS or else `crs`), each cell centre mapped
     /// through `to_param` (world → (s, t); the warp's forward map for indirect meshes).
-    pub fn like(like: &Raster, crs: Option<String>, to_param: impl Fn(f64, f64) -> (f64, f64)) -> Result<EvalGrid, Error> {
+    pub fn like(
+        like: &Raster,
+        crs: Option<String>,
+        to_param: impl Fn(f64, f64) -> (f64, f64),
+    ) -> Result<EvalGrid, Error> {
         let gt = like.geotransform;
         if gt[2] != 0.0 || gt[4] != 0.0 {
             return Err(Error::Rotated(gt));
@@ -130,7 +136,11 @@ impl EvalGrid {
 
     /// The original raster of an indirect fit (stored with the warp field) and its footprint,
     /// each cell centre mapped through `to_param` (the warp's forward map, then the georeference).
-    pub fn of_warp_source(src: &raster_proc::warp::SourceGrid, crs: Option<String>, to_param: impl Fn(f64, f64) -> (f64, f64)) -> Result<EvalGrid, raster_proc::ProcError> {
+    pub fn of_warp_source(
+        src: &raster_proc::warp::SourceGrid,
+        crs: Option<String>,
+        to_param: impl Fn(f64, f64) -> (f64, f64),
+    ) -> Result<EvalGrid, raster_proc::ProcError> {
         let raster = Raster::new_empty(src.width, src.height, src.geotransform, src.crs.clone().or(crs));
         let params = Params::List(cell_params(&raster, to_param));
         let mask = DataMask { width: src.width, height: src.height, bits: src.mask()? };

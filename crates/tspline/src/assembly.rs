@@ -179,7 +179,15 @@ pub(crate) struct CellRows<'a> {
 
 impl<'a> CellRows<'a> {
     pub(crate) fn new(sys: System<'a>, upper: &'a Upper) -> CellRows<'a> {
-        CellRows { sys, upper, sums: sys.zero_sums(upper), scratch: Vec::new(), row: Vec::with_capacity(32), prev: Vec::with_capacity(32), pos: Vec::with_capacity(32 * 33 / 2) }
+        CellRows {
+            sys,
+            upper,
+            sums: sys.zero_sums(upper),
+            scratch: Vec::new(),
+            row: Vec::with_capacity(32),
+            prev: Vec::with_capacity(32),
+            pos: Vec::with_capacity(32 * 33 / 2),
+        }
     }
 
     /// The datum `d` at parameter (s, t), its basis through the PB-spline's bucket grid
@@ -265,7 +273,8 @@ pub(crate) fn per_cell(
         .map(|c| -> Result<Sums, TsplineError> {
             let (j0, j1) = (c * chunk, ((c + 1) * chunk).min(units));
             let mut rows = CellRows::new(sys, &upper);
-            let raster = |rows: &mut CellRows, q: usize| rows.add_point((q % w) as f64, (q / w) as f64, samples.z.get(q));
+            let raster =
+                |rows: &mut CellRows, q: usize| rows.add_point((q % w) as f64, (q / w) as f64, samples.z.get(q));
             match (pts, region, asm) {
                 (Some(p), _, _) => (j0..j1).for_each(|q| rows.add_point(p.st[q][0], p.st[q][1], p.z[q])),
                 (None, Some(r), _) => r.for_rows(j0, j1, |q| raster(&mut rows, q)),
@@ -398,7 +407,13 @@ pub(crate) fn by_elements(sys: System<'_>, samples: &Samples, region: Option<&Re
 
 /// The valid cells (of `region`) that no leaf holds half-open, cell by cell: upper borders of
 /// the domain (A1) and cells outside it (which add nothing).
-fn uncovered_cells(sys: System<'_>, upper: &Upper, samples: &Samples, region: Option<&Region>, covered: &[u64]) -> Option<Sums> {
+fn uncovered_cells(
+    sys: System<'_>,
+    upper: &Upper,
+    samples: &Samples,
+    region: Option<&Region>,
+    covered: &[u64],
+) -> Option<Sums> {
     let mut rows: Option<CellRows<'_>> = None;
     let w = samples.width;
     for (wi, &word) in covered.iter().enumerate() {
@@ -411,7 +426,11 @@ fn uncovered_cells(sys: System<'_>, upper: &Upper, samples: &Samples, region: Op
                 break;
             }
             if word & (1u64 << b) == 0 && region.is_none_or(|r| r.contains(q)) && !samples.z.get(q).is_nan() {
-                rows.get_or_insert_with(|| CellRows::new(sys, upper)).add_point((q % w) as f64, (q / w) as f64, samples.z.get(q));
+                rows.get_or_insert_with(|| CellRows::new(sys, upper)).add_point(
+                    (q % w) as f64,
+                    (q / w) as f64,
+                    samples.z.get(q),
+                );
             }
         }
     }
@@ -520,7 +539,8 @@ impl<'a> Elements<'a> {
         for jt in 0..nt {
             for is in 0..ns {
                 let (sb, tb) = (&self.el.sb, &self.el.tb);
-                let e = Element { s0: sb[is], s1: sb[is + 1], t0: tb[jt], t1: tb[jt + 1], flags: self.el.flags(jt, is) };
+                let e =
+                    Element { s0: sb[is], s1: sb[is + 1], t0: tb[jt], t1: tb[jt + 1], flags: self.el.flags(jt, is) };
                 self.add_element(e);
             }
         }
@@ -595,7 +615,9 @@ impl<'a> Elements<'a> {
                 if d.is_nan() || self.region.is_some_and(|r| !r.contains(q)) {
                     continue;
                 }
-                if (e.flags & LEFT_BORDER != 0 && i as f64 == e.s0) || (e.flags & BOTTOM_BORDER != 0 && j as f64 == e.t0) {
+                if (e.flags & LEFT_BORDER != 0 && i as f64 == e.s0)
+                    || (e.flags & BOTTOM_BORDER != 0 && j as f64 == e.t0)
+                {
                     self.rows.add_point(i as f64, j as f64, d);
                     continue;
                 }
@@ -788,7 +810,11 @@ mod tests {
         let z: Vec<f64> = (0..w * h)
             .map(|q| {
                 let (i, j) = ((q % w) as f64, (q / w) as f64);
-                if lcg(&mut seed) < 0.05 { f64::NAN } else { (i * 0.21).sin() * 3.0 + j * 0.07 + (i * j * 0.003).cos() }
+                if lcg(&mut seed) < 0.05 {
+                    f64::NAN
+                } else {
+                    (i * 0.21).sin() * 3.0 + j * 0.07 + (i * j * 0.003).cos()
+                }
             })
             .collect();
         Samples { width: w, height: h, z: z.into() }
@@ -832,7 +858,9 @@ mod tests {
                 continue;
             }
             let mut row = Vec::new();
-            if !pb.for_each_basis((q % s.width) as f64, (q / s.width) as f64, &mut scratch, |i, v| row.push((i as usize, v))) {
+            if !pb.for_each_basis((q % s.width) as f64, (q / s.width) as f64, &mut scratch, |i, v| {
+                row.push((i as usize, v))
+            }) {
                 continue;
             }
             for &(i, vi) in &row {
@@ -869,7 +897,10 @@ mod tests {
                     for k in a.start[i]..a.start[i + 1] {
                         let j = a.cols[k] as usize;
                         if i <= j {
-                            assert!((new.vals[k] - ata[i * n + j]).abs() <= 1e-11 * ata[i * n + i].max(1.0), "{degree:?} ({i},{j})");
+                            assert!(
+                                (new.vals[k] - ata[i * n + j]).abs() <= 1e-11 * ata[i * n + i].max(1.0),
+                                "{degree:?} ({i},{j})"
+                            );
                         }
                     }
                     assert!((new.rhs[i] - atd[i]).abs() <= 1e-11 * atd[i].abs().max(1.0));
@@ -885,7 +916,10 @@ mod tests {
                 assert_close(&on_free(&old.rhs), &on_free(&new.rhs), "held rhs");
                 assert_close(&on_free(&old.support), &on_free(&new.support), "held support");
                 let free_pair = |v: &[f64]| {
-                    (0..n).flat_map(|i| (a.start[i]..a.start[i + 1]).map(move |k| (i, k))).map(|(i, k)| if free[i] && free[a.cols[k] as usize] { v[k] } else { 0.0 }).collect::<Vec<f64>>()
+                    (0..n)
+                        .flat_map(|i| (a.start[i]..a.start[i + 1]).map(move |k| (i, k)))
+                        .map(|(i, k)| if free[i] && free[a.cols[k] as usize] { v[k] } else { 0.0 })
+                        .collect::<Vec<f64>>()
                 };
                 assert_close(&free_pair(&old.vals), &free_pair(&new.vals), "held vals");
             }
@@ -910,7 +944,10 @@ mod tests {
                 let s = Samples { width: w, height: h, z: z.into() };
                 let old = per_cell(sys, &s, None, None, None).unwrap();
                 let new = by_elements(sys, &s, None);
-                assert!(old.vals == new.vals && old.rhs == new.rhs && old.support == new.support, "{degree:?} cell {q}");
+                assert!(
+                    old.vals == new.vals && old.rhs == new.rhs && old.support == new.support,
+                    "{degree:?} cell {q}"
+                );
             }
         }
     }

@@ -209,7 +209,8 @@ impl PbSpline {
     pub fn build(mesh: &TMesh) -> PbSpline {
         let active = mesh.active_points();
         let point_ids: Vec<u32> = (0..mesh.points.len() as u32).filter(|&i| active[i as usize]).collect();
-        let params: Vec<(f64, f64)> = point_ids.iter().map(|&i| (mesh.points[i as usize].s, mesh.points[i as usize].t)).collect();
+        let params: Vec<(f64, f64)> =
+            point_ids.iter().map(|&i| (mesh.points[i as usize].s, mesh.points[i as usize].t)).collect();
         let knots = knots::infer_batch(mesh, &params);
         PbSpline::from_parts(mesh, point_ids, knots)
     }
@@ -224,7 +225,12 @@ impl PbSpline {
     /// knots of that point, and the pieces are a function of the knots alone, so they are the
     /// bits `basis_pieces` would give (the incremental build after a refinement: most points
     /// keep their knots).
-    pub(crate) fn from_parts_reusing(mesh: &TMesh, point_ids: Vec<u32>, knots: Vec<LocalKnots>, reuse: Option<(&PbSpline, &[u32])>) -> PbSpline {
+    pub(crate) fn from_parts_reusing(
+        mesh: &TMesh,
+        point_ids: Vec<u32>,
+        knots: Vec<LocalKnots>,
+        reuse: Option<(&PbSpline, &[u32])>,
+    ) -> PbSpline {
         let k = mesh.degree.k();
         let knots: Vec<[f64; 10]> = knots
             .iter()
@@ -271,7 +277,12 @@ impl PbSpline {
         PbSpline::from_knot_rows(mesh, parts.point_ids, rows, None)
     }
 
-    fn from_knot_rows(mesh: &TMesh, point_ids: Vec<u32>, knots: Vec<[f64; 10]>, reuse: Option<(&PbSpline, &[u32])>) -> PbSpline {
+    fn from_knot_rows(
+        mesh: &TMesh,
+        point_ids: Vec<u32>,
+        knots: Vec<[f64; 10]>,
+        reuse: Option<(&PbSpline, &[u32])>,
+    ) -> PbSpline {
         let k = mesh.degree.k();
         let geom = point_ids.iter().map(|&i| mesh.points[i as usize]).map(|p| [p.x, p.y, p.z, p.w]).collect();
         let half = 5 * (k + 1);
@@ -288,14 +299,19 @@ impl PbSpline {
             a[..half].copy_from_slice(&basis_pieces(&kn[0..5], k)[..half]);
             a[half..].copy_from_slice(&basis_pieces(&kn[5..10], k)[..half]);
         });
-        let cells: Vec<[f64; 4]> =
-            mesh.cells.iter().filter(|c| c.is_leaf()).map(|c| [c.rect.s_min, c.rect.t_min, c.rect.s_max, c.rect.t_max]).collect();
+        let cells: Vec<[f64; 4]> = mesh
+            .cells
+            .iter()
+            .filter(|c| c.is_leaf())
+            .map(|c| [c.rect.s_min, c.rect.t_min, c.rect.s_max, c.rect.t_max])
+            .collect();
         let b = mesh.bounds();
         let n = cells.len().max(1) as f64;
         let aspect = (b.width() / b.height()).clamp(1e-6, 1e6);
         let ns = ((n * aspect).sqrt().ceil() as u32).clamp(1, 4096);
         let nt = ((n / aspect).sqrt().ceil() as u32).clamp(1, 4096);
-        let grid = BucketGrid { s0: b.s_min, t0: b.t_min, ds: b.width() / ns as f64, dt: b.height() / nt as f64, ns, nt };
+        let grid =
+            BucketGrid { s0: b.s_min, t0: b.t_min, ds: b.width() / ns as f64, dt: b.height() / nt as f64, ns, nt };
         let nb = (ns * nt) as usize;
         // Bucket lists in the order of the points' parameters (t, then s), not of their ids:
         // every sum over a bucket's points (here, in the extraction and in the kernels) then
@@ -321,10 +337,25 @@ impl PbSpline {
         );
         let (cell_start, cell_items) = csr(
             nb,
-            cells.iter().enumerate().map(|(i, c)| (i as u32, grid.index_range(c[0], c[2], true), grid.index_range(c[1], c[3], false))),
+            cells
+                .iter()
+                .enumerate()
+                .map(|(i, c)| (i as u32, grid.index_range(c[0], c[2], true), grid.index_range(c[1], c[3], false))),
             ns,
         );
-        PbSpline { degree: mesh.degree, point_ids, knots, poly, geom, cells, grid, pt_start, pt_items, cell_start, cell_items }
+        PbSpline {
+            degree: mesh.degree,
+            point_ids,
+            knots,
+            poly,
+            geom,
+            cells,
+            grid,
+            pt_start,
+            pt_items,
+            cell_start,
+            cell_items,
+        }
     }
 
     /// Values per point in [`PbSpline::poly`]: 5 (K+1) for σ, as many for τ.
@@ -393,8 +424,20 @@ impl PbSpline {
             return Some((s, t, up_s, up_t));
         }
         const EPS: f64 = 1.0 / (1u64 << 30) as f64;
-        let s = if up_s { s - EPS * ws } else if lo_s { s + EPS * ws } else { s };
-        let t = if up_t { t - EPS * wt } else if lo_t { t + EPS * wt } else { t };
+        let s = if up_s {
+            s - EPS * ws
+        } else if lo_s {
+            s + EPS * ws
+        } else {
+            s
+        };
+        let t = if up_t {
+            t - EPS * wt
+        } else if lo_t {
+            t + EPS * wt
+        } else {
+            t
+        };
         Some((s, t, false, false))
     }
 
@@ -511,7 +554,13 @@ impl PbSpline {
     /// samples in its own bookkeeping (`and_then_or_clear`), in the pattern and the cells'
     /// element lists.
     #[inline]
-    pub(crate) fn for_points_in_buckets_once(&self, s: (f64, f64), t: (f64, f64), first: &[[u32; 2]], mut f: impl FnMut(u32)) {
+    pub(crate) fn for_points_in_buckets_once(
+        &self,
+        s: (f64, f64),
+        t: (f64, f64),
+        first: &[[u32; 2]],
+        mut f: impl FnMut(u32),
+    ) {
         let (i0, i1) = self.grid.index_range(s.0, s.1, true);
         let (j0, j1) = self.grid.index_range(t.0, t.1, false);
         for bj in j0..=j1 {
@@ -637,7 +686,10 @@ impl PbSpline {
                 .iter()
                 .filter(|&&i| {
                     let kn = &self.knots[i as usize];
-                    kn[0] <= p[0] && p[0] <= kn[self.degree.k() + 1] && kn[5] <= p[1] && p[1] <= kn[5 + self.degree.k() + 1]
+                    kn[0] <= p[0]
+                        && p[0] <= kn[self.degree.k() + 1]
+                        && kn[5] <= p[1]
+                        && p[1] <= kn[5 + self.degree.k() + 1]
                 })
                 .count();
         }
@@ -694,7 +746,10 @@ mod tests {
                         let want = self::PbSpline::point(&pb, s, t)[2];
                         for cache in [&mut row, &mut shared] {
                             let got = pb.point_z_cached(s, t, cache);
-                            assert!(got.to_bits() == want.to_bits() || (got.is_nan() && want.is_nan()), "{degree:?} ({s}, {t}): {got} vs {want}");
+                            assert!(
+                                got.to_bits() == want.to_bits() || (got.is_nan() && want.is_nan()),
+                                "{degree:?} ({s}, {t}): {got} vs {want}"
+                            );
                         }
                         checked += want.is_finite() as usize;
                     }
@@ -722,14 +777,23 @@ mod tests {
             assert_eq!(bits(&a.poly), bits(&b.poly));
             assert_eq!(bits(a.geom.as_flattened()), bits(b.geom.as_flattened()));
             assert_eq!(bits(a.cells.as_flattened()), bits(b.cells.as_flattened()));
-            assert_eq!((a.pt_start, a.pt_items, a.cell_start, a.cell_items), (b.pt_start, b.pt_items, b.cell_start, b.cell_items));
+            assert_eq!(
+                (a.pt_start, a.pt_items, a.cell_start, a.cell_items),
+                (b.pt_start, b.pt_items, b.cell_start, b.cell_items)
+            );
         }
     }
 
     #[test]
     fn polynomial_pieces_equal_cox_de_boor() {
         let mut seed = 1u64;
-        for kn in [[0., 1., 2., 3., 4.], [0., 0., 0., 1., 2.], [0., 0., 1., 2., 2.], [1., 3., 3.5, 8., 9.], [2., 2., 2., 2.5, 2.5]] {
+        for kn in [
+            [0., 1., 2., 3., 4.],
+            [0., 0., 0., 1., 2.],
+            [0., 0., 1., 2., 2.],
+            [1., 3., 3.5, 8., 9.],
+            [2., 2., 2., 2.5, 2.5],
+        ] {
             for k in [1usize, 3] {
                 let pc = basis_pieces(&kn, k);
                 for _ in 0..500 {

@@ -335,7 +335,11 @@ impl Extraction {
                         den = den * u + cw[col];
                     }
                     // small, zero or NaN denominators: the reference decides (as in `z`)
-                    if den >= r[6] { num / den } else { pb.point(s, t)[2] }
+                    if den >= r[6] {
+                        num / den
+                    } else {
+                        pb.point(s, t)[2]
+                    }
                 };
                 i += 1;
                 if i == o.len() {
@@ -416,8 +420,13 @@ struct Scratch<'a> {
 /// t): [`CellElements::build`] takes a candidate from the first bucket its support shares with
 /// the cell only, so no sort/dedup is needed.
 pub(crate) fn first_buckets(pb: &PbSpline, parallel: bool) -> Vec<[u32; 2]> {
-    let first = |kn: &[f64; 10]| [pb.grid.index_range(kn[0], kn[0], true).0, pb.grid.index_range(kn[5], kn[5], false).0];
-    if parallel { pb.knots.par_iter().map(first).collect() } else { pb.knots.iter().map(first).collect() }
+    let first =
+        |kn: &[f64; 10]| [pb.grid.index_range(kn[0], kn[0], true).0, pb.grid.index_range(kn[5], kn[5], false).0];
+    if parallel {
+        pb.knots.par_iter().map(first).collect()
+    } else {
+        pb.knots.iter().map(first).collect()
+    }
 }
 
 /// The elements of one leaf cell (shared by the extraction and the fit's per-element
@@ -635,8 +644,14 @@ mod tests {
         let ex = Extraction::new(pb, true);
         let mut hint = 0;
         let mut nan = 0;
-        let bounds = [pb.cells.iter().map(|c| c[0]).fold(f64::INFINITY, f64::min), pb.cells.iter().map(|c| c[1]).fold(f64::INFINITY, f64::min)];
-        let upper = [pb.cells.iter().map(|c| c[2]).fold(f64::NEG_INFINITY, f64::max), pb.cells.iter().map(|c| c[3]).fold(f64::NEG_INFINITY, f64::max)];
+        let bounds = [
+            pb.cells.iter().map(|c| c[0]).fold(f64::INFINITY, f64::min),
+            pb.cells.iter().map(|c| c[1]).fold(f64::INFINITY, f64::min),
+        ];
+        let upper = [
+            pb.cells.iter().map(|c| c[2]).fold(f64::NEG_INFINITY, f64::max),
+            pb.cells.iter().map(|c| c[3]).fold(f64::NEG_INFINITY, f64::max),
+        ];
         for (n, q) in st.iter().enumerate() {
             let a = pb.point(q[0], q[1])[2];
             let b = ex.z(pb, q[0], q[1], &mut hint);
@@ -670,7 +685,12 @@ mod tests {
             let b = m.bounds();
             let mut seed = 5u64;
             let mut st: Vec<[f64; 2]> = (0..200_000)
-                .map(|_| [b.s_min - 2.0 + (b.width() + 4.0) * lcg(&mut seed), b.t_min - 2.0 + (b.height() + 4.0) * lcg(&mut seed)])
+                .map(|_| {
+                    [
+                        b.s_min - 2.0 + (b.width() + 4.0) * lcg(&mut seed),
+                        b.t_min - 2.0 + (b.height() + 4.0) * lcg(&mut seed),
+                    ]
+                })
                 .collect();
             for j in -1..=(b.t_max as i32 + 1) {
                 for i in -1..=(b.s_max as i32 + 1) {
@@ -684,7 +704,12 @@ mod tests {
             // ... and the element path is what was compared: inside the domain (away from its
             // borders) nearly every point takes it, not the reference fallback.
             let inner: Vec<[f64; 2]> = (0..20_000)
-                .map(|_| [b.s_min + b.width() * (0.1 + 0.8 * lcg(&mut seed)), b.t_min + b.height() * (0.1 + 0.8 * lcg(&mut seed))])
+                .map(|_| {
+                    [
+                        b.s_min + b.width() * (0.1 + 0.8 * lcg(&mut seed)),
+                        b.t_min + b.height() * (0.1 + 0.8 * lcg(&mut seed)),
+                    ]
+                })
                 .collect();
             let (taken, _) = ex.path_stats(&inner);
             assert!(taken > 0.9, "{degree:?}: only {taken} of interior points take the element path");
@@ -698,7 +723,12 @@ mod tests {
             let pb = PbSpline::build(&mm);
             let b = mm.bounds();
             let mut st: Vec<[f64; 2]> = (0..50_000)
-                .map(|_| [b.s_min - 1.0 + (b.width() + 2.0) * lcg(&mut seed), b.t_min - 1.0 + (b.height() + 2.0) * lcg(&mut seed)])
+                .map(|_| {
+                    [
+                        b.s_min - 1.0 + (b.width() + 2.0) * lcg(&mut seed),
+                        b.t_min - 1.0 + (b.height() + 2.0) * lcg(&mut seed),
+                    ]
+                })
                 .collect();
             for j in -1..=(b.t_max as i32 + 1) {
                 for i in -1..=(b.s_max as i32 + 1) {
@@ -755,7 +785,13 @@ mod probe {
         let t = Instant::now();
         let ex = Extraction::new(&pb, true);
         let tex = t.elapsed().as_secs_f64();
-        eprintln!("{} cells, {} elements, {} control points; extraction {:.3} s (rayon)", pb.cells.len(), ex.len(), pb.point_ids.len(), tex);
+        eprintln!(
+            "{} cells, {} elements, {} control points; extraction {:.3} s (rayon)",
+            pb.cells.len(),
+            ex.len(),
+            pb.point_ids.len(),
+            tex
+        );
         let pool1 = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
         // On-CPU time of this thread (/proc/thread-self/schedstat, ns): robust to a loaded machine.
         let cpu = || -> f64 {
@@ -777,7 +813,11 @@ mod probe {
         );
         let (t, c) = (Instant::now(), cpu());
         let _ = st.iter().step_by(7).map(|p| pb.point(p[0], p[1])[2]).sum::<f64>();
-        eprintln!("reference, 1 thread: {:.2} M points/s per cpu-second (wall {:.2})", st.len() as f64 / 7.0 / (cpu() - c) / 1e6, st.len() as f64 / 7.0 / t.elapsed().as_secs_f64() / 1e6);
+        eprintln!(
+            "reference, 1 thread: {:.2} M points/s per cpu-second (wall {:.2})",
+            st.len() as f64 / 7.0 / (cpu() - c) / 1e6,
+            st.len() as f64 / 7.0 / t.elapsed().as_secs_f64() / 1e6
+        );
         let t = Instant::now();
         let z2 = ex1.eval_z(&pb, &st, true);
         eprintln!("evaluation only, rayon: {:.2} M points/s", st.len() as f64 / t.elapsed().as_secs_f64() / 1e6);
@@ -810,4 +850,3 @@ mod probe {
         }
     }
 }
-

@@ -26,9 +26,9 @@
 
 use std::io::Write;
 
+use input_limits::quote;
 use quick_xml::events::Event;
 use quick_xml::Reader;
-use input_limits::quote;
 
 use crate::mesh::{ControlPoint, Degree, PointId, TMesh};
 use crate::TsplineError;
@@ -134,7 +134,8 @@ pub fn is_tmesh_document(src: &[u8]) -> bool {
             // <!DOCTYPE ...> (no internal subset in a T-mesh file)
             rest.iter().position(|&b| b == b'>').map(|i| i + 1)
         } else {
-            return rest.starts_with(b"<tmesh") && rest.get(6).is_some_and(|b| b.is_ascii_whitespace() || *b == b'>' || *b == b'/');
+            return rest.starts_with(b"<tmesh")
+                && rest.get(6).is_some_and(|b| b.is_ascii_whitespace() || *b == b'>' || *b == b'/');
         };
         match skip {
             Some(n) => rest = &rest[n..],
@@ -176,7 +177,15 @@ pub fn write(f: &TMeshFile, w: &mut dyn Write) -> std::io::Result<()> {
     let g = &f.georef;
     writeln!(w, r#"<?xml version="1.0" encoding="UTF-8"?>"#)?;
     writeln!(w, r#"<tmesh xmlns="{NAMESPACE}" version="1" degree="{}">"#, m.degree.k())?;
-    writeln!(w, r#"  <georef x0="{:?}" y0="{:?}" dx="{:?}" dy="{:?}"><crs>{}</crs></georef>"#, g.x0, g.y0, g.dx, g.dy, esc(&g.crs))?;
+    writeln!(
+        w,
+        r#"  <georef x0="{:?}" y0="{:?}" dx="{:?}" dy="{:?}"><crs>{}</crs></georef>"#,
+        g.x0,
+        g.y0,
+        g.dx,
+        g.dy,
+        esc(&g.crs)
+    )?;
     writeln!(w, r#"  <points count="{}">"#, m.points.len())?;
     for p in &m.points {
         writeln!(w, "{:?} {:?} {:?} {:?} {:?} {:?}", p.s, p.t, p.x, p.y, p.z, p.w)?;
@@ -231,7 +240,8 @@ pub fn read(data: &[u8]) -> Result<TMeshFile, TsplineError> {
     let mut text_pos = 0usize;
     loop {
         let pos = r.buffer_position() as usize;
-        let ev = r.read_event().map_err(|e| text_of.err(pos, format!("not well-formed XML: {}", quote(&e.to_string()))))?;
+        let ev =
+            r.read_event().map_err(|e| text_of.err(pos, format!("not well-formed XML: {}", quote(&e.to_string()))))?;
         match ev {
             Event::Start(ref e) | Event::Empty(ref e) => {
                 let tag = StartTag::read(e, pos, &text_of)?;
@@ -249,7 +259,8 @@ pub fn read(data: &[u8]) -> Result<TMeshFile, TsplineError> {
             }
             Event::GeneralRef(e) => {
                 let name = String::from_utf8_lossy(&e).to_string();
-                let c = predefined_entity(&name).ok_or_else(|| text_of.err(pos, format!("unknown entity &{};", quote(&name))))?;
+                let c = predefined_entity(&name)
+                    .ok_or_else(|| text_of.err(pos, format!("unknown entity &{};", quote(&name))))?;
                 text.push_str(c);
             }
             Event::End(_) => {
@@ -282,12 +293,19 @@ struct StartTag<'a> {
 }
 
 impl<'a> StartTag<'a> {
-    fn read(e: &quick_xml::events::BytesStart, pos: usize, text_of: &'a XmlText<'a>) -> Result<StartTag<'a>, TsplineError> {
+    fn read(
+        e: &quick_xml::events::BytesStart,
+        pos: usize,
+        text_of: &'a XmlText<'a>,
+    ) -> Result<StartTag<'a>, TsplineError> {
         let name = quote(&String::from_utf8_lossy(e.local_name().as_ref())).into_owned();
         let mut attrs = Vec::new();
         for a in e.attributes() {
             let a = a.map_err(|x| text_of.err(pos, format!("<{name}>: bad attribute: {}", quote(&x.to_string()))))?;
-            let v = a.unescape_value().map_err(|x| text_of.err(pos, format!("<{name}>: bad attribute value: {}", quote(&x.to_string()))))?.to_string();
+            let v = a
+                .unescape_value()
+                .map_err(|x| text_of.err(pos, format!("<{name}>: bad attribute value: {}", quote(&x.to_string()))))?
+                .to_string();
             attrs.push((String::from_utf8_lossy(a.key.local_name().as_ref()).to_string(), v));
         }
         Ok(StartTag { name, attrs, pos, text_of })
@@ -307,7 +325,10 @@ impl<'a> StartTag<'a> {
 
     fn num(&self, key: &str) -> Result<f64, TsplineError> {
         let v = self.required(key)?;
-        let x: f64 = v.trim().parse().map_err(|_| self.err(format!("<{}> {key}=\"{}\" is not a number", self.name, quote(v))))?;
+        let x: f64 = v
+            .trim()
+            .parse()
+            .map_err(|_| self.err(format!("<{}> {key}=\"{}\" is not a number", self.name, quote(v))))?;
         if !x.is_finite() {
             return Err(self.err(format!("<{}> {key} is not finite", self.name)));
         }
@@ -316,7 +337,9 @@ impl<'a> StartTag<'a> {
 
     fn uint(&self, key: &str) -> Result<usize, TsplineError> {
         let v = self.required(key)?;
-        v.trim().parse().map_err(|_| self.err(format!("<{}> {key}=\"{}\" is not a non-negative integer", self.name, quote(v))))
+        v.trim()
+            .parse()
+            .map_err(|_| self.err(format!("<{}> {key}=\"{}\" is not a non-negative integer", self.name, quote(v))))
     }
 }
 
@@ -355,11 +378,20 @@ impl XmlParts {
                     return Err(tag.err(format!("<tmesh> namespace is \"{}\", expected \"{NAMESPACE}\"", quote(ns))));
                 }
                 let k = tag.uint("degree")?;
-                self.degree = Some(Degree::from_u32(k as u32).ok_or_else(|| tag.err(format!("degree {k} is not supported (1 or 3)")))?);
+                self.degree = Some(
+                    Degree::from_u32(k as u32)
+                        .ok_or_else(|| tag.err(format!("degree {k} is not supported (1 or 3)")))?,
+                );
             }
             (0, other) => return Err(tag.err(format!("root element is <{other}>, expected <tmesh>"))),
             (1, "georef") => {
-                let g = Georef { x0: tag.num("x0")?, y0: tag.num("y0")?, dx: tag.num("dx")?, dy: tag.num("dy")?, crs: String::new() };
+                let g = Georef {
+                    x0: tag.num("x0")?,
+                    y0: tag.num("y0")?,
+                    dx: tag.num("dx")?,
+                    dy: tag.num("dy")?,
+                    crs: String::new(),
+                };
                 if g.dx == 0.0 || g.dy == 0.0 {
                     return Err(tag.err("<georef> dx and dy must be non-zero".into()));
                 }
@@ -486,7 +518,9 @@ mod tests {
 
     #[test]
     fn tmesh_documents_are_recognised_by_their_root() {
-        assert!(is_tmesh_document(b"\xEF\xBB\xBF<?xml version=\"1.0\"?>\n<!-- a > b --><tmesh xmlns=\"urn:geofit:tmesh:1\">"));
+        assert!(is_tmesh_document(
+            b"\xEF\xBB\xBF<?xml version=\"1.0\"?>\n<!-- a > b --><tmesh xmlns=\"urn:geofit:tmesh:1\">"
+        ));
         assert!(is_tmesh_document(b"  <tmesh>"));
         assert!(is_tmesh_document(b"<?xml version=\"1.0\"?><!DOCTYPE tmesh><tmesh degree=\"1\">"));
         assert!(!is_tmesh_document(b"<?xml version=\"1.0\"?><core:CityModel>"));
@@ -507,7 +541,13 @@ mod tests {
         }
         let file = TMeshFile {
             mesh: m.clone(),
-            georef: Georef { x0: 500015.0, y0: 2150015.5, dx: 30.0, dy: 30.0, crs: "PROJCS[\"WGS 84 / UTM <5N>\"] & co".into() },
+            georef: Georef {
+                x0: 500015.0,
+                y0: 2150015.5,
+                dx: 30.0,
+                dy: 30.0,
+                crs: "PROJCS[\"WGS 84 / UTM <5N>\"] & co".into(),
+            },
             mask: Some(DataMask { width: 5, height: 3, bits: (0..15).map(|i| i % 4 != 0).collect() }),
             warp: Some(r#"{"version":1,"rotation":0.5,"src":[[1.0,2.0]],"note":"<a & b>"}"#.into()),
         };
@@ -531,7 +571,16 @@ mod tests {
     #[test]
     fn nul_bytes_are_refused_with_their_position() {
         let mut buf = Vec::new();
-        write(&TMeshFile { mesh: TMesh::grid(Degree::Cubic, 0.0, 0.0, 1.0, 2, 2), georef: Georef::identity(), mask: None, warp: None }, &mut buf).unwrap();
+        write(
+            &TMeshFile {
+                mesh: TMesh::grid(Degree::Cubic, 0.0, 0.0, 1.0, 2, 2),
+                georef: Georef::identity(),
+                mask: None,
+                warp: None,
+            },
+            &mut buf,
+        )
+        .unwrap();
         let text = String::from_utf8(buf).unwrap().replace("<crs>", "<crs>EPSG:\u{0}25832");
         let e = read(text.as_bytes()).unwrap_err().to_string();
         assert!(e.contains("line 3:") && e.contains("a NUL byte") && !e.contains('\0'), "{e}");

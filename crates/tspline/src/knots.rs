@@ -31,7 +31,16 @@ pub struct LocalKnots {
 
 /// Collects up to `k` distinct edge coordinates beyond `from` in direction `dir` (+1 / −1) along
 /// the line, with the domain-gap stop of A14.
-fn ray(mesh: &TMesh, horizontal: bool, at: f64, from: f64, dir: f64, k: usize, limit: f64, buf: &mut Vec<Rect>) -> Vec<f64> {
+fn ray(
+    mesh: &TMesh,
+    horizontal: bool,
+    at: f64,
+    from: f64,
+    dir: f64,
+    k: usize,
+    limit: f64,
+    buf: &mut Vec<Rect>,
+) -> Vec<f64> {
     // Start with a short window and double it: most rays find their k knots nearby.
     let mut len = 1.0f64;
     // Use the size of cells touching the point as the first window estimate.
@@ -128,7 +137,8 @@ pub fn infer_batch(mesh: &TMesh, points: &[(f64, f64)]) -> Vec<LocalKnots> {
 /// knots of points far from the split cells.
 pub fn infer_missing(mesh: &TMesh, point_ids: &[u32], known: Vec<Option<LocalKnots>>) -> Vec<LocalKnots> {
     let missing: Vec<usize> = (0..known.len()).filter(|&i| known[i].is_none()).collect();
-    let params: Vec<(f64, f64)> = missing.iter().map(|&i| mesh.points[point_ids[i] as usize]).map(|p| (p.s, p.t)).collect();
+    let params: Vec<(f64, f64)> =
+        missing.iter().map(|&i| mesh.points[point_ids[i] as usize]).map(|p| (p.s, p.t)).collect();
     let mut out: Vec<LocalKnots> = known.iter().map(|k| k.unwrap_or(LocalKnots { s: [0.0; 5], t: [0.0; 5] })).collect();
     for (&i, kn) in missing.iter().zip(infer_batch(mesh, &params)) {
         out[i] = kn;
@@ -187,7 +197,8 @@ fn knots_along_lines(leaves: &[Rect], points: &[(f64, f64)], axis: Axis, k: usiz
     let per_line: Vec<Vec<(u32, [f64; 5])>> = (0..runs.len())
         .into_par_iter()
         .map(|l| {
-            let line = Line::new(members[start[l]..start[l + 1]].iter().map(|&c| axis.along(&leaves[c as usize])).collect());
+            let line =
+                Line::new(members[start[l]..start[l + 1]].iter().map(|&c| axis.along(&leaves[c as usize])).collect());
             let end = runs.get(l + 1).map_or(order.len(), |r| r.1);
             order[runs[l].1..end].iter().map(|&i| (i, line.knot_vector(axis.split(points[i as usize]).0, k))).collect()
         })
@@ -303,7 +314,7 @@ mod tests {
         let m = TMesh::grid(Degree::Cubic, 0.0, 0.0, 1.0, 6, 9);
         let k = infer(&m, 0.0, 4.0);
         assert_eq!(k.s, [0., 0., 0., 1., 2.].map(|v| v)); // own value repeated: s=0 has no west hit
-        // The thesis figure shows the point one column in: s = 1 → [0,0,1,2,3].
+                                                          // The thesis figure shows the point one column in: s = 1 → [0,0,1,2,3].
         let k = infer(&m, 1.0, 4.0);
         assert_eq!(k.s, [0., 0., 1., 2., 3.]);
         assert_eq!(k.t, [2., 3., 4., 5., 6.]);
@@ -335,7 +346,8 @@ mod tests {
     /// plus points on and off the mesh lines, inside and outside the domain.
     fn assert_batch_equals_rays(m: &TMesh, what: &str) {
         let active = m.active_points();
-        let mut pts: Vec<(f64, f64)> = m.points.iter().zip(&active).filter(|(_, a)| **a).map(|(p, _)| (p.s, p.t)).collect();
+        let mut pts: Vec<(f64, f64)> =
+            m.points.iter().zip(&active).filter(|(_, a)| **a).map(|(p, _)| (p.s, p.t)).collect();
         let b = m.bounds();
         let mut seed = 3u64;
         for _ in 0..200 {
@@ -348,7 +360,11 @@ mod tests {
         for (&(s, t), kb) in pts.iter().zip(&batch) {
             let kr = infer(m, s, t);
             // bits, not ==: a knot must be the same f64 to give the same surface
-            assert_eq!((kb.s.map(f64::to_bits), kb.t.map(f64::to_bits)), (kr.s.map(f64::to_bits), kr.t.map(f64::to_bits)), "{what}: point ({s}, {t})");
+            assert_eq!(
+                (kb.s.map(f64::to_bits), kb.t.map(f64::to_bits)),
+                (kr.s.map(f64::to_bits), kr.t.map(f64::to_bits)),
+                "{what}: point ({s}, {t})"
+            );
         }
     }
 
@@ -381,7 +397,9 @@ mod tests {
                 }
                 m.repair(1.0, &mut g);
                 if round == 2 {
-                    let parents: Vec<u32> = (0..m.cells.len() as u32).filter(|&c| m.cells[c as usize].alive && m.cells[c as usize].children.is_some()).collect();
+                    let parents: Vec<u32> = (0..m.cells.len() as u32)
+                        .filter(|&c| m.cells[c as usize].alive && m.cells[c as usize].children.is_some())
+                        .collect();
                     for &c in parents.iter().step_by(5) {
                         if m.cells[c as usize].alive && m.cells[c as usize].children.is_some() {
                             m.coarsen(c).unwrap();
@@ -412,8 +430,10 @@ mod tests {
             let r = fit(&samples, &FitOptions::new(degree, e), &Backend::Cpu, &mut |_| {}).unwrap();
             assert!(r.mesh.leaf_count() > 40, "the fit refined");
             assert_batch_equals_rays(&r.mesh, &format!("fit {degree:?} {e}"));
-            let ids: Vec<u32> = (0..r.mesh.points.len() as u32).filter(|&i| r.mesh.active_points()[i as usize]).collect();
-            let known: Vec<Option<LocalKnots>> = ids.iter().map(|&i| (i % 3 == 0).then_some(LocalKnots { s: [7.0; 5], t: [7.0; 5] })).collect();
+            let ids: Vec<u32> =
+                (0..r.mesh.points.len() as u32).filter(|&i| r.mesh.active_points()[i as usize]).collect();
+            let known: Vec<Option<LocalKnots>> =
+                ids.iter().map(|&i| (i % 3 == 0).then_some(LocalKnots { s: [7.0; 5], t: [7.0; 5] })).collect();
             let filled = infer_missing(&r.mesh, &ids, known);
             for (&i, kn) in ids.iter().zip(&filled) {
                 let p = r.mesh.points[i as usize];

@@ -49,7 +49,8 @@ impl OclDevice {
                 Err(e) => last_err = e.to_string(),
             }
         }
-        let (platform, device) = chosen.ok_or_else(|| err(format!("no OpenCL platform with a device found {last_err}")))?;
+        let (platform, device) =
+            chosen.ok_or_else(|| err(format!("no OpenCL platform with a device found {last_err}")))?;
         let context = Context::builder().platform(platform).devices(device).build().map_err(err)?;
         let queue = Queue::new(&context, device, None).map_err(err)?;
         let program = Program::builder()
@@ -78,7 +79,12 @@ impl OclDevice {
 
     /// A write-only output buffer of `len` elements (at least one).
     pub fn out<T: ocl::OclPrm>(&self, len: usize) -> Result<Buffer<T>, TsplineError> {
-        Buffer::<T>::builder().queue(self.queue.clone()).flags(flags::MEM_WRITE_ONLY).len(len.max(1)).build().map_err(err)
+        Buffer::<T>::builder()
+            .queue(self.queue.clone())
+            .flags(flags::MEM_WRITE_ONLY)
+            .len(len.max(1))
+            .build()
+            .map_err(err)
     }
 }
 

@@ -23,7 +23,6 @@ const RUN: usize = 64;
 /// The kernel source, compiled at run time.
 pub const KERNEL_SRC: &str = concat!(include_str!("common.cl"), include_str!("tspline.cl"));
 
-
 /// An OpenCL device with the compiled T-spline program.
 pub struct OclEvaluator {
     dev: OclDevice,
@@ -138,7 +137,13 @@ impl OclEvaluator {
     /// `n`: points; `runs`: work items of the element kernel (each evaluates up to [`RUN`]
     /// consecutive points). No local work size is set: on PoCL, forcing 1, 8, 64 or 256 was
     /// 1.3–2× slower than its own choice (measured with the `ocl_throughput` probe).
-    fn dense_kernel<'a>(&'a self, name: &str, sp: &'a OclSpline, n: usize, runs: usize) -> Result<ocl::builders::KernelBuilder<'a>, TsplineError> {
+    fn dense_kernel<'a>(
+        &'a self,
+        name: &str,
+        sp: &'a OclSpline,
+        n: usize,
+        runs: usize,
+    ) -> Result<ocl::builders::KernelBuilder<'a>, TsplineError> {
         match &sp.ext {
             Some(ex) if crate::eval::use_extraction(n, sp.ncells) => {
                 let mut kb = self.kernel(&format!("{name}_ext"), sp, runs)?;
@@ -223,7 +228,8 @@ impl OclEvaluator {
         let zero = LocalKnots { s: [0.0; 5], t: [0.0; 5] };
         let tmp = PbSpline::from_parts(mesh, ids.clone(), vec![zero; ids.len()]);
         let sp = self.upload_pb(&tmp)?;
-        let params: Vec<f64> = ids.iter().flat_map(|&i| [mesh.points[i as usize].s, mesh.points[i as usize].t]).collect();
+        let params: Vec<f64> =
+            ids.iter().flat_map(|&i| [mesh.points[i as usize].s, mesh.points[i as usize].t]).collect();
         let n = ids.len();
         let pbuf = self.dev.buf(&params)?;
         let out = self.out_buf(10 * n)?;
@@ -268,7 +274,12 @@ mod tests {
             let mut seed = 11u64;
             let n = if degree == Degree::Cubic { 1_000_000 } else { 200_000 };
             let mut st: Vec<[f64; 2]> = (0..n)
-                .map(|_| [b.s_min - 2.0 + (b.width() + 4.0) * lcg(&mut seed), b.t_min - 2.0 + (b.height() + 4.0) * lcg(&mut seed)])
+                .map(|_| {
+                    [
+                        b.s_min - 2.0 + (b.width() + 4.0) * lcg(&mut seed),
+                        b.t_min - 2.0 + (b.height() + 4.0) * lcg(&mut seed),
+                    ]
+                })
                 .collect();
             // include vertices and borders
             st.extend(m.points.iter().map(|p| [p.s, p.t]));
@@ -285,7 +296,8 @@ mod tests {
                 assert!((a - g).abs() <= 1e-12 * a.abs().max(1.0), "{degree:?} point {:?}: cpu {a} ocl {g}", st[i]);
             }
             assert!(nan > 0 && nan < st.len() / 2);
-            let same = cpu.iter().zip(&gpu).filter(|(a, g)| a.to_bits() == g.to_bits() || (a.is_nan() && g.is_nan())).count();
+            let same =
+                cpu.iter().zip(&gpu).filter(|(a, g)| a.to_bits() == g.to_bits() || (a.is_nan() && g.is_nan())).count();
             eprintln!("{degree:?}: {same} of {} bitwise equal", st.len());
             // the PB-spline kernel (used once the geometry changed) gives the same numbers
             let mut sp_ref = ocl.upload(&pb).unwrap();
@@ -293,7 +305,11 @@ mod tests {
             let n_ref = if degree == Degree::Cubic { 200_000 } else { st.len() };
             let gpu_ref = ocl.eval_points(&sp_ref, &st[..n_ref]).unwrap();
             for (i, (a, g)) in cpu.iter().zip(&gpu_ref).enumerate() {
-                assert!((a.is_nan() && g.is_nan()) || (a - g).abs() <= 1e-12 * a.abs().max(1.0), "{degree:?} reference kernel at {:?}: cpu {a} ocl {g}", st[i]);
+                assert!(
+                    (a.is_nan() && g.is_nan()) || (a - g).abs() <= 1e-12 * a.abs().max(1.0),
+                    "{degree:?} reference kernel at {:?}: cpu {a} ocl {g}",
+                    st[i]
+                );
             }
             // grid kernel
             let gs = GridSpec { s0: b.s_min, t0: b.t_min, ds: 0.7, dt: 0.9, ns: 150, nt: 100 };
@@ -358,7 +374,9 @@ mod tests {
         let cpu = || -> f64 {
             let s = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
             let f: Vec<&str> = s.rsplit(')').next().unwrap_or("").split_whitespace().collect();
-            (f.get(11).and_then(|v| v.parse::<f64>().ok()).unwrap_or(f64::NAN) + f.get(12).and_then(|v| v.parse::<f64>().ok()).unwrap_or(f64::NAN)) / 100.0
+            (f.get(11).and_then(|v| v.parse::<f64>().ok()).unwrap_or(f64::NAN)
+                + f.get(12).and_then(|v| v.parse::<f64>().ok()).unwrap_or(f64::NAN))
+                / 100.0
         };
         let c0 = cpu();
         let t = Instant::now();
@@ -368,19 +386,33 @@ mod tests {
         let a = ocl.eval_points(&sp, &st).unwrap();
         let tp = t.elapsed().as_secs_f64();
         let c1 = cpu();
-        eprintln!("eval_points (element kernel): {:.3} s = {:.2} M points/s; {:.2} M points per CPU-second (upload+eval)", tp, st.len() as f64 / tp / 1e6, st.len() as f64 / (c1 - c0) / 1e6);
+        eprintln!(
+            "eval_points (element kernel): {:.3} s = {:.2} M points/s; {:.2} M points per CPU-second (upload+eval)",
+            tp,
+            st.len() as f64 / tp / 1e6,
+            st.len() as f64 / (c1 - c0) / 1e6
+        );
         let gs = GridSpec { s0: 0.0, t0: 0.0, ds: 1.0, dt: 1.0, ns: side, nt: side };
         let t = Instant::now();
         let b = ocl.eval_grid(&sp, &gs).unwrap();
         let tg = t.elapsed().as_secs_f64();
         let c2 = cpu();
-        eprintln!("eval_grid (element kernel): {:.3} s = {:.2} M points/s; {:.2} M points per CPU-second", tg, b.len() as f64 / tg / 1e6, b.len() as f64 / (c2 - c1) / 1e6);
+        eprintln!(
+            "eval_grid (element kernel): {:.3} s = {:.2} M points/s; {:.2} M points per CPU-second",
+            tg,
+            b.len() as f64 / tg / 1e6,
+            b.len() as f64 / (c2 - c1) / 1e6
+        );
         ocl.update_geometry(&mut sp, &pb).unwrap();
         let sub = &st[..1_000_000];
         let t = Instant::now();
         let c = ocl.eval_points(&sp, sub).unwrap();
         let tr = t.elapsed().as_secs_f64();
-        eprintln!("eval_points (PB-spline kernel): {:.2} M points/s; {:.2} M points per CPU-second", sub.len() as f64 / tr / 1e6, sub.len() as f64 / (cpu() - c2) / 1e6);
+        eprintln!(
+            "eval_points (PB-spline kernel): {:.2} M points/s; {:.2} M points per CPU-second",
+            sub.len() as f64 / tr / 1e6,
+            sub.len() as f64 / (cpu() - c2) / 1e6
+        );
         let cpu = pb.eval_z(&st, true);
         for (q, x) in cpu.iter().enumerate() {
             let y = a[q];

@@ -22,7 +22,6 @@ pub const KERNEL_SRC: &str = concat!(include_str!("common.cl"), include_str!("fi
 /// Slots per row (more non-zero basis functions at one point is an error).
 pub const MAXNZ: usize = 32;
 
-
 /// Rows of T in ELL layout: row r has `count[r]` entries `idx/val[r·MAXNZ ..]`; count 0 = the
 /// sample lies outside the domain.
 #[derive(Debug, Clone, PartialEq)]
@@ -98,11 +97,7 @@ impl OclModel {
 
     /// Uploads the PB-spline's knots, weights, leaf cells and bucket lists.
     pub fn upload(&self, pb: &PbSpline) -> Result<OclModelSpline, TsplineError> {
-        Ok(OclModelSpline {
-            bufs: PbBuffers::upload(&self.dev, pb)?,
-            grid: pb.grid,
-            k: pb.degree.k() as u32,
-        })
+        Ok(OclModelSpline { bufs: PbBuffers::upload(&self.dev, pb)?, grid: pb.grid, k: pb.degree.k() as u32 })
     }
 
     /// The rows of T at the grid's points (one work item per row).
@@ -232,7 +227,11 @@ mod tests {
             let z: Vec<f64> = (0..w * h)
                 .map(|q| {
                     let (x, y) = ((q % w) as f64, (q / w) as f64);
-                    if (x - 20.0).powi(2) + (y - 15.0).powi(2) < 30.0 { f64::NAN } else { (x * 0.2).sin() * 5.0 + 0.1 * x * y / 10.0 }
+                    if (x - 20.0).powi(2) + (y - 15.0).powi(2) < 30.0 {
+                        f64::NAN
+                    } else {
+                        (x * 0.2).sin() * 5.0 + 0.1 * x * y / 10.0
+                    }
                 })
                 .collect();
             let samples = crate::fit::Samples { width: w, height: h, z: z.into() };

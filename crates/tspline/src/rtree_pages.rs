@@ -164,7 +164,8 @@ mod tests {
         // cells Z1, Z2, Z3 (object ids 0, 1, 2)
         let boxes = [[0.0, 1.0, 1.0, 2.0], [1.0, 1.0, 2.0, 2.0], [0.0, 0.0, 2.0, 1.0]];
         let pages = nearest_x(&boxes, 2, Order::YThenXDescending);
-        let rows: Vec<([f64; 4], Vec<usize>, Option<usize>)> = pages.into_iter().map(|p| (p.bbox, p.children, p.object)).collect();
+        let rows: Vec<([f64; 4], Vec<usize>, Option<usize>)> =
+            pages.into_iter().map(|p| (p.bbox, p.children, p.object)).collect();
         assert_eq!(
             rows,
             vec![

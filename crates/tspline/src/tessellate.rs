@@ -125,7 +125,10 @@ pub fn tessellate(
         tmesh_node.lines.push(lines);
     }
     let mut scene = Scene {
-        materials: vec![Material::new("surface", [1.0, 1.0, 1.0, 1.0]), Material::new("tmesh-edges", [0.05, 0.05, 0.05, 1.0])],
+        materials: vec![
+            Material::new("surface", [1.0, 1.0, 1.0, 1.0]),
+            Material::new("tmesh-edges", [0.05, 0.05, 0.05, 1.0]),
+        ],
         crs: if g.crs.is_empty() { None } else { Some(g.crs.clone()) },
         ..Default::default()
     };
@@ -142,7 +145,9 @@ pub fn tessellate(
 /// −½ and width − ½ outside, which dropped the outermost ring of samples and left a gap of one
 /// step between the glb of adjacent tiles (docs/decisions.md#terrain-tilesets).
 fn inside_mask(m: &DataMask, s: f64, t: f64) -> bool {
-    let cell = |u: f64, n: usize| (n > 0 && u >= -0.5 && u <= n as f64 - 0.5).then(|| (u.round().max(0.0) as usize).min(n - 1));
+    let cell = |u: f64, n: usize| {
+        (n > 0 && u >= -0.5 && u <= n as f64 - 0.5).then(|| (u.round().max(0.0) as usize).min(n - 1))
+    };
     match (cell(s, m.width), cell(t, m.height)) {
         (Some(i), Some(j)) => m.get(i, j),
         _ => false,
@@ -150,8 +155,14 @@ fn inside_mask(m: &DataMask, s: f64, t: f64) -> bool {
 }
 
 /// The valued samples as coloured vertices, two triangles per quad whose four corners have values.
-fn surface_mesh(file: &TMeshFile, grid: &SampleGrid, z: &[f64], colouring: &Colouring) -> Result<TriangleMesh, TessellateError> {
-    let (lowest, highest) = z.iter().filter(|v| v.is_finite()).fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+fn surface_mesh(
+    file: &TMeshFile,
+    grid: &SampleGrid,
+    z: &[f64],
+    colouring: &Colouring,
+) -> Result<TriangleMesh, TessellateError> {
+    let (lowest, highest) =
+        z.iter().filter(|v| v.is_finite()).fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
     if !lowest.is_finite() {
         return Err(TessellateError::NoPointInMask);
     }
@@ -169,7 +180,9 @@ fn surface_mesh(file: &TMeshFile, grid: &SampleGrid, z: &[f64], colouring: &Colo
         let (x, y) = file.georef.world(p[0], p[1]);
         vid[q] = mesh.push_vertex([x, y, z[q]]);
         colours.push(match colouring {
-            Colouring::ErrorAgainst(reference) => error_colour(reference(x, y).map(|v| (v - z[q]).abs()).unwrap_or(f64::NAN)),
+            Colouring::ErrorAgainst(reference) => {
+                error_colour(reference(x, y).map(|v| (v - z[q]).abs()).unwrap_or(f64::NAN))
+            }
             Colouring::Height { .. } => mesh_export::colour::elevation((z[q] - zmin) / (zmax - zmin).max(1e-300)),
         });
     }
@@ -192,7 +205,12 @@ fn draped_cell_edges(file: &TMeshFile, pb: &PbSpline, mask: Option<&DataMask>) -
     let mut lines = LineSet { material: Some(1), ..Default::default() };
     for c in file.mesh.cells.iter().filter(|c| c.is_leaf()) {
         let r = c.rect;
-        for (s0, t0, s1, t1) in [(r.s_min, r.t_min, r.s_max, r.t_min), (r.s_min, r.t_min, r.s_min, r.t_max), (r.s_min, r.t_max, r.s_max, r.t_max), (r.s_max, r.t_min, r.s_max, r.t_max)] {
+        for (s0, t0, s1, t1) in [
+            (r.s_min, r.t_min, r.s_max, r.t_min),
+            (r.s_min, r.t_min, r.s_min, r.t_max),
+            (r.s_min, r.t_max, r.s_max, r.t_max),
+            (r.s_max, r.t_min, r.s_max, r.t_max),
+        ] {
             let mut prev: Option<u32> = None;
             for k in 0..=EDGE_SEGMENTS {
                 let f = k as f64 / EDGE_SEGMENTS as f64;

@@ -4,10 +4,10 @@
 use clap::Args as ClapArgs;
 use serde::Serialize;
 
-use crate::cmd::args::{InputOutput, NormalizeArgs, require_positive};
+use crate::cmd::args::{require_positive, InputOutput, NormalizeArgs};
 use crate::config::{Config, Input, Output};
-use crate::report::{write_json_report, ReportKind};
 use crate::error::{CliError, CmdResult, Exit};
+use crate::report::{write_json_report, ReportKind};
 use normalize::conditions::{ConditionCounts, ConditionOptions};
 use normalize::convert::{convert_buildings, model_for, select_buildings, BuildingOptions, BuildingReport, Conversion};
 use normalize::{Counts, Rejection, Tolerances};
@@ -173,7 +173,16 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     }
     let (converted, rejected) = (done.buildings.len(), done.rejected);
     if let Some(p) = &args.report {
-        let report = Report { input: name.clone(), origin, tolerances: tol, conditions: copt, converted, rejected: rejected.clone(), total, buildings: done.buildings };
+        let report = Report {
+            input: name.clone(),
+            origin,
+            tolerances: tol,
+            conditions: copt,
+            converted,
+            rejected: rejected.clone(),
+            total,
+            buildings: done.buildings,
+        };
         write_json_report(p, &REPORT, &report)?;
     }
     if rejected.is_empty() {
@@ -192,7 +201,12 @@ fn print_summary(total: &Counts, done: &Conversion) {
     let cc = ConditionCounts::sum(done.buildings.iter().map(|r| &r.conditions));
     crate::say!(
         "conditions: parallelism {}, coplanarity {}, orthogonality {}, wall-window {}, identity {}, normal-norm {}",
-        cc.parallelism, cc.coplanarity, cc.orthogonality, cc.wall_window, cc.identity, cc.norm
+        cc.parallelism,
+        cc.coplanarity,
+        cc.orthogonality,
+        cc.wall_window,
+        cc.identity,
+        cc.norm
     );
     for r in &done.buildings {
         for n in &r.notices {

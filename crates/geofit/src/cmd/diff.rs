@@ -13,10 +13,10 @@ use raster_picture::{aux_xml, bar_chart, sidecar_paths, world_file, Canvas};
 use raster_proc::diff::{class_map_rgba, compare_with_map, DiffOptions, DiffReport, DEFAULT_CLASS_BOUNDS};
 use raster_proc::diff_figures::{error_map, histogram_chart};
 
-use crate::terrain_io::{gdal_notices, proc_err, read_raster_arg, z_unit_of};
 use crate::config::{Config, Output};
-use crate::report::{print_report_with_units, with_z_unit, write_json_report_with_units, ReportKind, Z_UNIT};
 use crate::error::{CliError, CmdResult, Exit};
+use crate::report::{print_report_with_units, with_z_unit, write_json_report_with_units, ReportKind, Z_UNIT};
+use crate::terrain_io::{gdal_notices, proc_err, read_raster_arg, z_unit_of};
 
 const EXAMPLE: &str = "\
 Example:
@@ -126,7 +126,14 @@ fn load_a(arg: &str) -> Result<(Raster, String), CliError> {
 /// The unit both rasters' heights are compared in: --z-unit, else what they declare (one that
 /// declares none is taken to share the other's: an `eval` output of a mesh fitted on it), else m.
 /// B's heights are converted into A's unit when the two declare different units.
-fn common_unit(a: &Raster, name_a: &str, b: &mut Raster, name_b: &str, given: Option<&str>, config: &Config) -> Result<String, CliError> {
+fn common_unit(
+    a: &Raster,
+    name_a: &str,
+    b: &mut Raster,
+    name_b: &str,
+    given: Option<&str>,
+    config: &Config,
+) -> Result<String, CliError> {
     let ua = z_unit_of(a, name_a, given)?;
     let ub = z_unit_of(b, name_b, given)?;
     if let (Some(ua), Some(ub)) = (ua, ub) {
@@ -144,7 +151,14 @@ fn common_unit(a: &Raster, name_a: &str, b: &mut Raster, name_b: &str, given: Op
 }
 
 fn print_text(w: &mut dyn Write, r: &DiffReport) -> std::io::Result<()> {
-    writeln!(w, "cells compared  {} (only in A {}, only in B {}){}", r.cells_compared, r.only_in_a, r.only_in_b, if r.resampled { ", B resampled onto A's grid" } else { "" })?;
+    writeln!(
+        w,
+        "cells compared  {} (only in A {}, only in B {}){}",
+        r.cells_compared,
+        r.only_in_a,
+        r.only_in_b,
+        if r.resampled { ", B resampled onto A's grid" } else { "" }
+    )?;
     writeln!(
         w,
         "|dz| mean       {:.4}   sigma {:.4}   median {:.4}   max {:.4}   RMS {:.4}",
@@ -182,7 +196,8 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     let (a, name_a) = load_a(&args.a)?;
     let (mut b, name_b) = read_raster_arg(&args.b)?;
     let z_unit = common_unit(&a, &name_a, &mut b, &name_b, args.z_unit.as_deref(), config)?;
-    let (report, classes) = compare_with_map(&a, &b, &opts).map_err(|e| proc_err(&format!("{name_a} vs {name_b}"), e))?;
+    let (report, classes) =
+        compare_with_map(&a, &b, &opts).map_err(|e| proc_err(&format!("{name_a} vs {name_b}"), e))?;
     let units = with_z_unit(REPORT.units, &z_unit);
     let exit = if args.check && report.over_tolerance > 0 { Exit::Findings } else { Exit::Ok };
     // --check failing is a failed step: its pictures are not written (make) unless

@@ -4,15 +4,15 @@
 use clap::Args as ClapArgs;
 
 use raster_io::{Raster, WriteOptions};
+use tspline::format::DataMask;
 use tspline::format::TMeshFile;
 use tspline::PbSpline;
-use tspline::format::DataMask;
 use tspline_raster::layout::{EvalGrid, Footprint, Params};
 
-use crate::terrain_io::{read_tmesh_arg, select_device, tspline_err, Device};
-use crate::terrain_io::{gdal_notices, read_raster_arg_band, write_raster_arg, Band, RasterOutArgs};
 use crate::config::Config;
 use crate::error::{CliError, CmdResult, Exit};
+use crate::terrain_io::{gdal_notices, read_raster_arg_band, write_raster_arg, Band, RasterOutArgs};
+use crate::terrain_io::{read_tmesh_arg, select_device, tspline_err, Device};
 
 const EXAMPLE: &str = "\
 Example:
@@ -67,7 +67,8 @@ fn output_grid(args: &Args, file: &TMeshFile, write_opts: &mut WriteOptions) -> 
     // and the default grid is the original raster's, masked by its footprint.
     let field = match &file.warp {
         Some(json) => Some(
-            raster_proc::warp::WarpField::from_json(json).map_err(|e| CliError::unreadable(format!("{}: <warp>: {e}", args.mesh)))?,
+            raster_proc::warp::WarpField::from_json(json)
+                .map_err(|e| CliError::unreadable(format!("{}: <warp>: {e}", args.mesh)))?,
         ),
         None => None,
     };
@@ -94,7 +95,8 @@ fn output_grid(args: &Args, file: &TMeshFile, write_opts: &mut WriteOptions) -> 
         return Ok(grid);
     }
     if let Some(src) = field.as_ref().and_then(|f| f.source.as_ref()) {
-        return EvalGrid::of_warp_source(src, crs, to_param).map_err(|e| CliError::unreadable(format!("{}: <warp> source grid: {e}", args.mesh)));
+        return EvalGrid::of_warp_source(src, crs, to_param)
+            .map_err(|e| CliError::unreadable(format!("{}: <warp> source grid: {e}", args.mesh)));
     }
     match &file.mask {
         Some(m) => Ok(EvalGrid::of_mask(g, m)),
@@ -111,7 +113,10 @@ fn extra_mask(args: &Args, out: &Raster) -> Result<Option<Raster>, CliError> {
     let Some(m) = &args.mask else { return Ok(None) };
     let (r, name, _) = read_raster_arg_band(m, Band::First)?;
     if r.width != out.width || r.height != out.height {
-        return Err(CliError::usage(format!("--mask {name} is {}×{}, the output grid is {}×{}", r.width, r.height, out.width, out.height)));
+        return Err(CliError::usage(format!(
+            "--mask {name} is {}×{}, the output grid is {}×{}",
+            r.width, r.height, out.width, out.height
+        )));
     }
     Ok(Some(r))
 }

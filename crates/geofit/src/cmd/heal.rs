@@ -4,10 +4,10 @@
 use clap::Args as ClapArgs;
 use serde::Serialize;
 
-use crate::cmd::args::{InputOutput, require_non_negative, require_positive};
+use crate::cmd::args::{require_non_negative, require_positive, InputOutput};
 use crate::config::{Config, Input, Output};
-use crate::report::{write_json_report, ReportKind};
 use crate::error::{CliError, CmdResult, Exit};
+use crate::report::{write_json_report, ReportKind};
 use heal::{HealError, HealOptions, HealReport};
 use normalize::conditions::ConditionOptions;
 use normalize::to_citygml::BackOptions;
@@ -110,7 +110,12 @@ fn options(a: &Args) -> Result<HealOptions, CliError> {
     Ok(HealOptions {
         lod: a.lod,
         tolerances: Tolerances { snap: a.snap, planarity: a.planarity, ..Tolerances::default() },
-        conditions: ConditionOptions { parallel_deg: a.angle, orthogonal_deg: a.angle, epsilon: a.epsilon, ..d.conditions },
+        conditions: ConditionOptions {
+            parallel_deg: a.angle,
+            orthogonal_deg: a.angle,
+            epsilon: a.epsilon,
+            ..d.conditions
+        },
         back: BackOptions { merge: !a.no_merge, precision: a.precision, ..BackOptions::default() },
         max_move: a.max_move,
         max_area_change: a.max_area_change / 100.0,
@@ -176,7 +181,12 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         print_summary(r);
     }
     if args.strict && !r.kept.is_empty() {
-        return Err(CliError::findings(format!("{name}: --strict: {} building(s) would keep their original geometry (first: {}: {}); nothing written", r.kept.len(), r.kept[0].building, r.kept[0].reason)));
+        return Err(CliError::findings(format!(
+            "{name}: --strict: {} building(s) would keep their original geometry (first: {}: {}); nothing written",
+            r.kept.len(),
+            r.kept[0].building,
+            r.kept[0].reason
+        )));
     }
     crate::config::encoding::write_document(&output, &healed.document)?;
     if let Some(p) = &args.report {

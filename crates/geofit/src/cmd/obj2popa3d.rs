@@ -4,10 +4,10 @@
 use clap::Args as ClapArgs;
 use serde::Serialize;
 
-use crate::cmd::args::{InputOutput, NormalizeArgs, require_positive};
+use crate::cmd::args::{require_positive, InputOutput, NormalizeArgs};
 use crate::config::{Config, Input, Output};
-use crate::report::{write_json_report, ReportKind};
 use crate::error::{CliError, CmdResult, Exit};
+use crate::report::{write_json_report, ReportKind};
 use normalize::conditions::{self, Ranges, SketchOptions};
 use normalize::{Counts, Notice};
 use popa3d_model::{Popa3d, SourceDocument};
@@ -60,7 +60,8 @@ pub struct Args {
 }
 
 /// `--report`: what was derived from the mesh.
-const REPORT: ReportKind = ReportKind { schema: "geofit-obj2popa3d-report/1", units: &[("counts.max_node_shift", "m")] };
+const REPORT: ReportKind =
+    ReportKind { schema: "geofit-obj2popa3d-report/1", units: &[("counts.max_node_shift", "m")] };
 
 #[derive(Serialize)]
 struct Report {
@@ -88,9 +89,14 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     let soup = normalize::obj::read_sketch(&bytes, &name).map_err(|e| CliError::unreadable(e.to_string()))?;
     let mut model = Popa3d::new(normalize::obj::sketch_origin(&soup));
     model.source = Some(SourceDocument { format: "obj".into(), file: name.clone() });
-    let n = normalize::normalize_into(&mut model, &soup, &tol).map_err(|r| CliError::findings(format!("{name}: rejected: {r}")))?;
+    let n = normalize::normalize_into(&mut model, &soup, &tol)
+        .map_err(|r| CliError::findings(format!("{name}: rejected: {r}")))?;
     let r = Ranges::whole(&model);
-    let so = SketchOptions { sigma_plane_difference: args.sigma_plane_difference, sigma_relative_angle: args.sigma_relative_angle, sigma_norm: args.sigma_norm };
+    let so = SketchOptions {
+        sigma_plane_difference: args.sigma_plane_difference,
+        sigma_relative_angle: args.sigma_relative_angle,
+        sigma_norm: args.sigma_norm,
+    };
     let (nd, na, nn) = conditions::sketch_priors(&mut model, &r, &so);
     let distances = match &args.distances {
         Some(csv) => read_distances(csv, &model)?,
@@ -124,6 +130,7 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
 
 /// The measured distances of the `--distances` CSV, resolved against the model's elements.
 fn read_distances(csv: &str, model: &Popa3d) -> Result<Vec<popa3d_model::Observation>, CliError> {
-    let text = String::from_utf8(Input::from_arg(csv).read_all()?).map_err(|_| CliError::unreadable(format!("{csv}: not UTF-8 text")))?;
+    let text = String::from_utf8(Input::from_arg(csv).read_all()?)
+        .map_err(|_| CliError::unreadable(format!("{csv}: not UTF-8 text")))?;
     popa3d_model::csv::parse_distances(&text, model).map_err(|e| CliError::findings(format!("{csv}: {e}")))
 }

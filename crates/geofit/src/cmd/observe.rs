@@ -49,8 +49,10 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     for csv in &args.add {
         let cin = Input::from_arg(csv);
         let cname = cin.display_name();
-        let text = String::from_utf8(cin.read_all()?).map_err(|e| CliError::unreadable(format!("{cname}: not UTF-8: {e}")))?;
-        let obs = popa3d_model::csv::parse_distances(&text, &model).map_err(|e| CliError::findings(format!("{cname}: {e}")))?;
+        let text =
+            String::from_utf8(cin.read_all()?).map_err(|e| CliError::unreadable(format!("{cname}: not UTF-8: {e}")))?;
+        let obs = popa3d_model::csv::parse_distances(&text, &model)
+            .map_err(|e| CliError::findings(format!("{cname}: {e}")))?;
         for o in obs {
             let ids = normalize::conditions::add_distance(&mut model, o, args.sigma_induced);
             added += 1;
@@ -58,7 +60,10 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         }
     }
     if !config.quiet {
-        crate::say!("observe: {added} measurement(s) added, {induced} induced constraint(s); {} observations in total", model.observations.len());
+        crate::say!(
+            "observe: {added} measurement(s) added, {induced} induced constraint(s); {} observations in total",
+            model.observations.len()
+        );
     }
     Output::from_arg(args.output.as_deref())
         .write_with(|w| popa3d_model::write(&model, w).map_err(|e| CliError::internal(e.to_string())))?;

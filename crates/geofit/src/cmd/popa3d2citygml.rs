@@ -6,8 +6,8 @@ use serde::Serialize;
 
 use crate::cmd::args::{require_non_negative, require_positive};
 use crate::config::{Config, Input, Output};
-use crate::report::{write_json_report, ReportKind};
 use crate::error::{CliError, CmdResult, Exit};
+use crate::report::{write_json_report, ReportKind};
 use heal::{HealError, HealOptions, WriteBackError};
 use normalize::to_citygml::{BackError, BackOptions, BackReport};
 
@@ -102,8 +102,19 @@ struct Report<'a> {
 }
 
 fn back_options(a: &Args) -> Result<BackOptions, CliError> {
-    require_positive(&[("coplanar-tolerance", a.coplanar_tolerance), ("collapse-tolerance", a.collapse_tolerance), ("area-tolerance", a.area_tolerance), ("max-move", a.max_move)])?;
-    Ok(BackOptions { coplanar_tolerance: a.coplanar_tolerance, collapse_tolerance: a.collapse_tolerance, area_tolerance: a.area_tolerance, merge: !a.no_merge, precision: a.precision })
+    require_positive(&[
+        ("coplanar-tolerance", a.coplanar_tolerance),
+        ("collapse-tolerance", a.collapse_tolerance),
+        ("area-tolerance", a.area_tolerance),
+        ("max-move", a.max_move),
+    ])?;
+    Ok(BackOptions {
+        coplanar_tolerance: a.coplanar_tolerance,
+        collapse_tolerance: a.collapse_tolerance,
+        area_tolerance: a.area_tolerance,
+        merge: !a.no_merge,
+        precision: a.precision,
+    })
 }
 
 /// The error of the conversion back, its message bounded: the provenance checks repeat ids of
@@ -182,7 +193,17 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
     }
     output.write_bytes(&healed.document)?;
     if let Some(p) = &args.report {
-        write_json_report(p, &REPORT, &Report { template: tname, options: &opts, result: &report, kept, moved_by_building_m: &healed.report.moved_by_building_m })?;
+        write_json_report(
+            p,
+            &REPORT,
+            &Report {
+                template: tname,
+                options: &opts,
+                result: &report,
+                kept,
+                moved_by_building_m: &healed.report.moved_by_building_m,
+            },
+        )?;
     }
     Ok(Exit::Ok)
 }

@@ -41,7 +41,9 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         Some("obj") => Format::Obj,
         Some("gltf") => Format::Gltf,
         Some("glb") | None => Format::Glb,
-        Some(other) => return Err(CliError::usage(format!("unknown output format .{other} (use .glb, .gltf or .obj)"))),
+        Some(other) => {
+            return Err(CliError::usage(format!("unknown output format .{other} (use .glb, .gltf or .obj)")))
+        }
     };
     let file = read_tmesh_arg(&args.mesh)?;
     tessellate(file, &args.mesh, &output, format, &args.opts, config)

@@ -7,9 +7,9 @@ use clap::Args as ClapArgs;
 
 use raster_proc::warp::{field_of, unwarp_raster};
 
-use crate::terrain_io::{gdal_notices, proc_err, read_cloud, read_raster_arg_typed, write_raster_arg, RasterOutArgs};
 use crate::config::{Config, Output};
 use crate::error::{CliError, CmdResult, Exit};
+use crate::terrain_io::{gdal_notices, proc_err, read_cloud, read_raster_arg_typed, write_raster_arg, RasterOutArgs};
 
 const EXAMPLE: &str = "\
 Example:
@@ -67,7 +67,11 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
             }
             Ok(())
         })?;
-        config.notice(&format!("mapped {} points {}", cloud.points.len(), if args.forward { "into the warped frame" } else { "back to the original frame" }));
+        config.notice(&format!(
+            "mapped {} points {}",
+            cloud.points.len(),
+            if args.forward { "into the warped frame" } else { "back to the original frame" }
+        ));
         return Ok(Exit::Ok);
     }
     let write_opts = args.raster_out.checked(args.output.as_deref(), Some(sample_type))?;

@@ -11,11 +11,11 @@ use raster_proc::pca::Mass;
 use raster_proc::splat::SplatKernel;
 use raster_proc::warp::{warp_raster, WarpParams, WarpStats};
 
+use crate::config::Config;
+use crate::error::{CliError, CmdResult, Exit};
+use crate::report::{write_json_report, ReportKind};
 use crate::terrain_io::{gdal_notices, proc_err, read_raster_arg_typed, write_raster_arg, RasterOutArgs};
 use raster_io::RasterFormat;
-use crate::config::Config;
-use crate::report::{write_json_report, ReportKind};
-use crate::error::{CliError, CmdResult, Exit};
 
 const EXAMPLE: &str = "\
 Example:
@@ -116,7 +116,10 @@ pub fn run(args: Args, config: &Config) -> CmdResult {
         if tiff {
             Ok(())
         } else {
-            Err(CliError::usage(format!("{}: the warp field needs a GeoTIFF output (.tif, -of COG or -of GTiff)", args.output.as_deref().unwrap_or("-"))))
+            Err(CliError::usage(format!(
+                "{}: the warp field needs a GeoTIFF output (.tif, -of COG or -of GTiff)",
+                args.output.as_deref().unwrap_or("-")
+            )))
         }
     };
     needs_tiff(&args.raster_out.checked(args.output.as_deref(), Some(raster_io::SampleType::Float32))?)?;

@@ -51,9 +51,18 @@ enum Finished {
 }
 
 impl<'a> Approximation<'a> {
-    pub(super) fn new(samples: &'a Samples, pts: Option<&'a Scattered>, opts: &'a FitOptions, backend: &'a Backend<'a>) -> Result<Approximation<'a>, TsplineError> {
+    pub(super) fn new(
+        samples: &'a Samples,
+        pts: Option<&'a Scattered>,
+        opts: &'a FitOptions,
+        backend: &'a Backend<'a>,
+    ) -> Result<Approximation<'a>, TsplineError> {
         let (tol, tol_final) = tolerances(samples, pts, opts)?;
-        let asm = if opts.opencl_assembly && opts.method == Method::Lsq { Some(crate::ocl_fit::OclModel::new()?) } else { None };
+        let asm = if opts.opencl_assembly && opts.method == Method::Lsq {
+            Some(crate::ocl_fit::OclModel::new()?)
+        } else {
+            None
+        };
         Ok(Approximation {
             samples,
             pts,
@@ -69,7 +78,11 @@ impl<'a> Approximation<'a> {
     }
 
     /// The loop from `mesh` on; `progress` gets every iteration's statistics.
-    pub(super) fn run(mut self, mut mesh: TMesh, progress: &mut dyn FnMut(&IterationStats)) -> Result<FitResult, TsplineError> {
+    pub(super) fn run(
+        mut self,
+        mut mesh: TMesh,
+        progress: &mut dyn FnMut(&IterationStats),
+    ) -> Result<FitResult, TsplineError> {
         let mut step = Refinement::default();
         for it in 0.. {
             let t0 = Instant::now();
@@ -95,7 +108,9 @@ impl<'a> Approximation<'a> {
             if err.over_tolerance == 0 {
                 match self.finish(mesh, pb, it, &mut *progress)? {
                     Finished::Done(result) => return Ok(result),
-                    Finished::Missed { mesh: m, pb: p, err: e, over } => (mesh, pb, err, over_leaves) = (m, *p, e, over),
+                    Finished::Missed { mesh: m, pb: p, err: e, over } => {
+                        (mesh, pb, err, over_leaves) = (m, *p, e, over)
+                    }
                 }
             }
             if it >= self.opts.max_iterations {
@@ -104,7 +119,11 @@ impl<'a> Approximation<'a> {
             match refine(&mesh, &pb, self.samples, self.opts, over_leaves, &err)? {
                 Refined::Stop(stop) => return Ok(self.result(mesh, stop)),
                 Refined::Next(next, refined) => {
-                    let split_rects = mesh.leaves().filter(|&c| !next.cells[c as usize].is_leaf()).map(|c| mesh.cells[c as usize].rect).collect();
+                    let split_rects = mesh
+                        .leaves()
+                        .filter(|&c| !next.cells[c as usize].is_leaf())
+                        .map(|c| mesh.cells[c as usize].rect)
+                        .collect();
                     step = Refinement { prev: Some(pb), split_rects, refined };
                     mesh = next;
                 }
@@ -128,14 +147,22 @@ impl<'a> Approximation<'a> {
         };
         let t_build = t0.elapsed().as_secs_f64();
         let local = match (&old, opts.method, opts.local_updates) {
-            (Some(old), Method::Lsq, true) if self.pts.is_none() => local_update(old, &pb, mesh.points.len(), samples.width, samples.height),
+            (Some(old), Method::Lsq, true) if self.pts.is_none() => {
+                local_update(old, &pb, mesh.points.len(), samples.width, samples.height)
+            }
             _ => None,
         };
         drop(old);
         let z = match (opts.method, &local) {
-            (Method::Lsq, Some((free, region))) => fit_lsq_local(LsqProblem { free: Some(free), region: Some(region), ..LsqProblem::global(mesh, samples) }, &pb)?,
+            (Method::Lsq, Some((free, region))) => fit_lsq_local(
+                LsqProblem { free: Some(free), region: Some(region), ..LsqProblem::global(mesh, samples) },
+                &pb,
+            )?,
             (Method::Lsq, None) => {
-                let (z, p) = fit_lsq_released(LsqProblem { pts: self.pts, asm: self.asm.as_ref(), ..LsqProblem::global(mesh, samples) }, pb)?;
+                let (z, p) = fit_lsq_released(
+                    LsqProblem { pts: self.pts, asm: self.asm.as_ref(), ..LsqProblem::global(mesh, samples) },
+                    pb,
+                )?;
                 pb = p;
                 z
             }
@@ -144,7 +171,9 @@ impl<'a> Approximation<'a> {
         if z.iter().any(|v| !v.is_finite()) {
             // the input range check makes this unreachable for sound solvers; a typed error
             // rather than an invalid mesh (which would panic when written) if it happens anyway
-            return Err(TsplineError::Fit(format!("iteration {it}: the least-squares solution has non-finite control points")));
+            return Err(TsplineError::Fit(format!(
+                "iteration {it}: the least-squares solution has non-finite control points"
+            )));
         }
         set_z(mesh, &mut pb, &z);
         Ok(Fitted { pb, local, t_build })
@@ -155,7 +184,12 @@ impl<'a> Approximation<'a> {
     /// every cell). A region of more than half the raster (a large system's local update) is
     /// not checked first: every cell at once gives the same errors and leaves (those outside
     /// it did not change) in one pass instead of up to two.
-    fn check_iteration(&mut self, mesh: &TMesh, pb: &PbSpline, region: Option<&Region>) -> Result<(ErrorStats, Vec<CellId>), TsplineError> {
+    fn check_iteration(
+        &mut self,
+        mesh: &TMesh,
+        pb: &PbSpline,
+        region: Option<&Region>,
+    ) -> Result<(ErrorStats, Vec<CellId>), TsplineError> {
         let region = region.filter(|r| r.len() * 2 <= self.samples.z.len());
         let (err, over) = check(mesh, pb, self.samples, self.pts, region, self.backend, &mut self.errs, &self.tol)?;
         if err.over_tolerance == 0 && region.is_some() {
@@ -168,15 +202,28 @@ impl<'a> Approximation<'a> {
     /// the mesh as written evaluated as `geofit eval` evaluates it at every cell (also the
     /// fresh check of a coarsened mesh: docs/decisions.md#one-final-check). No solve follows
     /// unless it fails: the factor's memory goes back first.
-    fn finish(&mut self, mut mesh: TMesh, mut pb: PbSpline, it: usize, progress: &mut dyn FnMut(&IterationStats)) -> Result<Finished, TsplineError> {
+    fn finish(
+        &mut self,
+        mut mesh: TMesh,
+        mut pb: PbSpline,
+        it: usize,
+        progress: &mut dyn FnMut(&IterationStats),
+    ) -> Result<Finished, TsplineError> {
         if self.may_coarsen {
-            let coarsening = super::coarsen::Coarsening { samples: self.samples, pts: self.pts, opts: self.opts, backend: self.backend, tol: &self.tol };
+            let coarsening = super::coarsen::Coarsening {
+                samples: self.samples,
+                pts: self.pts,
+                opts: self.opts,
+                backend: self.backend,
+                tol: &self.tol,
+            };
             let c = coarsening.run(mesh, pb, &mut self.errs, it + 1, progress)?;
             (mesh, pb) = (c.mesh, c.pb);
             self.iterations.extend(c.rounds);
         }
         sparse_spd::release_workspace();
-        let (fin, over, pb) = check_written_released(&mesh, pb, self.samples, self.pts, &mut self.errs, &self.tol_final)?;
+        let (fin, over, pb) =
+            check_written_released(&mesh, pb, self.samples, self.pts, &mut self.errs, &self.tol_final)?;
         if fin.over_tolerance == 0 {
             if let Some(last) = self.iterations.last_mut() {
                 last.error = fin;

@@ -22,7 +22,8 @@ pub(super) fn check_heights_range(z: &Heights) -> Result<(), TsplineError> {
 }
 
 pub(super) fn check_range_of(z: impl Iterator<Item = f64>) -> Result<(), TsplineError> {
-    let (min, max) = z.filter(|v| v.is_finite()).fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(v), b.max(v)));
+    let (min, max) =
+        z.filter(|v| v.is_finite()).fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(v), b.max(v)));
     // no finite value at all is not a range problem: the fit names the empty raster itself
     if min <= max && (min.abs() > MAX_ABS_VALUE || max.abs() > MAX_ABS_VALUE) {
         return Err(TsplineError::ValueRange { min, max, limit: MAX_ABS_VALUE });
@@ -49,7 +50,10 @@ pub(crate) fn check(
             Backend::OpenCl(o) => o.eval_points(&o.upload(pb)?, &p.st)?,
             Backend::Cpu => pb.eval_z(&p.st, true),
         };
-        errs.par_iter_mut().zip(&z).zip(&p.z).for_each(|((e, zk), dk)| *e = if zk.is_nan() { f64::INFINITY } else { (zk - dk).abs() });
+        errs.par_iter_mut()
+            .zip(&z)
+            .zip(&p.z)
+            .for_each(|((e, zk), dk)| *e = if zk.is_nan() { f64::INFINITY } else { (zk - dk).abs() });
         return Ok(summarize_at(mesh, pb, &|q| (p.st[q][0], p.st[q][1]), errs, tol));
     }
     match region {
@@ -61,7 +65,15 @@ pub(crate) fn check(
 
 /// [`check`] of a local try on a raster whose verdict kept its region's errors (`kept`,
 /// [`over_tolerance_region`]): they are written into `errs`, not evaluated again.
-pub(crate) fn check_kept(mesh: &TMesh, pb: &PbSpline, samples: &Samples, region: &Region, kept: &RegionErrors, errs: &mut [f64], tol: &Tolerance) -> (ErrorStats, Vec<CellId>) {
+pub(crate) fn check_kept(
+    mesh: &TMesh,
+    pb: &PbSpline,
+    samples: &Samples,
+    region: &Region,
+    kept: &RegionErrors,
+    errs: &mut [f64],
+    tol: &Tolerance,
+) -> (ErrorStats, Vec<CellId>) {
     kept.write(region, samples.width, errs);
     summarize(mesh, pb, samples.width, errs, tol)
 }
@@ -71,7 +83,11 @@ pub(crate) fn check_kept(mesh: &TMesh, pb: &PbSpline, samples: &Samples, region:
 /// and its coarsening keep δ free, the check of the written mesh may use half of it for the
 /// rounding between the loop's and `eval`'s evaluation paths, and the other half stays for
 /// the paths not checked here (the OpenCL kernels).
-pub(crate) fn tolerances(samples: &Samples, pts: Option<&Scattered>, opts: &FitOptions) -> Result<(Tolerance, Tolerance), TsplineError> {
+pub(crate) fn tolerances(
+    samples: &Samples,
+    pts: Option<&Scattered>,
+    opts: &FitOptions,
+) -> Result<(Tolerance, Tolerance), TsplineError> {
     let zscale = match pts {
         Some(p) => p.z.iter().filter(|v| v.is_finite()).fold(0.0f64, |m, v| m.max(v.abs())),
         None => samples.z.iter().filter(|v| v.is_finite()).fold(0.0f64, |m, v| m.max(v.abs())),
@@ -80,14 +96,22 @@ pub(crate) fn tolerances(samples: &Samples, pts: Option<&Scattered>, opts: &FitO
         None => (None, opts.max_error),
         Some(c) => {
             if pts.is_some() {
-                return Err(TsplineError::Fit("a per-cell tolerance applies to raster fits, not to scattered points (--indirect)".into()));
+                return Err(TsplineError::Fit(
+                    "a per-cell tolerance applies to raster fits, not to scattered points (--indirect)".into(),
+                ));
             }
             if c.uncertainty.len() != samples.z.len() {
-                return Err(TsplineError::Fit(format!("{} per-cell tolerances for {} cells", c.uncertainty.len(), samples.z.len())));
+                return Err(TsplineError::Fit(format!(
+                    "{} per-cell tolerances for {} cells",
+                    c.uncertainty.len(),
+                    samples.z.len()
+                )));
             }
             let min = c.min_over(|q| !samples.z.get(q).is_nan()).unwrap_or(opts.max_error);
             if !(min > 0.0 && min.is_finite()) {
-                return Err(TsplineError::Fit(format!("the per-cell tolerance must be positive at every valid cell, got {min}")));
+                return Err(TsplineError::Fit(format!(
+                    "the per-cell tolerance must be positive at every valid cell, got {min}"
+                )));
             }
             (Some(c.clone()), min)
         }
@@ -101,7 +125,12 @@ pub(crate) fn tolerances(samples: &Samples, pts: Option<&Scattered>, opts: &FitO
 /// The mesh as the output file holds it: written with [`crate::format::write`] and read back
 /// (compacted numbering, text round trip). What `geofit eval` reads.
 pub fn as_written(mesh: &TMesh) -> Result<TMesh, TsplineError> {
-    let file = crate::format::TMeshFile { mesh: mesh.clone(), georef: crate::format::Georef::identity(), mask: None, warp: None };
+    let file = crate::format::TMeshFile {
+        mesh: mesh.clone(),
+        georef: crate::format::Georef::identity(),
+        mask: None,
+        warp: None,
+    };
     let mut bytes = Vec::new();
     crate::format::write(&file, &mut bytes)?;
     Ok(crate::format::read(&bytes)?.mesh)
@@ -112,7 +141,13 @@ pub fn as_written(mesh: &TMesh) -> Result<TMesh, TsplineError> {
 /// same element-extraction-or-reference choice (made for `w·h` points, not per block), the same
 /// per-point arithmetic (an element owns its points half-open, so the row order does not
 /// matter). `ex`: the extraction when that choice takes it.
-pub(super) fn eval_rows_as_eval(pb: &PbSpline, ex: Option<&crate::extraction::Extraction>, w: usize, j0: usize, j1: usize) -> Vec<f64> {
+pub(super) fn eval_rows_as_eval(
+    pb: &PbSpline,
+    ex: Option<&crate::extraction::Extraction>,
+    w: usize,
+    j0: usize,
+    j1: usize,
+) -> Vec<f64> {
     let g = GridSpec { s0: 0.0, t0: j0 as f64, ds: 1.0, dt: 1.0, ns: w, nt: j1 - j0 };
     match ex {
         Some(ex) => ex.eval_grid(pb, &g, false),
@@ -168,9 +203,22 @@ pub(crate) fn check_written_released(
 /// with round-trip floats, and reading builds them in the same order (test
 /// `written_mesh_is_the_compacted_mesh`); the text round trip itself took ~0.1 s of the BAG
 /// 0.1 m fit's one thread.
-fn written_errors(mesh: &TMesh, samples: &Samples, pts: Option<&Scattered>, errs: &mut [f64]) -> Result<(), TsplineError> {
+fn written_errors(
+    mesh: &TMesh,
+    samples: &Samples,
+    pts: Option<&Scattered>,
+    errs: &mut [f64],
+) -> Result<(), TsplineError> {
     let written = PbSpline::build(&mesh.compacted());
-    let err_of = |zk: f64, dk: f64| if dk.is_nan() { f64::NAN } else if zk.is_nan() { f64::INFINITY } else { (zk - dk).abs() };
+    let err_of = |zk: f64, dk: f64| {
+        if dk.is_nan() {
+            f64::NAN
+        } else if zk.is_nan() {
+            f64::INFINITY
+        } else {
+            (zk - dk).abs()
+        }
+    };
     if let Some(p) = pts {
         let z = written.eval_z(&p.st, true);
         errs.par_iter_mut().zip(&z).zip(&p.z).for_each(|((e, zk), dk)| *e = err_of(*zk, *dk));

@@ -43,7 +43,12 @@ pub(crate) struct Coarsened {
 /// Max |bilinear(surface at the corners) − data| over the valid cells in `r` (closed), or
 /// +∞ where the surface is undefined at a corner.
 fn bilinear_proxy(pb: &PbSpline, samples: &Samples, r: Rect) -> f64 {
-    let z = [pb.point(r.s_min, r.t_min)[2], pb.point(r.s_max, r.t_min)[2], pb.point(r.s_min, r.t_max)[2], pb.point(r.s_max, r.t_max)[2]];
+    let z = [
+        pb.point(r.s_min, r.t_min)[2],
+        pb.point(r.s_max, r.t_min)[2],
+        pb.point(r.s_min, r.t_max)[2],
+        pb.point(r.s_max, r.t_max)[2],
+    ];
     if z.iter().any(|v| !v.is_finite()) {
         return f64::INFINITY;
     }
@@ -75,7 +80,9 @@ fn candidates(mesh: &TMesh, failed: &HashSet<CellId>) -> Vec<CellId> {
     (0..mesh.cells.len() as CellId)
         .filter(|c| {
             let cell = &mesh.cells[*c as usize];
-            cell.alive && !failed.contains(c) && cell.children.is_some_and(|k| k.iter().all(|k| mesh.cells[k as usize].is_leaf()))
+            cell.alive
+                && !failed.contains(c)
+                && cell.children.is_some_and(|k| k.iter().all(|k| mesh.cells[k as usize].is_leaf()))
         })
         .collect()
 }
@@ -110,8 +117,21 @@ struct Rounds {
 impl Coarsening<'_> {
     /// Coarsens `mesh` (`pb` its PB-spline with the fitted z, `errs` its |Δz| per raster cell,
     /// kept up to date); `first_round` numbers the statistics rows after the loop's iterations.
-    pub(crate) fn run(&self, mesh: TMesh, pb: PbSpline, errs: &mut [f64], first_round: usize, progress: &mut dyn FnMut(&IterationStats)) -> Result<Coarsened, TsplineError> {
-        let mut st = Rounds { best: mesh, best_pb: KeptPb::new(pb), failed: HashSet::new(), held: HeldBack::default(), undo: Undo::default() };
+    pub(crate) fn run(
+        &self,
+        mesh: TMesh,
+        pb: PbSpline,
+        errs: &mut [f64],
+        first_round: usize,
+        progress: &mut dyn FnMut(&IterationStats),
+    ) -> Result<Coarsened, TsplineError> {
+        let mut st = Rounds {
+            best: mesh,
+            best_pb: KeptPb::new(pb),
+            failed: HashSet::new(),
+            held: HeldBack::default(),
+            undo: Undo::default(),
+        };
         let mut rounds = Vec::new();
         for _ in 0..MAX_ROUNDS {
             let t0 = Instant::now();
@@ -158,7 +178,10 @@ impl Coarsening<'_> {
         use rayon::prelude::*;
         let all = st.held.tried(&st.best, candidates(&st.best, &st.failed));
         let surface = st.best_pb.get(&st.best);
-        let keep: Vec<bool> = all.par_iter().map(|&c| bilinear_proxy(surface, self.samples, st.best.cells[c as usize].rect) <= self.opts.max_error).collect();
+        let keep: Vec<bool> = all
+            .par_iter()
+            .map(|&c| bilinear_proxy(surface, self.samples, st.best.cells[c as usize].rect) <= self.opts.max_error)
+            .collect();
         let (ok, no): (Vec<_>, Vec<_>) = all.into_iter().zip(keep).partition(|(_, k)| *k);
         st.failed.extend(no.into_iter().map(|(c, _)| c));
         ok.into_iter().map(|(c, _)| c).collect()
@@ -181,7 +204,13 @@ impl Coarsening<'_> {
     /// Refits `m` until no cell is over the tolerance, splitting back the merges near the cells
     /// over it (never tried again): the PB-spline and statistics of the passing try, or None
     /// when no merge is left.
-    fn refit_until_within(&self, st: &mut Rounds, m: &mut TMesh, merged: &mut Vec<CellId>, errs: &mut [f64]) -> Result<Option<(PbSpline, ErrorStats)>, TsplineError> {
+    fn refit_until_within(
+        &self,
+        st: &mut Rounds,
+        m: &mut TMesh,
+        merged: &mut Vec<CellId>,
+        errs: &mut [f64],
+    ) -> Result<Option<(PbSpline, ErrorStats)>, TsplineError> {
         while !merged.is_empty() {
             // every try starts from the kept heights (a failed try's solve moved them)
             for (p, q) in m.points.iter_mut().zip(&st.best.points) {
@@ -252,8 +281,13 @@ impl HeldBack {
         if !tests::HOLD_BACK.get() {
             return all;
         }
-        let near = |r: Rect| self.kept.iter().any(|&k| distance(r, k) <= HELD_REACH * r.width().max(r.height()).max(k.width()).max(k.height()));
-        let tried: Vec<CellId> = all.into_iter().filter(|c| !self.cells.contains(c) || near(mesh.cells[*c as usize].rect)).collect();
+        let near = |r: Rect| {
+            self.kept
+                .iter()
+                .any(|&k| distance(r, k) <= HELD_REACH * r.width().max(r.height()).max(k.width()).max(k.height()))
+        };
+        let tried: Vec<CellId> =
+            all.into_iter().filter(|c| !self.cells.contains(c) || near(mesh.cells[*c as usize].rect)).collect();
         #[cfg(test)]
         tests::HELD_SKIPPED.set(tests::HELD_SKIPPED.get() + self.cells.len());
         for c in &tried {
@@ -353,7 +387,13 @@ impl Coarsening<'_> {
     /// the PB-spline, the statistics and the leaves holding cells (points) over the tolerance;
     /// what the check overwrote in `errs` goes to the rounds' undo. A try on a large raster
     /// releases the kept PB-spline to its knots ([`KeptPb`]).
-    fn refit(&self, st: &mut Rounds, m: &mut TMesh, changed: &[Rect], errs: &mut [f64]) -> Result<(PbSpline, ErrorStats, Vec<CellId>), TsplineError> {
+    fn refit(
+        &self,
+        st: &mut Rounds,
+        m: &mut TMesh,
+        changed: &[Rect],
+        errs: &mut [f64],
+    ) -> Result<(PbSpline, ErrorStats, Vec<CellId>), TsplineError> {
         let (samples, pts, backend, tol) = (self.samples, self.pts, self.backend, self.tol);
         fit::release_free_memory(samples.z.len());
         let old_pb = st.best_pb.get(&st.best);
@@ -372,7 +412,8 @@ impl Coarsening<'_> {
         }
         // a local update exists only for raster data (pts is None then)
         let (free, region) = local.as_ref().map_or((None, None), |(f, r)| (Some(&f[..]), Some(r)));
-        let (z, mut pb) = fit::fit_lsq_released(fit::LsqProblem { mesh: &*m, samples, pts, free, region, asm: None }, pb)?;
+        let (z, mut pb) =
+            fit::fit_lsq_released(fit::LsqProblem { mesh: &*m, samples, pts, free, region, asm: None }, pb)?;
         fit::set_z(m, &mut pb, &z);
         let region = local.map(|(_, r)| r);
         if pts.is_none() {
@@ -405,7 +446,7 @@ impl Coarsening<'_> {
 mod tests {
     use std::cell::Cell;
 
-    use crate::fit::{fit, eval_errors, Backend, FitOptions, Samples};
+    use crate::fit::{eval_errors, fit, Backend, FitOptions, Samples};
     use crate::mesh::Degree;
 
     thread_local! {
@@ -428,7 +469,9 @@ mod tests {
                 let (x, y) = ((q % w) as f64, (q / w) as f64);
                 seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
                 let noise = ((seed >> 33) as f64 / (1u64 << 31) as f64 - 0.5) * 0.3;
-                5.0 * (x * 0.07).sin() * (y * 0.05).cos() + 0.02 * x + if (x - 60.0).abs() < 8.0 && (y - 50.0).abs() < 8.0 { noise * 4.0 } else { noise * 0.2 }
+                5.0 * (x * 0.07).sin() * (y * 0.05).cos()
+                    + 0.02 * x
+                    + if (x - 60.0).abs() < 8.0 && (y - 50.0).abs() < 8.0 { noise * 4.0 } else { noise * 0.2 }
             })
             .collect();
         let s = Samples { width: w, height: h, z: z.into() };
@@ -439,7 +482,12 @@ mod tests {
                 HELD_SKIPPED.set(0);
                 let r = fit(&s, &FitOptions::new(degree, 0.1), &Backend::Cpu, &mut |_| {}).unwrap();
                 HOLD_BACK.set(true);
-                let mut rects: Vec<[u64; 4]> = r.mesh.leaves().map(|c| r.mesh.cells[c as usize].rect).map(|q| [q.s_min, q.t_min, q.s_max, q.t_max].map(f64::to_bits)).collect();
+                let mut rects: Vec<[u64; 4]> = r
+                    .mesh
+                    .leaves()
+                    .map(|c| r.mesh.cells[c as usize].rect)
+                    .map(|q| [q.s_min, q.t_min, q.s_max, q.t_max].map(f64::to_bits))
+                    .collect();
                 rects.sort_unstable();
                 (rects, r.iterations.last().unwrap().control_points, HELD_SKIPPED.get())
             };

@@ -4,7 +4,13 @@ use super::*;
 
 /// Dragging (spec §4.6, Alg. 4): z-only, Jacobi-style simultaneous update, step limit A12.
 /// Returns the new z per PB point.
-pub fn fit_drag(pb: &PbSpline, samples: &Samples, steps: usize, threshold: f64, backend: &Backend) -> Result<Vec<f64>, TsplineError> {
+pub fn fit_drag(
+    pb: &PbSpline,
+    samples: &Samples,
+    steps: usize,
+    threshold: f64,
+    backend: &Backend,
+) -> Result<Vec<f64>, TsplineError> {
     let params: Vec<[f64; 2]> = pb.point_ids.iter().enumerate().map(|(i, _)| pb_param(pb, i)).collect();
     // Dragging needs a continuous reference (spec §4.6): holes are filled by dilation and
     // points outside the raster take the nearest edge value (A10: clamp to edge).
@@ -70,7 +76,8 @@ pub fn mean_dilation_fill(samples: &Samples) -> Samples {
         }
         v
     };
-    let mut front: Vec<usize> = (0..z.len()).filter(|&q| z[q].is_nan() && nbrs(q).iter().any(|&n| !z[n].is_nan())).collect();
+    let mut front: Vec<usize> =
+        (0..z.len()).filter(|&q| z[q].is_nan() && nbrs(q).iter().any(|&n| !z[n].is_nan())).collect();
     while !front.is_empty() {
         let vals: Vec<f64> = front
             .iter()

@@ -95,7 +95,12 @@ pub fn fit_lsq(mesh: &TMesh, pb: &PbSpline, samples: &Samples) -> Result<Vec<f64
 /// [`fit_lsq`] with the rows of the model matrix computed by the OpenCL kernel (spec T29,
 /// [`crate::ocl_fit`]) block by block when `asm` is given; the host accumulates the normal
 /// equations from them (the matrix is never stored whole).
-pub fn fit_lsq_with(mesh: &TMesh, pb: &PbSpline, samples: &Samples, asm: Option<&crate::ocl_fit::OclModel>) -> Result<Vec<f64>, TsplineError> {
+pub fn fit_lsq_with(
+    mesh: &TMesh,
+    pb: &PbSpline,
+    samples: &Samples,
+    asm: Option<&crate::ocl_fit::OclModel>,
+) -> Result<Vec<f64>, TsplineError> {
     fit_lsq_local(LsqProblem { asm, ..LsqProblem::global(mesh, samples) }, pb)
 }
 
@@ -294,7 +299,9 @@ fn assemble(p: LsqProblem<'_>, pb: &PbSpline) -> Result<Normal, TsplineError> {
     };
     let (symbolic, sums) = match &asm {
         Some((o, sp)) => (None, crate::assembly::per_cell(sys, samples, pts, region, Some((*o, sp)))),
-        None if crate::sparse::symbolic_needed(b_start, b_cols) => rayon::join(|| sparse_spd::cholesky_symbolic(b_start, b_cols).ok(), on_cpu),
+        None if crate::sparse::symbolic_needed(b_start, b_cols) => {
+            rayon::join(|| sparse_spd::cholesky_symbolic(b_start, b_cols).ok(), on_cpu)
+        }
         None => (None, on_cpu()),
     };
     let sums = sums?;
@@ -358,7 +365,8 @@ fn assemble(p: LsqProblem<'_>, pb: &PbSpline) -> Result<Normal, TsplineError> {
 
 /// The sparse solve; the current heights are the iterative fallback's warm start.
 pub(super) fn solve(a: &Csr, rhs: &[f64], prior: &[f64]) -> Result<Vec<f64>, TsplineError> {
-    let (z, _info) = crate::sparse::solve_spd(a, rhs, prior).map_err(|e| TsplineError::Fit(format!("least squares: {e}")))?;
+    let (z, _info) =
+        crate::sparse::solve_spd(a, rhs, prior).map_err(|e| TsplineError::Fit(format!("least squares: {e}")))?;
     Ok(z)
 }
 

@@ -66,8 +66,8 @@ use crate::tolerance::{CellTolerance, Tolerance};
 use crate::TsplineError;
 
 mod approximation;
-mod coarsen;
 mod check;
+mod coarsen;
 mod drag;
 mod errors;
 mod least_squares;
@@ -158,7 +158,22 @@ impl Domain {
 
 impl FitOptions {
     pub fn new(degree: Degree, max_error: f64) -> FitOptions {
-        FitOptions { degree, max_error, max_points: None, max_iterations: 100, method: Method::Lsq, overhang: 0.25, initial_cells: 4, drag_steps: 40, local_updates: true, opencl_assembly: false, coarsen: true, cell_tolerance: None, domain: None, split: SplitRule::Quad }
+        FitOptions {
+            degree,
+            max_error,
+            max_points: None,
+            max_iterations: 100,
+            method: Method::Lsq,
+            overhang: 0.25,
+            initial_cells: 4,
+            drag_steps: 40,
+            local_updates: true,
+            opencl_assembly: false,
+            coarsen: true,
+            cell_tolerance: None,
+            domain: None,
+            split: SplitRule::Quad,
+        }
     }
 }
 
@@ -200,10 +215,14 @@ pub enum StopReason {
     /// Every valid cell is within the tolerance.
     ToleranceReached,
     /// The next refinement would exceed the control-point cap.
-    MaxPoints { cap: usize },
+    MaxPoints {
+        cap: usize,
+    },
     MaxIterations,
     /// Cells over the tolerance remain, but their mesh cells are at the minimum size.
-    MinCellSize { cells_over: usize },
+    MinCellSize {
+        cells_over: usize,
+    },
 }
 
 pub struct FitResult {
@@ -227,7 +246,9 @@ pub fn build_pb(mesh: &TMesh, backend: &Backend) -> Result<PbSpline, TsplineErro
 /// inference: tested).
 pub fn build_pb_incremental(mesh: &TMesh, old: &PbSpline, split: &[crate::mesh::Rect]) -> PbSpline {
     use rstar::{primitives::Rectangle, RTree, AABB};
-    let tree: RTree<Rectangle<[f64; 2]>> = RTree::bulk_load(split.iter().map(|r| Rectangle::from_corners([r.s_min, r.t_min], [r.s_max, r.t_max])).collect());
+    let tree: RTree<Rectangle<[f64; 2]>> = RTree::bulk_load(
+        split.iter().map(|r| Rectangle::from_corners([r.s_min, r.t_min], [r.s_max, r.t_max])).collect(),
+    );
     let mut old_of = vec![u32::MAX; mesh.points.len()];
     for (i, &pid) in old.point_ids.iter().enumerate() {
         old_of[pid as usize] = i as u32;
@@ -253,7 +274,8 @@ pub fn build_pb_incremental(mesh: &TMesh, old: &PbSpline, split: &[crate::mesh::
         })
         .collect();
     // the points that keep their old knots keep their old polynomial pieces too
-    let reuse: Vec<u32> = point_ids.iter().zip(&knots).map(|(&i, kn)| if kn.is_some() { old_of[i as usize] } else { u32::MAX }).collect();
+    let reuse: Vec<u32> =
+        point_ids.iter().zip(&knots).map(|(&i, kn)| if kn.is_some() { old_of[i as usize] } else { u32::MAX }).collect();
     let knots = crate::knots::infer_missing(mesh, &point_ids, knots);
     PbSpline::from_parts_reusing(mesh, point_ids, knots, Some((old, &reuse)))
 }
@@ -284,7 +306,11 @@ pub fn initial_mesh(samples: &Samples, opts: &FitOptions) -> TMesh {
     let place = |len: f64, n: &mut usize| -> f64 {
         loop {
             let o = ((len - *n as f64 * c0) * 0.5).floor();
-            let covers = if opts.overhang > 0.0 { o < 0.0 && o + *n as f64 * c0 > len } else { o <= 0.0 && o + *n as f64 * c0 >= len };
+            let covers = if opts.overhang > 0.0 {
+                o < 0.0 && o + *n as f64 * c0 > len
+            } else {
+                o <= 0.0 && o + *n as f64 * c0 >= len
+            };
             if covers {
                 return o;
             }
@@ -303,7 +329,11 @@ pub fn initial_mesh(samples: &Samples, opts: &FitOptions) -> TMesh {
 
 fn mean_of(samples: &Samples) -> f64 {
     let (sum, cnt) = samples.z.iter().filter(|v| !v.is_nan()).fold((0.0, 0usize), |(s, n), v| (s + v, n + 1));
-    if cnt == 0 { 0.0 } else { sum / cnt as f64 }
+    if cnt == 0 {
+        0.0
+    } else {
+        sum / cnt as f64
+    }
 }
 
 /// Rasters from which [`release_free_memory`] trims (2²⁴ cells).
@@ -372,7 +402,12 @@ pub(crate) fn big_blocks_from_system(cells: usize) {
 }
 
 /// The approximation loop (Alg. 3). `progress` gets every iteration's statistics.
-pub fn fit(samples: &Samples, opts: &FitOptions, backend: &Backend, progress: &mut dyn FnMut(&IterationStats)) -> Result<FitResult, TsplineError> {
+pub fn fit(
+    samples: &Samples,
+    opts: &FitOptions,
+    backend: &Backend,
+    progress: &mut dyn FnMut(&IterationStats),
+) -> Result<FitResult, TsplineError> {
     fit_impl(samples, None, opts, backend, progress)
 }
 
@@ -386,7 +421,10 @@ pub fn fit_points(
     backend: &Backend,
     progress: &mut dyn FnMut(&IterationStats),
 ) -> Result<FitResult, TsplineError> {
-    if pts.st.len() != pts.z.len() || pts.z.iter().any(|v| !v.is_finite()) || pts.st.iter().flatten().any(|v| !v.is_finite()) {
+    if pts.st.len() != pts.z.len()
+        || pts.z.iter().any(|v| !v.is_finite())
+        || pts.st.iter().flatten().any(|v| !v.is_finite())
+    {
         return Err(TsplineError::Fit("scattered data: positions and values must be finite and as many".into()));
     }
     if pts.z.is_empty() {
@@ -423,7 +461,9 @@ fn check_inputs(samples: &Samples, pts: Option<&Scattered>, opts: &FitOptions) -
     check_heights_range(&samples.z)?;
     if opts.split != SplitRule::Quad && opts.domain.is_some() {
         // docs/decisions.md#anisotropic-splits-issue-19: the seam stitch needs square cells
-        return Err(TsplineError::Fit("anisotropic splits are not available for tiles of a plan (their seams need square cells)".into()));
+        return Err(TsplineError::Fit(
+            "anisotropic splits are not available for tiles of a plan (their seams need square cells)".into(),
+        ));
     }
     if let Some(p) = pts {
         check_value_range(&p.z)?;
@@ -484,7 +524,9 @@ mod tests {
         let pb = PbSpline::build(&mesh);
         let (w, h) = (4096, 80);
         let mut s = sample(&pb, w, h);
-        let z: Vec<f64> = (0..w * h).map(|q| s.z.get(q) + if q % 7 == 0 { f64::NAN } else { 0.3 * ((q % 13) as f64 - 6.0) }).collect();
+        let z: Vec<f64> = (0..w * h)
+            .map(|q| s.z.get(q) + if q % 7 == 0 { f64::NAN } else { 0.3 * ((q % 13) as f64 - 6.0) })
+            .collect();
         s.z = z.into();
         let mut region = Region::new(w, h);
         region.add_rect(5.5, 40.0, 3.0, 30.2);
@@ -518,7 +560,11 @@ mod tests {
         for k in [0, 1, 2, 7, 1000, sorted.len() / 2 - 1, sorted.len() / 2, sorted.len() - 2, sorted.len() - 1] {
             assert_eq!(nth_smallest_f32(&errs, [k])[0].to_bits(), sorted[k].to_bits(), "k = {k}");
             let [a, b] = nth_smallest_f32(&errs, [k, sorted.len() - 1 - k]);
-            assert_eq!((a.to_bits(), b.to_bits()), (sorted[k].to_bits(), sorted[sorted.len() - 1 - k].to_bits()), "k = {k}");
+            assert_eq!(
+                (a.to_bits(), b.to_bits()),
+                (sorted[k].to_bits(), sorted[sorted.len() - 1 - k].to_bits()),
+                "k = {k}"
+            );
         }
     }
 
@@ -563,7 +609,12 @@ mod tests {
             let pb = PbSpline::build(&m);
             let z = fit_lsq(&m, &pb, &samples).unwrap();
             for (i, &pid) in pb.point_ids.iter().enumerate() {
-                assert!((z[i] - truth.points[pid as usize].z).abs() < 1e-9, "{degree:?}: {} vs {}", z[i], truth.points[pid as usize].z);
+                assert!(
+                    (z[i] - truth.points[pid as usize].z).abs() < 1e-9,
+                    "{degree:?}: {} vs {}",
+                    z[i],
+                    truth.points[pid as usize].z
+                );
             }
             // the whole loop
             let r = fit(&samples, &opts, &Backend::Cpu, &mut |_| {}).unwrap();
@@ -583,17 +634,27 @@ mod tests {
     #[test]
     fn written_mesh_is_the_compacted_mesh() {
         let (w, h) = (60, 45);
-        let z: Vec<f64> = (0..w * h).map(|q| ((q % w) as f64 * 0.37).sin() * 3.0 + ((q / w) as f64 * 0.29).cos() * 5.0 + 1e3).collect();
+        let z: Vec<f64> = (0..w * h)
+            .map(|q| ((q % w) as f64 * 0.37).sin() * 3.0 + ((q / w) as f64 * 0.29).cos() * 5.0 + 1e3)
+            .collect();
         let s = Samples { width: w, height: h, z: z.into() };
         for degree in [Degree::Linear, Degree::Cubic] {
             let r = fit(&s, &FitOptions::new(degree, 0.2), &Backend::Cpu, &mut |_| {}).unwrap();
-            assert!(r.iterations.iter().any(|it| it.merged_cells > 0) || degree == Degree::Cubic, "a coarsened mesh (dead cells) is covered");
+            assert!(
+                r.iterations.iter().any(|it| it.merged_cells > 0) || degree == Degree::Cubic,
+                "a coarsened mesh (dead cells) is covered"
+            );
             let (read, compact) = (as_written(&r.mesh).unwrap(), r.mesh.compacted());
-            let bits = |m: &TMesh| m.points.iter().map(|p| [p.s, p.t, p.x, p.y, p.z, p.w].map(f64::to_bits)).collect::<Vec<_>>();
+            let bits = |m: &TMesh| {
+                m.points.iter().map(|p| [p.s, p.t, p.x, p.y, p.z, p.w].map(f64::to_bits)).collect::<Vec<_>>()
+            };
             assert_eq!(bits(&read), bits(&compact), "{degree:?}");
             let leaves = |m: &TMesh| m.cells.iter().map(|c| (c.corners, c.is_leaf())).collect::<Vec<_>>();
             assert_eq!(leaves(&read), leaves(&compact), "{degree:?}");
-            assert!(compact.points.len() < r.mesh.points.len() || compact.cells.len() < r.mesh.cells.len(), "compaction dropped something");
+            assert!(
+                compact.points.len() < r.mesh.points.len() || compact.cells.len() < r.mesh.cells.len(),
+                "compaction dropped something"
+            );
         }
     }
 
@@ -604,7 +665,8 @@ mod tests {
     #[test]
     fn final_check_evaluates_as_eval_does() {
         let (w, h) = (70, 50);
-        let z: Vec<f64> = (0..w * h).map(|q| ((q % w) as f64 * 0.21).sin() * 7.0 + ((q / w) as f64 * 0.13).cos() * 4.0).collect();
+        let z: Vec<f64> =
+            (0..w * h).map(|q| ((q % w) as f64 * 0.21).sin() * 7.0 + ((q / w) as f64 * 0.13).cos() * 4.0).collect();
         let s = Samples { width: w, height: h, z: z.into() };
         for (degree, method) in [(Degree::Cubic, Method::Lsq), (Degree::Linear, Method::Drag)] {
             let mut o = FitOptions::new(degree, 0.5);
@@ -613,7 +675,8 @@ mod tests {
             assert_eq!(r.stop, StopReason::ToleranceReached);
             let written = PbSpline::build(&as_written(&r.mesh).unwrap());
             for (gw, gh) in [(w, h), (3, 2)] {
-                let st: Vec<[f64; 2]> = (0..gh).rev().flat_map(|j| (0..gw).map(move |i| [i as f64, j as f64])).collect();
+                let st: Vec<[f64; 2]> =
+                    (0..gh).rev().flat_map(|j| (0..gw).map(move |i| [i as f64, j as f64])).collect();
                 let z_eval = written.eval_z(&st, true);
                 let ex = written.use_extraction(gw * gh).then(|| crate::extraction::Extraction::new(&written, true));
                 assert_eq!(ex.is_some(), (gw, gh) == (w, h), "both paths covered");
@@ -626,7 +689,11 @@ mod tests {
                     assert!((z_eval[k] - checked).abs() <= 1e-12 * (1.0 + checked.abs()), "{degree:?} at {p:?}");
                 }
                 if (gw, gh) == (w, h) {
-                    let max = st.iter().enumerate().map(|(k, p)| (z_eval[k] - s.get(p[0] as usize, p[1] as usize)).abs()).fold(0.0, f64::max);
+                    let max = st
+                        .iter()
+                        .enumerate()
+                        .map(|(k, p)| (z_eval[k] - s.get(p[0] as usize, p[1] as usize)).abs())
+                        .fold(0.0, f64::max);
                     assert!(max <= 0.5, "{degree:?} {method:?}: {max}");
                 }
             }
@@ -653,13 +720,21 @@ mod tests {
                     }
                 }
                 next.repair(1.0, &mut g);
-                let split: Vec<Rect> = m.leaves().filter(|&c| !next.cells[c as usize].is_leaf()).map(|c| m.cells[c as usize].rect).collect();
+                let split: Vec<Rect> = m
+                    .leaves()
+                    .filter(|&c| !next.cells[c as usize].is_leaf())
+                    .map(|c| m.cells[c as usize].rect)
+                    .collect();
                 let inc = build_pb_incremental(&next, &old, &split);
                 let full = PbSpline::build(&next);
                 assert_eq!(inc.point_ids, full.point_ids);
                 assert_eq!(inc.knots, full.knots, "{degree:?}");
                 // the polynomial pieces kept from `old` are the ones a full build computes
-                assert!(inc.poly.iter().zip(&full.poly).all(|(a, b)| a.to_bits() == b.to_bits()) && inc.poly.len() == full.poly.len(), "{degree:?}");
+                assert!(
+                    inc.poly.iter().zip(&full.poly).all(|(a, b)| a.to_bits() == b.to_bits())
+                        && inc.poly.len() == full.poly.len(),
+                    "{degree:?}"
+                );
                 m = next;
                 old = full;
             }
@@ -710,7 +785,9 @@ mod tests {
             })
             .collect();
         let s = Samples { width: w, height: h, z: z.into() };
-        for (degree, method) in [(Degree::Linear, Method::Lsq), (Degree::Cubic, Method::Lsq), (Degree::Linear, Method::Drag)] {
+        for (degree, method) in
+            [(Degree::Linear, Method::Lsq), (Degree::Cubic, Method::Lsq), (Degree::Linear, Method::Drag)]
+        {
             let mut o = FitOptions::new(degree, 0.25);
             o.method = method;
             let r = fit(&s, &o, &Backend::Cpu, &mut |_| {}).unwrap();
@@ -766,8 +843,20 @@ mod tests {
             a.start.push(a.cols.len());
         }
         // upper triangle only, as the assembly leaves it
-        let upper = |i: usize, j: usize| if i == j { if i % 2 == 1 { 1.0 } else { 4.0 } } else { -1.0 };
-        a.vals = (0..5).flat_map(|i| rows[i].iter().map(move |&j| if j as usize >= i { upper(i, j as usize) } else { f64::NAN })).collect();
+        let upper = |i: usize, j: usize| {
+            if i == j {
+                if i % 2 == 1 {
+                    1.0
+                } else {
+                    4.0
+                }
+            } else {
+                -1.0
+            }
+        };
+        a.vals = (0..5)
+            .flat_map(|i| rows[i].iter().map(move |&j| if j as usize >= i { upper(i, j as usize) } else { f64::NAN }))
+            .collect();
         mirror_upper(&mut a);
         for i in 0..5 {
             for k in a.start[i]..a.start[i + 1] {
@@ -813,7 +902,13 @@ mod tests {
                 let max = errs.iter().cloned().fold(0.0, f64::max);
                 assert!(max <= e, "{degree:?} {rule:?}: max |dz| {max}");
                 if rule == SplitRule::Anisotropic {
-                    assert!(r.mesh.leaves().any(|c| { let q = r.mesh.cells[c as usize].rect; q.width() < q.height() }), "no cell cut across s");
+                    assert!(
+                        r.mesh.leaves().any(|c| {
+                            let q = r.mesh.cells[c as usize].rect;
+                            q.width() < q.height()
+                        }),
+                        "no cell cut across s"
+                    );
                     assert_linearly_independent(&r.mesh);
                 }
                 n.push(pb.point_ids.len());

@@ -29,7 +29,13 @@ pub(super) const LARGE_FREE_SHARE: f64 = 0.7;
 /// on a small system when more than [`LOCAL_SHARE`] of the basis changed or the re-checked
 /// cells are more than half the raster; on a [`LARGE_SYSTEM`] when more than
 /// [`LARGE_LOCAL_SHARE`] changed or more than [`LARGE_FREE_SHARE`] of the points are free.
-pub(crate) fn local_update(old: &PbSpline, new: &PbSpline, n_points: usize, w: usize, h: usize) -> Option<(Vec<bool>, Region)> {
+pub(crate) fn local_update(
+    old: &PbSpline,
+    new: &PbSpline,
+    n_points: usize,
+    w: usize,
+    h: usize,
+) -> Option<(Vec<bool>, Region)> {
     let n = new.knots.len();
     let large = n >= large_system();
     let mut old_of = vec![u32::MAX; n_points];
@@ -166,13 +172,22 @@ pub(crate) fn refine(
     }
     let dirs: Vec<SplitDir> = match opts.split {
         SplitRule::Quad => vec![SplitDir::Quad; splittable.len()],
-        SplitRule::Anisotropic => splittable.par_iter().map(|&c| split_direction(pb, samples, mesh.cells[c as usize].rect, opts.max_error)).collect(),
+        SplitRule::Anisotropic => splittable
+            .par_iter()
+            .map(|&c| split_direction(pb, samples, mesh.cells[c as usize].rect, opts.max_error))
+            .collect(),
     };
     let mut next = mesh.clone();
-    let mut geom = |s: f64, t: f64| (s, t, {
-        let z = pb.point(s, t)[2];
-        if z.is_nan() { 0.0 } else { z }
-    });
+    let mut geom = |s: f64, t: f64| {
+        (s, t, {
+            let z = pb.point(s, t)[2];
+            if z.is_nan() {
+                0.0
+            } else {
+                z
+            }
+        })
+    };
     for (&c, &dir) in splittable.iter().zip(&dirs) {
         if next.cells[c as usize].is_leaf() {
             next.split_dir(c, dir, &mut geom);
@@ -374,10 +389,16 @@ mod tests {
             let (small, k_small) = run(usize::MAX);
             let (large, k_large) = run(0);
             assert_eq!(k_small, 0, "{degree:?}: a small system took a region of more than half the raster");
-            assert!(k_large > 0, "{degree:?}: no local update with a large region: the test does not exercise the rule");
+            assert!(
+                k_large > 0,
+                "{degree:?}: no local update with a large region: the test does not exercise the rule"
+            );
             let n_small = small.iterations.last().unwrap().control_points;
             let n_large = large.iterations.last().unwrap().control_points;
-            assert!(n_large.abs_diff(n_small) * 50 <= n_small, "{degree:?}: {n_large} against {n_small} control points");
+            assert!(
+                n_large.abs_diff(n_small) * 50 <= n_small,
+                "{degree:?}: {n_large} against {n_small} control points"
+            );
             let pb = crate::eval::PbSpline::build(&large.mesh);
             assert_eq!(pb.point_ids.len(), n_large);
             let mut errs = vec![0.0; s.z.len()];

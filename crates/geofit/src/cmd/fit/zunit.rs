@@ -39,7 +39,9 @@ impl FitUnits {
     /// where nothing declares a unit and --max-error is in metres (as before).
     pub fn describe(&self, tolerance_text: String, given: Option<f64>) -> String {
         match (self.data, given) {
-            (Some(z), Some(e)) if self.factor() != 1.0 => format!("{tolerance_text} {} ({e} {})", z.unit.name, self.error.name),
+            (Some(z), Some(e)) if self.factor() != 1.0 => {
+                format!("{tolerance_text} {} ({e} {})", z.unit.name, self.error.name)
+            }
             (Some(z), _) => format!("{tolerance_text} {}", z.unit.name),
             _ => tolerance_text,
         }
@@ -50,7 +52,8 @@ impl FitUnits {
 pub(super) fn resolve(r: &Raster, name: &str, args: &Args, config: &Config) -> Result<FitUnits, CliError> {
     let error = match args.error_unit.as_deref() {
         None => METRE,
-        Some(u) => parse_length_unit(u).ok_or_else(|| CliError::usage(format!("--error-unit '{u}' is not a unit geofit knows ({KNOWN_UNITS})")))?,
+        Some(u) => parse_length_unit(u)
+            .ok_or_else(|| CliError::usage(format!("--error-unit '{u}' is not a unit geofit knows ({KNOWN_UNITS})")))?,
     };
     let data = z_unit_of(r, name, args.z_unit.as_deref())?;
     let units = FitUnits { data, error };

@@ -154,7 +154,10 @@ pub(super) fn build_model(b: &BuildArgs, config: &Config) -> Result<(Model, Buil
     // returned (docs/decisions.md#crashes-and-hangs-of-issue-40).
     for (w, n) in [(b.w_value, "--w-value"), (b.w_normal, "--w-normal"), (rough, "--w-rough")] {
         if w > implicit::dsi::MAX_WEIGHT {
-            return Err(CliError::usage(format!("{n} {w:e} is above the largest weight, {:e}", implicit::dsi::MAX_WEIGHT)));
+            return Err(CliError::usage(format!(
+                "{n} {w:e} is above the largest weight, {:e}",
+                implicit::dsi::MAX_WEIGHT
+            )));
         }
     }
     if b.max_iter > implicit::dsi::MAX_ITER || b.rounds > implicit::dsi::MAX_ROUNDS {

@@ -69,7 +69,11 @@ pub(super) fn run(a: CsgArgs, config: &Config) -> CmdResult {
         })?;
     }
     if let Some(p) = &a.report {
-        write_json_report(p, &CSG_REPORT, &CsgReport { op: name, triangles: s.tris.len(), closed, volume, area: s.area() })?;
+        write_json_report(
+            p,
+            &CSG_REPORT,
+            &CsgReport { op: name, triangles: s.tris.len(), closed, volume, area: s.area() },
+        )?;
     }
     write_surfaces(&a.output, &[(name.to_string(), s)], config)?;
     Ok(Exit::Ok)

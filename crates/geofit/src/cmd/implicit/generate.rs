@@ -43,12 +43,19 @@ pub enum Shape {
 
 pub(super) fn run(a: GenerateArgs) -> CmdResult {
     use implicit::generate as g;
-    let c: Vec<f64> = a.center.split(',').map(|x| x.trim().parse::<f64>()).collect::<Result<_, _>>().map_err(|_| CliError::usage("--center: expected X,Y,Z"))?;
+    let c: Vec<f64> = a
+        .center
+        .split(',')
+        .map(|x| x.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| CliError::usage("--center: expected X,Y,Z"))?;
     if c.len() != 3 {
         return Err(CliError::usage("--center: expected X,Y,Z"));
     }
     let text = match a.shape {
-        Shape::Sphere => g::to_text(&g::sphere(a.n, [c[0], c[1], c[2]], a.radius, a.noise, a.normal_noise, a.seed), false),
+        Shape::Sphere => {
+            g::to_text(&g::sphere(a.n, [c[0], c[1], c[2]], a.radius, a.noise, a.normal_noise, a.seed), false)
+        }
         Shape::Plane => g::to_text(&g::plane(a.n, 2.0 * a.radius, a.noise, a.normal_noise, a.seed), false),
         Shape::Faulted => {
             let (pts, f) = g::faulted(a.n / 3, &[-20.0, 0.0, 20.0], a.throw, a.noise, a.seed);

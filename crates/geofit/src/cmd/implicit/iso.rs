@@ -53,7 +53,10 @@ struct IsoReport {
 pub(super) fn run(a: IsoArgs, config: &Config) -> CmdResult {
     let m = read_model(&a.model)?;
     if a.colour == Colour::Attribute && m.attribute.is_none() {
-        return Err(CliError::usage(format!("--colour attribute: {} has no attribute (interpolate with --attribute FILE)", a.model)));
+        return Err(CliError::usage(format!(
+            "--colour attribute: {} has no attribute (interpolate with --attribute FILE)",
+            a.model
+        )));
     }
     let values = if a.values.is_empty() { m.default_iso_values() } else { a.values.clone() };
     let parts = iso_parts(&m, &values, a.colour);
@@ -64,7 +67,14 @@ pub(super) fn run(a: IsoArgs, config: &Config) -> CmdResult {
             .zip(&values)
             .map(|((_, s), &v)| {
                 let closed = s.is_closed();
-                IsoReport { value: v, triangles: s.tris.len(), vertices: s.positions.len(), area: s.area(), closed, volume: closed.then(|| s.volume().abs()) }
+                IsoReport {
+                    value: v,
+                    triangles: s.tris.len(),
+                    vertices: s.positions.len(),
+                    area: s.area(),
+                    closed,
+                    volume: closed.then(|| s.volume().abs()),
+                }
             })
             .collect();
         write_json_report(p, &ISO_REPORT, &r)?;

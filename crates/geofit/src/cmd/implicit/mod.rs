@@ -70,16 +70,22 @@ pub enum Sub {
     #[command(after_long_help = "Example:\n  geofit implicit run sphere.xyz -o sphere.glb --report report.json")]
     Run(RunArgs),
     /// Interpolate φ on an adaptive mesh and save the model (mesh, constraints, solution).
-    #[command(after_long_help = "Example:\n  geofit implicit interpolate horizons.csv --fault f.obj -o model.gfim --vtk field.vtk")]
+    #[command(
+        after_long_help = "Example:\n  geofit implicit interpolate horizons.csv --fault f.obj -o model.gfim --vtk field.vtk"
+    )]
     Interpolate(InterpolateArgs),
     /// Move or add constraints and re-interpolate (base + float constraints, warm-started CG).
-    #[command(after_long_help = "Example (move data point 17 to new world coordinates, in metres):\n  geofit implicit update model.gfim --move 17,550600,7821900,-9730 -o moved.gfim")]
+    #[command(
+        after_long_help = "Example (move data point 17 to new world coordinates, in metres):\n  geofit implicit update model.gfim --move 17,550600,7821900,-9730 -o moved.gfim"
+    )]
     Update(UpdateArgs),
     /// Iso-surfaces of a saved model by marching tetrahedra.
     #[command(after_long_help = "Example:\n  geofit implicit iso model.gfim --value 60 --value 250 -o horizons.glb")]
     Iso(IsoArgs),
     /// Cross-section of a saved model by a plane, coloured by φ or the model's attribute.
-    #[command(after_long_help = "Example (a horizontal section at z = -9800 m):\n  geofit implicit section model.gfim --plane z=-9800 -o section.obj")]
+    #[command(
+        after_long_help = "Example (a horizontal section at z = -9800 m):\n  geofit implicit section model.gfim --plane z=-9800 -o section.obj"
+    )]
     Section(SectionArgs),
     /// Union, intersection or difference of two models (min/max of their fields).
     #[command(after_long_help = "Example:\n  geofit implicit csg a.gfim b.gfim --op difference -o a_minus_b.glb")]
@@ -147,10 +153,15 @@ pub(super) fn write_vtk(path: &Option<String>, m: &Model) -> Result<(), CliError
     if let Some((_, a)) = &m.attribute {
         fields.push(("attribute", a));
     }
-    Output::from_arg(Some(p)).write_with(|w| implicit::vtk::write_vtk(w, &m.mesh, m.origin, &fields).map_err(CliError::io_out))
+    Output::from_arg(Some(p))
+        .write_with(|w| implicit::vtk::write_vtk(w, &m.mesh, m.origin, &fields).map_err(CliError::io_out))
 }
 
-pub(super) fn write_surfaces(out: &Option<String>, parts: &[(String, Surface)], config: &Config) -> Result<(), CliError> {
+pub(super) fn write_surfaces(
+    out: &Option<String>,
+    parts: &[(String, Surface)],
+    config: &Config,
+) -> Result<(), CliError> {
     let output = Output::from_arg(out.as_deref());
     let (lo, hi) = parts
         .iter()

@@ -29,7 +29,10 @@ pub(super) fn run(a: RunArgs, config: &Config) -> CmdResult {
     }
     let ext = Output::from_arg(a.output.as_deref()).extension();
     if !matches!(ext.as_deref(), None | Some("obj") | Some("glb")) {
-        return Err(CliError::usage(format!("-o: unknown surface format `.{}`: use .obj or .glb", ext.unwrap_or_default())));
+        return Err(CliError::usage(format!(
+            "-o: unknown surface format `.{}`: use .obj or .glb",
+            ext.unwrap_or_default()
+        )));
     }
     let (m, rep, secs) = build_model(&a.build, config)?;
     let isos = if a.iso.is_empty() { m.default_iso_values() } else { a.iso.clone() };

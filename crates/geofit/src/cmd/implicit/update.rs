@@ -61,7 +61,8 @@ pub(super) fn run(a: UpdateArgs, config: &Config) -> CmdResult {
     let mut moves = Vec::new();
     for s in &a.moves {
         let f: Vec<&str> = s.split(',').map(|x| x.trim()).collect();
-        let bad = || CliError::usage(format!("--move `{s}`: expected I,X,Y,Z (constraint index and new world position)"));
+        let bad =
+            || CliError::usage(format!("--move `{s}`: expected I,X,Y,Z (constraint index and new world position)"));
         if f.len() != 4 {
             return Err(bad());
         }

@@ -179,7 +179,10 @@ fn summarize(input: &Input) -> Result<Summary, CliError> {
         .short_rings
         .iter()
         .map(|(span, n)| {
-            format!("{name}:{}:{}: gml:LinearRing has {n} positions, at least 4 are needed (closed ring of 3 points)", span.line, span.column)
+            format!(
+                "{name}:{}:{}: gml:LinearRing has {n} positions, at least 4 are needed (closed ring of 3 points)",
+                span.line, span.column
+            )
         })
         .collect();
     for u in stream.unresolved_xlinks() {

@@ -49,7 +49,13 @@ impl Info {
         match self {
             Info::CityGml(_) => &[("envelope", "CRS units"), ("declared_envelope", "CRS units")],
             Info::TMesh(_) => &[("domain", "raster cells (parameter units)"), ("georef", "CRS units (x0, y0, dx, dy)")],
-            Info::Raster(_) => &[("width", "cells"), ("height", "cells"), ("geotransform", "CRS units"), ("nodata", Z_UNIT), ("range", Z_UNIT)],
+            Info::Raster(_) => &[
+                ("width", "cells"),
+                ("height", "cells"),
+                ("geotransform", "CRS units"),
+                ("nodata", Z_UNIT),
+                ("range", Z_UNIT),
+            ],
             Info::Points(_) => &[("envelope", "CRS units")],
         }
     }
@@ -202,7 +208,12 @@ fn write_raster_text(w: &mut dyn Write, info: &RasterInfo) -> std::io::Result<()
     writeln!(w, "kind:         raster, {}×{} cells{bands}", info.width, info.height)?;
     writeln!(w, "geotransform: {} {} {} {} {} {}", gt[0], gt[1], gt[2], gt[3], gt[4], gt[5])?;
     writeln!(w, "crs:          {}", info.crs.as_deref().map(short_crs).unwrap_or("none"))?;
-    writeln!(w, "nodata:       {} cells (marker {})", info.nodata_count, info.nodata.map(|v| v.to_string()).unwrap_or_else(|| "none".into()))?;
+    writeln!(
+        w,
+        "nodata:       {} cells (marker {})",
+        info.nodata_count,
+        info.nodata.map(|v| v.to_string()).unwrap_or_else(|| "none".into())
+    )?;
     writeln!(w, "valid:        {} cells", info.valid_count)?;
     match info.range {
         Some([a, b]) => writeln!(w, "range:        {a} .. {b}")?,
@@ -235,7 +246,13 @@ pub(super) fn points_info(c: &raster_io::PointCloud, name: &str) -> Info {
     for p in &c.points {
         e.add_point(p);
     }
-    let info = PointsInfo { file: name.to_string(), kind: "points", points: c.points.len(), envelope: env(&e), crs: c.crs.clone() };
+    let info = PointsInfo {
+        file: name.to_string(),
+        kind: "points",
+        points: c.points.len(),
+        envelope: env(&e),
+        crs: c.crs.clone(),
+    };
     Info::Points(info)
 }
 

@@ -23,7 +23,8 @@ pub(super) fn run(a: ExtractArgs, config: &Config) -> CmdResult {
     output.check_target()?;
     let tiles = tiling::plan::read_plan(&read_text(&a.plan)?, &a.plan).map_err(tiling_error)?;
     let tile = tiling::plan::find_tile(&tiles, &a.tile, &a.plan).map_err(tiling_error)?;
-    let read = |p: &str| std::fs::read(p).map_err(|e| TilingError::Unreadable { name: p.to_string(), message: e.to_string() });
+    let read =
+        |p: &str| std::fs::read(p).map_err(|e| TilingError::Unreadable { name: p.to_string(), message: e.to_string() });
     let x = tiling::extract::extract(tile, &read).map_err(tiling_error)?;
     if x.buildings != tile.work {
         return Err(CliError::unreadable(format!(

@@ -47,14 +47,19 @@ pub(super) fn run(a: TilesetArgs, config: &Config) -> CmdResult {
         let extent = tiling::tileset::glb_extent(&bytes, g).map_err(tiling_error)?;
         let abs = Path::new(g).canonicalize().map_err(|e| CliError::unreadable(format!("{g}: {e}")))?;
         let rel = abs.strip_prefix(&base).map_err(|_| {
-            CliError::usage(format!("{g}: not below the tileset's directory {} (content URIs are relative)", base.display()))
+            CliError::usage(format!(
+                "{g}: not below the tileset's directory {} (content URIs are relative)",
+                base.display()
+            ))
         })?;
         let uri = rel.components().map(|c| c.as_os_str().to_string_lossy().into_owned()).collect::<Vec<_>>().join("/");
         tiles.push(tiling::tileset::ContentTile { uri, extent });
     }
     let generator = format!("geofit {}", env!("CARGO_PKG_VERSION"));
     let heights = match (a.height_offset, a.heights_as_is, &a.geoid) {
-        (Some(m), ..) if !m.is_finite() => return Err(CliError::usage(format!("--height-offset must be a finite number of metres, got {m}"))),
+        (Some(m), ..) if !m.is_finite() => {
+            return Err(CliError::usage(format!("--height-offset must be a finite number of metres, got {m}")))
+        }
         (Some(m), ..) => tiling::tileset::Heights::Offset(m),
         (None, true, _) => tiling::tileset::Heights::AsIs,
         (None, false, Some(g)) => tiling::tileset::Heights::Geoid(g.clone()),

@@ -58,7 +58,9 @@ impl GeographicFrame {
             self.utm = Some((zone, utm_conversion(zone)?, srs.to_string(), epsg, order));
         }
         let (zone, conv, ..) = self.utm.as_ref().expect("set above");
-        let (e, n) = conv.convert((lon, lat)).map_err(|e| format!("({}, {}) has no position in EPSG:{zone}: {e}", p[0], p[1]))?;
+        let (e, n) = conv
+            .convert((lon, lat))
+            .map_err(|e| format!("({}, {}) has no position in EPSG:{zone}: {e}", p[0], p[1]))?;
         (p[0], p[1]) = (e, n);
         Ok(())
     }

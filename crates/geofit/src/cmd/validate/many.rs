@@ -25,8 +25,10 @@ struct SummaryLine<'a> {
 fn check_source(input: &Input, checks: &Checks) -> Result<Report, CliError> {
     let bytes = input.map_or_read()?;
     let mut frame = super::frame::GeographicFrame::default();
-    validate_document_in(&bytes, &input.display_name(), checks, Some(&mut frame), &|p: Progress| bytes.release_before(p.bytes_read))
-        .map_err(document_error)
+    validate_document_in(&bytes, &input.display_name(), checks, Some(&mut frame), &|p: Progress| {
+        bytes.release_before(p.bytes_read)
+    })
+    .map_err(document_error)
 }
 
 /// Several files: checked in parallel (the schemas parsed once), reported in input order, one

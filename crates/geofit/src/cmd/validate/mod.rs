@@ -102,7 +102,8 @@ pub struct Args {
     pub normals_tol: f64,
 }
 
-const HOW_TO_GET: &str = "CityGML schemas not found (no --schemas DIR, GEOFIT_SCHEMAS unset or empty, no ../shared/xsd \
+const HOW_TO_GET: &str =
+    "CityGML schemas not found (no --schemas DIR, GEOFIT_SCHEMAS unset or empty, no ../shared/xsd \
 beside the checkout): XSD validation skipped, geometric checks only. To enable it, point --schemas or GEOFIT_SCHEMAS \
 at an offline bundle holding citygml-1.0.xsd, citygml-2.0.xsd and citygml-3.0.xsd wrappers that import the OGC \
 CityGML/GML schemas by relative paths (e.g. the schemas shipped in citygml4j, \
@@ -111,7 +112,11 @@ citygml4j-xml/src/main/resources/org/citygml4j/schemas, plus the wrappers descri
 /// Where the schemas are: --schemas, $GEOFIT_SCHEMAS, ../shared/xsd beside the checkout.
 fn find_schema_dir(explicit: Option<&Path>) -> Result<PathBuf, String> {
     if let Some(d) = explicit {
-        return if d.is_dir() { Ok(d.to_path_buf()) } else { Err(format!("--schemas {}: not a directory", d.display())) };
+        return if d.is_dir() {
+            Ok(d.to_path_buf())
+        } else {
+            Err(format!("--schemas {}: not a directory", d.display()))
+        };
     }
     match std::env::var_os("GEOFIT_SCHEMAS") {
         // set but empty: no schemas on purpose, no search
@@ -140,13 +145,18 @@ fn find_schema_dir(explicit: Option<&Path>) -> Result<PathBuf, String> {
 }
 
 fn check_opts(args: &Args) -> Result<Options, CliError> {
-    for (name, v) in [("--snap-tol", args.snap_tol), ("--planarity-tol", args.planarity_tol), ("--normals-tol", args.normals_tol)] {
+    for (name, v) in
+        [("--snap-tol", args.snap_tol), ("--planarity-tol", args.planarity_tol), ("--normals-tol", args.normals_tol)]
+    {
         if !v.is_finite() || v < 0.0 {
             return Err(CliError::usage(format!("{name} must be a finite number ≥ 0, got {v}")));
         }
     }
     if args.normals_tol > 180.0 {
-        return Err(CliError::usage(format!("--normals-tol is an angle in degrees (0..180), got {}", args.normals_tol)));
+        return Err(CliError::usage(format!(
+            "--normals-tol is an angle in degrees (0..180), got {}",
+            args.normals_tol
+        )));
     }
     Ok(Options { snap_tol: args.snap_tol, planarity_tol: args.planarity_tol, normals_tol_deg: args.normals_tol })
 }
@@ -205,7 +215,8 @@ fn run_one(args: &Args, options: Options, config: &Config) -> CmdResult {
             progress.set(p.bytes_read as u64, &format!("{} features checked", p.features));
         };
         let mut frame = frame::GeographicFrame::default();
-        let report = validate_document_in(&bytes, &name, &checks, Some(&mut frame), &on_batch).map_err(document_error)?;
+        let report =
+            validate_document_in(&bytes, &name, &checks, Some(&mut frame), &on_batch).map_err(document_error)?;
         progress.finish(&format!("{} features checked", report.geometry.features));
         report
     } else {
@@ -218,5 +229,9 @@ fn run_one(args: &Args, options: Options, config: &Config) -> CmdResult {
 /// `--json`: one file's report, the same object as a line of a many-file run.
 const REPORT: ReportKind = ReportKind {
     schema: "geofit-validate/1",
-    units: &[("geometry.options.snap_tol", "CRS units (m)"), ("geometry.options.planarity_tol", "CRS units (m)"), ("geometry.options.normals_tol_deg", "deg")],
+    units: &[
+        ("geometry.options.snap_tol", "CRS units (m)"),
+        ("geometry.options.planarity_tol", "CRS units (m)"),
+        ("geometry.options.normals_tol_deg", "deg"),
+    ],
 };

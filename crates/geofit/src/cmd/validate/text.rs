@@ -16,7 +16,11 @@ pub(super) fn write(w: &mut dyn Write, r: &Report) -> std::io::Result<()> {
     if let Some(frame) = &r.geometry.frame {
         writeln!(w, "{f}: frame: {frame}")?;
     }
-    let schema_name = r.xsd.schema.as_deref().map(|s| Path::new(s).file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default());
+    let schema_name = r
+        .xsd
+        .schema
+        .as_deref()
+        .map(|s| Path::new(s).file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default());
     if r.xsd.checked {
         let sn = schema_name.unwrap_or_default();
         if r.xsd.errors.is_empty() {
@@ -26,7 +30,12 @@ pub(super) fn write(w: &mut dyn Write, r: &Report) -> std::io::Result<()> {
                 let what = if e.kind == XsdErrorKind::NotWellFormed { "not well-formed" } else { "XSD" };
                 writeln!(w, "{f}:{}:{}: {what}: {}", e.line, e.column, e.message)?;
             }
-            writeln!(w, "{f}: XSD ({sn}): {} error{}", r.xsd.errors.len(), if r.xsd.errors.len() == 1 { "" } else { "s" })?;
+            writeln!(
+                w,
+                "{f}: XSD ({sn}): {} error{}",
+                r.xsd.errors.len(),
+                if r.xsd.errors.len() == 1 { "" } else { "s" }
+            )?;
         }
     } else {
         writeln!(w, "{f}: XSD: not checked ({})", r.xsd.reason.as_deref().unwrap_or(""))?;
