@@ -111,7 +111,9 @@ lint:
 	$(CARGO) fmt --all -- --check
 	$(CARGO) clippy --workspace --all-targets -- -D warnings $(CLIPPY_ALLOW)
 	RUSTDOCFLAGS="-D warnings" $(CARGO) doc --workspace --no-deps -q
-	@if rustup toolchain list 2>/dev/null | grep -q "^$(MSRV)"; then \
+	@if rustc --version | grep -q "^rustc $(MSRV) "; then \
+	  echo "lint: the default toolchain is the declared minimum Rust $(MSRV): the builds above are the MSRV build"; \
+	elif rustup toolchain list 2>/dev/null | grep -q "^$(MSRV)"; then \
 	  echo "lint: building with the declared minimum Rust $(MSRV)"; $(CARGO) +$(MSRV) check --workspace -q; \
 	else echo "lint: toolchain $(MSRV) (declared rust-version) not installed: MSRV build not run" >&2; \
 	  [ "$$CI" != true ] || exit 1; fi
