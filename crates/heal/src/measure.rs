@@ -20,7 +20,7 @@ pub struct Measures {
 }
 
 /// The objects of a unit and their own polygons (not those reached by XLink).
-fn own_polygons<'a>(objects: &[&'a CityObject]) -> Vec<&'a Polygon> {
+pub(crate) fn own_polygons<'a>(objects: &[&'a CityObject]) -> Vec<&'a Polygon> {
     objects
         .iter()
         .flat_map(|o| o.geometries.iter())

@@ -9,6 +9,7 @@
 use super::ring::{cross, dot, norm, sub, P3};
 use super::rings::newell;
 use super::work::{Face, WPoly};
+use crate::measure::own_polygons;
 use citygml_io::{CityObject, GeometryKind, Polygon, Ring};
 use std::collections::{BTreeMap, HashMap, HashSet};
 
@@ -94,15 +95,6 @@ pub fn findings(objects: &[&CityObject], opts: &citygml_validate::Options) -> Fi
         *m.entry((f.feature, f.code)).or_insert(0) += 1;
     }
     m
-}
-
-fn own_polygons<'a>(objects: &[&'a CityObject]) -> Vec<&'a Polygon> {
-    objects
-        .iter()
-        .flat_map(|o| o.geometries.iter())
-        .flat_map(|g| g.polygons())
-        .filter(|p| p.via_xlink.is_none())
-        .collect()
 }
 
 fn ring_area(r: &[P3]) -> f64 {
