@@ -36,15 +36,7 @@ fn check(f: &Path, only: &BTreeSet<String>) -> Value {
 
 /// `geofit validate` findings per (feature gml:id, code).
 fn findings(f: &Path) -> BTreeMap<(String, i64), usize> {
-    let v = run(&["validate", "-q", "--json", "--no-xsd", s(f)], None);
-    let j: Value = serde_json::from_slice(&v.stdout)
-        .unwrap_or_else(|_| panic!("validate {}: {}", f.display(), String::from_utf8_lossy(&v.stderr)));
-    let mut out = BTreeMap::new();
-    for x in j["geometry"]["findings"].as_array().cloned().unwrap_or_default() {
-        let feature = x["feature"].as_str().unwrap_or("(no id)").to_string();
-        *out.entry((feature, x["code"].as_i64().unwrap())).or_insert(0) += 1;
-    }
-    out
+    common::findings_by_feature(f)
 }
 
 /// The fixtures with findings the repairs act on (the file name of a QIE file gives its code).

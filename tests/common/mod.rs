@@ -244,3 +244,16 @@ pub fn refused(
     }
     err
 }
+
+/// `geofit validate --no-xsd` geometry findings per (feature gml:id, code), counted.
+pub fn findings_by_feature(f: &Path) -> std::collections::BTreeMap<(String, i64), usize> {
+    let v = run(&["validate", "-q", "--no-xsd", "--json", f.to_str().unwrap()], None);
+    let j: serde_json::Value = serde_json::from_slice(&v.stdout)
+        .unwrap_or_else(|_| panic!("validate {}: {}", f.display(), String::from_utf8_lossy(&v.stderr)));
+    let mut out = std::collections::BTreeMap::new();
+    for x in j["geometry"]["findings"].as_array().cloned().unwrap_or_default() {
+        let feature = x["feature"].as_str().unwrap_or("(no id)").to_string();
+        *out.entry((feature, x["code"].as_i64().unwrap())).or_insert(0) += 1;
+    }
+    out
+}
